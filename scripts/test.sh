@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Sets up .venv with the ROS and test extras and runs the whole test suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh "ros,test"
+# Each pytest run gets its own DDS domain and stays on loopback, so parallel runs do not see each other.
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"
+exec .venv/bin/python -m pytest "$@"

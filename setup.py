@@ -1,0 +1,52 @@
+"""ament_python package, also pip-installable into a plain virtual environment.
+
+The ROS 2 client libraries are an extra (`[ros]`) so that a sourced ROS
+workspace, which already provides rclpy, does not get a second copy.
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "softcath_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "benchmarks"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/designs", glob("config/designs/*.yaml")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.24",
+        "scipy>=1.10",
+        "pyyaml>=6.0",
+        "matplotlib>=3.7",
+        "tqdm>=4.60",
+    ],
+    extras_require={
+        "ros": [
+            "ros-rclpy>=9.1",
+            "ros-std-msgs>=5.5",
+            "ros-geometry-msgs>=5.5",
+            "ros-diagnostic-msgs>=5.5",
+            "ros-rmw-fastrtps-cpp>=9.3",
+        ],
+        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9"],
+        "bench": ["psutil>=5.9"],
+    },
+    zip_safe=True,
+    maintainer="softcath_ros developers",
+    maintainer_email="softcath@example.org",
+    description="Model, steering and bench nodes for a steerable soft fluidic catheter.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "softcath = softcath_ros.cli:main",
+            "model_node = softcath_ros.nodes.model_node:main",
+        ],
+    },
+)

@@ -1,0 +1,41 @@
+"""`softcath` command line (interfaces.md).
+
+Each subcommand is a module in this package with ``register(subparsers)``; the
+handler it sets as ``func`` returns the exit code. Add new ones to ``SUBCOMMANDS``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ..core.errors import SoftcathError
+
+SUBCOMMANDS = [
+    "predict",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="softcath", description="softcath_ros command line: model, "
+                                     "steer and characterise a soft catheter actuator (see README).")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"{__name__}.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except SoftcathError as exc:
+        print(f"softcath {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"softcath {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

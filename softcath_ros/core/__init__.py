@@ -1,0 +1,1 @@
+"""Pure core: designs, materials, the model ladder and kinematics. Never imports rclpy."""

@@ -1,0 +1,358 @@
+"""Design files: one actuator per YAML file (interfaces.md), loaded and validated.
+
+Every error names the offending field and value (``DesignError``). Coordinates are
+on the cross-section, origin on the body axis, metres.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import yaml
+
+from .yaml_io import load_yaml
+
+from .errors import DesignError
+from .materials import YeohMaterial, material_from_spec
+
+# Thinnest silicone wall we accept unless the design states its own minimum (m).
+# 0.2 mm is about what moulding of Ecoflex reliably gives; the implemented design has 0.6 mm.
+DEFAULT_MIN_WALL = 0.2e-3
+
+
+@dataclass(frozen=True)
+class Hole:
+    """A circular hole in the section: a pressurised channel or the lumen (m)."""
+
+    diameter: float
+    center: tuple[float, float]
+
+    @property
+    def radius(self) -> float:
+        return 0.5 * self.diameter
+
+    @property
+    def area(self) -> float:
+        return math.pi * self.radius**2
+
+
+@dataclass(frozen=True)
+class LimitingFibre:
+    """Strain-limiting fibre embedded in the silicone (m); nearly inextensible."""
+
+    diameter: float
+    center: tuple[float, float]
+    material: YeohMaterial
+
+    @property
+    def area(self) -> float:
+        return math.pi * (0.5 * self.diameter) ** 2
+
+
+@dataclass(frozen=True)
+class Reinforcement:
+    """Helical/ring thread on the outside that stops radial expansion (m, Pa)."""
+
+    pitch: float
+    thread_diameter: float
+    shape: str  # "square" | "round"
+    youngs_modulus: float
+    poisson_ratio: float
+
+    @property
+    def thread_area(self) -> float:
+        """Cross-section area of one thread, m^2 (square of side d, or circle of diameter d)."""
+        d = self.thread_diameter
+        return d * d if self.shape == "square" else math.pi * d * d / 4.0
+
+    @property
+    def hoop_stiffness_per_length(self) -> float:
+        """Homogenised hoop membrane stiffness E A / pitch, N/m."""
+        return self.youngs_modulus * self.thread_area / self.pitch
+
+
+@dataclass(frozen=True)
+class Device:
+    """A tool in the lumen (camera lead, ...). ``bending_stiffness`` in N m^2."""
+
+    diameter: float
+    bending_stiffness: float
+
+
+@dataclass(frozen=True)
+class Design:
+    name: str
+    length: float
+    outer_diameter: float
+    channels: tuple[Hole, ...]
+    lumen: Hole | None
+    limiting_fibre: LimitingFibre | None
+    reinforcement: Reinforcement | None
+    cap_thickness: float
+    material: YeohMaterial
+    device: Device | None
+    max_pressure: float
+    min_wall_thickness: float = DEFAULT_MIN_WALL
+    source: str | None = field(default=None, compare=False)
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channels)
+
+    @property
+    def outer_radius(self) -> float:
+        return 0.5 * self.outer_diameter
+
+    def with_length(self, length: float) -> "Design":
+        return replace(self, length=_positive(length, "length"))
+
+    def to_dict(self) -> dict:
+        """The design as a plain mapping in the design-file schema (round-trips through load)."""
+        d = {
+            "name": self.name,
+            "length": self.length,
+            "outer_diameter": self.outer_diameter,
+            "channels": [{"diameter": c.diameter, "center": list(c.center)} for c in self.channels],
+            "lumen": None if self.lumen is None else {"diameter": self.lumen.diameter,
+                                                      "center": list(self.lumen.center)},
+            "limiting_fibre": None if self.limiting_fibre is None else {
+                "diameter": self.limiting_fibre.diameter,
+                "center": list(self.limiting_fibre.center),
+                "material": _material_dict(self.limiting_fibre.material)},
+            "reinforcement": None if self.reinforcement is None else asdict(self.reinforcement),
+            "cap_thickness": self.cap_thickness,
+            "material": _material_dict(self.material),
+            "device": None if self.device is None else asdict(self.device),
+            "limits": {"max_pressure": self.max_pressure},
+            "min_wall_thickness": self.min_wall_thickness,
+        }
+        return d
+
+    def content_hash(self) -> str:
+        """Stable hash of everything that affects physics (for result caches)."""
+        blob = json.dumps(self.to_dict(), sort_keys=True, default=float).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _material_dict(m: YeohMaterial) -> dict:
+    return {"model": "yeoh", "c1": m.c1, "c2": m.c2, "c3": m.c3,
+            "bulk_modulus": m.bulk_modulus, "density": m.density}
+
+
+# --------------------------------------------------------------------------- loading
+
+_REQUIRED = ("name", "length", "outer_diameter", "channels", "material", "limits")
+_OPTIONAL = {"lumen": None, "limiting_fibre": None, "reinforcement": None, "device": None,
+             "cap_thickness": 1.0e-3, "min_wall_thickness": DEFAULT_MIN_WALL, "description": ""}
+
+
+def designs_dir() -> Path | None:
+    """Directory of the designs shipped with the package (ROS share dir, venv share dir or source tree)."""
+    candidates = []
+    try:  # a sourced ROS workspace
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory("softcath_ros")) / "config" / "designs")
+    except Exception:  # noqa: BLE001 - ament index absent or package not in it
+        pass
+    import sys
+
+    candidates.append(Path(sys.prefix) / "share" / "softcath_ros" / "config" / "designs")
+    candidates.append(Path(__file__).resolve().parents[2] / "config" / "designs")
+    for c in candidates:
+        if c.is_dir():
+            return c
+    return None
+
+
+def resolve_design_path(name_or_path: str | Path) -> Path:
+    """A path as given if it exists, else a shipped design by name (with or without .yaml)."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    d = designs_dir()
+    if d is not None:
+        for cand in (d / p.name, d / f"{p.name}.yaml"):
+            if cand.is_file():
+                return cand
+    known = sorted(x.stem for x in d.glob("*.yaml")) if d else []
+    raise DesignError("design", str(name_or_path), f"no such file or shipped design; shipped: {known}")
+
+
+def load_design(name_or_path: str | Path) -> Design:
+    """Load and validate a design file (path, or the name of a shipped design)."""
+    path = resolve_design_path(name_or_path)
+    try:
+        data = load_yaml(path.read_text())
+    except yaml.YAMLError as exc:
+        raise DesignError("design", str(path), f"not valid YAML: {exc}") from None
+    return design_from_dict(data, source=str(path))
+
+
+def design_from_dict(data, source: str | None = None) -> Design:
+    if not isinstance(data, dict):
+        raise DesignError("design", data, "must be a mapping of fields")
+    for key in _REQUIRED:
+        if key not in data:
+            raise DesignError(key, None, "missing required field")
+    for key in data:
+        if key not in _REQUIRED and key not in _OPTIONAL:
+            raise DesignError(key, data[key], f"unknown field; known: {sorted(_REQUIRED + tuple(_OPTIONAL))}")
+    get = lambda k: data.get(k, _OPTIONAL.get(k))  # noqa: E731
+
+    name = data["name"]
+    if not isinstance(name, str) or not name:
+        raise DesignError("name", name, "must be a non-empty string")
+    length = _positive(data["length"], "length")
+    outer = _positive(data["outer_diameter"], "outer_diameter")
+    min_wall = _positive(get("min_wall_thickness"), "min_wall_thickness")
+
+    raw_channels = data["channels"]
+    if not isinstance(raw_channels, list) or not raw_channels:
+        raise DesignError("channels", raw_channels, "must be a non-empty list of {diameter, center}")
+    channels = tuple(_hole(c, f"channels[{i}]") for i, c in enumerate(raw_channels))
+    lumen = None if get("lumen") is None else _hole(get("lumen"), "lumen")
+
+    material = material_from_spec(data["material"], "material")
+
+    fibre = None
+    if get("limiting_fibre") is not None:
+        f = _mapping(get("limiting_fibre"), "limiting_fibre", {"diameter", "center", "material"})
+        fibre = LimitingFibre(
+            diameter=_positive(_req(f, "diameter", "limiting_fibre"), "limiting_fibre.diameter"),
+            center=_point(_req(f, "center", "limiting_fibre"), "limiting_fibre.center"),
+            material=material_from_spec(f.get("material", "polyester_fibre"), "limiting_fibre.material"))
+
+    reinforcement = None
+    if get("reinforcement") is not None:
+        r = _mapping(get("reinforcement"), "reinforcement",
+                     {"pitch", "thread_diameter", "shape", "youngs_modulus", "poisson_ratio"})
+        shape = r.get("shape", "square")
+        if shape not in ("square", "round"):
+            raise DesignError("reinforcement.shape", shape, "must be 'square' or 'round'")
+        nu = _number(_req(r, "poisson_ratio", "reinforcement"), "reinforcement.poisson_ratio")
+        if not -1.0 < nu < 0.5:
+            raise DesignError("reinforcement.poisson_ratio", nu, "must lie in (-1, 0.5)")
+        reinforcement = Reinforcement(
+            pitch=_positive(_req(r, "pitch", "reinforcement"), "reinforcement.pitch"),
+            thread_diameter=_positive(_req(r, "thread_diameter", "reinforcement"), "reinforcement.thread_diameter"),
+            shape=shape,
+            youngs_modulus=_positive(_req(r, "youngs_modulus", "reinforcement"), "reinforcement.youngs_modulus"),
+            poisson_ratio=nu)
+        if reinforcement.thread_diameter > reinforcement.pitch:
+            raise DesignError("reinforcement.thread_diameter", reinforcement.thread_diameter,
+                              f"larger than the pitch {reinforcement.pitch}: threads would overlap")
+
+    device = None
+    if get("device") is not None:
+        dv = _mapping(get("device"), "device", {"diameter", "bending_stiffness"})
+        device = Device(diameter=_positive(_req(dv, "diameter", "device"), "device.diameter"),
+                        bending_stiffness=_nonnegative(_req(dv, "bending_stiffness", "device"),
+                                                       "device.bending_stiffness"))
+        if lumen is None:
+            raise DesignError("device", get("device"), "a device needs a lumen, and lumen is null")
+        if device.diameter > lumen.diameter:
+            raise DesignError("device.diameter", device.diameter,
+                              f"larger than the lumen diameter {lumen.diameter}")
+
+    limits = _mapping(data["limits"], "limits", {"max_pressure"})
+    if "max_pressure" not in limits:
+        raise DesignError("limits.max_pressure", None, "missing: every design must state its safe maximum pressure (Pa)")
+    max_pressure = _positive(limits["max_pressure"], "limits.max_pressure")
+    cap = _positive(get("cap_thickness"), "cap_thickness")
+    if cap >= length:
+        raise DesignError("cap_thickness", cap, f"not shorter than the length {length}")
+
+    design = Design(name=name, length=length, outer_diameter=outer, channels=channels, lumen=lumen,
+                    limiting_fibre=fibre, reinforcement=reinforcement, cap_thickness=cap,
+                    material=material, device=device, max_pressure=max_pressure,
+                    min_wall_thickness=min_wall, source=source)
+    check_geometry(design)
+    return design
+
+
+def check_geometry(design: Design) -> None:
+    """Holes inside the body with walls >= the minimum, holes apart, fibre inside silicone."""
+    big_r = design.outer_radius
+    wmin = design.min_wall_thickness
+    holes = [(f"channels[{i}]", c) for i, c in enumerate(design.channels)]
+    if design.lumen is not None:
+        holes.append(("lumen", design.lumen))
+    for name, h in holes:
+        outer_wall = big_r - (math.hypot(*h.center) + h.radius)
+        if outer_wall < 0:
+            raise DesignError(f"{name}.center", list(h.center),
+                              f"hole of diameter {h.diameter} reaches outside the body (outer diameter {design.outer_diameter})")
+        if outer_wall < wmin - 1e-12:
+            raise DesignError(f"{name}.center", list(h.center),
+                              f"outer wall {outer_wall * 1e3:.3f} mm is thinner than the minimum {wmin * 1e3:.3f} mm")
+    for i, (na, a) in enumerate(holes):
+        for nb, b in holes[i + 1:]:
+            gap = math.dist(a.center, b.center) - a.radius - b.radius
+            if gap < 0:
+                raise DesignError(f"{nb}.center", list(b.center), f"overlaps {na}")
+            if gap < wmin - 1e-12:
+                raise DesignError(f"{nb}.center", list(b.center),
+                                  f"wall to {na} is {gap * 1e3:.3f} mm, thinner than the minimum {wmin * 1e3:.3f} mm")
+    f = design.limiting_fibre
+    if f is not None:
+        r = 0.5 * f.diameter
+        if math.hypot(*f.center) + r > big_r:
+            raise DesignError("limiting_fibre.center", list(f.center), "fibre is not inside the silicone body")
+        for name, h in holes:
+            if math.dist(f.center, h.center) < r + h.radius:
+                raise DesignError("limiting_fibre.center", list(f.center),
+                                  f"fibre is not inside silicone: it cuts {name}")
+
+
+def _mapping(value, field_name, allowed):
+    if not isinstance(value, dict):
+        raise DesignError(field_name, value, "must be a mapping (or null)")
+    for key in value:
+        if key not in allowed:
+            raise DesignError(f"{field_name}.{key}", value[key], f"unknown key; allowed: {sorted(allowed)}")
+    return value
+
+
+def _req(mapping, key, parent):
+    if key not in mapping:
+        raise DesignError(f"{parent}.{key}", None, "missing required field")
+    return mapping[key]
+
+
+def _hole(value, field_name) -> Hole:
+    m = _mapping(value, field_name, {"diameter", "center"})
+    return Hole(diameter=_positive(_req(m, "diameter", field_name), f"{field_name}.diameter"),
+                center=_point(_req(m, "center", field_name), f"{field_name}.center"))
+
+
+def _point(value, field_name) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise DesignError(field_name, value, "must be a list [x, y] in metres")
+    return (_number(value[0], f"{field_name}[0]"), _number(value[1], f"{field_name}[1]"))
+
+
+def _number(value, field_name) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DesignError(field_name, value, "must be a number")
+    value = float(value)
+    if not math.isfinite(value):
+        raise DesignError(field_name, value, "must be finite")
+    return value
+
+
+def _positive(value, field_name) -> float:
+    v = _number(value, field_name)
+    if v <= 0:
+        raise DesignError(field_name, v, "must be positive")
+    return v
+
+
+def _nonnegative(value, field_name) -> float:
+    v = _number(value, field_name)
+    if v < 0:
+        raise DesignError(field_name, v, "must not be negative")
+    return v

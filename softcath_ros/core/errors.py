@@ -1,0 +1,23 @@
+"""Errors the core raises, each naming what was wrong so a user can fix it."""
+
+
+class SoftcathError(Exception):
+    """Base class: a message fit to print as a one-line CLI error."""
+
+
+class DesignError(SoftcathError):
+    """A design file field is missing, malformed or physically impossible.
+
+    ``field`` is the dotted path of the offending field (e.g. ``channels[0].diameter``),
+    ``value`` the value found there.
+    """
+
+    def __init__(self, field: str, value, reason: str):
+        self.field = field
+        self.value = value
+        self.reason = reason
+        super().__init__(f"design field '{field}' = {value!r}: {reason}")
+
+
+class ModelError(SoftcathError):
+    """A model was asked for something it cannot do (unknown rung, bad input shape)."""

@@ -1,0 +1,65 @@
+"""Model + kinematics in one step: pressures -> bend state -> tip pose (what `predict` reports)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kinematics import tip_pose
+from .models.base import BendModel
+
+
+@dataclass
+class Prediction:
+    pressures_pa: list[float]
+    curvature_per_m: list[float]
+    axial_stretch: float
+    radius_of_curvature_m: float | None   # None for a straight backbone
+    bending_angle_rad: float
+    tip_position_m: list[float]
+    tip_orientation_xyzw: list[float]
+    converged: bool
+    solve_time_s: float
+    reason: str = ""
+
+    def to_json(self) -> dict:
+        d = dict(self.__dict__)
+        if self.converged:
+            d.pop("reason")
+        else:  # never print numbers from a solve that failed
+            for key in ("curvature_per_m", "axial_stretch", "radius_of_curvature_m", "bending_angle_rad",
+                        "tip_position_m", "tip_orientation_xyzw"):
+                d[key] = None
+        return d
+
+
+def predict(model: BendModel, pressures: np.ndarray, length: float | None = None) -> list[Prediction]:
+    """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m)."""
+    length = model.design.length if length is None else length
+    t0 = time.perf_counter()
+    state = model.evaluate(np.atleast_2d(pressures))
+    elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)
+    arc = length * state.axial_stretch
+    pos, quat = tip_pose(state.curvature, arc)
+    out = []
+    for i, p in enumerate(np.atleast_2d(pressures)):
+        k = state.curvature[i]
+        kappa = float(np.hypot(*k))
+        out.append(Prediction(
+            pressures_pa=[float(v) for v in p],
+            curvature_per_m=[float(v) for v in k],
+            axial_stretch=float(state.axial_stretch[i]),
+            radius_of_curvature_m=(1.0 / kappa) if kappa > 0 else None,
+            bending_angle_rad=kappa * float(arc[i]),
+            tip_position_m=[float(v) for v in pos[i]],
+            tip_orientation_xyzw=[float(v) for v in quat[i]],
+            converged=bool(state.converged[i]),
+            solve_time_s=elapsed,
+            reason="" if state.converged[i] else (state.message or "did not converge")))
+    return out
+
+
+def format_mm(value_m: float | None) -> str:
+    return "inf" if value_m is None or not math.isfinite(value_m) else f"{value_m * 1e3:.2f}"

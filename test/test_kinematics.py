@@ -1,0 +1,109 @@
+"""Constant-curvature kinematics against hand-computed arcs."""
+import math
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.kinematics import backbone_poses, bending_angle, curvature_for_tip, tip_pose
+
+L = 0.04
+
+
+def rotate(q, v):
+    """Rotate vector v by unit quaternion q (x, y, z, w)."""
+    x, y, z, w = q
+    u = np.array([x, y, z])
+    return 2 * np.dot(u, v) * u + (w * w - np.dot(u, u)) * np.asarray(v) + 2 * w * np.cross(u, v)
+
+
+def test_straight_backbone():
+    pos, q = tip_pose(np.zeros(2), L)
+    np.testing.assert_allclose(pos, [0, 0, L], atol=1e-15)
+    np.testing.assert_allclose(q, [0, 0, 0, 1], atol=1e-15)
+
+
+def test_quarter_circle_towards_minus_y():
+    r = 2 * L / math.pi                       # quarter circle: L = R pi / 2
+    pos, q = tip_pose(np.array([0.0, -1.0 / r]), L)
+    np.testing.assert_allclose(pos, [0, -r, r], atol=1e-12)
+    # The tip tangent points along -y after a 90 degree bend.
+    np.testing.assert_allclose(rotate(q, [0, 0, 1]), [0, -1, 0], atol=1e-12)
+
+
+def test_half_circle_towards_plus_x():
+    r = L / math.pi
+    pos, q = tip_pose(np.array([1.0 / r, 0.0]), L)
+    np.testing.assert_allclose(pos, [2 * r, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(rotate(q, [0, 0, 1]), [0, 0, -1], atol=1e-12)
+
+
+@pytest.mark.parametrize("direction_deg", [0, 37, 90, 135, 180, 251, 300, 359.9])
+def test_any_direction_matches_planar_arc(direction_deg):
+    kappa = 30.0
+    u = np.array([math.cos(math.radians(direction_deg)), math.sin(math.radians(direction_deg))])
+    pos, q = tip_pose(kappa * u, L)
+    theta = kappa * L
+    radial = (1 - math.cos(theta)) / kappa
+    np.testing.assert_allclose(pos, [radial * u[0], radial * u[1], math.sin(theta) / kappa], atol=1e-12)
+    tangent = [math.sin(theta) * u[0], math.sin(theta) * u[1], math.cos(theta)]
+    np.testing.assert_allclose(rotate(q, [0, 0, 1]), tangent, atol=1e-12)
+
+
+def test_tiny_curvature_is_smooth_and_keeps_direction():
+    for kappa in (1e-3, 1e-8, 1e-12, 1e-200):
+        k = np.array([-kappa, 0.0])
+        pos, q = tip_pose(k, L)
+        assert np.all(np.isfinite(pos)) and np.all(np.isfinite(q))
+        # first-order arc: deflection kappa L^2 / 2 towards -x, never flipped
+        assert pos[0] < 0
+        assert pos[0] == pytest.approx(-kappa * L * L / 2, rel=1e-6)
+        assert pos[2] == pytest.approx(L, rel=1e-9)
+
+
+def test_quaternions_unit_and_tangent_consistent_along_backbone():
+    rng = np.random.default_rng(1)
+    ks = rng.normal(scale=40.0, size=(50, 2))
+    lengths = rng.uniform(0.01, 0.05, size=50)
+    pos, quat = backbone_poses(ks, lengths, 41)
+    assert pos.shape == (50, 41, 3) and quat.shape == (50, 41, 4)
+    np.testing.assert_allclose(np.linalg.norm(quat, axis=-1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(pos[:, 0], 0.0, atol=1e-15)
+    for i in range(0, 50, 7):
+        # finite-difference tangent of the positions equals the quaternion's z axis
+        ds = lengths[i] / 40
+        fd = (pos[i, 2:] - pos[i, :-2]) / (2 * ds)
+        z_axes = np.array([rotate(q, [0, 0, 1]) for q in quat[i, 1:-1]])
+        np.testing.assert_allclose(fd, z_axes, atol=(np.hypot(*ks[i]) * ds) ** 2 + 1e-9)  # O(ds^2) FD error
+
+
+def test_backbone_ends_at_tip():
+    k = np.array([12.0, -5.0])
+    pos, quat = backbone_poses(k, L, 10)
+    tpos, tq = tip_pose(k, L)
+    np.testing.assert_allclose(pos[-1], tpos)
+    np.testing.assert_allclose(quat[-1], tq)
+    with pytest.raises(ValueError):
+        backbone_poses(k, L, 1)
+
+
+def test_bending_angle():
+    assert bending_angle(np.array([3.0, 4.0]), 0.1) == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("k", [[0.0, -39.27], [25.0, 10.0], [1e-9, 0.0], [0.0, 0.0], [-70.0, 50.0]])
+def test_inverse_recovers_curvature(k):
+    k = np.array(k)
+    pos, _ = tip_pose(k, L)
+    inv = curvature_for_tip(pos, L)
+    assert inv.reachable
+    np.testing.assert_allclose(inv.curvature, k, rtol=1e-9, atol=1e-9)
+    assert inv.arc_length == pytest.approx(L, rel=1e-9)
+
+
+def test_inverse_reports_unreachable_points():
+    inv = curvature_for_tip(np.array([0.0, 0.0, 2 * L]), L)   # straight ahead but too far
+    assert not inv.reachable and inv.arc_length == pytest.approx(2 * L)
+    inv = curvature_for_tip(np.array([0.0, 0.0, 0.0]), L)
+    assert not inv.reachable
+    inv = curvature_for_tip(np.array([0.0, 0.0, -0.01]), L)   # straight behind the base
+    assert not inv.reachable
