@@ -1,0 +1,58 @@
+"""`softcath predict` as users and scripts call it (a real subprocess, the installed console script)."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from softcath_ros.core.design import load_design
+from softcath_ros.core.models import make_model
+
+
+def softcath(*args):
+    return subprocess.run([sys.executable, "-m", "softcath_ros.cli", *args], capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_predict_json_matches_model():
+    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "0", "0.2", "--unit", "bar", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["model"] == "closed_form" and out["design"] == "implemented_5mm"
+    straight, bent = out["results"]
+    assert straight["radius_of_curvature_m"] is None and straight["tip_position_m"] == [0.0, 0.0, 0.04]
+    k = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4]).curvature
+    assert bent["pressures_pa"] == [20000.0]
+    assert bent["curvature_per_m"] == pytest.approx(k.tolist())
+    assert bent["radius_of_curvature_m"] == pytest.approx(1 / abs(k[1]))
+    assert bent["converged"] is True and len(bent["tip_orientation_xyzw"]) == 4
+    assert bent["tip_position_m"][1] < 0   # bends towards -y, away from the channel
+
+
+def test_predict_length_override_and_table():
+    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "20000", "--length", "0.02")
+    assert r.returncode == 0, r.stderr
+    assert "length 20.0 mm" in r.stdout and "50.12" in r.stdout   # R_C does not depend on length
+
+
+@pytest.mark.parametrize("args,fragment", [
+    (["--design", "nope", "--pressure", "1"], "no such file or shipped design"),
+    (["--design", "implemented_5mm", "--pressure", "1,2"], "2 value(s) for a design with 1 channel"),
+    (["--design", "implemented_5mm", "--pressure", "abc"], "not a number"),
+    (["--design", "implemented_5mm", "--pressure", "-1"], "must not be negative"),
+    (["--design", "implemented_5mm", "--pressure", "1", "--model", "bogus"], "unknown model 'bogus'"),
+    (["--design", "implemented_5mm", "--pressure", "1", "--length", "-2"], "must be positive"),
+])
+def test_bad_input_is_one_line_error(args, fragment):
+    r = softcath("predict", *args)
+    assert r.returncode != 0
+    assert fragment in r.stderr
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_every_subcommand_has_help():
+    from softcath_ros.cli import SUBCOMMANDS
+
+    for name in SUBCOMMANDS:
+        r = softcath(name, "--help")
+        assert r.returncode == 0 and "usage" in r.stdout
