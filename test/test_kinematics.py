@@ -107,3 +107,13 @@ def test_inverse_reports_unreachable_points():
     assert not inv.reachable
     inv = curvature_for_tip(np.array([0.0, 0.0, -0.01]), L)   # straight behind the base
     assert not inv.reachable
+
+
+def test_scalar_tip_pose_matches_vectorised():
+    from softcath_ros.core.kinematics import tip_pose_single
+
+    for k in ([0.0, 0.0], [1e-9, -2e-9], [3e-5, 0.0], [25.0, -40.0], [0.0, -78.5]):
+        pos, q = tip_pose(np.array(k), L)
+        spos, sq = tip_pose_single(k[0], k[1], L)
+        np.testing.assert_allclose(spos, pos, rtol=1e-13, atol=1e-18)
+        np.testing.assert_allclose(sq, q, rtol=1e-13, atol=1e-18)

@@ -12,6 +12,7 @@ and smooth through k = 0 and never flips direction for tiny curvature.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,3 +106,24 @@ def curvature_for_tip(tip, length, rtol: float = 1e-3) -> TipInverse:
     arc = np.where(r2 > 0, arc, np.inf)
     reachable = np.isfinite(arc) & (np.abs(arc - length) <= rtol * np.asarray(length))
     return TipInverse(curvature=np.where(r2[..., None] > 0, k, 0.0), arc_length=arc, reachable=reachable)
+
+
+def _sinc_scalar(t: float) -> float:
+    # Taylor below 1e-4: the error term t^4/120 is below double precision there.
+    return 1.0 - t * t / 6.0 if abs(t) < 1e-4 else math.sin(t) / t
+
+
+def tip_pose_single(kx: float, ky: float, arc_length: float):
+    """``tip_pose`` for one backbone with plain floats: ((x, y, z), (qx, qy, qz, qw)).
+
+    Same formulas without numpy's per-call overhead (about 10x faster for one pose),
+    for nodes that answer one command at a time.
+    """
+    s = arc_length
+    theta = math.hypot(kx, ky) * s
+    half = 0.5 * theta
+    sinc_half = _sinc_scalar(half)
+    s2f2 = s * s * 0.5 * sinc_half * sinc_half
+    sg = s * 0.5 * sinc_half
+    return ((kx * s2f2, ky * s2f2, s * _sinc_scalar(theta)),
+            (-ky * sg, kx * sg, 0.0, math.cos(half)))
