@@ -26,6 +26,10 @@ setup(
         "pyyaml>=6.0",
         "matplotlib>=3.7",
         "tqdm>=4.60",
+        # Recording (rosbag2-compatible MCAP) and reading it back without ROS installed.
+        "mcap>=1.6",
+        "mcap-ros2-support>=0.6",
+        "zstandard>=0.22",
     ],
     extras_require={
         "ros": [
@@ -35,7 +39,7 @@ setup(
             "ros-diagnostic-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
         ],
-        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9"],
+        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6"],
         "bench": ["psutil>=5.9"],
     },
     zip_safe=True,

@@ -1,0 +1,191 @@
+"""BagWriter: a rosbag2-compatible MCAP recording (one bag directory, one .mcap file).
+
+Layout as ``ros2 bag record -s mcap`` makes it: ``DIR/`` with ``DIR_0.mcap`` and
+``metadata.yaml``. Inside the file: profile ``ros2``; one schema per type (encoding
+``ros2msg``, the complete definition); one channel per topic (encoding ``cdr``,
+metadata ``offered_qos_profiles`` and ``topic_type_hash``); messages with log time
+(reception) and publish time; zstd chunks; on close the ``rosbag2`` metadata record
+(key ``serialized_metadata``) and the summary.
+
+No data lost: the open chunk is closed and written (and fsynced) at least every
+``flush_period_s`` and whenever ``flush()`` is called (the bench calls it at each
+step end), so a killed recorder loses at most the last period; ``recover`` rebuilds
+the rest. An unwritable path or a nearly full disk fails in the constructor.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import threading
+import time
+from pathlib import Path
+
+from mcap.writer import CompressionType, Writer
+
+from ..core.errors import SoftcathError
+from . import bag_metadata as bm
+from .bag_metadata import TopicInfo
+from .msg_definitions import full_definition, type_description_hash
+from .qos import OfferedQos, qos_profiles_yaml
+
+LIBRARY = "softcath_ros recorder (python mcap)"
+
+
+class RecordingError(SoftcathError):
+    pass
+
+
+class BagWriter:
+    def __init__(self, bag_dir, *, compression: str = "zstd", chunk_size: int = 1 << 20,
+                 flush_period_s: float = 1.0, fsync: bool = True, min_free_bytes: int = 64 << 20,
+                 custom_data: dict[str, str] | None = None, distro: str | None = None):
+        self.bag_dir = Path(bag_dir)
+        self.path = self.bag_dir / f"{self.bag_dir.name}_0.mcap"
+        self.flush_period_s = float(flush_period_s)
+        self.fsync = fsync
+        self.custom_data = dict(custom_data or {})
+        self.distro = distro or bm.ros_distro()
+        self.topics: dict[str, TopicInfo] = {}
+        self._channel_ids: dict[str, int] = {}
+        self._schema_ids: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+        self.message_count = 0
+        self._t_min: int | None = None
+        self._t_max = 0
+        self._check_destination(min_free_bytes)
+        try:
+            self._file = open(self.path, "xb")
+        except OSError as exc:
+            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror or exc}") from None
+        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        if compression not in comp:
+            raise RecordingError(f"compression {compression!r}: expected one of {sorted(comp)}")
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp[compression])
+        self._writer.start(profile="ros2", library=LIBRARY)
+        self._sync()
+        self._last_flush = time.monotonic()
+
+    def _check_destination(self, min_free_bytes: int) -> None:
+        try:
+            self.bag_dir.mkdir(parents=True, exist_ok=False)
+        except FileExistsError:
+            raise RecordingError(f"recording directory {self.bag_dir} already exists; "
+                                 "choose a new name (recordings are never overwritten)") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create recording directory {self.bag_dir}: "
+                                 f"{exc.strerror or exc}") from None
+        if not os.access(self.bag_dir, os.W_OK):
+            raise RecordingError(f"recording directory {self.bag_dir} is not writable")
+        free = shutil.disk_usage(self.bag_dir).free
+        if free < min_free_bytes:
+            raise RecordingError(f"only {free / 2**20:.1f} MiB free at {self.bag_dir}; the recorder "
+                                 f"needs at least {min_free_bytes / 2**20:.0f} MiB")
+
+    # ------------------------------------------------------------------ topics and messages
+    def add_topic(self, name: str, type_name: str, offered_qos: list[OfferedQos] | None = None,
+                  type_hash: str | None = None) -> None:
+        """Declare a topic before writing to it (schema and channel as rosbag2's create_topic)."""
+        with self._lock:
+            if name in self.topics:
+                return
+            if type_name not in self._schema_ids:
+                try:
+                    text = full_definition(type_name)
+                except SoftcathError as exc:
+                    raise RecordingError(f"topic {name}: {exc}") from None
+                self._schema_ids[type_name] = self._writer.register_schema(
+                    name=type_name, encoding="ros2msg", data=text.encode())
+            info = TopicInfo(name=name, type=type_name, offered_qos=list(offered_qos or []),
+                             type_hash=type_hash if type_hash is not None else type_description_hash(type_name))
+            self._channel_ids[name] = self._writer.register_channel(
+                topic=name, message_encoding="cdr", schema_id=self._schema_ids[type_name],
+                metadata={"offered_qos_profiles": qos_profiles_yaml(info.offered_qos),
+                          "topic_type_hash": info.type_hash})
+            self.topics[name] = info
+
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """One serialized (CDR) message. ``log_time_ns``: reception time; publish time defaults to it."""
+        with self._lock:
+            if self._closed:
+                raise RecordingError(f"recording {self.path} is closed")
+            try:
+                channel = self._channel_ids[topic]
+            except KeyError:
+                raise RecordingError(f"topic {topic} was not added to the recording") from None
+            try:
+                self._writer.add_message(channel_id=channel, log_time=log_time_ns, data=data,
+                                         publish_time=log_time_ns if publish_time_ns is None else publish_time_ns)
+            except OSError as exc:
+                raise RecordingError(f"writing {self.path} failed: {exc.strerror or exc}") from None
+            self.topics[topic].message_count += 1
+            self.message_count += 1
+            self._t_min = log_time_ns if self._t_min is None else min(self._t_min, log_time_ns)
+            self._t_max = max(self._t_max, log_time_ns)
+            if time.monotonic() - self._last_flush >= self.flush_period_s:
+                self._flush_locked()
+
+    def flush_if_due(self) -> None:
+        """Call periodically (timer): closes the open chunk once it is older than the flush period."""
+        with self._lock:
+            if not self._closed and time.monotonic() - self._last_flush >= self.flush_period_s:
+                self._flush_locked()
+
+    def flush(self) -> None:
+        """Close the open chunk and push it to disk now (step ends)."""
+        with self._lock:
+            if not self._closed:
+                self._flush_locked()
+
+    def _flush_locked(self) -> None:
+        try:
+            self._writer.flush()
+            self._sync()
+        except OSError as exc:
+            raise RecordingError(f"writing {self.path} failed: {exc.strerror or exc}") from None
+        self._last_flush = time.monotonic()
+
+    def _sync(self) -> None:
+        self._file.flush()
+        if self.fsync:
+            os.fsync(self._file.fileno())
+
+    # ------------------------------------------------------------------ metadata and attachments
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        with self._lock:
+            self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
+    def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int | None = None) -> None:
+        now = time.time_ns() if log_time_ns is None else log_time_ns
+        with self._lock:
+            self._writer.add_attachment(create_time=now, log_time=now, name=name, media_type=media_type,
+                                        data=data)
+
+    # ------------------------------------------------------------------ closing
+    def bag_metadata(self) -> dict:
+        start = self._t_min or 0
+        return bm.bag_metadata(list(self.topics.values()), self.path.name, start, self._t_max - start,
+                               self.message_count, self.custom_data, self.distro)
+
+    def close(self) -> None:
+        """Write the rosbag2 metadata record and the summary; idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            node = self.bag_metadata()
+            self._writer.add_metadata("rosbag2", {"serialized_metadata": bm.dump(node)})
+            self._writer.finish()
+            self._sync()
+            self._file.close()
+            (self.bag_dir / "metadata.yaml").write_text(bm.metadata_yaml(node))
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
