@@ -14,6 +14,7 @@ from ..core.errors import SoftcathError
 SUBCOMMANDS = [
     "recover",
     "predict",
+    "allocate",
 ]
 
 

@@ -40,6 +40,9 @@ from .kinematics import curvature_for_tip, tip_pose
 from .models.base import BendModel
 
 TWO_PI = 2.0 * math.pi
+# A request counts as beyond reach only past this relative margin, so the boundary itself
+# (kappa == max curvature up to rounding) is reachable and not flagged saturated.
+_SATURATION_RTOL = 1e-9
 
 
 class AllocationError(SoftcathError):
@@ -300,8 +303,8 @@ class Allocator:
                           achieved_curvature=np.zeros(2), axial_stretch=self._rest_stretch,
                           max_curvature=0.0, saturated=False, reachable=False, active_channels=(),
                           message=(f"direction {math.degrees(phi):.2f} deg is unreachable for design "
-                                   f"'{self.design.name}': channels bend only towards {dirs} deg "
-                                   "(and between neighbours less than 180 deg apart)"))
+                                   f"'{self.design.name}': its channels bend only towards {dirs} deg"
+                                   + (" and between neighbours less than 180 deg apart" if self._sectors else "")))
 
     def _result(self, pressures, requested, achieved, stretch, kmax, saturated, active, iterations=0,
                 converged=True, message="") -> Allocation:
@@ -332,7 +335,7 @@ class Allocator:
 
     def _pair_linear(self, s: _Sector, requested, kappa, ux, uy) -> Allocation:
         kmax, qa, qb = self._linear_reach(s, ux, uy)
-        saturated = kappa > kmax
+        saturated = kappa > kmax * (1.0 + _SATURATION_RTOL)
         k = kmax if saturated else kappa
         p = [0.0] * self.n_channels
         # min() guards the last ulp: the saturated larger pressure is exactly max_pressure.
@@ -365,7 +368,7 @@ class Allocator:
         except ModelError as exc:
             return self._failed(requested, (s.a, s.b), str(exc))
         iterations += n_b
-        if kappa >= kmax:
+        if kappa > kmax * (1.0 + _SATURATION_RTOL):
             return self._result(self._full(s, q_sat), requested, k, stretch, kmax, True, (s.a, s.b), iterations)
         # Inside after all (Newton wandered out on the way): restart from the scaled boundary point.
         try:
@@ -464,10 +467,10 @@ class Allocator:
     def _single(self, i: int, requested, kappa: float) -> Allocation:
         """One channel alone (a request along its own bending direction, within the tolerance)."""
         kmax = float(self.channel_max_curvature[i])
-        saturated = kappa > kmax
+        saturated = kappa > kmax * (1.0 + _SATURATION_RTOL)
         if self.linear:
             p = [0.0] * self.n_channels
-            p[i] = self.max_pressure if saturated else kappa / kmax * self.max_pressure
+            p[i] = self.max_pressure if saturated else min(kappa / kmax, 1.0) * self.max_pressure
             achieved, stretch = self._linear_state(p)
             return self._result(np.array(p), requested, achieved, stretch, kmax, saturated, (i,))
         count = [0]
@@ -479,7 +482,7 @@ class Allocator:
             return self._eval(p)
 
         try:
-            if saturated:
+            if saturated or kappa >= kmax:
                 pi = self.max_pressure
             else:
                 pi = brentq(lambda x: float(np.hypot(*(reach(x).curvature - self._rest_curvature))) - kappa,

@@ -1,0 +1,356 @@
+"""Pressure allocation: the 3-channel design, the allocator's inverse, reachable set and CLI.
+
+Accuracy targets (issue 4): round trip curvature -> allocate -> the same rung's forward
+model within 0.5 degree in direction and 1% in magnitude over the whole reachable set.
+The linear closed form is checked on a dense grid; the Newton path (used by the
+non-linear rungs) is checked on a non-linear test double with two-channel coupling,
+and on every registered rung that is fast enough, see ``test_round_trip_every_rung``.
+"""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from softcath_ros.cli import main as cli_main
+from softcath_ros.core.allocation import AllocationError, Allocator
+from softcath_ros.core.channel_layout import max_channel_layout
+from softcath_ros.core.design import design_from_dict, load_design
+from softcath_ros.core.errors import DesignError
+from softcath_ros.core.kinematics import tip_pose
+from softcath_ros.core.models import make_model
+from softcath_ros.core.models.base import BendModel, BendState
+from softcath_ros.core.yaml_io import load_yaml
+
+DESIGNS = __import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "designs"
+
+DIRECTION_TOL_DEG = 0.5
+MAGNITUDE_RTOL = 0.01
+
+
+@pytest.fixture(scope="module")
+def three():
+    return load_design(DESIGNS / "three_channel_5mm.yaml")
+
+
+@pytest.fixture(scope="module")
+def three_dict():
+    return load_yaml((DESIGNS / "three_channel_5mm.yaml").read_text())
+
+
+class CoupledNonlinear(BendModel):
+    """Test double for a non-linear rung: curvature grows superlinearly with pressure and two
+    active channels bend 5% more than their superposition (actuator.md). No ``curvature_per_pa``,
+    so the allocator must take the Newton path."""
+
+    name = "coupled_nonlinear"
+
+    def __init__(self, design):
+        super().__init__(design)
+        self.linear = make_model("closed_form", design)
+
+    def _evaluate_batch(self, p):
+        pm = self.design.max_pressure
+        grown = p * (1.0 + 1.5 * (p / pm) ** 2)
+        k = grown @ self.linear.curvature_per_pa.T
+        pairs = (p[:, 0] * p[:, 1] + p[:, 1] * p[:, 2] + p[:, 0] * p[:, 2]) / pm**2 if p.shape[1] == 3 else 0.0
+        k = k * (1.0 + 0.05 * np.minimum(4 * pairs, 1.0))[:, None] if p.shape[1] == 3 else k
+        return BendState(curvature=k, axial_stretch=1.0 + p @ self.linear.stretch_per_pa,
+                         converged=np.ones(len(p), dtype=bool))
+
+
+# ---------------------------------------------------------------------------- the design
+
+
+def test_three_channel_design_is_the_layout_optimum(three):
+    """The shipped geometry is max_channel_layout's answer and sits on the 0.6 mm wall minimum."""
+    assert three.n_channels == 3 and three.min_wall_thickness == pytest.approx(0.6e-3)
+    layout = max_channel_layout(three.outer_diameter, three.lumen.diameter, three.min_wall_thickness)
+    # Closed form of the optimum (docs/three_channel_design.md): outer and lumen walls both active.
+    r_expected = (three.outer_radius - three.lumen.radius - 2 * three.min_wall_thickness) / 2
+    assert layout.channel_radius == pytest.approx(r_expected, rel=1e-6)
+    assert layout.center_radius == pytest.approx(three.lumen.radius + three.min_wall_thickness + r_expected, rel=1e-6)
+    assert layout.channel_wall > three.min_wall_thickness  # the channel-channel wall is not the limit
+    for c, expected in zip(three.channels, layout.centers(3)):
+        assert c.diameter == pytest.approx(layout.channel_diameter, abs=1e-9)
+        assert c.center == pytest.approx(expected, abs=1e-9)
+    assert three.lumen.center == (0.0, 0.0)
+    # 120 degrees apart, the same distance from the axis.
+    angles = sorted(math.degrees(math.atan2(c.center[1], c.center[0])) % 360 for c in three.channels)
+    assert np.diff(angles) == pytest.approx([120, 120], abs=1e-6)
+
+
+@pytest.mark.parametrize("grow", ["diameter", "radius_out", "radius_in"])
+def test_three_channel_design_cannot_grow(three_dict, grow):
+    """Any larger or shifted channel breaks a 0.6 mm wall: validation (min_wall_thickness) refuses it."""
+    d = json.loads(json.dumps(three_dict))
+    for ch in d["channels"]:
+        x, y = ch["center"]
+        r = math.hypot(x, y)
+        if grow == "diameter":
+            ch["diameter"] += 2e-6
+        else:
+            f = (r + (1e-6 if grow == "radius_out" else -1e-6)) / r
+            ch["center"] = [x * f, y * f]
+    with pytest.raises(DesignError, match="thinner than the minimum"):
+        design_from_dict(d)
+
+
+@pytest.mark.parametrize("lumen", [0.6e-3, 1.0e-3, 1.5e-3])
+def test_channel_layout_walls(lumen):
+    lay = max_channel_layout(5e-3, lumen, 0.6e-3)
+    assert min(lay.outer_wall, lay.lumen_wall, lay.channel_wall) == pytest.approx(0.6e-3, rel=1e-6)
+    assert lay.outer_wall >= 0.6e-3 * (1 - 1e-6) and lay.lumen_wall >= 0.6e-3 * (1 - 1e-6)
+    assert lay.area_ratio == pytest.approx(3 * lay.channel_radius**2 / 2.5e-3**2)
+
+
+def test_channel_layout_rejects_impossible():
+    with pytest.raises(ValueError, match="no channel fits"):
+        max_channel_layout(5e-3, 3.5e-3, 0.6e-3)
+
+
+# ---------------------------------------------------------------------------- allocation, linear rung
+
+
+def _round_trip_errors(model, allocator, n_dir, fractions):
+    """Worst direction error (deg) and magnitude error (relative) over a grid inside the reachable set."""
+    worst_dir = worst_mag = 0.0
+    for phi in np.linspace(0, 2 * np.pi, n_dir, endpoint=False):
+        kmax = allocator.max_curvature(phi)
+        assert kmax > 0
+        for f in fractions:
+            k = f * kmax * np.array([np.cos(phi), np.sin(phi)])
+            res = allocator.allocate(k)
+            assert res.reachable and res.converged and not res.saturated, res.message
+            p = res.pressures
+            assert np.all(p >= 0) and np.all(p <= model.design.max_pressure)
+            assert np.count_nonzero(p) <= 2, p  # never all three
+            achieved = model.evaluate(p).curvature  # the rung's own forward model, independently
+            np.testing.assert_allclose(achieved, res.achieved_curvature, rtol=1e-9, atol=1e-12)
+            err = math.degrees(abs(math.remainder(math.atan2(achieved[1], achieved[0]) - phi, 2 * math.pi)))
+            worst_dir = max(worst_dir, err)
+            worst_mag = max(worst_mag, abs(np.hypot(*achieved) / np.hypot(*k) - 1))
+    return worst_dir, worst_mag
+
+
+def test_round_trip_closed_form_dense_grid(three):
+    model = make_model("closed_form", three)
+    allocator = Allocator(model)
+    fractions = np.concatenate([np.geomspace(0.002, 0.05, 6), np.linspace(0.1, 1.0, 19)])
+    worst_dir, worst_mag = _round_trip_errors(model, allocator, 720, fractions)
+    assert worst_dir <= DIRECTION_TOL_DEG and worst_mag <= MAGNITUDE_RTOL
+    # A linear rung is inverted exactly; the sweep above visits directions in order, so the
+    # hysteresis band never applied here and the result is exact to rounding.
+    assert worst_dir < 1e-9 and worst_mag < 1e-9
+
+
+def test_round_trip_newton_path_with_coupling(three):
+    model = CoupledNonlinear(three)
+    allocator = Allocator(model)
+    assert not allocator.linear
+    worst_dir, worst_mag = _round_trip_errors(model, allocator, 144, [0.01, 0.1, 0.3, 0.5, 0.7, 0.9, 0.99, 1.0])
+    assert worst_dir <= DIRECTION_TOL_DEG and worst_mag <= MAGNITUDE_RTOL
+    # The coupling is honoured: the superposition of single-channel pressures would miss.
+    res = allocator.allocate([0.0, 8.0])  # between channels 1 and 2 (directions 30 and 150 deg)
+    assert set(res.active_channels) == {1, 2}
+    superposed = sum(model.evaluate(np.eye(3)[i] * res.pressures[i]).curvature for i in (1, 2))
+    assert np.hypot(*res.achieved_curvature) > 1.01 * np.hypot(*superposed)
+
+
+@pytest.mark.parametrize("factory", ["closed_form", "nonlinear"])
+def test_saturation_along_the_same_direction(three, factory):
+    model = make_model("closed_form", three) if factory == "closed_form" else CoupledNonlinear(three)
+    allocator = Allocator(model)
+    for phi in np.radians([0, 17, 30, 75, 90, 200, 271, 333]):
+        u = np.array([np.cos(phi), np.sin(phi)])
+        kmax = allocator.max_curvature(phi)
+        res = allocator.allocate(3.0 * kmax * u)
+        assert res.saturated and res.reachable
+        assert res.max_curvature == pytest.approx(kmax, rel=1e-6)
+        assert res.pressures.max() == pytest.approx(three.max_pressure, rel=1e-12)
+        assert res.pressures.max() <= three.max_pressure
+        k = model.evaluate(res.pressures).curvature
+        assert np.hypot(*k) == pytest.approx(kmax, rel=1e-6)
+        assert math.degrees(abs(math.remainder(math.atan2(k[1], k[0]) - phi, 2 * math.pi))) < 1e-4
+        # Just inside the boundary: not saturated, the larger pressure below the maximum.
+        inside = allocator.allocate(0.999 * kmax * u)
+        assert not inside.saturated and inside.pressures.max() < three.max_pressure
+
+
+def test_reachable_set_shape_closed_form(three):
+    """Linear, symmetric: reach is max at each channel's direction and mid-sector (both at max_pressure,
+    120 degrees apart, sum of equal unit vectors has unit length) and cos(30 deg) of it in between."""
+    allocator = Allocator(make_model("closed_form", three))
+    rs = allocator.reachable_set(12)  # every 30 degrees, starting at 0
+    k1 = allocator.channel_max_curvature[0]
+    assert np.degrees(rs.channel_directions) == pytest.approx([270, 30, 150])
+    expected = [k1 * (1 if (round(math.degrees(d)) - 30) % 60 == 0 else math.cos(math.radians(30)))
+                for d in rs.directions]
+    np.testing.assert_allclose(rs.max_curvature, expected, rtol=1e-12)
+
+
+def test_zero_and_deadband(three):
+    allocator = Allocator(make_model("closed_form", three))
+    res = allocator.allocate([0.0, 0.0])
+    assert np.all(res.pressures == 0) and res.active_channels == () and not res.saturated
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        phi = rng.uniform(0, 2 * np.pi)
+        tiny = rng.uniform(0, 1) * allocator.deadband
+        assert np.all(allocator.allocate(tiny * np.array([np.cos(phi), np.sin(phi)])).pressures == 0)
+    # Just above the deadband the pressures are small (well below 1% of max_pressure): no jump.
+    above = allocator.allocate([1.01 * allocator.deadband, 0.0])
+    assert 0 < above.pressures.max() < 0.01 * three.max_pressure
+
+
+def test_hysteresis_no_flicker_on_a_sector_edge(three):
+    """A direction wobbling +-0.1 deg around channel 1's direction (30 deg) switches sectors each time
+    without hysteresis (channels 0 and 2 alternate); with it, the other channel stays at zero."""
+    model = make_model("closed_form", three)
+    wobble = [math.radians(30 + (0.1 if i % 2 else -0.1)) for i in range(40)]
+
+    def run(h):
+        allocator = Allocator(model, hysteresis_deg=h)
+        return [allocator.allocate(5.0 * np.array([math.cos(p), math.sin(p)])) for p in wobble]
+
+    plain = run(0.0)
+    assert {r.active_channels for r in plain} == {(0, 1), (1, 2)}  # flicker, as the test's premise
+    held = run(0.2)
+    assert len({r.active_channels for r in held}) == 1
+    for r, phi in zip(held, wobble):  # the snapped direction stays within the hysteresis band
+        k = r.achieved_curvature
+        assert math.degrees(abs(math.atan2(k[1], k[0]) - phi)) <= 0.2 + 1e-9
+        assert np.hypot(*k) == pytest.approx(5.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("factory", ["closed_form", "nonlinear"])
+@pytest.mark.parametrize("fraction", [0.5, 1.0, 2.0])
+@pytest.mark.parametrize("hysteresis_deg", [0.0, 0.2])
+def test_pressures_continuous_as_direction_sweeps_the_circle(three, factory, fraction, hysteresis_deg):
+    model = make_model("closed_form", three) if factory == "closed_form" else CoupledNonlinear(three)
+    allocator = Allocator(model, hysteresis_deg=hysteresis_deg)
+    kmin = min(allocator.reachable_set(72).max_curvature)
+    steps = 3600 if factory == "closed_form" else 720
+    phis = np.linspace(0, 2 * np.pi, steps + 1)  # closes the circle: the last equals the first
+    ps = np.array([allocator.allocate(fraction * kmin * np.array([np.cos(p), np.sin(p)])).pressures
+                   for p in phis])
+    jumps = np.abs(np.diff(ps, axis=0)).max(axis=1)
+    # Pressures move at most by (max pressure per radian) x (step): a sector switch that jumped
+    # would move a channel by a large fraction of max_pressure in one step. Leaving the hysteresis
+    # band catches up the direction it held back, so that band adds to the step.
+    bound = 3.0 * three.max_pressure * (2 * np.pi / steps + math.radians(hysteresis_deg))
+    assert jumps.max() <= bound, (jumps.max(), bound)
+    np.testing.assert_allclose(ps[0], ps[-1], atol=1e-6 * three.max_pressure)
+    assert ps.max() <= three.max_pressure and ps.min() >= 0
+    assert all(np.count_nonzero(p) <= 2 for p in ps)
+
+
+def test_one_channel_design_reports_unreachable_directions(implemented_design):
+    allocator = Allocator(make_model("closed_form", implemented_design))
+    # Channel at +y bends towards -y (270 deg) only.
+    assert math.degrees(allocator.channel_directions[0]) == pytest.approx(270)
+    ok = allocator.allocate([0.0, -10.0])
+    assert ok.reachable and ok.pressures[0] > 0
+    assert np.hypot(*implemented_design_model_curv(implemented_design, ok.pressures)) == pytest.approx(10.0)
+    for k in ([10.0, 0.0], [0.0, 10.0], [-3.0, -10.0]):
+        res = allocator.allocate(k)
+        assert not res.reachable and np.all(res.pressures == 0) and "unreachable" in res.message
+    assert allocator.max_curvature(0.0) == 0.0
+    assert allocator.max_curvature(math.radians(270)) > 0
+    # Within the stated tolerance of its own direction it is steered along that direction.
+    near = allocator.allocate(10.0 * np.array([math.cos(math.radians(270.3)), math.sin(math.radians(270.3))]))
+    assert near.reachable and near.achieved_curvature[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def implemented_design_model_curv(design, p):
+    return make_model("closed_form", design).evaluate(p).curvature
+
+
+def test_allocate_bend_angle_includes_stretch(three):
+    allocator = Allocator(make_model("closed_form", three))
+    for deg_dir, deg_angle in [(0, 5), (45, 12), (200, 17)]:
+        res = allocator.allocate_bend(math.radians(deg_dir), math.radians(deg_angle))
+        k = res.achieved_curvature
+        angle = np.hypot(*k) * three.length * res.axial_stretch
+        assert angle == pytest.approx(math.radians(deg_angle), rel=1e-9)
+        assert res.axial_stretch > 1.0  # the stretch was not ignored
+        assert math.remainder(math.degrees(math.atan2(k[1], k[0])) - deg_dir, 360) == pytest.approx(0, abs=1e-9)
+    sat = allocator.allocate_bend(0.0, math.radians(80))
+    assert sat.saturated and sat.extras["achieved_angle_rad"] == pytest.approx(sat.extras["max_angle_rad"])
+
+
+def test_allocate_tip_recovers_forward_pressures(three):
+    model = make_model("closed_form", three)
+    allocator = Allocator(model)
+    for p in ([0.0, 30e3, 10e3], [20e3, 0.0, 0.0], [45e3, 0.0, 5e3]):
+        state = model.evaluate(p)
+        tip, _ = tip_pose(state.curvature, three.length * state.axial_stretch)
+        res = allocator.allocate_tip(tip)
+        assert res.extras["tip_reachable"] and res.extras["tip_error_m"] < 1e-9
+        np.testing.assert_allclose(res.pressures, p, atol=1e-6 * three.max_pressure)
+    # Off the workspace (too close to the base): aimed at, reported not reached.
+    off = allocator.allocate_tip([0.002, 0.0, 0.02])
+    assert not off.extras["tip_reachable"] and off.extras["tip_error_m"] > 1e-3
+    pos = np.array(off.extras["achieved_tip_m"])
+    assert math.atan2(pos[0], pos[2]) == pytest.approx(math.atan2(0.002, 0.02), rel=1e-9)  # on the bearing
+
+
+def test_bad_requests_raise(three):
+    allocator = Allocator(make_model("closed_form", three))
+    with pytest.raises(AllocationError):
+        allocator.allocate([float("nan"), 0.0])
+    with pytest.raises(AllocationError):
+        allocator.allocate([float("inf"), 1.0])
+    with pytest.raises(AllocationError):
+        allocator.allocate_bend(0.0, -0.1)
+    with pytest.raises(AllocationError):
+        allocator.allocate_tip([0.0, 0.0, -0.01])
+
+
+# ---------------------------------------------------------------------------- every registered rung
+
+
+def test_three_channel_design_runs_on_every_rung(three):
+    """Loads and evaluates on each rung of the ladder; the allocator's channel directions follow
+    the 120 degree symmetry on each (cheap checks only: the round trip per rung is below)."""
+    from softcath_ros.core.models import available_models
+
+    for name in available_models():
+        model = make_model(name, three)
+        state = model.evaluate(np.array([0.3, 0.0, 0.0]) * three.max_pressure)
+        assert state.converged and state.curvature[1] < 0 and abs(state.curvature[0]) < 1e-6 * abs(state.curvature[1])
+
+
+# ---------------------------------------------------------------------------- command line
+
+
+def _cli(capsys, *argv):
+    code = cli_main(["allocate", *argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_json(capsys, three):
+    code, out, _ = _cli(capsys, "--design", "three_channel_5mm", "--curvature", "3,0", "--json",
+                        "--reachable-set", "6")
+    assert code == 0
+    d = json.loads(out)
+    assert d["saturated"] is False and d["reachable"] is True
+    k = make_model("closed_form", three).evaluate(d["pressures_pa"]).curvature
+    np.testing.assert_allclose(k, [3.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(d["achieved_curvature_per_m"], k, atol=1e-12)
+    assert d["max_curvature_per_m"] > 3.0 and len(d["reachable_set"]["max_curvature_per_m"]) == 6
+    code, out, _ = _cli(capsys, "--design", "three_channel_5mm", "--direction", "90", "--angle", "60", "--json")
+    d = json.loads(out)
+    assert code == 0 and d["saturated"] is True and max(d["pressures_pa"]) == three.max_pressure
+    code, out, _ = _cli(capsys, "--design", "three_channel_5mm", "--tip", "0.004,0.0,0.0395", "--json")
+    assert code == 0 and "tip_error_m" in json.loads(out)
+
+
+def test_cli_errors(capsys):
+    code, out, err = _cli(capsys, "--design", "implemented_5mm", "--curvature", "5,0", "--json")
+    assert code == 1 and json.loads(out)["reachable"] is False and "unreachable" in err
+    code, _, err = _cli(capsys, "--design", "three_channel_5mm", "--curvature", "nan,0")
+    assert code == 2 and "finite" in err
+    code, _, err = _cli(capsys, "--design", "three_channel_5mm", "--direction", "10")
+    assert code == 2 and "--angle" in err
