@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .errors import ModelError, SoftcathError
-from .kinematics import curvature_for_tip, tip_pose
+from .kinematics import curvature_for_tip, tip_pose_single
 from .models.base import BendModel
 
 TWO_PI = 2.0 * math.pi
@@ -208,7 +208,7 @@ class Allocator:
         for _ in range(8):
             kappa = angle / (length * stretch)
             result = self.allocate((kappa * ux, kappa * uy))
-            if abs(result.axial_stretch - stretch) <= 1e-12 * stretch:
+            if abs(result.axial_stretch - stretch) <= 1e-10 * stretch:  # angle error <= 1e-10 relative
                 break
             stretch = result.axial_stretch
         achieved = math.hypot(*result.achieved_curvature) * length * result.axial_stretch
@@ -228,14 +228,15 @@ class Allocator:
         if p.size != 3 or not np.all(np.isfinite(p)):
             raise AllocationError(f"tip {p.tolist()} m must be three finite numbers")
         length = self.design.length if length is None else float(length)
-        inv = curvature_for_tip(p, length)
-        rho = math.hypot(p[0], p[1])
-        if not np.isfinite(inv.arc_length) and rho == 0.0:
+        arc = curvature_for_tip(p, length)
+        arc_length = float(arc.arc_length)
+        if not math.isfinite(arc_length):
             raise AllocationError(f"tip {p.tolist()} m: no bending arc ends there (on or behind the base)")
-        angle = 2.0 * math.atan2(rho, p[2])
-        direction = math.atan2(p[1], p[0]) if rho > 0 else 0.0
-        result = self.allocate_bend(direction, angle, length)
-        pos, _ = tip_pose(result.achieved_curvature, length * result.axial_stretch)
+        kx, ky = float(arc.curvature[0]), float(arc.curvature[1])
+        angle = math.hypot(kx, ky) * arc_length  # = 2 atan2(rho, z), the bearing of the target doubled
+        result = self.allocate_bend(math.atan2(ky, kx), angle, length)
+        ka, kb = result.achieved_curvature
+        pos = np.array(tip_pose_single(float(ka), float(kb), length * result.axial_stretch)[0])
         error = float(np.linalg.norm(pos - p))
         result.extras.update({"target_tip_m": p.tolist(), "achieved_tip_m": pos.tolist(), "tip_error_m": error,
                               "tip_reachable": bool(result.reachable and error <= rtol * length)})

@@ -1,0 +1,166 @@
+"""Time of one pressure allocation (softcath_ros.core.allocation.Allocator).
+
+Target (issue 4): one allocation <= 100 us with the fast rungs. Every call is timed on
+its own (perf_counter_ns); the table gives the median and the 99th percentile over
+many calls with random requests (directions over the full circle, magnitudes inside
+the reachable set, or beyond it for the saturated cases).
+
+Cases: the linear fast path (closed_form: exact 2 x 2 inverse in floats), the same
+rung seen only through ``evaluate`` (the generic Newton path every non-linear rung
+takes, so its overhead is visible apart from the rung's own cost), and any further
+rungs named with --model (they take the Newton path with their real cost).
+
+    .venv/bin/python benchmarks/allocation_speed.py [--design three_channel_5mm] [--calls 20000]
+        [--model section ...]
+
+Writes benchmarks/results/allocation_speed.{json,csv,png}.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from softcath_ros.core.allocation import Allocator
+from softcath_ros.core.design import load_design
+from softcath_ros.core.models import make_model
+from softcath_ros.core.models.base import BendModel
+
+RESULTS = Path(__file__).resolve().parent / "results"
+TARGET_US = 100.0
+
+
+class EvaluateOnly(BendModel):
+    """A rung seen only through ``evaluate``: hides ``curvature_per_pa`` so the allocator takes
+    its generic Newton path (what every non-linear rung gets)."""
+
+    def __init__(self, model: BendModel):
+        super().__init__(model.design)
+        self._inner = model
+        self.name = f"{model.name} via evaluate"
+
+    def _evaluate_batch(self, pressures):
+        return self._inner._evaluate_batch(pressures)
+
+
+def time_calls(fn, requests, label) -> np.ndarray:
+    """Seconds of each call ``fn(request)``."""
+    out = np.empty(len(requests))
+    clock = time.perf_counter_ns
+    for i, r in enumerate(tqdm(requests, desc=label, leave=False, mininterval=0.5)):
+        t0 = clock()
+        fn(r)
+        out[i] = (clock() - t0) * 1e-9
+    return out
+
+
+def requests_for(allocator: Allocator, n: int, rng, saturated: bool) -> list[np.ndarray]:
+    phis = rng.uniform(0, 2 * math.pi, n)
+    kmax = np.array([allocator.max_curvature(p) for p in phis])
+    f = rng.uniform(1.2, 3.0, n) if saturated else rng.uniform(0.01, 1.0, n)
+    return [f[i] * kmax[i] * np.array([math.cos(phis[i]), math.sin(phis[i])]) for i in range(n)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--design", default="three_channel_5mm")
+    ap.add_argument("--calls", type=int, default=20000, help="calls per fast case (slower cases use fewer)")
+    ap.add_argument("--model", nargs="*", default=[], help="further rungs to time on the Newton path")
+    args = ap.parse_args()
+
+    design = load_design(args.design)
+    rng = np.random.default_rng(0)
+    rows = []
+
+    def record(case, model_name, path, seconds):
+        us = seconds * 1e6
+        row = {"case": case, "model": model_name, "path": path, "calls": len(us),
+               "median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)),
+               "mean_us": float(us.mean()), "max_us": float(us.max()),
+               "meets_100us_target": bool(np.median(us) <= TARGET_US)}
+        rows.append(row)
+        print(f"{case:44s} {model_name:28s} median {row['median_us']:9.2f} us  p99 {row['p99_us']:9.2f} us"
+              f"  ({len(us)} calls)")
+
+    try:
+        cf = make_model("closed_form", design)
+        fast = Allocator(cf)
+        n = args.calls
+        record("allocate (inside reach)", "closed_form", "linear", time_calls(
+            fast.allocate, requests_for(fast, n, rng, False), "fast inside"))
+        record("allocate (saturated)", "closed_form", "linear", time_calls(
+            fast.allocate, requests_for(fast, n, rng, True), "fast saturated"))
+        bends = [(rng.uniform(0, 2 * math.pi), rng.uniform(0, 0.3)) for _ in range(n)]
+        record("allocate_bend (direction + angle)", "closed_form", "linear",
+               time_calls(lambda r: fast.allocate_bend(*r), bends, "fast bend"))
+        tips = []
+        for r in requests_for(fast, n // 4, rng, False):
+            tips.append(np.array([*(r * design.length ** 2 / 2), design.length * 0.98]))
+        record("allocate_tip (tip point)", "closed_form", "linear",
+               time_calls(fast.allocate_tip, tips, "fast tip"))
+
+        generic = Allocator(EvaluateOnly(cf))
+        m = max(n // 10, 200)
+        record("allocate (inside reach)", "closed_form via evaluate", "newton", time_calls(
+            generic.allocate, requests_for(fast, m, rng, False), "newton inside"))
+        record("allocate (saturated)", "closed_form via evaluate", "newton", time_calls(
+            generic.allocate, requests_for(fast, m // 4, rng, True), "newton saturated"))
+
+        for name in args.model:
+            alloc = Allocator(make_model(name, design))
+            k = max(m // 20, 20)
+            record("allocate (inside reach)", name, "linear" if alloc.linear else "newton",
+                   time_calls(alloc.allocate, requests_for(alloc, k, rng, False), name))
+    except KeyboardInterrupt:
+        print("interrupted: writing the cases timed so far")
+
+    meta = {"design": args.design, "calls": args.calls, "target_median_us": TARGET_US,
+            "python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
+            "cpu_count": os.cpu_count(), "load_average": os.getloadavg(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "note": "shared 2-core machine, other jobs running: medians, not minima"}
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "allocation_speed.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
+    with open(RESULTS / "allocation_speed.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    plot(rows, RESULTS / "allocation_speed.png", design.name)
+    print(f"results in {RESULTS}/allocation_speed.{{json,csv,png}}")
+
+
+def plot(rows, path, design_name):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    labels = [f"{r['case']}\n{r['model']}" for r in rows]
+    y = np.arange(len(rows))
+    med = [r["median_us"] for r in rows]
+    p99 = [r["p99_us"] for r in rows]
+    colors = ["tab:blue" if r["path"] == "linear" else "tab:orange" for r in rows]
+    ax.barh(y, med, color=colors)
+    ax.scatter(p99, y, marker="|", s=200, color="k", label="99th percentile")
+    ax.axvline(TARGET_US, color="r", ls="--", lw=1, label="target: 100 us (fast rungs)")
+    ax.set_xscale("log")
+    ax.set_yticks(y, labels, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlabel("time per allocation, us (median; blue: linear fast path, orange: Newton path)")
+    ax.set_title(f"Pressure allocation, design {design_name}")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+if __name__ == "__main__":
+    main()
