@@ -18,14 +18,8 @@ Writes benchmarks/results/allocation_speed.{json,csv,png}.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
-import os
-import platform
 import time
-from pathlib import Path
-
 import numpy as np
 from tqdm import tqdm
 
@@ -34,7 +28,8 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel
 
-RESULTS = Path(__file__).resolve().parent / "results"
+from results_io import RESULTS, write_results  # noqa: E402  (benchmarks/ is the script's directory)
+
 TARGET_US = 100.0
 
 
@@ -123,16 +118,8 @@ def main() -> None:
         print("interrupted: writing the cases timed so far")
 
     meta = {"design": args.design, "calls": args.calls, "target_median_us": TARGET_US,
-            "python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
-            "cpu_count": os.cpu_count(), "load_average": os.getloadavg(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
             "note": "shared 2-core machine, other jobs running: medians, not minima"}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "allocation_speed.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
-    with open(RESULTS / "allocation_speed.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_results("allocation_speed", meta, rows)
     plot(rows, RESULTS / "allocation_speed.png", design.name)
     print(f"results in {RESULTS}/allocation_speed.{{json,csv,png}}")
 
