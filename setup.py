@@ -18,6 +18,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/designs", glob("config/designs/*.yaml")),
+        ("share/" + package_name + "/config/protocols", glob("config/protocols/*.yaml")),
     ],
     python_requires=">=3.10",
     install_requires=[

@@ -12,6 +12,8 @@ import sys
 from ..core.errors import SoftcathError
 
 SUBCOMMANDS = [
+    "calibrate",
+    "report",
     "recover",
     "predict",
     "allocate",

@@ -1,0 +1,212 @@
+"""From a bench recording to per-step statistics (actuator.md "The bench").
+
+Each ``sample`` marker on the step topic is one reading: the latest measured
+pressures, angle and force received before the marker. On the force bench the scale
+reading at p = 0 of the same trial (its first loading step) is subtracted (tare).
+Per step (bench, drive, phase, level) the mean and standard deviation over trials and
+samples are reported for pressure, curvature, R_C = l / theta and force; loading and
+unloading at the same level are compared (hysteresis) with Welch's t statistic.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DEFAULT_TOPICS = {
+    "step": "/softcath/bench/step",
+    "pressure_measured": "/softcath/pressure_measured",
+    "angle": "/softcath/bench/angle",
+    "force": "/softcath/bench/force",
+}
+
+
+@dataclass
+class SampleRow:
+    step: int
+    bench: str
+    sample_name: str
+    length: float            # m
+    trial: int
+    phase: str
+    drive: str
+    level: float
+    pressure_cmd: np.ndarray  # Pa (C,)
+    pressure: np.ndarray      # Pa (C,), measured
+    angle: float              # rad
+    force: float              # N, tared on the force bench
+    settled: bool = True
+
+    @property
+    def curvature(self) -> float:
+        return self.angle / self.length
+
+
+@dataclass
+class StepStats:
+    bench: str
+    drive: str
+    phase: str
+    level: float
+    n: int
+    pressure_mean: np.ndarray     # Pa (C,)
+    pressure_std: np.ndarray
+    curvature_mean: float         # 1/m
+    curvature_std: float
+    radius_mean: float            # m (nan where the bend is within the reading noise)
+    radius_std: float
+    force_mean: float             # N
+    force_std: float
+    length: float
+    unsettled: int = 0
+    model: dict = field(default_factory=dict)  # name -> {"curvature": , "radius": , "force": }
+
+    @property
+    def pressure_magnitude(self) -> float:
+        return float(np.max(self.pressure_mean))
+
+
+def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]]) -> list[SampleRow]:
+    """``events``: (time ns, marker dict) in time order. ``streams``: name -> [(time ns, value)] for
+    'pressure_measured' (array), 'angle', 'force' (floats), each in time order."""
+    idx = {k: 0 for k in streams}
+    latest: dict[str, object] = {k: None for k in streams}
+    settled_by_step: dict[int, bool] = {}
+    rows: list[SampleRow] = []
+    for t, ev in events:
+        for k, seq in streams.items():
+            while idx[k] < len(seq) and seq[idx[k]][0] <= t:
+                latest[k] = seq[idx[k]][1]
+                idx[k] += 1
+        if ev.get("event") == "settled":
+            settled_by_step[ev["step"]] = bool(ev.get("settled", True))
+        if ev.get("event") != "sample":
+            continue
+        if latest.get("pressure_measured") is None:
+            continue  # nothing measured yet: not a reading
+        rows.append(SampleRow(
+            step=int(ev["step"]), bench=ev["bench"], sample_name=ev["sample_name"],
+            length=float(ev["sample_length_m"]), trial=int(ev["trial"]), phase=ev["phase"], drive=ev["drive"],
+            level=float(ev["level"]), pressure_cmd=np.asarray(ev["pressure_cmd_pa"], dtype=float),
+            pressure=np.asarray(latest["pressure_measured"], dtype=float),
+            angle=float(latest["angle"]) if latest.get("angle") is not None else math.nan,
+            force=float(latest["force"]) if latest.get("force") is not None else math.nan,
+            settled=settled_by_step.get(int(ev["step"]), True)))
+    return tare_forces(rows)
+
+
+def tare_forces(rows: list[SampleRow]) -> list[SampleRow]:
+    """Subtract, per (sample, drive, trial) on the force bench, the mean reading at the first p = 0 step."""
+    tare: dict[tuple, float] = {}
+    for key in {(r.sample_name, r.drive, r.trial) for r in rows if r.bench == "force"}:
+        zero = [r for r in rows if r.bench == "force" and (r.sample_name, r.drive, r.trial) == key
+                and r.level == 0 and r.phase == "loading"]
+        if zero:
+            first = min(r.step for r in zero)
+            tare[key] = float(np.mean([r.force for r in zero if r.step == first]))
+    for r in rows:
+        if r.bench == "force":
+            r.force = r.force - tare.get((r.sample_name, r.drive, r.trial), math.nan)
+    return rows
+
+
+def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[SampleRow]:
+    from ..recording.reader import iter_messages
+
+    topics = {**DEFAULT_TOPICS, **(topics or {})}
+    by_topic = {v: k for k, v in topics.items()}
+    events: list[tuple[int, dict]] = []
+    streams: dict[str, list] = {"pressure_measured": [], "angle": [], "force": []}
+    for m in iter_messages(path, topics=list(topics.values())):
+        kind = by_topic[m.topic]
+        if kind == "step":
+            events.append((m.log_time_ns, json.loads(m.message.data)))
+        elif kind == "pressure_measured":
+            streams[kind].append((m.log_time_ns, np.asarray(m.message.data, dtype=float)))
+        else:
+            streams[kind].append((m.log_time_ns, float(m.message.data)))
+    return rows_from_events(events, streams)
+
+
+def summarise(rows: list[SampleRow], angle_resolution: float = math.radians(1.0)) -> list[StepStats]:
+    """Mean and std per (bench, drive, phase, level). R_C is left out (nan) where the mean angle is
+    below ``angle_resolution`` (rad): there l / theta measures the noise, not the bend."""
+    groups: dict[tuple, list[SampleRow]] = {}
+    for r in rows:
+        groups.setdefault((r.bench, r.drive, r.phase, r.level), []).append(r)
+    out = []
+    for (bench, drive, phase, level), rs in groups.items():
+        p = np.array([r.pressure for r in rs])
+        k = np.array([r.curvature for r in rs])
+        f = np.array([r.force for r in rs])
+        ang = np.array([r.angle for r in rs])
+        std = (lambda x: float(np.std(x, ddof=1)) if len(x) > 1 else 0.0)
+        if bench == "angle" and abs(float(np.mean(ang))) >= angle_resolution:
+            radius = np.array([r.length for r in rs]) / ang
+            r_mean, r_std = float(np.mean(radius)), std(radius)
+        else:
+            r_mean, r_std = math.nan, math.nan
+        out.append(StepStats(bench=bench, drive=drive, phase=phase, level=level, n=len(rs),
+                             pressure_mean=p.mean(axis=0), pressure_std=p.std(axis=0, ddof=1) if len(rs) > 1
+                             else np.zeros(p.shape[1]),
+                             curvature_mean=float(np.mean(k)) if bench == "angle" else math.nan,
+                             curvature_std=std(k) if bench == "angle" else math.nan,
+                             radius_mean=r_mean, radius_std=r_std,
+                             force_mean=float(np.mean(f)) if bench == "force" else math.nan,
+                             force_std=std(f) if bench == "force" else math.nan,
+                             length=float(np.mean([r.length for r in rs])),
+                             unsettled=sum(not r.settled for r in rs)))
+    order = {"loading": 0, "unloading": 1}
+    out.sort(key=lambda s: (s.bench, s.drive, order[s.phase], s.level if s.phase == "loading" else -s.level))
+    return out
+
+
+@dataclass
+class Hysteresis:
+    bench: str
+    drive: str
+    level: float
+    quantity: str           # "curvature" (1/m) or "force" (N)
+    loading: float
+    unloading: float
+    difference: float       # unloading - loading
+    t_statistic: float      # Welch
+    significant: bool       # |t| > 2
+
+
+def hysteresis(stats: list[StepStats]) -> list[Hysteresis]:
+    by_key = {(s.bench, s.drive, s.phase, s.level): s for s in stats}
+    out = []
+    for (bench, drive, phase, level), up in by_key.items():
+        down = by_key.get((bench, drive, "unloading", level))
+        if phase != "loading" or down is None:
+            continue
+        q = "curvature" if bench == "angle" else "force"
+        mu_u, sd_u = getattr(up, f"{q}_mean"), getattr(up, f"{q}_std")
+        mu_d, sd_d = getattr(down, f"{q}_mean"), getattr(down, f"{q}_std")
+        se = math.sqrt(sd_u**2 / up.n + sd_d**2 / down.n)
+        t = (mu_d - mu_u) / se if se > 0 else 0.0
+        out.append(Hysteresis(bench, drive, level, q, mu_u, mu_d, mu_d - mu_u, t, abs(t) > 2.0))
+    out.sort(key=lambda h: (h.bench, h.drive, h.level))
+    return out
+
+
+def overlay_model(stats: list[StepStats], model, label: str, pressure_scale: float = 1.0) -> None:
+    """Store the model's curvature, R_C and blocking force at each step's mean measured pressure
+    (times ``pressure_scale``, e.g. 1 - a fitted pressure shift) in ``stats[i].model[label]``."""
+    from .blocking import BlockingForce
+
+    if not stats:
+        return
+    force = BlockingForce(model)
+    p = np.array([s.pressure_mean for s in stats]) * pressure_scale
+    state = model.evaluate(np.clip(p, 0.0, None))
+    k = np.atleast_2d(state.curvature)
+    kmag = np.hypot(k[:, 0], k[:, 1])
+    conv = np.atleast_1d(state.converged)
+    for i, s in enumerate(stats):
+        s.model[label] = {"curvature": float(kmag[i]) if conv[i] else math.nan,
+                          "radius": float(1.0 / kmag[i]) if conv[i] and kmag[i] > 0 else math.nan,
+                          "force": float(force.from_curvature(k[i], s.length)) if conv[i] else math.nan}

@@ -1,0 +1,359 @@
+"""Test protocols (config/protocols/*.yaml) and the engine that steps through them.
+
+A protocol is a pressure staircase (0 -> max -> 0 by default), repeated over trials,
+on one or more benches (angle, blocking force), each with its mounted samples
+(actuators of given length). For a multi-channel design it drives each listed
+channel alone, or bends in listed directions through the allocator, whose levels
+are then fractions of the reachable curvature in that direction.
+
+``ProtocolRunner`` is a clock-driven state machine with no I/O: each update gets the
+time and the measured pressures and returns the events to publish (step start,
+settled, sample, step end, protocol end). A step is settled when every channel's
+measurement has stayed within ``settle.tolerance`` of the command for ``settle.hold``
+seconds and at least ``dwell`` seconds have passed; after ``settle.timeout`` it is
+sampled anyway and flagged unsettled. Then ``samples_per_step`` readings are taken
+``sample_period`` apart.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..core.errors import SoftcathError
+from ..core.yaml_io import load_yaml
+
+PA_PER_BAR = 1.0e5
+BENCHES = ("angle", "force")
+
+
+class ProtocolError(SoftcathError):
+    def __init__(self, field_name: str, value, reason: str):
+        super().__init__(f"protocol field '{field_name}' = {value!r}: {reason}")
+
+
+@dataclass(frozen=True)
+class BenchSample:
+    name: str
+    length: float  # m
+
+
+@dataclass(frozen=True)
+class BenchSpec:
+    kind: str                      # "angle" | "force"
+    samples: tuple[BenchSample, ...]
+
+
+@dataclass(frozen=True)
+class Protocol:
+    name: str
+    description: str
+    design: str | None
+    drive: str                     # "channels" | "direction"
+    channels: tuple[int, ...]      # drive: channels
+    directions_deg: tuple[float, ...]  # drive: direction
+    levels: tuple[float, ...]      # Pa (channels) or fraction of reach (direction), loading order
+    down: bool
+    trials: int
+    dwell: float
+    settle_tolerance: float        # Pa, peak-to-peak band of the measurement over the hold time
+    settle_max_offset: float       # Pa, largest |measured - command| accepted as arrived
+    settle_hold: float             # s
+    settle_timeout: float          # s
+    samples_per_step: int
+    sample_period: float           # s
+    benches: tuple[BenchSpec, ...]
+    source: dict = field(default_factory=dict, compare=False)
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(self.source, sort_keys=False)
+
+
+@dataclass(frozen=True)
+class Step:
+    index: int
+    bench: str
+    sample: BenchSample
+    trial: int
+    phase: str                     # "loading" | "unloading"
+    drive: str                     # "channel 0" | "direction 120.0 deg"
+    level: float                   # Pa or fraction
+    pressures: tuple[float, ...]   # Pa, commanded per channel
+
+    def describe(self) -> dict:
+        return {"step": self.index, "bench": self.bench, "sample_name": self.sample.name,
+                "sample_length_m": self.sample.length, "trial": self.trial, "phase": self.phase,
+                "drive": self.drive, "level": self.level, "pressure_cmd_pa": list(self.pressures)}
+
+
+# --------------------------------------------------------------------------- loading
+
+def protocols_dir() -> Path | None:
+    from ..core.design import designs_dir
+
+    d = designs_dir()
+    cands = [] if d is None else [d.parent / "protocols"]
+    cands.append(Path(__file__).resolve().parents[2] / "config" / "protocols")
+    return next((c for c in cands if c.is_dir()), None)
+
+
+def load_protocol(name_or_path) -> Protocol:
+    p = Path(name_or_path)
+    if not p.is_file():
+        d = protocols_dir()
+        cand = [] if d is None else [d / p.name, d / f"{p.name}.yaml"]
+        p = next((c for c in cand if c.is_file()), None)
+        if p is None:
+            known = sorted(x.stem for x in d.glob("*.yaml")) if d else []
+            raise ProtocolError("protocol", str(name_or_path), f"no such file or shipped protocol; shipped: {known}")
+    try:
+        data = load_yaml(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ProtocolError("protocol", str(p), f"not valid YAML: {exc}") from None
+    return protocol_from_dict(data)
+
+
+def _num(d: dict, key: str, default=None, *, positive=False, nonneg=False, where="") -> float:
+    name = f"{where}{key}"
+    if key not in d:
+        if default is None:
+            raise ProtocolError(name, None, "missing required field")
+        return float(default)
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ProtocolError(name, v, "must be a finite number")
+    if positive and v <= 0:
+        raise ProtocolError(name, v, "must be positive")
+    if nonneg and v < 0:
+        raise ProtocolError(name, v, "must not be negative")
+    return float(v)
+
+
+_KEYS = {"name", "description", "design", "drive", "channels", "directions_deg", "staircase", "trials",
+         "dwell", "settle", "samples_per_step", "sample_period", "benches"}
+
+
+def protocol_from_dict(data) -> Protocol:
+    if not isinstance(data, dict):
+        raise ProtocolError("protocol", data, "must be a mapping")
+    for k in data:
+        if k not in _KEYS:
+            raise ProtocolError(k, data[k], f"unknown field; known: {sorted(_KEYS)}")
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ProtocolError("name", name, "must be a non-empty string")
+    drive = data.get("drive", "channels")
+    if drive not in ("channels", "direction"):
+        raise ProtocolError("drive", drive, "must be 'channels' or 'direction'")
+    channels = tuple(data.get("channels", [0]))
+    if drive == "channels" and (not channels or not all(isinstance(c, int) and c >= 0 for c in channels)):
+        raise ProtocolError("channels", list(channels), "must be a non-empty list of channel indices")
+    directions = tuple(float(x) for x in data.get("directions_deg", []))
+    if drive == "direction" and not directions:
+        raise ProtocolError("directions_deg", [], "drive 'direction' needs at least one direction")
+
+    sc = data.get("staircase")
+    if not isinstance(sc, dict):
+        raise ProtocolError("staircase", sc, "must be a mapping with levels, or max and step")
+    if "levels" in sc:
+        levels = sc["levels"]
+        if not isinstance(levels, list) or not levels:
+            raise ProtocolError("staircase.levels", levels, "must be a non-empty list")
+        levels = tuple(_num({"v": v}, "v", where="staircase.levels.") for v in levels)
+    else:
+        top = _num(sc, "max", positive=True, where="staircase.")
+        step = _num(sc, "step", positive=True, where="staircase.")
+        n = int(round(top / step))
+        if abs(n * step - top) > 1e-9 * top:
+            raise ProtocolError("staircase.step", step, f"does not divide max {top}")
+        levels = tuple(i * step for i in range(n + 1))
+    if any(b < a for a, b in zip(levels, levels[1:])) or levels[0] < 0:
+        raise ProtocolError("staircase.levels", list(levels), "must be non-negative and increasing")
+    if drive == "direction" and levels[-1] > 1.0:
+        raise ProtocolError("staircase.levels", list(levels),
+                            "for drive 'direction' levels are fractions of the reachable curvature (<= 1)")
+
+    settle = data.get("settle", {})
+    if not isinstance(settle, dict):
+        raise ProtocolError("settle", settle, "must be a mapping {tolerance, hold, timeout}")
+    benches_raw = data.get("benches")
+    if not isinstance(benches_raw, list) or not benches_raw:
+        raise ProtocolError("benches", benches_raw, "must be a non-empty list of {kind, samples}")
+    benches = []
+    for i, b in enumerate(benches_raw):
+        where = f"benches[{i}]"
+        if not isinstance(b, dict) or b.get("kind") not in BENCHES:
+            raise ProtocolError(f"{where}.kind", b.get("kind") if isinstance(b, dict) else b,
+                                f"must be one of {BENCHES}")
+        samples = b.get("samples")
+        if not isinstance(samples, list) or not samples:
+            raise ProtocolError(f"{where}.samples", samples, "must be a non-empty list of {name, length}")
+        benches.append(BenchSpec(b["kind"], tuple(
+            BenchSample(str(s.get("name", f"sample{j}")),
+                        _num(s, "length", positive=True, where=f"{where}.samples[{j}].")) for j, s in
+            enumerate(samples))))
+    trials = data.get("trials", 1)
+    if not isinstance(trials, int) or trials < 1:
+        raise ProtocolError("trials", trials, "must be a positive integer")
+    n_samples = data.get("samples_per_step", 3)
+    if not isinstance(n_samples, int) or n_samples < 1:
+        raise ProtocolError("samples_per_step", n_samples, "must be a positive integer")
+    return Protocol(
+        name=name, description=str(data.get("description", "")), design=data.get("design"), drive=drive,
+        channels=channels, directions_deg=directions, levels=levels, down=bool(sc.get("down", True)),
+        trials=trials, dwell=_num(data, "dwell", 0.5, nonneg=True),
+        settle_tolerance=_num(settle, "tolerance", 1000.0, positive=True, where="settle."),
+        settle_max_offset=_num(settle, "max_offset", 3000.0, positive=True, where="settle."),
+        settle_hold=_num(settle, "hold", 0.2, nonneg=True, where="settle."),
+        settle_timeout=_num(settle, "timeout", 5.0, positive=True, where="settle."),
+        samples_per_step=n_samples, sample_period=_num(data, "sample_period", 0.05, positive=True),
+        benches=tuple(benches), source=data)
+
+
+# --------------------------------------------------------------------------- expansion
+
+def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, allocator=None) -> list[Step]:
+    """Every step in execution order. ``allocator`` (core.allocation.Allocator) is needed for
+    drive 'direction'; pressures beyond ``max_pressure`` are refused, never clipped silently."""
+    drives: list[tuple[str, callable]] = []
+    if protocol.drive == "channels":
+        for c in protocol.channels:
+            if c >= n_channels:
+                raise ProtocolError("channels", list(protocol.channels),
+                                    f"channel {c} does not exist (design has {n_channels})")
+
+            def unit(level, c=c):
+                p = np.zeros(n_channels)
+                p[c] = level
+                return p
+            drives.append((f"channel {c}", unit))
+    else:
+        if allocator is None:
+            raise ProtocolError("drive", "direction", "needs the allocator (softcath_ros.core.allocation)")
+        for deg in protocol.directions_deg:
+            phi = math.radians(deg)
+            kmax = allocator.max_curvature(phi)
+            if kmax <= 0:
+                raise ProtocolError("directions_deg", deg, "the design cannot bend in this direction")
+
+            def by_direction(frac, phi=phi, kmax=kmax):
+                if frac == 0:
+                    return np.zeros(n_channels)
+                a = allocator.allocate((frac * kmax * math.cos(phi), frac * kmax * math.sin(phi)))
+                return np.asarray(a.pressures, dtype=float)
+            drives.append((f"direction {deg:g} deg", by_direction))
+
+    up = list(protocol.levels)
+    sequence = [(lv, "loading") for lv in up]
+    if protocol.down:
+        sequence += [(lv, "unloading") for lv in reversed(up[:-1])]
+    steps: list[Step] = []
+    for bench in protocol.benches:
+        for sample in bench.samples:
+            for drive_name, to_pressures in drives:
+                for trial in range(protocol.trials):
+                    for level, phase in sequence:
+                        p = to_pressures(level)
+                        if np.any(p > max_pressure * (1 + 1e-9)) or np.any(p < 0):
+                            raise ProtocolError("staircase", level, f"needs pressures {p.tolist()} Pa outside "
+                                                f"[0, max_pressure {max_pressure:g}]")
+                        steps.append(Step(len(steps), bench.kind, sample, trial, phase, drive_name, float(level),
+                                          tuple(float(x) for x in p)))
+    return steps
+
+
+def estimated_duration(protocol: Protocol, n_steps: int, regulator_time_constant: float = 0.1) -> float:
+    """Lower bound of a run's duration, s (settling assumed after ~4 time constants)."""
+    per_step = max(protocol.dwell, 4 * regulator_time_constant + protocol.settle_hold) + \
+        protocol.samples_per_step * protocol.sample_period
+    return n_steps * per_step
+
+
+# --------------------------------------------------------------------------- engine
+
+class ProtocolRunner:
+    """Steps through ``steps`` against a clock; see the module docstring for the rules."""
+
+    def __init__(self, protocol: Protocol, steps: list[Step]):
+        if not steps:
+            raise ProtocolError("steps", [], "protocol expands to no steps")
+        self.protocol = protocol
+        self.steps = steps
+        self.i = -1
+        self.state = "idle"
+        self.done = False
+        self._t_step = 0.0
+        self._window: deque = deque()  # (t, measured) over the last hold seconds
+        self._t_sampling = 0.0
+        self._n_taken = 0
+        self.settled_flags: list[bool] = []
+
+    @property
+    def step(self) -> Step | None:
+        return self.steps[self.i] if 0 <= self.i < len(self.steps) else None
+
+    @property
+    def command(self) -> np.ndarray:
+        s = self.step
+        return np.zeros(len(self.steps[0].pressures)) if s is None else np.asarray(s.pressures)
+
+    def _event(self, name: str, t: float, **extra) -> dict:
+        ev = {"event": name, "t": t}
+        if self.step is not None:
+            ev.update(self.step.describe())
+        ev.update(extra)
+        return ev
+
+    def start(self, t: float) -> list[dict]:
+        events = [{"event": "protocol_start", "t": t, "protocol": self.protocol.name, "n_steps": len(self.steps)}]
+        return events + self._begin(0, t)
+
+    def _begin(self, i: int, t: float) -> list[dict]:
+        self.i = i
+        if i >= len(self.steps):
+            self.done = True
+            self.state = "done"
+            return [{"event": "protocol_end", "t": t, "n_steps": len(self.steps),
+                     "unsettled_steps": [k for k, ok in enumerate(self.settled_flags) if not ok]}]
+        self.state = "settling"
+        self._t_step = t
+        self._window.clear()
+        return [self._event("step_start", t)]
+
+    def update(self, t: float, measured) -> list[dict]:
+        """Advance to time ``t`` (s) with the latest measured pressures (Pa, or None if none yet)."""
+        if self.state in ("idle", "done"):
+            return []
+        events: list[dict] = []
+        p = self.protocol
+        if self.state == "settling":
+            elapsed = t - self._t_step
+            settled = False
+            if measured is not None:
+                m = np.asarray(measured, dtype=float)
+                w = self._window
+                w.append((t, m))
+                while len(w) > 1 and w[1][0] <= t - p.settle_hold:
+                    w.popleft()
+                values = np.array([x for _, x in w])
+                stable = t - w[0][0] >= p.settle_hold and np.all(np.ptp(values, axis=0) <= p.settle_tolerance)
+                arrived = np.all(np.abs(m - self.command) <= p.settle_max_offset)
+                settled = bool(stable and arrived and elapsed >= p.dwell)
+            if settled or elapsed >= p.settle_timeout:
+                self.settled_flags.append(bool(settled))
+                events.append(self._event("settled", t, settled=bool(settled), settle_time_s=elapsed))
+                self.state = "sampling"
+                self._t_sampling = t
+                self._n_taken = 0
+        if self.state == "sampling":
+            while self._n_taken < p.samples_per_step and t >= self._t_sampling + self._n_taken * p.sample_period:
+                events.append(self._event("sample", t, sample=self._n_taken))
+                self._n_taken += 1
+            if self._n_taken >= p.samples_per_step:
+                events.append(self._event("step_end", t))
+                events += self._begin(self.i + 1, t)
+        return events

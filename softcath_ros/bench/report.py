@@ -1,0 +1,183 @@
+"""Bench report: Markdown table and PNG plots (R_C and force vs pressure, loading/unloading,
+models overlaid, before/after calibration)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .analysis import Hysteresis, StepStats
+
+PA_PER_BAR = 1.0e5
+
+
+def _fmt(x: float, scale: float = 1.0, digits: int = 2) -> str:
+    return "—" if x is None or not np.isfinite(x) else f"{x * scale:.{digits}f}"
+
+
+def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: list[Hysteresis],
+             plots: list[str], calibration: dict | None = None) -> str:
+    labels = list(stats[0].model) if stats else []
+    lines = [f"# {title}", ""]
+    for k, v in info.items():
+        lines.append(f"- **{k}**: {v}")
+    lines.append("")
+    for bench in ("angle", "force"):
+        rows = [s for s in stats if s.bench == bench]
+        if not rows:
+            continue
+        if bench == "angle":
+            lines += ["## Angle bench: radius of curvature", "",
+                      "R_C = l / theta per reading; mean ± std over trials and samples (— where the bend is "
+                      "within the reading noise).", ""]
+            head = ["drive", "phase", "p cmd [bar]", "p measured [bar]", "n", "curvature [1/m]", "R_C [mm]"]
+            head += [f"R_C {lb} [mm]" for lb in labels]
+        else:
+            lines += ["## Blocking-force bench", "", "Scale reading minus the reading at p = 0 of the same trial.", ""]
+            head = ["drive", "phase", "p cmd [bar]", "p measured [bar]", "n", "force [mN]"]
+            head += [f"force {lb} [mN]" for lb in labels]
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for s in rows:
+            p = f"{_fmt(s.pressure_magnitude, 1 / PA_PER_BAR, 3)} ± {_fmt(float(np.max(s.pressure_std)), 1 / PA_PER_BAR, 3)}"
+            level = _fmt(s.level, 1 / PA_PER_BAR, 3) if s.drive.startswith("channel") else f"{s.level:g} of reach"
+            cells = [s.drive, s.phase + (" (unsettled)" if s.unsettled else ""), level, p, str(s.n)]
+            if bench == "angle":
+                cells += [f"{_fmt(s.curvature_mean)} ± {_fmt(s.curvature_std)}",
+                          f"{_fmt(s.radius_mean, 1e3, 1)} ± {_fmt(s.radius_std, 1e3, 1)}"]
+                cells += [_fmt(s.model[lb]["radius"], 1e3, 1) for lb in labels]
+            else:
+                cells += [f"{_fmt(s.force_mean, 1e3)} ± {_fmt(s.force_std, 1e3)}"]
+                cells += [_fmt(s.model[lb]["force"], 1e3) for lb in labels]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    if hyst:
+        lines += ["## Hysteresis: unloading minus loading", "",
+                  "Welch t statistic; |t| > 2 marks a difference larger than the scatter.", "",
+                  "| bench | drive | level | quantity | loading | unloading | difference | t | significant |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for h in hyst:
+            unit, sc = ("1/m", 1.0) if h.quantity == "curvature" else ("mN", 1e3)
+            lv = f"{h.level / PA_PER_BAR:.3f} bar" if h.drive.startswith("channel") else f"{h.level:g}"
+            lines.append(f"| {h.bench} | {h.drive} | {lv} | {h.quantity} [{unit}] | {h.loading * sc:.3f} | "
+                         f"{h.unloading * sc:.3f} | {h.difference * sc:+.3f} | {h.t_statistic:+.2f} | "
+                         f"{'yes' if h.significant else 'no'} |")
+        n_sig = sum(h.significant for h in hyst)
+        lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference.", ""]
+    if calibration:
+        c = calibration
+        lines += ["## Calibration", "",
+                  f"Rung `{c['rung']}` fitted to this recording (95% confidence from the Jacobian):", "",
+                  f"- pressure shift: {c['pressure_shift']:.4f} ± {c['ci95']['pressure_shift']:.4f} "
+                  "(model evaluated at (1 − shift) × p)",
+                  f"- material scale: {c['material_scale']:.4f} ± {c['ci95']['material_scale']:.4f} "
+                  "(all Yeoh coefficients × scale)",
+                  f"- parameter correlation: {c['correlation']:.3f}",
+                  f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
+                  f"({c['n_residuals']} readings)", ""]
+        if c.get("message"):
+            lines += [f"Solver: {c['message']}", ""]
+    if plots:
+        lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
+    return "\n".join(lines)
+
+
+def plot(stats: list[StepStats], out_dir: Path, stem: str) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    labels = list(stats[0].model) if stats else []
+    styles = ["-", "--", ":", "-."]
+    for bench, qty, ylabel, scale in (("angle", "radius", "R_C [mm]", 1e3), ("angle", "curvature", "curvature [1/m]", 1.0),
+                                      ("force", "force", "blocking force [mN]", 1e3)):
+        rows = [s for s in stats if s.bench == bench]
+        if not rows:
+            continue
+        fig, ax = plt.subplots(figsize=(6.4, 4.4))
+        for drive in sorted({s.drive for s in rows}):
+            for phase, marker in (("loading", "o"), ("unloading", "s")):
+                sel = [s for s in rows if s.drive == drive and s.phase == phase]
+                if not sel:
+                    continue
+                x = np.array([s.pressure_magnitude for s in sel]) / PA_PER_BAR
+                y = np.array([getattr(s, f"{qty}_mean") for s in sel]) * scale
+                e = np.array([getattr(s, f"{qty}_std") for s in sel]) * scale
+                ok = np.isfinite(y)
+                ax.errorbar(x[ok], y[ok], yerr=np.nan_to_num(e[ok]), fmt=marker, capsize=3, ms=5,
+                            label=f"bench {drive}, {phase}", mfc="none" if phase == "unloading" else None)
+            sel = sorted([s for s in rows if s.drive == drive and s.phase == "loading"], key=lambda s: s.pressure_magnitude)
+            for lb, ls in zip(labels, styles):
+                x = np.array([s.pressure_magnitude for s in sel]) / PA_PER_BAR
+                y = np.array([s.model[lb][qty] for s in sel]) * scale
+                ok = np.isfinite(y)
+                ax.plot(x[ok], y[ok], ls, label=f"model {lb}")
+        ax.set_xlabel("measured pressure [bar]")
+        ax.set_ylabel(ylabel)
+        if qty == "radius":
+            ax.set_yscale("log")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        ax.set_title(f"{stem}: {bench} bench")
+        fig.tight_layout()
+        path = out_dir / f"{stem}_{qty}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(str(path))
+    return paths
+
+
+def recording_design(path):
+    """The design attached to a bench recording (attachment 'design.yaml'), or None."""
+    from ..core.design import design_from_dict
+    from ..core.yaml_io import load_yaml
+    from ..recording.reader import read_attachments
+
+    data = read_attachments(path).get("design.yaml")
+    return None if data is None else design_from_dict(load_yaml(data.decode()), source=f"{path}:design.yaml")
+
+
+def write_report(recording, design=None, rungs=("closed_form",), calibration: dict | None = None,
+                 out_dir=None, topics: dict | None = None) -> dict:
+    """Analyse ``recording`` and write report.md + PNGs. Returns paths and the statistics.
+
+    ``calibration`` (from calibrate, as a mapping) adds the calibrated model as an overlay:
+    the rung on the design with the fitted material scale, at (1 - shift) p."""
+    from ..core.errors import SoftcathError
+    from ..core.models import make_model
+    from ..recording.reader import read_metadata, recording_file
+    from .analysis import hysteresis, overlay_model, rows_from_recording, summarise
+    from .calibration import scaled_design
+
+    path = recording_file(recording)
+    out = Path(out_dir) if out_dir else path.parent
+    out.mkdir(parents=True, exist_ok=True)
+    design = design or recording_design(path)
+    if design is None:
+        raise SoftcathError(f"{path} has no design attached; pass --design")
+    rows = rows_from_recording(path, topics)
+    if not rows:
+        raise SoftcathError(f"{path}: no bench readings (no 'sample' markers on the step topic)")
+    stats = summarise(rows)
+    for rung in rungs:
+        overlay_model(stats, make_model(rung, design), rung)
+    if calibration:
+        cal_model = make_model(calibration["rung"], scaled_design(design, calibration["material_scale"]))
+        overlay_model(stats, cal_model, f"{calibration['rung']} calibrated",
+                      pressure_scale=1.0 - calibration["pressure_shift"])
+    hyst = hysteresis(stats)
+    meta = read_metadata(path).get("softcath", {})
+    info = {"recording": str(path), "design": design.name,
+            "simulated": meta.get("simulated", "unknown"),
+            "protocol": meta.get("protocol", "unknown"),
+            "readings": f"{len(rows)} ({sum(not r.settled for r in rows)} from unsettled steps)",
+            "models overlaid": ", ".join(list(rungs) + ([f"{calibration['rung']} calibrated"] if calibration else []))}
+    if meta.get("simulated") == "true":
+        info["note"] = "simulated rig (sim_bench_node), not hardware"
+    plots = plot(stats, out, "report")
+    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration)
+    md = out / "report.md"
+    md.write_text(text)
+    return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows}

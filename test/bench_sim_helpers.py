@@ -1,0 +1,62 @@
+"""Offline bench runs for tests: the protocol engine driving the simulated rig on a fake clock."""
+import json
+
+import numpy as np
+
+from softcath_ros.bench.protocol import ProtocolRunner, expand_steps
+
+
+def run_offline(protocol, rig, dt=0.01, max_time=600.0):
+    """Returns (events [(t_ns, marker)], streams {name: [(t_ns, value)]}), as a recording would hold."""
+    design = rig.model.design
+    steps = expand_steps(protocol, design.n_channels, design.max_pressure)
+    runner = ProtocolRunner(protocol, steps)
+    events, streams = [], {"pressure_measured": [], "angle": [], "force": []}
+    t = 0.0
+    pending = runner.start(t)
+    while True:
+        for ev in pending:
+            if ev["event"] == "step_start":
+                rig.mount(ev["bench"], ev["sample_length_m"])
+            events.append((int(t * 1e9) + 1, ev))  # markers follow the readings of the same tick
+        if runner.done or t > max_time:
+            break
+        rig.advance(dt, runner.command)
+        t += dt
+        reading = rig.read()
+        tn = int(t * 1e9)
+        streams["pressure_measured"].append((tn, reading.pressures.copy()))
+        streams["angle"].append((tn, reading.angle))
+        streams["force"].append((tn, reading.force))
+        pending = runner.update(t, reading.pressures)
+    return events, streams
+
+
+def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True):
+    """Write an offline run as a bench recording would be written (same topics and types)."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64, Float64MultiArray, String
+
+    from softcath_ros.recording import BagWriter
+
+    with BagWriter(bag_dir, custom_data={"simulated": str(simulated).lower()}) as w:
+        w.add_topic("/softcath/bench/step", "std_msgs/msg/String")
+        w.add_topic("/softcath/pressure_measured", "std_msgs/msg/Float64MultiArray")
+        w.add_topic("/softcath/bench/angle", "std_msgs/msg/Float64")
+        w.add_topic("/softcath/bench/force", "std_msgs/msg/Float64")
+        w.add_metadata("softcath", {"simulated": str(simulated).lower(), "protocol": "test"})
+        w.add_attachment("design.yaml", "application/yaml", design_yaml.encode())
+        merged = [(t, "m", v) for t, v in streams["pressure_measured"]] + \
+                 [(t, "a", v) for t, v in streams["angle"]] + [(t, "f", v) for t, v in streams["force"]] + \
+                 [(t, "e", ev) for t, ev in events]
+        merged.sort(key=lambda x: x[0])
+        for t, kind, v in merged:
+            if kind == "m":
+                w.write("/softcath/pressure_measured", serialize_message(Float64MultiArray(data=list(map(float, v)))), t)
+            elif kind == "a":
+                w.write("/softcath/bench/angle", serialize_message(Float64(data=float(v))), t)
+            elif kind == "f":
+                w.write("/softcath/bench/force", serialize_message(Float64(data=float(v))), t)
+            else:
+                w.write("/softcath/bench/step", serialize_message(String(data=json.dumps(v))), t)
+    return bag_dir / f"{bag_dir.name}_0.mcap"

@@ -1,0 +1,224 @@
+"""Bench core: protocol loading and engine, simulated rig, analysis, calibration, report."""
+import math
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import yaml
+
+from bench_sim_helpers import run_offline, write_recording
+from softcath_ros.bench.analysis import hysteresis, rows_from_events, summarise
+from softcath_ros.bench.blocking import BlockingForce
+from softcath_ros.bench.calibration import calibrate, scaled_design
+from softcath_ros.bench.protocol import (ProtocolError, ProtocolRunner, expand_steps, load_protocol,
+                                         protocol_from_dict)
+from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
+from softcath_ros.core.models import make_model
+
+BAR = 1e5
+
+
+def test_default_protocol_expands_to_the_reference_staircase(implemented_design):
+    p = load_protocol("default")
+    steps = expand_steps(p, implemented_design.n_channels, implemented_design.max_pressure)
+    levels = [s.level for s in steps if s.bench == "angle" and s.trial == 0]
+    assert levels == [0, 5e3, 10e3, 15e3, 20e3, 25e3, 30e3, 35e3, 30e3, 25e3, 20e3, 15e3, 10e3, 5e3, 0]
+    assert [s.phase for s in steps[:9]] == ["loading"] * 8 + ["unloading"]
+    assert {s.bench for s in steps} == {"angle", "force"} and {s.trial for s in steps} == {0, 1, 2}
+    assert len(steps) == 2 * 3 * 15 and [s.index for s in steps] == list(range(len(steps)))
+
+
+@pytest.mark.parametrize("patch, field", [
+    ({"staircase": {"max": 35000.0, "step": 4000.0}}, "staircase.step"),
+    ({"bogus": 1}, "bogus"),
+    ({"trials": 0}, "trials"),
+    ({"benches": [{"kind": "laser", "samples": [{"length": 0.02}]}]}, "benches[0].kind"),
+    ({"benches": [{"kind": "angle", "samples": [{"name": "a", "length": -1}]}]}, "benches[0].samples[0].length"),
+    ({"drive": "direction"}, "directions_deg"),
+])
+def test_protocol_errors_name_the_field(patch, field):
+    data = yaml.safe_load(open("config/protocols/default.yaml"))
+    data.update(patch)
+    with pytest.raises(ProtocolError, match=re.escape(f"'{field}'")):
+        protocol_from_dict(data)
+
+
+def test_protocol_refuses_pressures_beyond_the_design_limit(implemented_design):
+    p = replace(load_protocol("default"), levels=(0.0, implemented_design.max_pressure * 1.5))
+    with pytest.raises(ProtocolError, match="max_pressure"):
+        expand_steps(p, 1, implemented_design.max_pressure)
+    with pytest.raises(ProtocolError, match="channel 1 does not exist"):
+        expand_steps(replace(p, channels=(1,)), 1, implemented_design.max_pressure)
+
+
+def _drive(runner, measured_fn, dt=0.01, t_end=100.0):
+    t, events = 0.0, runner.start(0.0)
+    while not runner.done and t < t_end:
+        t += dt
+        events += runner.update(t, measured_fn(t, runner.command))
+    return events
+
+
+def test_runner_waits_for_dwell_and_settling_then_samples():
+    p = load_protocol("quick")
+    steps = expand_steps(p, 1, 50000.0)
+    events = _drive(ProtocolRunner(p, steps), lambda t, cmd: cmd)  # perfect regulator
+    names = [e["event"] for e in events]
+    assert names[0] == "protocol_start" and names[-1] == "protocol_end"
+    assert names.count("step_start") == names.count("step_end") == len(steps)
+    assert names.count("sample") == len(steps) * p.samples_per_step
+    settled = [e for e in events if e["event"] == "settled"]
+    assert all(e["settled"] for e in settled)
+    assert all(e["settle_time_s"] >= max(p.dwell, p.settle_hold) - 1e-9 for e in settled)
+    samples = [e for e in events if e["event"] == "sample" and e["step"] == 2]
+    assert [s["sample"] for s in samples] == list(range(p.samples_per_step))
+    assert samples[-1]["t"] - samples[0]["t"] == pytest.approx((p.samples_per_step - 1) * p.sample_period, abs=0.011)
+
+
+def test_runner_flags_steps_that_never_settle():
+    p = load_protocol("quick")
+    steps = expand_steps(p, 1, 50000.0)[:3]
+    events = _drive(ProtocolRunner(p, steps), lambda t, cmd: cmd + 2 * p.settle_max_offset)
+    settled = [e for e in events if e["event"] == "settled"]
+    assert [e["settled"] for e in settled] == [False] * 3
+    assert all(e["settle_time_s"] >= p.settle_timeout for e in settled)
+    assert events[-1]["unsettled_steps"] == [0, 1, 2]
+
+
+def test_rig_regulator_lag_gauge_error_and_biases(implemented_design):
+    model = make_model("closed_form", implemented_design)
+    params = RigParams(gauge_noise=0.0, angle_noise=0.0, force_noise=0.0, seed=3)
+    rig = SimulatedRig(model, params)
+    assert abs(rig.gauge_bias[0]) <= 0.02 * BAR
+    rig.advance(params.regulator_time_constant, [30000.0])
+    assert rig.true_pressures[0] == pytest.approx(30000.0 * (1 - math.exp(-1)), rel=1e-9)
+    rig.advance(50 * params.regulator_time_constant, [30000.0])
+    rig.mount("angle", 0.02)
+    r = rig.read()
+    assert r.pressures[0] == pytest.approx(30000.0 + rig.gauge_bias[0], rel=1e-6)
+    k_true = np.hypot(*model.evaluate(np.array([30000.0 * 0.75])).curvature)
+    assert r.angle == pytest.approx(k_true * 0.02 * 0.95 * math.cos(0.15), rel=1e-6)
+    assert r.angle < k_true * 0.02  # friction and out-of-plane bending under-read
+    rig.mount("force", 0.017)
+    f = rig.read()
+    assert f.angle == 0.0
+    assert f.force - params.scale_offset == pytest.approx(
+        0.95 * BlockingForce(model)(np.array([22500.0]), 0.017), rel=1e-6)
+
+
+def test_blocking_force_is_three_halves_end_moment_over_length(implemented_design):
+    """Closed form: EI kappa is the pressure moment p d A, so F = 1.5 p d A / l exactly."""
+    model = make_model("closed_form", implemented_design)
+    ch = implemented_design.channels[0]
+    d = ch.center[1] - model.section.neutral_axis[1]
+    p, length = 35000.0, 0.017
+    assert BlockingForce(model)(np.array([p]), length) == pytest.approx(1.5 * p * ch.area * d / length, rel=1e-9)
+
+
+def _known_rows():
+    """Two trials, one angle step pair and a force run with hand-chosen readings."""
+    events, streams = [], {"pressure_measured": [], "angle": [], "force": []}
+    t = 0
+
+    def reading(p, angle, force):
+        nonlocal t
+        t += 10
+        streams["pressure_measured"].append((t, np.array([p])))
+        streams["angle"].append((t, angle))
+        streams["force"].append((t, force))
+
+    def sample(step, bench, trial, phase, level, n=0):
+        nonlocal t
+        t += 10
+        events.append((t, {"event": "sample", "step": step, "bench": bench, "sample_name": "s",
+                           "sample_length_m": 0.02, "trial": trial, "phase": phase, "drive": "channel 0",
+                           "level": level, "pressure_cmd_pa": [level], "sample": n}))
+
+    step = 0
+    for trial, (a_up, a_down) in enumerate([(0.40, 0.44), (0.42, 0.46)]):
+        reading(20000.0, a_up, 0.0)
+        sample(step, "angle", trial, "loading", 20000.0)
+        reading(20100.0, a_down, 0.0)
+        sample(step + 1, "angle", trial, "unloading", 20000.0)
+        step += 2
+    for trial, (tare, f) in enumerate([(0.003, 0.013), (0.004, 0.016)]):
+        reading(0.0, 0.0, tare)
+        sample(step, "force", trial, "loading", 0.0)
+        reading(35000.0, 0.0, f)
+        sample(step + 1, "force", trial, "loading", 35000.0)
+        step += 2
+    return rows_from_events(events, streams)
+
+
+def test_analysis_statistics_on_known_values():
+    rows = _known_rows()
+    stats = {(s.bench, s.phase, s.level): s for s in summarise(rows)}
+    up = stats[("angle", "loading", 20000.0)]
+    assert up.n == 2 and up.curvature_mean == pytest.approx(0.41 / 0.02)
+    assert up.curvature_std == pytest.approx(np.std([20.0, 21.0], ddof=1))
+    assert up.radius_mean == pytest.approx(np.mean([0.02 / 0.40, 0.02 / 0.42]))
+    f = stats[("force", "loading", 35000.0)]
+    assert f.force_mean == pytest.approx(0.011)  # tared: (0.010 + 0.012) / 2
+    assert f.force_std == pytest.approx(np.std([0.010, 0.012], ddof=1))
+    assert stats[("force", "loading", 0.0)].force_mean == pytest.approx(0.0)
+    (h,) = hysteresis(summarise(rows))
+    assert h.difference == pytest.approx(0.04 / 0.02) and h.significant  # unloading bends more, consistently
+
+
+def test_offline_run_and_calibration_recover_the_simulated_truth(implemented_design):
+    """Truth: the closed form on a material 1.3x stiffer, at 0.75 p; no bench bias. The fit must find both."""
+    truth = make_model("closed_form", scaled_design(implemented_design, 1.3))
+    params = RigParams(pressure_shift=0.25, friction_underread=0.0, out_of_plane_tilt=0.0, seed=11)
+    protocol = load_protocol("quick")
+    events, streams = run_offline(protocol, SimulatedRig(truth, params))
+    rows = rows_from_events(events, streams)
+    assert len(rows) == 28 * protocol.samples_per_step and all(r.settled for r in rows)
+    result = calibrate(rows, implemented_design, "closed_form")
+    assert result.success
+    assert result.pressure_shift == pytest.approx(0.25, abs=max(3 * result.ci95["pressure_shift"], 0.01))
+    assert result.material_scale == pytest.approx(1.3, abs=max(3 * result.ci95["material_scale"], 0.02))
+    assert result.ci95["pressure_shift"] < 0.05 and result.ci95["material_scale"] < 0.1
+    assert result.rms_after < result.rms_before / 3
+
+
+def test_report_on_a_recording_with_known_values(tmp_path, implemented_design):
+    """Noise-free rig: the report's table must show the model's own numbers (shifted by the rig's bias)."""
+    from softcath_ros.bench.report import write_report
+    from softcath_ros.cli import main
+
+    model = make_model("closed_form", implemented_design)
+    params = RigParams(pressure_shift=0.0, friction_underread=0.0, out_of_plane_tilt=0.0, gauge_error=0.0,
+                       gauge_noise=0.0, angle_noise=0.0, force_noise=0.0)
+    events, streams = run_offline(load_protocol("quick"), SimulatedRig(model, params))
+    path = write_recording(tmp_path / "known", events, streams, yaml.safe_dump(implemented_design.to_dict()))
+    result = write_report(path)
+    top = [s for s in result["stats"] if s.bench == "angle" and s.level == 30000.0][0]
+    k = float(np.hypot(*model.evaluate(top.pressure_mean).curvature))
+    assert top.curvature_mean == pytest.approx(k, rel=1e-9)
+    assert top.model["closed_form"]["radius"] == pytest.approx(1 / k, rel=1e-9)
+    assert top.radius_mean == pytest.approx(1 / k, rel=1e-3)  # mean of l/theta over slightly varying p
+    # Linear rung, noise-free rig: the spread in curvature is exactly the spread in pressure.
+    assert top.curvature_std == pytest.approx(k / top.pressure_mean[0] * top.pressure_std[0], rel=1e-6)
+    text = open(result["report"]).read()
+    assert f"| {top.curvature_mean:.2f} ± {top.curvature_std:.2f} |" in text and "Hysteresis" in text
+    assert len(result["plots"]) == 3 and all(open(p, "rb").read(4) == b"\x89PNG" for p in result["plots"])
+    # The CLI on the same file, JSON out.
+    assert main(["report", str(path), "--out", str(tmp_path / "cli"), "--json"]) == 0
+    assert (tmp_path / "cli" / "report.md").is_file()
+
+
+def test_runner_settles_on_a_stable_reading_despite_gauge_offset():
+    """A gauge 0.02 bar off never meets the command exactly: a stable reading within max_offset settles."""
+    p = load_protocol("quick")
+    steps = expand_steps(p, 1, 50000.0)[:4]
+    events = _drive(ProtocolRunner(p, steps), lambda t, cmd: cmd + 2000.0)
+    assert all(e["settled"] for e in events if e["event"] == "settled")
+
+
+def test_noisy_default_run_settles_every_step(implemented_design):
+    rig = SimulatedRig(make_model("closed_form", implemented_design), RigParams(seed=2))
+    events, _ = run_offline(load_protocol("default"), rig)
+    settled = [e for _, e in events if e["event"] == "settled"]
+    assert len(settled) == 90 and all(e["settled"] for e in settled)
+    assert events[-1][0] / 1e9 < 75.0  # the default protocol's own duration (the main job must stay < 2 min)
