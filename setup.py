@@ -52,6 +52,8 @@ setup(
         "console_scripts": [
             "softcath = softcath_ros.cli:main",
             "model_node = softcath_ros.nodes.model_node:main",
+            "bench_node = softcath_ros.nodes.bench_node:main",
+            "sim_bench_node = softcath_ros.nodes.sim_bench_node:main",
         ],
     },
 )

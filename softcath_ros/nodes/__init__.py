@@ -1,0 +1,1 @@
+"""ROS 2 adapters: thin rclpy nodes around the core (architecture.md "Nodes")."""

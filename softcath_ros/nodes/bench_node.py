@@ -1,0 +1,216 @@
+"""bench_node (node ``softcath_bench``): runs a test protocol and records everything to MCAP.
+
+The protocol engine (bench.protocol.ProtocolRunner) decides; this node publishes its
+commands on /softcath/pressure_cmd and its markers (JSON) on /softcath/bench/step, feeds
+it the measured pressures, and records the listed topics with a TopicRecorder into a
+rosbag2-style bag directory under ``output_dir``. Chunks are flushed every second and at
+each step end; SIGINT/SIGTERM vent nothing it does not own but always finalise the file.
+
+It waits (up to ``wait_timeout`` s) for a rig: a publisher of /softcath/pressure_measured
+and a subscriber of /softcath/pressure_cmd. If that rig is sim_bench_node (its node is in
+the graph or it announced itself on /softcath/bench/rig), the recording is marked
+simulated. At the end it prints ``recording: PATH`` and a one-line summary.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_TOPICS = ["/softcath/pressure_cmd", "/softcath/pressure_measured", "/softcath/bench/angle",
+                  "/softcath/bench/force", "/softcath/bench/step", "/softcath/bench/rig", "/softcath/tip_pose",
+                  "/softcath/backbone", "/diagnostics"]
+SIM_NODE = "softcath_sim_bench"
+
+
+def main(argv=None) -> int:
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray, String
+
+    from ..bench.protocol import ProtocolRunner, expand_steps, load_protocol
+    from ..core.design import load_design
+    from ..core.errors import SoftcathError
+    from ..recording import BagWriter
+    from .recorder import TopicRecorder
+
+    class BenchNode(Node):
+        def __init__(self):
+            super().__init__("softcath_bench")
+            self.declare_parameter("protocol", "default")
+            self.declare_parameter("design", "")
+            self.declare_parameter("model", "closed_form")
+            self.declare_parameter("output_dir", "runs")
+            self.declare_parameter("name", "")
+            self.declare_parameter("record_topics", DEFAULT_TOPICS)
+            self.declare_parameter("rate_hz", 50.0)
+            self.declare_parameter("flush_period", 1.0)
+            self.declare_parameter("wait_timeout", 20.0)
+            self.declare_parameter("start_delay", 1.0)
+            self.declare_parameter("min_free_mb", 64)
+            gp = lambda n: self.get_parameter(n).value  # noqa: E731
+
+            self.protocol = load_protocol(gp("protocol"))
+            design_name = gp("design") or self.protocol.design
+            if not design_name:
+                raise SoftcathError("no design: set the 'design' parameter or 'design' in the protocol")
+            self.design = load_design(design_name)
+            allocator = None
+            if self.protocol.drive == "direction":
+                from ..core.allocation import Allocator
+                from ..core.models import make_model
+                allocator = Allocator(make_model(gp("model"), self.design))
+            self.steps = expand_steps(self.protocol, self.design.n_channels, self.design.max_pressure, allocator)
+            stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
+            name = gp("name") or f"bench_{self.protocol.name}_{stamp}"
+            self.writer = BagWriter(Path(gp("output_dir")) / name, flush_period_s=float(gp("flush_period")),
+                                    min_free_bytes=int(gp("min_free_mb")) << 20,
+                                    custom_data={"protocol": self.protocol.name, "design": self.design.name})
+            self.runner = ProtocolRunner(self.protocol, self.steps)
+            reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+            self.pub_cmd = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", reliable)
+            self.pub_step = self.create_publisher(String, "/softcath/bench/step", reliable)
+            self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+            self.measured = None
+            self.rig_info: dict | None = None
+            self.create_subscription(Float64MultiArray, "/softcath/pressure_measured", self.on_measured, 10)
+            self.create_subscription(String, "/softcath/bench/rig", self.on_rig,
+                                     QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                                durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            self.recorder = TopicRecorder(self, self.writer, list(gp("record_topics")))
+            self.state = "waiting"
+            self.t0 = time.monotonic()
+            self.t_ready: float | None = None
+            self.t_end: float | None = None
+            self.result = 0
+            self.create_timer(1.0 / float(gp("rate_hz")), self.tick)
+            self.create_timer(1.0, self.diagnostics)
+            self.get_logger().info(f"protocol {self.protocol.name}: {len(self.steps)} steps on design "
+                                   f"{self.design.name}; recording to {self.writer.path}")
+
+        # -------------------------------------------------------------- inputs
+        def on_measured(self, msg):
+            p = np.asarray(msg.data, dtype=float)
+            if p.shape == (self.design.n_channels,) and np.all(np.isfinite(p)):
+                self.measured = p
+
+        def on_rig(self, msg):
+            try:
+                self.rig_info = json.loads(msg.data)
+            except ValueError:
+                self.rig_info = {"raw": msg.data}
+
+        # -------------------------------------------------------------- protocol
+        def now(self) -> float:
+            return time.monotonic() - self.t0
+
+        def publish_events(self, events):
+            for ev in events:
+                self.pub_step.publish(String(data=json.dumps(ev)))
+                if ev["event"] == "step_end":
+                    self.writer.flush()
+
+        def rig_ready(self) -> bool:
+            return (self.count_publishers("/softcath/pressure_measured") > 0
+                    and self.count_subscribers("/softcath/pressure_cmd") > 0 and self.measured is not None)
+
+        def tick(self):
+            t = self.now()
+            if self.state == "waiting":
+                if self.rig_ready():
+                    if self.t_ready is None:
+                        self.t_ready = t  # let late discovery (subscriptions, recorder) settle
+                    elif t - self.t_ready >= float(self.get_parameter("start_delay").value):
+                        self.begin(t)
+                elif t > float(self.get_parameter("wait_timeout").value):
+                    self.get_logger().error("no rig: nothing publishes /softcath/pressure_measured or listens to "
+                                            "/softcath/pressure_cmd (start sim_bench_node or the hardware driver)")
+                    self.result = 3
+                    self.state = "done"
+                return
+            if self.state == "running":
+                self.publish_events(self.runner.update(t, self.measured))
+                self.pub_cmd.publish(Float64MultiArray(data=[float(x) for x in self.runner.command]))
+                if self.runner.done:
+                    self.state = "finishing"
+                    self.t_end = t
+            elif self.state == "finishing":
+                self.pub_cmd.publish(Float64MultiArray(data=[0.0] * self.design.n_channels))
+                if t - self.t_end > 0.5:  # the last readings and markers reach the recorder
+                    self.state = "done"
+
+        def begin(self, t: float):
+            simulated = SIM_NODE in self.get_node_names() or bool(self.rig_info and self.rig_info.get("simulated"))
+            self.simulated = simulated
+            self.writer.custom_data["simulated"] = str(simulated).lower()
+            meta = {"simulated": str(simulated).lower(), "protocol": self.protocol.name,
+                    "design": self.design.name, "design_hash": self.design.content_hash(),
+                    "n_steps": str(len(self.steps)), "started": datetime.now().isoformat(timespec="seconds"),
+                    "rig": json.dumps(self.rig_info) if self.rig_info else "unknown"}
+            self.writer.add_metadata("softcath", meta)
+            self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
+            import yaml
+            self.writer.add_attachment("design.yaml", "application/yaml",
+                                       yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
+            self.state = "running"
+            self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); starting protocol")
+            self.publish_events(self.runner.start(t))
+
+        def diagnostics(self):
+            r = self.recorder
+            level = DiagnosticStatus.OK if r.dropped == 0 and r.error is None else DiagnosticStatus.WARN
+            step = self.runner.step
+            st = DiagnosticStatus(level=level, name="softcath_bench", message=f"{self.state}"
+                                  + (f", step {step.index + 1}/{len(self.steps)}" if step else ""),
+                                  values=[KeyValue(key="recording", value=str(self.writer.path)),
+                                          KeyValue(key="messages", value=str(self.writer.message_count)),
+                                          KeyValue(key="dropped", value=str(r.dropped)),
+                                          KeyValue(key="pending_topics", value=",".join(r.pending))])
+            msg = DiagnosticArray(status=[st])
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.pub_diag.publish(msg)
+
+        def finalise(self) -> dict:
+            self.writer.close()
+            return {"recording": str(self.writer.path), "messages": self.writer.message_count,
+                    "dropped": self.recorder.dropped, "lost_in_middleware": self.recorder.lost,
+                    "write_failures": self.recorder.write_failures,
+                    "per_topic": {k: v.message_count for k, v in self.writer.topics.items()},
+                    "not_seen": list(self.recorder.pending), "state": self.state,
+                    "unsettled_steps": [k for k, ok in enumerate(self.runner.settled_flags) if not ok]}
+
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    try:
+        node = BenchNode()
+    except SoftcathError as exc:
+        print(f"bench_node: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    interrupted = False
+    try:
+        while rclpy.ok() and node.state != "done":
+            rclpy.spin_once(node, timeout_sec=0.05)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        interrupted = True
+    finally:
+        summary = node.finalise()
+        if interrupted or node.state != "done":
+            summary["state"] = "interrupted"
+        print(f"recording: {summary['recording']}", flush=True)
+        print("summary: " + json.dumps(summary), flush=True)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if summary["state"] == "interrupted":
+        return 130
+    return node.result
+
+
+if __name__ == "__main__":
+    sys.exit(main())

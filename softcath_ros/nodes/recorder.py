@@ -1,0 +1,118 @@
+"""TopicRecorder: subscribes to topics as they appear and hands serialized messages to a BagWriter.
+
+As rosbag2 does: a topic is subscribed once a publisher is seen; the subscription's
+reliability and durability are adapted to what every publisher offers
+(recording.qos.adapt_request_to_offers); the offered profiles and the type hash from
+the graph go into the channel's metadata; messages arrive raw (CDR bytes, never
+deserialized); log time is the reception time, publish time the source timestamp.
+Messages the middleware reports lost, and writes that fail, are counted as dropped.
+"""
+from __future__ import annotations
+
+import importlib
+import time
+
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
+
+from ..recording import BagWriter, OfferedQos, RecordingError, adapt_request_to_offers
+
+_REL = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+_DUR = {"transient_local": DurabilityPolicy.TRANSIENT_LOCAL, "volatile": DurabilityPolicy.VOLATILE}
+
+
+def offered_qos(profile) -> OfferedQos:
+    """rclpy QoSProfile (from the graph) -> the recorder's OfferedQos."""
+    def name(enum_cls, value):
+        try:
+            return enum_cls(value).name.lower()
+        except ValueError:
+            return "unknown"
+
+    return OfferedQos(history=name(HistoryPolicy, profile.history), depth=int(profile.depth),
+                      reliability=name(ReliabilityPolicy, profile.reliability),
+                      durability=name(DurabilityPolicy, profile.durability),
+                      deadline_ns=int(profile.deadline.nanoseconds), lifespan_ns=int(profile.lifespan.nanoseconds),
+                      liveliness=name(LivelinessPolicy, profile.liveliness),
+                      liveliness_lease_duration_ns=int(profile.liveliness_lease_duration.nanoseconds),
+                      avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
+
+
+def message_class(type_name: str):
+    pkg, sub, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{sub}"), name)
+
+
+class TopicRecorder:
+    def __init__(self, node, writer: BagWriter, topics: list[str], *, depth: int = 1000, poll_period: float = 0.25):
+        self.node = node
+        self.writer = writer
+        self.pending = list(dict.fromkeys(topics))
+        self.subscriptions = {}
+        self.received: dict[str, int] = {}
+        self.lost = 0
+        self.write_failures = 0
+        self.depth = depth
+        self.error: str | None = None
+        self.poll()
+        self._timer = node.create_timer(poll_period, self.poll)
+        self._flush_timer = node.create_timer(0.2, self._flush_if_due)
+
+    @property
+    def dropped(self) -> int:
+        return self.lost + self.write_failures
+
+    def poll(self) -> None:
+        for topic in list(self.pending):
+            infos = self.node.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            types = {i.topic_type for i in infos}
+            if len(types) > 1:
+                self.node.get_logger().warn(f"{topic}: publishers disagree on the type {sorted(types)}; not recorded",
+                                            throttle_duration_sec=5.0)
+                continue
+            type_name = types.pop()
+            offers = [offered_qos(i.qos_profile) for i in infos]
+            reliability, durability, warnings = adapt_request_to_offers(offers)
+            for w in warnings:
+                self.node.get_logger().warn(f"{topic}: {w}")
+            h = str(infos[0].topic_type_hash)
+            try:
+                self.writer.add_topic(topic, type_name, offers, h if h.startswith("RIHS01_") else None)
+                cls = message_class(type_name)
+            except (RecordingError, ImportError, AttributeError, ValueError) as exc:
+                self.node.get_logger().error(f"{topic}: cannot record: {exc}")
+                self.pending.remove(topic)
+                continue
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth, reliability=_REL[reliability],
+                             durability=_DUR[durability])
+            self.received[topic] = 0
+            self.subscriptions[topic] = self.node.create_subscription(
+                cls, topic, self._callback(topic), qos, raw=True,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
+            self.pending.remove(topic)
+
+    def _callback(self, topic: str):
+        write = self.writer.write
+        received = self.received
+
+        def on_message(data: bytes, info) -> None:
+            t = info.get("received_timestamp") or time.time_ns()
+            try:
+                write(topic, data, t, info.get("source_timestamp") or t)
+            except RecordingError as exc:
+                self.write_failures += 1
+                self.error = str(exc)
+                return
+            received[topic] += 1
+        return on_message
+
+    def _on_lost(self, status) -> None:
+        self.lost += int(status.total_count_change)
+
+    def _flush_if_due(self) -> None:
+        try:
+            self.writer.flush_if_due()
+        except RecordingError as exc:
+            self.error = str(exc)

@@ -1,0 +1,124 @@
+"""sim_bench_node (node ``softcath_sim_bench``): the simulated bench, embedded default when no rig
+is attached. All physics is in ``softcath_ros.bench.sim_rig``; this node only wires it to topics.
+
+Subscribes: /softcath/pressure_cmd (Float64MultiArray, Pa), /softcath/bench/step (String, JSON
+markers from bench_node: which bench and sample are mounted).
+Publishes at ``rate_hz``: /softcath/pressure_measured (Float64MultiArray, Pa),
+/softcath/bench/angle (Float64, rad), /softcath/bench/force (Float64, N), /diagnostics, and once
+(transient local) /softcath/bench/rig: JSON saying this rig is simulated, with its parameters.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import asdict
+
+import numpy as np
+
+RIG_TOPIC = "/softcath/bench/rig"
+
+
+def main(argv=None) -> int:
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64, Float64MultiArray, String
+
+    from ..bench.sim_rig import RigParams, SimulatedRig
+    from ..core.design import load_design
+    from ..core.errors import SoftcathError
+    from ..core.models import make_model
+
+    class SimBenchNode(Node):
+        def __init__(self):
+            super().__init__("softcath_sim_bench")
+            d = RigParams()
+            self.declare_parameter("design", "implemented_5mm")
+            self.declare_parameter("model", "closed_form")
+            self.declare_parameter("rate_hz", 100.0)
+            for name, default in asdict(d).items():
+                self.declare_parameter(name, default)
+            params = RigParams(**{k: type(v)(self.get_parameter(k).value) for k, v in asdict(d).items()})
+            design = load_design(self.get_parameter("design").value)
+            model = make_model(self.get_parameter("model").value, design)
+            self.rig = SimulatedRig(model, params)
+            self.rejected = 0
+            self.command = np.zeros(design.n_channels)
+            self.pub_p = self.create_publisher(Float64MultiArray, "/softcath/pressure_measured", 10)
+            self.pub_a = self.create_publisher(Float64, "/softcath/bench/angle", 10)
+            self.pub_f = self.create_publisher(Float64, "/softcath/bench/force", 10)
+            self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            self.pub_rig = self.create_publisher(String, RIG_TOPIC, latched)
+            self.pub_rig.publish(String(data=json.dumps({
+                "simulated": True, "node": self.get_name(), "design": design.name,
+                "design_hash": design.content_hash(), "model": model.name, "rig": asdict(params)})))
+            self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self.on_command, 10)
+            self.create_subscription(String, "/softcath/bench/step", self.on_step, 100)
+            self.dt = 1.0 / float(self.get_parameter("rate_hz").value)
+            self.create_timer(self.dt, self.tick)
+            self.create_timer(1.0, self.diagnostics)
+            self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
+                                   f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
+
+        def on_command(self, msg):
+            p = np.asarray(msg.data, dtype=float)
+            if p.shape != self.command.shape or not np.all(np.isfinite(p)):
+                self.rejected += 1
+                self.get_logger().warn(f"rejected pressure command {list(msg.data)} (need "
+                                       f"{self.command.size} finite values)", throttle_duration_sec=2.0)
+                return
+            self.command = p  # the regulator clamps to [0, max_pressure]
+
+        def on_step(self, msg):
+            try:
+                ev = json.loads(msg.data)
+            except ValueError:
+                return
+            if ev.get("event") == "step_start":
+                try:
+                    self.rig.mount(ev["bench"], float(ev["sample_length_m"]))
+                except (KeyError, ValueError) as exc:
+                    self.get_logger().warn(f"cannot mount sample from marker: {exc}")
+
+        def tick(self):
+            self.rig.advance(self.dt, self.command)
+            r = self.rig.read()
+            self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
+            self.pub_a.publish(Float64(data=r.angle))
+            self.pub_f.publish(Float64(data=r.force))
+
+        def diagnostics(self):
+            st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == 0 else DiagnosticStatus.WARN,
+                                  name="softcath_sim_bench", hardware_id="simulated",
+                                  message="simulated rig running" + (f", {self.rejected} commands rejected"
+                                                                     if self.rejected else ""),
+                                  values=[KeyValue(key="rejected_commands", value=str(self.rejected)),
+                                          KeyValue(key="bench", value=self.rig.bench),
+                                          KeyValue(key="sample_length_m", value=f"{self.rig.length:g}")])
+            msg = DiagnosticArray(status=[st])
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.pub_diag.publish(msg)
+
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    try:
+        node = SimBenchNode()
+    except (SoftcathError, ValueError) as exc:
+        print(f"sim_bench_node: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
