@@ -54,6 +54,7 @@ setup(
             "model_node = softcath_ros.nodes.model_node:main",
             "bench_node = softcath_ros.nodes.bench_node:main",
             "sim_bench_node = softcath_ros.nodes.sim_bench_node:main",
+            "allocation_node = softcath_ros.nodes.allocation_node:main",
         ],
     },
 )

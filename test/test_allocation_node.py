@@ -1,0 +1,278 @@
+"""allocation_node over DDS: the node runs as its own process (the installed executable);
+this test process is the operator (publishes bend_cmd / tip_target, listens to pressure_cmd
+and /diagnostics). Domain ids 221-229 belong to this file."""
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")  # the ros extra is part of the test environment (scripts/test.sh)
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import PointStamped, Vector3Stamped  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from softcath_ros.core.allocation import Allocator  # noqa: E402
+from softcath_ros.core.design import load_design  # noqa: E402
+from softcath_ros.core.models import make_model  # noqa: E402
+
+EXE = Path(sys.executable).parent / "allocation_node"
+DOMAINS = iter(range(221, 230))
+
+
+def start_node(exe, domain, *params):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    args = [str(exe), "--ros-args"]
+    for p in params:
+        args += ["-p", p]
+    return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def stop(proc, sig=signal.SIGINT, timeout=10.0):
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+class Operator:
+    """The other end of the wire, in this process (its own rclpy context and domain)."""
+
+    def __init__(self, domain):
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("alloc_test_operator", context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.pressures = []   # (monotonic time, [Pa ...])
+        self.diagnostics = []
+        self.node.create_subscription(Float64MultiArray, "/softcath/pressure_cmd",
+                                      lambda m: self.pressures.append((time.monotonic(), list(m.data))), 50)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                      lambda m: self.diagnostics.extend(
+                                          s for s in m.status if s.name.startswith("softcath_allocation")), 50)
+        self.bend = self.node.create_publisher(Vector3Stamped, "/softcath/bend_cmd", 10)
+        self.tip = self.node.create_publisher(PointStamped, "/softcath/tip_target", 10)
+
+    def spin(self, seconds, until=None):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+            if until is not None and until():
+                return True
+        return until is None
+
+    def send_bend(self, kx, ky, frame="softcath_base"):
+        m = Vector3Stamped()
+        m.header.frame_id = frame
+        m.vector.x, m.vector.y, m.vector.z = float(kx), float(ky), 123.0  # z is ignored
+        self.bend.publish(m)
+
+    def send_tip(self, x, y, z, frame="softcath_base"):
+        m = PointStamped()
+        m.header.frame_id = frame
+        m.point.x, m.point.y, m.point.z = float(x), float(y), float(z)
+        self.tip.publish(m)
+
+    def stream_bend(self, k, seconds, rate=100.0):
+        """Publish ``k`` at ``rate`` for ``seconds``; returns the time of the last send."""
+        end = time.monotonic() + seconds
+        while True:
+            self.send_bend(*k)
+            sent = time.monotonic()
+            self.spin(1.0 / rate)
+            if time.monotonic() >= end:
+                return sent
+
+    def last_diag(self):
+        return {kv.key: kv.value for kv in self.diagnostics[-1].values} if self.diagnostics else {}
+
+    def close(self):
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+@pytest.fixture
+def wire(request):
+    """(operator, node process) on a fresh domain; node parameters by indirect parametrisation."""
+    params = getattr(request, "param", ())
+    domain = next(DOMAINS)
+    proc = start_node(EXE, domain, *params)
+    op = Operator(domain)
+    try:
+        assert op.spin(20.0, until=lambda: len(op.pressures) > 3), "allocation_node did not start publishing"
+        yield op, proc
+    finally:
+        op.close()
+        stop(proc)
+
+
+@pytest.fixture(scope="module")
+def allocator():
+    return Allocator(make_model("closed_form", load_design("three_channel_5mm")))
+
+
+def settle_value(op, seconds=0.3):
+    """Latest published pressures after streaming has settled."""
+    op.spin(seconds)
+    return np.array(op.pressures[-1][1])
+
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
+
+
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.4", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
+    op, proc = wire
+    assert np.all(np.array(op.pressures[-1][1]) == 0.0)  # vented before any command
+    for k in ([3.0, 0.0], [-4.0, 4.0], [0.0, -20.0]):
+        op.stream_bend(k, 0.4)
+        got = np.array(op.pressures[-1][1])
+        expected = allocator.allocate(k).pressures
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-6)
+    assert np.max(got) == 50e3  # the last request is beyond reach: saturated at max_pressure
+    op.spin(0.3)
+    assert op.last_diag()["saturated"] == "true"
+    tip = [0.004, 0.001, 0.0392]
+    end = time.monotonic() + 0.4
+    while time.monotonic() < end:
+        op.send_tip(*tip)
+        op.spin(0.01)
+    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate_tip(tip).pressures, rtol=1e-9, atol=1e-6)
+    assert proc.poll() is None
+
+
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.4", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
+    op, proc = wire
+    op.stream_bend([3.0, 0.0], 0.3)
+    good = np.array(op.pressures[-1][1])
+    bad = [(float("nan"), 0.0, "softcath_base"), (float("inf"), 1.0, "softcath_base"),
+           (1e9, 0.0, "softcath_base"), (1.0, 0.0, "world"), (1.0, 0.0, "")]
+    for kx, ky, frame in bad:
+        op.send_bend(kx, ky, frame)
+        op.spin(0.02)
+    op.send_tip(float("nan"), 0.0, 0.04)
+    op.send_tip(0.0, 0.0, 50.0)            # absurdly far
+    op.send_tip(0.0, 0.0, -0.01)           # behind the base: no arc ends there
+    op.send_tip(0.001, 0.0, 0.039, frame="camera")
+    assert op.spin(3.0, until=lambda: op.last_diag().get("commands_rejected") == "9"), op.last_diag()
+    diag = op.diagnostics[-1]
+    assert diag.level == DiagnosticStatus.WARN and "rejected" in diag.message
+    # None of them changed the output (the good command's pressures are held until the timeout).
+    later = [np.array(p) for t, p in op.pressures if p != [0.0, 0.0, 0.0]]
+    np.testing.assert_allclose(later[-1], good)
+    op.stream_bend([-3.0, 0.0], 0.3)
+    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate([-3.0, 0.0]).pressures, rtol=1e-9)
+    assert proc.poll() is None
+
+
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.3", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+def test_watchdog_vents_after_timeout_and_resumes(wire, allocator):
+    op, proc = wire
+    t_last = op.stream_bend([3.0, 0.0], 0.5)
+    assert max(op.pressures[-1][1]) > 0
+    assert op.spin(3.0, until=lambda: op.pressures[-1][1] == [0.0, 0.0, 0.0])
+    vent_time = time.monotonic() - t_last
+    assert 0.3 <= vent_time < 1.0, vent_time  # not before the timeout, soon after it
+    assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "vented")
+    assert op.diagnostics[-1].level == DiagnosticStatus.WARN and "vented" in op.diagnostics[-1].message
+    op.stream_bend([0.0, 5.0], 0.4)
+    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate([0.0, 5.0]).pressures, rtol=1e-9)
+    assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "ok")
+
+
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=50000.0", "max_pressure:=20000", "command_timeout:=0.5",
+                         "publish_rate:=100.0")], indirect=True, ids=[""])
+def test_rate_limit_and_read_only_lowered_max_pressure(wire):
+    op, proc = wire
+    t0 = time.monotonic()
+    op.stream_bend([0.0, -50.0], 1.0)  # far beyond reach: saturates at the lowered max_pressure
+    samples = [(t, p) for t, p in op.pressures if t >= t0]
+    values = np.array([p for _, p in samples])
+    times = np.array([t for t, _ in samples])
+    assert values.max() == pytest.approx(20e3) and values.max() <= 20e3
+    rising = values[:, 0]
+    first = np.argmax(rising > 0)
+    # Channel 0 climbs at <= 50 kPa/s: 20 kPa takes >= 0.4 s (less a publish period of jitter).
+    reached = np.argmax(rising >= 20e3 - 1e-9)
+    assert times[reached] - times[first] >= 0.4 - 0.05, times[reached] - times[first]
+    steps = np.diff(rising[first:reached + 1])
+    assert steps.max() <= 50e3 * 0.05  # never a jump: a step per message <= rate x (a few periods)
+    # Read-only at run time: setting it is refused, and it still reads back 20000.
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    client = op.node.create_client(SetParameters, "/softcath_allocation/set_parameters")
+    assert client.wait_for_service(timeout_sec=10.0)
+    req = SetParameters.Request(parameters=[Parameter(name="max_pressure", value=ParameterValue(
+        type=ParameterType.PARAMETER_DOUBLE, double_value=90e3))])
+    future = client.call_async(req)
+    op.spin(5.0, until=future.done)
+    assert future.done() and not future.result().results[0].successful
+    get = op.node.create_client(GetParameters, "/softcath_allocation/get_parameters")
+    assert get.wait_for_service(timeout_sec=10.0)
+    fut = get.call_async(GetParameters.Request(names=["max_pressure"]))
+    op.spin(5.0, until=fut.done)
+    value = fut.result().values[0]
+    assert (value.double_value or value.integer_value) == 20e3
+    op.stream_bend([0.0, -50.0], 0.3)
+    assert max(op.pressures[-1][1]) == 20e3
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_clean_exit_on_signal(sig):
+    proc = start_node(EXE, next(DOMAINS))
+    try:
+        deadline = time.monotonic() + 20
+        out = ""
+        while "publishing at" not in out and time.monotonic() < deadline:  # wait until it is up
+            out += proc.stdout.readline()
+        assert "publishing at" in out
+        code = stop(proc, sig)
+        rest = proc.stdout.read()
+        assert code == 0, rest
+        assert "Traceback" not in rest
+    finally:
+        stop(proc, signal.SIGKILL)
+
+
+def test_bad_parameter_exits_with_one_line():
+    proc = start_node(EXE, next(DOMAINS), "design:=no_such_design")
+    try:
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        stop(proc, signal.SIGKILL)
+    assert proc.returncode == 2 and "no_such_design" in out and "Traceback" not in out
+
+
+# ---------------------------------------------------------------------------- the node's policy, without DDS
+
+
+def test_rate_limiter_and_watchdog_policy():
+    from softcath_ros.core.command_shaping import CommandWatchdog, RateLimiter, check_frame, check_vector
+
+    lim = RateLimiter(3, max_rate=1000.0)
+    out = [lim.step([500.0, -10.0, 0.2], 0.1).copy() for _ in range(6)]
+    assert out[0].tolist() == [100.0, -10.0, 0.2]  # each channel by at most rate x dt
+    assert out[-1].tolist() == [500.0, -10.0, 0.2]
+    assert lim.step([0.0, 0.0, 0.0], 0.0).tolist() == [500.0, -10.0, 0.2]  # dt = 0: no movement
+    with pytest.raises(ValueError):
+        RateLimiter(3, 0.0)
+    dog = CommandWatchdog(0.5)
+    assert dog.expired(0.0)  # nothing fed yet
+    dog.feed(10.0)
+    assert not dog.expired(10.5) and dog.expired(10.5001)
+    assert not check_frame("world", "softcath_base").ok and check_frame("softcath_base", "softcath_base").ok
+    assert not check_vector([float("nan"), 0.0], 10.0, "k", "1/m").ok
+    assert not check_vector([8.0, 8.0], 10.0, "k", "1/m").ok and check_vector([6.0, 8.0], 10.0, "k", "1/m").ok
