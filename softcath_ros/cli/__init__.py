@@ -12,6 +12,7 @@ import sys
 from ..core.errors import SoftcathError
 
 SUBCOMMANDS = [
+    "characterise",
     "calibrate",
     "report",
     "recover",

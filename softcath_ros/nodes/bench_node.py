@@ -114,6 +114,10 @@ def main(argv=None) -> int:
         def publish_events(self, events):
             for ev in events:
                 self.pub_step.publish(String(data=json.dumps(ev)))
+                if ev["event"] == "step_start" and ev["step"] == 0 or (
+                        ev["event"] == "step_start" and self.steps[ev["step"] - 1].trial != ev["trial"]):
+                    self.get_logger().info(f"step {ev['step'] + 1}/{len(self.steps)}: {ev['bench']} bench, "
+                                           f"{ev['sample_name']}, {ev['drive']}, trial {ev['trial'] + 1}")
                 if ev["event"] == "step_end":
                     self.writer.flush()
 
