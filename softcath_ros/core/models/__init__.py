@@ -10,6 +10,7 @@ from .base import BendModel, BendState
 # name -> "module:Class"; imported lazily so heavy engines (NGSolve) load only when used.
 RUNGS: dict[str, str] = {
     "closed_form": "softcath_ros.core.models.closed_form:ClosedFormModel",
+    "section": "softcath_ros.core.models.section:SectionModel",
 }
 
 

@@ -1,0 +1,130 @@
+"""Load-ramp continuation for nonlinear solvers: adaptive steps, a predictor, step cutting,
+and a failure report that carries the last converged state.
+
+Generic: the caller supplies a *corrector* that solves the equilibrium at one value of a
+scalar load parameter ``t`` starting from a guess, and says whether it converged. The ramp
+walks ``t`` from ``start`` through every checkpoint (the loads the caller wants answers at)
+and returns the converged state at each one, or stops at the first load it cannot reach,
+never returning a state that did not converge.
+
+    def corrector(guess, t, previous) -> Correction: ...
+    result = ramp(corrector, state0, checkpoints=[t1, t2, ...], control=StepControl(...))
+    if not result.converged:
+        print(result.message)            # "did not converge at <describe(t)> (...)"
+        result.last_state, result.last_load   # the last converged state and its load
+
+States are numpy arrays for the default secant predictor (linear extrapolation through
+the last two converged states); any other state type needs ``extrapolate=None``
+(constant predictor) or a custom ``extrapolate(t0, s0, t1, s1, t) -> guess``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+
+@dataclass
+class StepControl:
+    """Step-size policy, in the units of the load parameter."""
+
+    initial_step: float
+    max_step: float
+    min_step: float
+    grow: float = 1.5                # after an easy step (fewer than target_iterations)
+    shrink: float = 0.5              # after a failed attempt
+    target_iterations: int = 4
+    adaptive: bool = True            # False: fixed steps of initial_step, no cutting (stability studies)
+
+
+@dataclass
+class Correction:
+    """What a corrector returns for one attempt."""
+
+    state: Any
+    converged: bool
+    iterations: int = 0
+    message: str = ""                # why it failed (inverted element, diverged, ...)
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class RampPoint:
+    load: float
+    state: Any
+    iterations: int
+    info: dict
+
+
+@dataclass
+class RampResult:
+    points: list[RampPoint]          # converged states at the checkpoints reached, in order
+    converged: bool                  # True when every checkpoint was reached
+    message: str                     # empty when converged
+    last_load: float                 # last converged load
+    last_state: Any                  # and its state
+    steps: int = 0                   # accepted steps
+    cuts: int = 0                    # rejected attempts
+    iterations: int = 0              # corrector iterations in total (accepted and rejected)
+
+
+def secant(t0: float, s0, t1: float, s1, t: float):
+    """Linear extrapolation through (t0, s0), (t1, s1) to t."""
+    return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
+
+
+def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints: Sequence[float],
+         control: StepControl, start: float = 0.0, history: tuple[float, Any] | None = None,
+         extrapolate: Callable | None = secant, describe: Callable[[float], str] = lambda t: f"load {t:g}",
+         on_step: Callable[[float, Correction], None] | None = None) -> RampResult:
+    """Continue from ``state0`` (converged at ``start``) through the increasing ``checkpoints``.
+
+    ``history``: an earlier converged (load, state) to seed the secant predictor.
+    ``on_step`` is called after every accepted step (progress bars).
+    """
+    t, state = start, state0
+    prev = history
+    step = control.initial_step
+    result = RampResult(points=[], converged=True, message="", last_load=start, last_state=state0)
+    last = None
+    for target in checkpoints:
+        if target < t - 1e-12 * max(1.0, abs(t)):
+            raise ValueError(f"checkpoints must not decrease: {target} after {t}")
+        while t < target:
+            dt = min(step, target - t)
+            # do not leave a sliver smaller than a tenth of a step before the checkpoint
+            if target - (t + dt) < 0.1 * dt:
+                dt = target - t
+            t_new = t + dt
+            if prev is not None and extrapolate is not None and t > prev[0]:
+                guess = extrapolate(prev[0], prev[1], t, state, t_new)
+            else:
+                guess = state
+            corr = corrector(guess, t_new, state)
+            if not corr.converged and prev is not None and extrapolate is not None:
+                # the secant can overshoot near a limit point: retry from the last state
+                result.iterations += corr.iterations
+                corr = corrector(state, t_new, state)
+            result.iterations += corr.iterations
+            if corr.converged:
+                last = corr
+                prev = (t, state)
+                t, state = (target if t_new >= target else t_new), corr.state
+                result.steps += 1
+                result.last_load, result.last_state = t, state
+                if on_step is not None:
+                    on_step(t, corr)
+                if control.adaptive and corr.iterations < control.target_iterations:
+                    step = min(control.max_step, step * control.grow)
+                continue
+            result.cuts += 1
+            if not control.adaptive or dt * control.shrink < control.min_step:
+                why = f": {corr.message}" if corr.message else ""
+                result.converged = False
+                result.message = (f"did not converge at {describe(t_new)} (last converged "
+                                  f"{describe(t)}, step {dt:.3g} after {result.cuts} cut(s){why})")
+                return result
+            step = dt * control.shrink
+        landed = last is not None and result.last_load == target
+        result.points.append(RampPoint(load=target, state=state, iterations=last.iterations if landed else 0,
+                                       info=last.info if landed else {}))
+    return result

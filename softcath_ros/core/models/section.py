@@ -1,0 +1,229 @@
+"""Section rung (2.5D): the long-actuator limit as a finite-strain FE problem on the cross-section.
+
+The body is treated as infinitely long: every cross-section deforms the same way in its
+plane, and out of plane the body bends uniformly with curvature k and stretches by lambda
+(kinematics and potential: ``section_fe/problem.py``). Solved by Newton on a P2/P0 mixed
+mesh (``section_fe/mesh.py``, own mesher) with a pressure ramp (``core/continuation.py``).
+
+What it captures that the closed form does not: the channel walls bulge and the channel
+area grows with pressure, the silicone is hyperelastic, the fibre and rings act at their
+true positions. What it leaves out: the tip cap and the fixed base (end effects over about
+one diameter), so it is the limit of a long actuator; R_C does not depend on the length.
+
+A command that cannot be reached (Newton fails even with small steps, an element inverts)
+is returned with ``converged=False``, NaN numbers and a message "did not converge at
+p = ..." that names the last converged pressure; ``extras['last_converged']`` holds that
+state's pressure and curvature.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections import OrderedDict
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..continuation import Correction, StepControl, ramp
+from ..design import Design
+from ..errors import ModelError
+from ..section_fe.mesh import Circle, mesh_section
+from ..section_fe.problem import SectionProblem
+from ..section_fe.solver import newton
+from .base import BendModel, BendState
+
+# Bump when the discretisation or the solver changes what a cached result would be.
+SOLVER_VERSION = "section-1"
+PA_PER_BAR = 1.0e5
+
+
+@dataclass(frozen=True)
+class SectionSettings:
+    """Discretisation and solver settings (all of them go into the cache key)."""
+
+    mesh_size: float | None = None      # m; None: outer diameter / 20
+    tol: float = 1e-8                   # Newton step tolerance (non-dimensional: u / R, lambda, k R)
+    max_newton: int = 10
+    initial_step: float = 2000.0        # Pa
+    max_step: float = 4000.0            # Pa
+    min_step: float = 20.0              # Pa
+    adaptive: bool = True               # False: fixed steps of initial_step, no cutting
+    hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
+
+    def resolved_mesh_size(self, design: Design) -> float:
+        return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
+
+
+class SectionModel(BendModel):
+    name = "section"
+
+    def __init__(self, design: Design, cache_dir: str | Path | None = None, progress: bool = False,
+                 **settings):
+        super().__init__(design)
+        try:
+            self.settings = SectionSettings(**settings)
+        except TypeError as exc:
+            raise ModelError(f"model 'section': {exc}; settings: {list(SectionSettings.__annotations__)}") from None
+        h = self.settings.resolved_mesh_size(design)
+        holes = [Circle(c.center, c.radius) for c in design.channels]
+        if design.lumen is not None:
+            holes.append(Circle(design.lumen.center, design.lumen.radius))
+        self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h)
+        self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only)
+        self.progress = progress
+        self.cache_dir = None if cache_dir is None else Path(cache_dir)
+        # converged states by pressure vector (Pa): starting points for later commands
+        self._states: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self._states[tuple([0.0] * design.n_channels)] = self.problem.initial_state()
+        self._max_states = 256
+
+    # ------------------------------------------------------------------ identity
+    def cache_key(self, pressures: np.ndarray) -> str:
+        blob = json.dumps({"design": self.design.content_hash(), "settings": asdict(self.settings),
+                           "version": SOLVER_VERSION, "mesh_nodes": self.mesh.n_nodes}, sort_keys=True)
+        h = hashlib.sha256(blob.encode())
+        h.update(np.ascontiguousarray(pressures, dtype=float).tobytes())
+        return h.hexdigest()[:20]
+
+    # ------------------------------------------------------------------ evaluation
+    def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
+        if self.cache_dir is not None:
+            cached = self._load_cached(pressures)
+            if cached is not None:
+                return cached
+        n, c = pressures.shape
+        curvature = np.full((n, 2), np.nan)
+        stretch = np.full(n, np.nan)
+        converged = np.zeros(n, dtype=bool)
+        area = np.full((n, c), np.nan)
+        iterations = np.zeros(n, dtype=int)
+        messages: list[str] = []
+        last_converged: list[dict | None] = [None] * n
+        todo = list(range(n))
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n, desc="section", unit="cmd")
+        try:
+            while todo:
+                done, failed, msg, last = self._solve_path(pressures, todo)
+                for i, x, its in done:
+                    curvature[i], stretch[i], area[i] = self._outputs(x)
+                    converged[i] = True
+                    iterations[i] = its
+                if bar is not None:
+                    bar.update(len(done) + (failed is not None))
+                if failed is None:
+                    break
+                messages.append(msg)
+                last_converged[failed] = last
+                todo = [i for i in todo if i != failed and not converged[i]]
+        finally:
+            if bar is not None:
+                bar.close()
+        state = BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
+                          message="; ".join(messages),
+                          extras={"channel_area": area, "newton_iterations": iterations,
+                                  "last_converged": last_converged,
+                                  "mesh_nodes": self.mesh.n_nodes, "mesh_size": self.mesh.h})
+        if self.cache_dir is not None:
+            self._save_cached(pressures, state)
+        return state
+
+    def _solve_path(self, pressures: np.ndarray, todo: list[int]):
+        """Ramp through the commands ``todo`` in order from the nearest converged state.
+
+        The path is the polyline start -> p[todo[0]] -> p[todo[1]] ...; its arc length (Pa) is
+        the continuation parameter. Stops at the first command it cannot reach."""
+        first = pressures[todo[0]]
+        start_key = min(self._states, key=lambda k: float(np.max(np.abs(np.asarray(k) - first))))
+        corners = [np.asarray(start_key)] + [pressures[i] for i in todo]
+        seg = np.array([np.max(np.abs(b - a)) for a, b in zip(corners[:-1], corners[1:])])
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+
+        def pressure_at(t: float) -> np.ndarray:
+            j = int(np.clip(np.searchsorted(cum, t, side="right") - 1, 0, len(seg) - 1))
+            f = 0.0 if seg[j] == 0 else (t - cum[j]) / seg[j]
+            return corners[j] + min(max(f, 0.0), 1.0) * (corners[j + 1] - corners[j])
+
+        c_ref = self.problem.c_ref
+
+        def corrector(guess, t, previous) -> Correction:
+            return newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                          max_iterations=self.settings.max_newton)
+
+        def describe(t: float) -> str:
+            p = pressure_at(t)
+            return "p = " + ", ".join(f"{v / PA_PER_BAR:.4f}" for v in p) + " bar"
+
+        s = self.settings
+        control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
+                              adaptive=s.adaptive)
+        result = ramp(corrector, self._states[start_key], cum[1:], control, describe=describe)
+        done = []
+        for i, point in zip(todo, result.points):
+            self._remember(pressures[i], point.state)
+            done.append((i, point.state, point.iterations))
+        if result.converged:
+            return done, None, "", None
+        failed = todo[len(result.points)]
+        self._remember(pressure_at(result.last_load), result.last_state)
+        k, lam, _ = self._outputs(result.last_state)
+        last = {"pressure": pressure_at(result.last_load).tolist(), "curvature": k.tolist(),
+                "axial_stretch": lam}
+        p_fail = pressures[failed]
+        msg = (f"section model: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p_fail)} bar "
+               f"{result.message}")
+        return done, failed, msg, last
+
+    def _remember(self, p: np.ndarray, x: np.ndarray) -> None:
+        key = tuple(float(v) for v in p)
+        self._states[key] = x
+        self._states.move_to_end(key)
+        while len(self._states) > self._max_states:
+            self._states.popitem(last=False)
+
+    def _outputs(self, x):
+        lam, kr = self.problem.frame_state(x)
+        return kr / self.design.outer_radius, lam, self.problem.channel_areas(x) * self.design.outer_radius ** 2
+
+    # ------------------------------------------------------------------ disk cache
+    def _cache_path(self, pressures) -> Path:
+        return self.cache_dir / f"section_{self.cache_key(pressures)}.npz"
+
+    def _load_cached(self, pressures) -> BendState | None:
+        path = self._cache_path(pressures)
+        if not path.is_file():
+            return None
+        try:
+            z = np.load(path, allow_pickle=False)
+            last = json.loads(str(z["last_converged"]))
+            return BendState(curvature=z["curvature"], axial_stretch=z["axial_stretch"],
+                             converged=z["converged"], message=str(z["message"]),
+                             extras={"channel_area": z["channel_area"], "newton_iterations": z["newton_iterations"],
+                                     "last_converged": last, "mesh_nodes": self.mesh.n_nodes,
+                                     "mesh_size": self.mesh.h, "cached": True})
+        except (OSError, ValueError, KeyError):
+            return None  # a damaged cache entry is recomputed
+
+    def _save_cached(self, pressures, state: BendState) -> None:
+        path = self._cache_path(pressures)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+        np.savez(tmp, curvature=state.curvature, axial_stretch=state.axial_stretch,
+                 converged=state.converged, message=np.array(state.message),
+                 channel_area=state.extras["channel_area"], newton_iterations=state.extras["newton_iterations"],
+                 last_converged=np.array(json.dumps(state.extras["last_converged"])))
+        os.replace(tmp, path)
+
+
+def default_cache_dir() -> Path:
+    """Where ``softcath`` keeps expensive results: $SOFTCATH_CACHE_DIR or ~/.cache/softcath_ros."""
+    env = os.environ.get("SOFTCATH_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "softcath_ros"
+
+
+__all__ = ["SectionModel", "SectionSettings", "default_cache_dir"]

@@ -1,0 +1,162 @@
+"""Quadratic (P2) triangle mesh of the actuator cross-section: a disk with circular holes.
+
+A small self-contained mesher (numpy + scipy's Delaunay), so the section rung needs no
+meshing library: nodes on every circle at spacing ``h``, a hexagonal lattice inside,
+a few rounds of Laplacian smoothing, Delaunay, and the triangles whose centroid lies
+in a hole or outside the disk dropped. Midside nodes of edges on a circle are put on
+the circle (isoparametric geometry), so holes are round to O(h^3).
+
+The P1 triangulation is checked: its area must equal the area of the boundary polygons
+exactly, which holds only if every boundary chord is an edge of the mesh.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from ..errors import ModelError
+
+
+@dataclass(frozen=True)
+class Circle:
+    center: tuple[float, float]
+    radius: float
+
+
+@dataclass
+class SectionMesh:
+    nodes: np.ndarray            # (n, 2) m, reference positions (corner and midside nodes)
+    triangles: np.ndarray        # (e, 6) node ids: 3 corners counter-clockwise, then midsides 01, 12, 20
+    outer_edges: np.ndarray      # (b, 3) quadratic edges on the outer circle: (start, mid, end)
+    hole_edges: list[np.ndarray] = field(default_factory=list)  # per hole, (b, 3) counter-clockwise about the hole
+    h: float = 0.0
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes)
+
+
+def _circle_points(c: Circle, h: float, min_points: int = 16) -> np.ndarray:
+    n = max(min_points, int(math.ceil(2 * math.pi * c.radius / h)))
+    t = 2 * math.pi * np.arange(n) / n
+    return np.column_stack([c.center[0] + c.radius * np.cos(t), c.center[1] + c.radius * np.sin(t)])
+
+
+def _signed_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
+    """Distance to the boundary, positive inside the silicone."""
+    d = outer.radius - np.hypot(p[:, 0] - outer.center[0], p[:, 1] - outer.center[1])
+    for c in holes:
+        d = np.minimum(d, np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) - c.radius)
+    return d
+
+
+def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8) -> SectionMesh:
+    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m)."""
+    if h <= 0 or h > outer.radius:
+        raise ModelError(f"section mesh size h = {h} m must lie in (0, outer radius {outer.radius} m]")
+    boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
+    n_boundary = sum(len(b) for b in boundary)
+    # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges.
+    dy = h * math.sqrt(3) / 2
+    ys = np.arange(-outer.radius, outer.radius + dy, dy)
+    pts = []
+    for j, y in enumerate(ys):
+        xs = np.arange(-outer.radius, outer.radius + h, h) + (0.5 * h if j % 2 else 0.0)
+        pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
+    interior = np.concatenate(pts)
+    interior = interior[_signed_distance(interior, outer, holes) > 0.7 * h]
+    points = np.concatenate(boundary + [interior])
+
+    for _ in range(smoothing_rounds + 1):
+        tri = _triangulate(points, outer, holes)
+        if _ == smoothing_rounds:
+            break
+        # Laplacian smoothing of interior nodes (boundary fixed), kept inside the domain.
+        acc = np.zeros_like(points)
+        cnt = np.zeros(len(points))
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            np.add.at(acc, tri[:, a], points[tri[:, b]])
+            np.add.at(acc, tri[:, b], points[tri[:, a]])
+            np.add.at(cnt, tri[:, a], 1)
+            np.add.at(cnt, tri[:, b], 1)
+        new = points.copy()
+        movable = np.arange(len(points)) >= n_boundary
+        movable &= cnt > 0
+        new[movable] = acc[movable] / cnt[movable, None]
+        ok = _signed_distance(new, outer, holes) > 0.5 * h
+        points = np.where((movable & ok)[:, None], new, points)
+    _check_conforming(points, tri, boundary)
+    return _to_p2(points, tri, boundary, [outer] + list(holes), h)
+
+
+def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
+    tri = Delaunay(points).simplices
+    centroids = points[tri].mean(axis=1)
+    tri = tri[_signed_distance(centroids, outer, holes) > 0]
+    # Counter-clockwise corners.
+    p = points[tri]
+    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    tri[area2 < 0] = tri[area2 < 0][:, [0, 2, 1]]
+    return tri
+
+
+def _polygon_area(p: np.ndarray) -> float:
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def _check_conforming(points, tri, boundary) -> None:
+    p = points[tri]
+    area = 0.5 * np.sum((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    expected = _polygon_area(boundary[0]) - sum(_polygon_area(b) for b in boundary[1:])
+    if abs(area - expected) > 1e-9 * expected:
+        raise ModelError(f"section mesher produced a non-conforming mesh (area {area:.6e} vs {expected:.6e} m^2); "
+                         "try another mesh size")
+
+
+def _to_p2(points, tri, boundary, circles, h) -> SectionMesh:
+    # Unique edges -> midside nodes.
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    key = np.sort(edges, axis=1)
+    uniq, inverse = np.unique(key, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    n_p1 = len(points)
+    mids = 0.5 * (points[uniq[:, 0]] + points[uniq[:, 1]])
+    # Boundary nodes: the first len(boundary[0]) belong to circle 0, and so on.
+    offsets = np.cumsum([0] + [len(b) for b in boundary])
+    owner = np.full(n_p1, -1)
+    for i in range(len(boundary)):
+        owner[offsets[i]:offsets[i + 1]] = i
+    on_circle = (owner[uniq[:, 0]] >= 0) & (owner[uniq[:, 0]] == owner[uniq[:, 1]])
+    # An edge joining two nodes of one circle is a boundary chord only if they are neighbours on it.
+    for i, c in enumerate(circles):
+        sel = on_circle & (owner[uniq[:, 0]] == i)
+        n_i = offsets[i + 1] - offsets[i]
+        a, b = uniq[sel, 0] - offsets[i], uniq[sel, 1] - offsets[i]
+        neighbours = (np.abs(a - b) == 1) | (np.abs(a - b) == n_i - 1)
+        idx = np.flatnonzero(sel)
+        on_circle[idx[~neighbours]] = False
+        idx = idx[neighbours]
+        v = mids[idx] - np.asarray(c.center)
+        mids[idx] = np.asarray(c.center) + c.radius * v / np.linalg.norm(v, axis=1)[:, None]
+    nodes = np.concatenate([points, mids])
+    mid_ids = n_p1 + inverse.reshape(3, -1).T  # (e, 3) for edges 01, 12, 20
+    triangles = np.concatenate([tri, mid_ids], axis=1)
+
+    def circle_edges(i: int, ccw_about_center: bool) -> np.ndarray:
+        n_i = offsets[i + 1] - offsets[i]
+        start = offsets[i] + np.arange(n_i)
+        end = offsets[i] + (np.arange(n_i) + 1) % n_i
+        k = np.sort(np.column_stack([start, end]), axis=1)
+        pos = np.searchsorted(uniq[:, 0] * (n_p1 + 1) + uniq[:, 1], k[:, 0] * (n_p1 + 1) + k[:, 1])
+        mid = n_p1 + pos
+        e = np.column_stack([start, mid, end])  # boundary points are generated counter-clockwise
+        return e if ccw_about_center else e[:, ::-1]
+
+    outer_edges = circle_edges(0, True)
+    hole_edges = [circle_edges(i, True) for i in range(1, len(circles))]
+    return SectionMesh(nodes=nodes, triangles=triangles, outer_edges=outer_edges, hole_edges=hole_edges, h=h)
