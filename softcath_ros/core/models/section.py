@@ -31,7 +31,7 @@ from ..design import Design
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import newton
+from ..section_fe.solver import LinearSolver, newton
 from .base import BendModel, BendState
 
 # Bump when the discretisation or the solver changes what a cached result would be.
@@ -44,13 +44,15 @@ class SectionSettings:
     """Discretisation and solver settings (all of them go into the cache key)."""
 
     mesh_size: float | None = None      # m; None: outer diameter / 20
-    tol: float = 1e-8                   # Newton step tolerance (non-dimensional: u / R, lambda, k R)
+    tol: float = 1e-6                   # Newton step tolerance (non-dimensional: u / R, lambda, k R);
+                                        # the error left after that step is of the order of its square
     max_newton: int = 10
     initial_step: float = 2000.0        # Pa
     max_step: float = 4000.0            # Pa
     min_step: float = 20.0              # Pa
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
+    min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
 
     def resolved_mesh_size(self, design: Design) -> float:
         return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
@@ -72,12 +74,15 @@ class SectionModel(BendModel):
             holes.append(Circle(design.lumen.center, design.lumen.radius))
         self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h)
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only)
+        self.linear = LinearSolver()
         self.progress = progress
         self.cache_dir = None if cache_dir is None else Path(cache_dir)
         # converged states by pressure vector (Pa): starting points for later commands
         self._states: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self._states[tuple([0.0] * design.n_channels)] = self.problem.initial_state()
         self._max_states = 256
+        # (last converged pressure key, a pressure it could not reach, message, last state summary)
+        self._failures: list[tuple] = []
 
     # ------------------------------------------------------------------ identity
     def cache_key(self, pressures: np.ndarray) -> str:
@@ -140,6 +145,9 @@ class SectionModel(BendModel):
         the continuation parameter. Stops at the first command it cannot reach."""
         first = pressures[todo[0]]
         start_key = min(self._states, key=lambda k: float(np.max(np.abs(np.asarray(k) - first))))
+        known = self._known_failure(start_key, first)
+        if known is not None:
+            return [], todo[0], self._failure_message(first, known[0]), known[1]
         corners = [np.asarray(start_key)] + [pressures[i] for i in todo]
         seg = np.array([np.max(np.abs(b - a)) for a, b in zip(corners[:-1], corners[1:])])
         cum = np.concatenate([[0.0], np.cumsum(seg)])
@@ -151,9 +159,19 @@ class SectionModel(BendModel):
 
         c_ref = self.problem.c_ref
 
+        hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
+
         def corrector(guess, t, previous) -> Correction:
-            return newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                          max_iterations=self.settings.max_newton)
+            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                          max_iterations=self.settings.max_newton, linear=self.linear)
+            if corr.converged:
+                gaps = self.problem.hole_gaps(corr.state)
+                if gaps.min() < self.settings.min_hole_gap:
+                    name = hole_names[int(np.argmin(gaps))]
+                    corr.converged = False
+                    corr.message = (f"the walls of the {name} touch (gap {gaps.min():.1%} of its diameter); "
+                                    "self-contact is not modelled")
+            return corr
 
         def describe(t: float) -> str:
             p = pressure_at(t)
@@ -170,14 +188,30 @@ class SectionModel(BendModel):
         if result.converged:
             return done, None, "", None
         failed = todo[len(result.points)]
-        self._remember(pressure_at(result.last_load), result.last_state)
+        last_p = pressure_at(result.last_load)
+        self._remember(last_p, result.last_state)
         k, lam, _ = self._outputs(result.last_state)
-        last = {"pressure": pressure_at(result.last_load).tolist(), "curvature": k.tolist(),
-                "axial_stretch": lam}
-        p_fail = pressures[failed]
-        msg = (f"section model: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p_fail)} bar "
-               f"{result.message}")
-        return done, failed, msg, last
+        last = {"pressure": last_p.tolist(), "curvature": k.tolist(), "axial_stretch": float(lam)}
+        # Commands further out along the same direction from this state fail the same way.
+        failing_p = pressure_at(min(result.last_load + s.min_step, cum[-1]))
+        self._failures.append((tuple(float(v) for v in last_p), failing_p, result.message, last))
+        return done, failed, self._failure_message(pressures[failed], result.message), last
+
+    def _known_failure(self, start_key: tuple, target: np.ndarray):
+        start = np.asarray(start_key)
+        d_t = target - start
+        for key, p_fail, message, last in self._failures:
+            if key != start_key:
+                continue
+            d_f = p_fail - start
+            nt, nf = np.linalg.norm(d_t), np.linalg.norm(d_f)
+            if nf > 0 and nt >= nf and float(d_t @ d_f) >= (1 - 1e-9) * nt * nf:
+                return message, last
+        return None
+
+    @staticmethod
+    def _failure_message(p: np.ndarray, why: str) -> str:
+        return f"section model: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p)} bar {why}"
 
     def _remember(self, p: np.ndarray, x: np.ndarray) -> None:
         key = tuple(float(v) for v in p)

@@ -121,6 +121,12 @@ class SectionProblem:
         dofs[:, 1:12:2] = 2 * tri + 1
         dofs[:, 12:] = self.i_glob
         self.elem_dofs = dofs
+        D0 = np.zeros((ne, len(_QW), 5, 15))
+        D0[..., 0, 0:12:2] = self.dNdX[..., 0]
+        D0[..., 1, 0:12:2] = self.dNdX[..., 1]
+        D0[..., 2, 1:12:2] = self.dNdX[..., 0]
+        D0[..., 3, 1:12:2] = self.dNdX[..., 1]
+        self._D0 = D0
 
         # --- strain-limiting fibre as a point fibre inside its element
         self.fibre = None
@@ -145,7 +151,8 @@ class SectionProblem:
         self.device_ei = 0.0 if design.device is None else design.device.bending_stiffness / (c_ref * R**4)
 
         # --- gauge: in-plane rigid motions are removed by pinning node A (both components) and
-        # the x component of a node B above or below it (sparse rows keep the LU cheap). Results
+        # the x component of a node B above or below it (their rows become identity rows, which
+        # keeps the tangent symmetric positive definite at stable states, so LDL^T needs no pivoting). Results
         # are reported in the frame where the silicone's mean displacement and mean rotation vanish
         # (``frame_state``), which does not depend on the choice of A and B.
         w = np.einsum("eq,qa->ea", self.dA, N)             # int N_a dA per element node
@@ -156,9 +163,7 @@ class SectionProblem:
         self._rot_weights = self._w_node / r2
         a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1)))
         b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0])))
-        C = np.zeros((3, self.n))
-        C[0, 2 * a] = C[1, 2 * a + 1] = C[2, 2 * b] = 1.0
-        self.C = C
+        self.pinned = np.array([2 * a, 2 * a + 1, 2 * b])
         self._build_pattern()
 
     # ------------------------------------------------------------------ set-up helpers
@@ -192,15 +197,10 @@ class SectionProblem:
         gi = self.i_glob
         blocks_r.append(np.repeat(gi, 3))
         blocks_c.append(np.tile(gi, 3))
-        # constraint rows/cols
-        rows_c, cols_c = np.nonzero(self.C)
-        self._c_vals = self.C[rows_c, cols_c]
         n = self.n
-        blocks_r += [rows_c + n, cols_c]
-        blocks_c += [cols_c, rows_c + n]
         rows = np.concatenate(blocks_r)
         cols = np.concatenate(blocks_c)
-        size = n + 3
+        size = n
         key = rows * size + cols
         uniq, inv = np.unique(key, return_inverse=True)
         self._scatter = inv.ravel()
@@ -215,6 +215,11 @@ class SectionProblem:
         self._csr_indices = m.indices.copy()
         self._csr_indptr = m.indptr.copy()
         self._nnz = len(uniq)
+        r_of = np.repeat(np.arange(size), np.diff(self._csr_indptr))
+        is_pinned = np.zeros(size, dtype=bool)
+        is_pinned[self.pinned] = True
+        self._pinned_entries = is_pinned[r_of] | is_pinned[self._csr_indices]
+        self._pinned_diag = self._pinned_entries & (r_of == self._csr_indices) & is_pinned[r_of]
 
     def frame_state(self, x) -> tuple[float, np.ndarray]:
         """(lambda, k R) in the frame that follows the silicone's mean displacement and rotation.
@@ -276,26 +281,43 @@ class SectionProblem:
             out.append(lam * (A.sum() - kx * Sx.sum() - ky * Sy.sum()))
         return np.array(out)
 
+    def hole_gaps(self, x) -> np.ndarray:
+        """Per hole (channels, then lumen): the smallest distance between its deformed wall points
+        that are at least a quarter of the perimeter apart, relative to the hole's diameter.
+
+        Near zero the opposite walls touch; the model has no self-contact, so it must stop there."""
+        u = x[:self.n_u].reshape(-1, 2)
+        out = []
+        for edges in self.mesh.hole_edges:
+            ids = edges[:, :2].ravel()                     # corner and midside nodes, in order
+            pts = self.X[ids] + u[ids]
+            m = len(ids)
+            i, j = np.triu_indices(m, k=1)
+            sep = np.minimum(j - i, m - (j - i))
+            far = sep >= m // 4
+            d = np.linalg.norm(pts[i[far]] - pts[j[far]], axis=1)
+            ref = np.linalg.norm(self.X[ids] - self.X[ids].mean(0), axis=1).mean() * 2
+            out.append(d.min() / ref)
+        return np.array(out)
+
     def channel_areas(self, x) -> np.ndarray:
         u = x[:self.n_u].reshape(-1, 2)
         return np.array([self._green(self.X[e] + u[e], order=0)[0].sum() for e in self.channel_edges])
 
     # ------------------------------------------------------------------ full assembly
     def assemble(self, x, pressures):
-        """(energy, gradient (n,), KKT matrix (n+3, n+3) CSR) at ``x``; energy inf if inadmissible."""
+        """(energy, gradient (n,), tangent (n, n) CSR, aux for the pressure update) at ``x``.
+
+        Pinned rows/columns are identity and their gradient entries zero; energy inf (and the
+        rest None) if the state is inadmissible."""
         F2, f33, xq, (lam, kx, ky) = self._element_kinematics(x)
         det2 = F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]
         if np.any(det2 <= 0) or np.any(f33 <= 0):
             return np.inf, None, None, None
         ne, nq = det2.shape
         a = np.stack([F2[..., 0, 0], F2[..., 0, 1], F2[..., 1, 0], F2[..., 1, 1], f33], -1)  # (e,q,5)
-        # D = da/d(local dofs): (e,q,5,15)
-        D = np.zeros((ne, nq, 5, 15))
-        dN = self.dNdX
-        D[..., 0, 0:12:2] = dN[..., 0]
-        D[..., 1, 0:12:2] = dN[..., 1]
-        D[..., 2, 1:12:2] = dN[..., 0]
-        D[..., 3, 1:12:2] = dN[..., 1]
+        # D = da/d(local dofs): (e,q,5,15); rows 0-3 (in-plane F) are constant
+        D = self._D0.copy()
         D[..., 4, 0:12:2] = -lam * kx * self.N
         D[..., 4, 1:12:2] = -lam * ky * self.N
         D[..., 4, 12] = 1 - kx * xq[..., 0] - ky * xq[..., 1]
@@ -342,7 +364,8 @@ class SectionProblem:
         # tangent with the independent element pressure p_e in the geometric terms
         Pa = Pw + p_e[:, None, None] * Ga
         Maa = self.dA[..., None, None] * (Waa + p_e[:, None, None, None] * Jaa)
-        H_e = np.einsum("eqki,eqkl,eqlj->eij", D, Maa, D, optimize=True)
+        Dr = D.reshape(ne, nq * 5, 15)
+        H_e = np.matmul(Dr.transpose(0, 2, 1), np.matmul(Maa, D).reshape(ne, nq * 5, 15))
         self._add_f33_hessian(H_e, Pa[..., 4], self.N, xq, lam, kx, ky)
         H_e += (self.bulk / self.area_e)[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
 
@@ -375,9 +398,10 @@ class SectionProblem:
         grad[self.n_u + 1] += self.device_ei * kx
         grad[self.n_u + 2] += self.device_ei * ky
         vals.append(np.diag([0.0, self.device_ei, self.device_ei]).ravel())
-        vals.append(self._c_vals)
-        vals.append(self._c_vals)
         data = np.bincount(self._pos, weights=np.concatenate(vals), minlength=self._nnz)
+        data[self._pinned_entries] = 0.0
+        data[self._pinned_diag] = 1.0
+        grad[self.pinned] = 0.0
         K = sp.csr_matrix((data, self._csr_indices, self._csr_indptr), shape=self._csr_shape)
         aux = (Up - p_e, (self.bulk / self.area_e)[:, None] * G_e)
         return float(E), grad, K, aux
