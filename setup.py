@@ -31,6 +31,8 @@ setup(
         "mcap>=1.6",
         "mcap-ros2-support>=0.6",
         "zstandard>=0.22",
+        # Sparse LDL^T for the section rung's Newton steps (it falls back to SuperLU without it).
+        "qdldl>=0.1.7",
     ],
     extras_require={
         "ros": [

@@ -254,10 +254,4 @@ class SectionModel(BendModel):
         os.replace(tmp, path)
 
 
-def default_cache_dir() -> Path:
-    """Where ``softcath`` keeps expensive results: $SOFTCATH_CACHE_DIR or ~/.cache/softcath_ros."""
-    env = os.environ.get("SOFTCATH_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "softcath_ros"
-
-
-__all__ = ["SectionModel", "SectionSettings", "default_cache_dir"]
+__all__ = ["SectionModel", "SectionSettings"]
