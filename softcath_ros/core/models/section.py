@@ -53,6 +53,8 @@ class SectionSettings:
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
+    pressure_load: str = "follower"     # "follower": on the deformed channel walls and the end caps;
+                                        # "end_cap": only the end caps' axial force (the closed form's load)
 
     def resolved_mesh_size(self, design: Design) -> float:
         return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
@@ -73,7 +75,11 @@ class SectionModel(BendModel):
         if design.lumen is not None:
             holes.append(Circle(design.lumen.center, design.lumen.radius))
         self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h)
-        self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only)
+        if self.settings.pressure_load not in ("follower", "end_cap"):
+            raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
+                             "'follower' or 'end_cap'")
+        self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
+                                      end_cap_only=self.settings.pressure_load == "end_cap")
         self.linear = LinearSolver()
         self.progress = progress
         self.cache_dir = None if cache_dir is None else Path(cache_dir)

@@ -81,8 +81,12 @@ class Loads:
 class SectionProblem:
     """Discrete potential for one design and mesh; ``x`` = [u (2n, in units of R), lambda, kx R, ky R]."""
 
-    def __init__(self, design: Design, mesh: SectionMesh, hoop_tension_only: bool = False):
+    def __init__(self, design: Design, mesh: SectionMesh, hoop_tension_only: bool = False,
+                 end_cap_only: bool = False):
         self.design = design
+        # end_cap_only: the pressure acts only through the end caps (axial force p A at the
+        # reference channel centre), as the closed form assumes; no load on the channel walls.
+        self.end_cap_only = end_cap_only
         self.mesh = mesh
         R = design.outer_radius
         self.R = R
@@ -272,8 +276,10 @@ class SectionProblem:
         return float(E)
 
     def channel_volumes(self, x) -> np.ndarray:
-        """Channel volume per unit reference length, lambda int (1 - k.x) dA (non-dimensional)."""
-        u = x[:self.n_u].reshape(-1, 2)
+        """Channel volume per unit reference length, lambda int (1 - k.x) dA (non-dimensional).
+
+        With ``end_cap_only`` the channel keeps its reference cross-section in this term."""
+        u = x[:self.n_u].reshape(-1, 2) * (0.0 if self.end_cap_only else 1.0)
         lam, kx, ky = x[self.n_u:self.n]
         out = []
         for edges in self.channel_edges:
@@ -387,7 +393,13 @@ class SectionProblem:
             vals.append(h_h.ravel())
             k += 1
         for i, edges in enumerate(self.channel_edges):
-            v, gv, hv = self._volume_derivs(self.X[edges] + u[edges], lam, kx, ky)
+            if self.end_cap_only:
+                v, gv, hv = self._volume_derivs(self.X[edges], lam, kx, ky)
+                gv[:, :6] = 0.0
+                hv[:, :6, :] = 0.0
+                hv[:, :, :6] = 0.0
+            else:
+                v, gv, hv = self._volume_derivs(self.X[edges] + u[edges], lam, kx, ky)
             p = pressures[i]
             E -= p * v
             np.add.at(grad, self._edge_dofs[k].ravel(), -p * gv.ravel())
