@@ -45,6 +45,8 @@ class Correction:
     iterations: int = 0
     message: str = ""                # why it failed (inverted element, diverged, ...)
     info: dict = field(default_factory=dict)
+    outside_domain: bool = False     # the solve converged but the state is outside the model's
+                                     # validity (e.g. self-contact): another predictor will not help
 
 
 @dataclass
@@ -100,7 +102,7 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             else:
                 guess = state
             corr = corrector(guess, t_new, state)
-            if not corr.converged and prev is not None and extrapolate is not None:
+            if not corr.converged and not corr.outside_domain and prev is not None and extrapolate is not None:
                 # the secant can overshoot near a limit point: retry from the last state
                 result.iterations += corr.iterations
                 corr = corrector(state, t_new, state)
