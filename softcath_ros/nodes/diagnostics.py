@@ -1,0 +1,61 @@
+"""Counting checked inputs and reporting them on /diagnostics (diagnostic_msgs/DiagnosticArray).
+
+A node keeps one ``InputCounters`` per input stream, bumps it per message (cheap:
+plain ints) and lets a ``DiagnosticsReporter`` timer publish the totals periodically.
+Level: OK while everything since the last report was accepted, WARN when something
+was clamped, rejected or failed in the model since then.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class InputCounters:
+    accepted: int = 0        # commands that produced a published result (clamped ones included)
+    rejected: int = 0        # bad input: nothing published
+    clamped: int = 0         # out of range, clamped into the limits and then used
+    model_failed: int = 0    # valid input, but the model did not converge / gave non-finite numbers
+    last_reason: str = ""    # why the most recent command was rejected, clamped or failed
+    extra: dict = field(default_factory=dict)  # fixed key/values shown with the counters
+
+    def problems(self) -> int:
+        return self.rejected + self.clamped + self.model_failed
+
+    def key_values(self) -> list[tuple[str, str]]:
+        kv = [("accepted", str(self.accepted)), ("rejected", str(self.rejected)),
+              ("clamped", str(self.clamped)), ("model_failed", str(self.model_failed)),
+              ("last_reason", self.last_reason)]
+        return kv + [(k, str(v)) for k, v in self.extra.items()]
+
+
+class DiagnosticsReporter:
+    """Publishes ``counters`` on /diagnostics every ``period`` seconds from ``node``'s timer."""
+
+    def __init__(self, node, counters: InputCounters, status_name: str, hardware_id: str,
+                 period: float = 1.0, topic: str = "/diagnostics"):
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self._node = node
+        self._counters = counters
+        self._name = status_name
+        self._hardware_id = hardware_id
+        self._pub = node.create_publisher(DiagnosticArray, topic, 10)
+        self._problems_at_last_report = 0
+        self._timer = node.create_timer(period, self.publish)
+
+    def publish(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+        c = self._counters
+        new_problems = c.problems() - self._problems_at_last_report
+        self._problems_at_last_report = c.problems()
+        if new_problems:
+            level, message = DiagnosticStatus.WARN, f"{new_problems} command(s) rejected, clamped or failed: {c.last_reason}"
+        else:
+            level, message = DiagnosticStatus.OK, "all commands since the last report accepted"
+        status = DiagnosticStatus(level=level, name=self._name, message=message, hardware_id=self._hardware_id,
+                                  values=[KeyValue(key=k, value=v) for k, v in c.key_values()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        self._pub.publish(msg)

@@ -1,0 +1,165 @@
+"""model_node (node ``softcath_model``): channel pressures -> predicted tip pose and backbone.
+
+Subscribes ``/softcath/pressure_cmd`` (std_msgs/Float64MultiArray, Pa per channel) and,
+for every accepted command, publishes ``/softcath/tip_pose`` (PoseStamped) and
+``/softcath/backbone`` (PoseArray, ``backbone_points`` poses from base to tip), both in
+frame ``softcath_base`` and stamped with the time the command was received (clock
+read on entry to the callback). Bad commands are rejected or clamped per
+``out_of_range`` (core.pressure_command), counted, warned about (throttled) and
+reported on /diagnostics; a model that does not converge publishes nothing.
+
+Latency: messages are preallocated and filled in place (``reuse_messages``) and the
+EventsExecutor is the default; benchmarks/node_latency.py measures these choices.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
+from ..core.design import load_design
+from ..core.errors import SoftcathError
+from ..core.kinematics import backbone_poses
+from ..core.models import make_model
+from ..core.pressure_command import POLICIES, check_pressure_command
+from .diagnostics import DiagnosticsReporter, InputCounters
+from .qos import RELIABILITIES, stream_qos
+from .runtime import EXECUTORS, run_node
+
+FRAME_ID = "softcath_base"
+WARN_THROTTLE_S = 1.0
+
+
+class ModelNode(Node):
+    def __init__(self):
+        super().__init__("softcath_model")
+        startup = "applied at start-up"
+        p = self._declare
+        design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
+        model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form")
+        n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip (>= 2)")
+        depth = p("qos_depth", 100, "keep-last depth of the command subscription and pose publishers")
+        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}")
+        self.out_of_range = p("out_of_range", "reject",
+                              f"finite pressures outside [0, max_pressure]: {' | '.join(POLICIES)}")
+        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)} ({startup})")
+        self.reuse_messages = p("reuse_messages", True, "fill preallocated messages in place (faster)")
+        diag_period = p("diagnostics_period", 1.0, "seconds between /diagnostics reports")
+        for name, value, allowed in (("out_of_range", self.out_of_range, POLICIES),
+                                     ("executor", self.executor_name, EXECUTORS),
+                                     ("reliability", reliability, RELIABILITIES)):
+            if value not in allowed:
+                raise ValueError(f"parameter {name} = {value!r}: not one of {allowed}")
+        if n_points < 2:
+            raise ValueError(f"parameter backbone_points = {n_points}: needs at least 2 (base and tip)")
+        if diag_period <= 0:
+            raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
+
+        self.design = load_design(design_name)
+        self.model = make_model(model_name, self.design)
+        self.n_channels = self.design.n_channels
+        self.length = self.design.length
+        self.n_points = int(n_points)
+        # The safety limit comes from the design only: an override is ignored (and said so).
+        self.max_pressure = self.design.max_pressure
+        self.declare_parameter("max_pressure", self.max_pressure, ParameterDescriptor(
+            description="Pa, from the design file; read-only", read_only=True), ignore_override=True)
+        if "max_pressure" in self._parameter_overrides:
+            self.get_logger().warn(f"max_pressure override ignored: the limit is the design's "
+                                   f"{self.max_pressure:g} Pa")
+        # Rungs with a one-command fast path (closed form) skip the BendState allocation.
+        self._fast = getattr(self.model, "curvature_single", None)
+
+        self.counters = InputCounters(extra={"design": self.design.name, "model": self.model.name,
+                                             "max_pressure_pa": f"{self.max_pressure:g}",
+                                             "out_of_range": self.out_of_range})
+        qos = stream_qos(int(depth), reliability)
+        self._clock = self.get_clock()
+        self._tip_pub = self.create_publisher(PoseStamped, "/softcath/tip_pose", qos)
+        self._backbone_pub = self.create_publisher(PoseArray, "/softcath/backbone", qos)
+        self._tip, self._backbone = self._new_messages()
+        self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self._on_command, qos)
+        self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
+                                                self.design.name, diag_period)
+        self.get_logger().info(
+            f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
+            f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
+            f"executor={self.executor_name}, qos {reliability} depth {depth}")
+
+    def _declare(self, name, default, description):
+        return self.declare_parameter(name, default, ParameterDescriptor(
+            description=description, read_only=True)).value
+
+    def _new_messages(self):
+        tip = PoseStamped()
+        tip.header.frame_id = FRAME_ID
+        backbone = PoseArray(poses=[Pose() for _ in range(self.n_points)])
+        backbone.header.frame_id = FRAME_ID
+        # Handles to the sub-messages, so filling is plain attribute stores.
+        self._tip_p, self._tip_q = tip.pose.position, tip.pose.orientation
+        self._bb = [(pose.position, pose.orientation) for pose in backbone.poses]
+        return tip, backbone
+
+    # -- the hot path ----------------------------------------------------------------------
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        stamp_ns = self._clock.now().nanoseconds   # time the command was received
+        check = check_pressure_command(msg.data, self.n_channels, self.max_pressure, self.out_of_range)
+        c = self.counters
+        if check.status != "ok":
+            c.last_reason = check.reason
+            if check.status == "rejected":
+                c.rejected += 1
+                self.get_logger().warn(f"command rejected: {check.reason}", throttle_duration_sec=WARN_THROTTLE_S)
+                return
+            c.clamped += 1
+            self.get_logger().warn(f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}",
+                                   throttle_duration_sec=WARN_THROTTLE_S)
+        if self._fast is not None:
+            curvature, stretch = self._fast(check.pressures)
+        else:
+            state = self.model.evaluate(check.pressures)
+            if not bool(state.converged):
+                return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
+            curvature, stretch = state.curvature, float(state.axial_stretch)
+        positions, quats = backbone_poses(curvature, self.length * stretch, self.n_points)
+        if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
+            return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
+        c.accepted += 1
+        self._publish(stamp_ns, positions.tolist(), quats.tolist())
+
+    def _model_failed(self, reason: str) -> None:
+        self.counters.model_failed += 1
+        self.counters.last_reason = reason
+        self.get_logger().warn(reason, throttle_duration_sec=WARN_THROTTLE_S)
+
+    def _publish(self, stamp_ns: int, positions: list, quats: list) -> None:
+        if not self.reuse_messages:
+            self._tip, self._backbone = self._new_messages()
+        tip, backbone = self._tip, self._backbone
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        for stamp in (tip.header.stamp, backbone.header.stamp):
+            stamp.sec, stamp.nanosec = sec, nanosec
+        for (pos, ori), (x, y, z), (qx, qy, qz, qw) in zip(self._bb, positions, quats):
+            pos.x, pos.y, pos.z = x, y, z
+            ori.x, ori.y, ori.z, ori.w = qx, qy, qz, qw
+        # The backbone's last pose is the tip (same arc length), so the two topics agree exactly.
+        (x, y, z), (qx, qy, qz, qw) = positions[-1], quats[-1]
+        p, q = self._tip_p, self._tip_q
+        p.x, p.y, p.z = x, y, z
+        q.x, q.y, q.z, q.w = qx, qy, qz, qw
+        # publish() serialises synchronously, so refilling the same messages next time is safe.
+        self._tip_pub.publish(tip)
+        self._backbone_pub.publish(backbone)
+
+
+def main(args=None) -> int:
+    return run_node(ModelNode, args, startup_errors=(SoftcathError, ValueError, ParameterException))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,79 @@
+"""Executors and the main loop every softcath node shares.
+
+``run_node`` builds the node, spins it on the executor it names and ends with exit
+code 0 on SIGINT/SIGTERM (rclpy's signal handlers shut the context down; we catch
+the resulting exceptions so no traceback is printed). A node that cannot start
+(bad design file, unknown model, bad parameter) logs one line and exits with 2.
+
+Executors (``benchmarks/node_latency.py`` compares them):
+- ``events``: rclpy.experimental.EventsExecutor, C++ event queue, lowest overhead.
+  Its ``spin()`` in rclpy 9.1 (PyPI wheels) never dispatches a callback here, so we
+  drive it with ``spin_once(timeout)``, which works and wakes on shutdown.
+  It does not pass MessageInfo to subscription callbacks.
+- ``single``: rclpy's SingleThreadedExecutor (Python wait-set loop).
+- ``multi``: rclpy's MultiThreadedExecutor (thread pool; callbacks in one mutually
+  exclusive group unless the node says otherwise).
+"""
+from __future__ import annotations
+
+import sys
+from typing import Callable
+
+EXECUTORS = ("events", "single", "multi")
+
+
+def make_executor(name: str):
+    """The executor called ``name`` (one of ``EXECUTORS``)."""
+    if name == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    if name == "single":
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor()
+    if name == "multi":
+        from rclpy.executors import MultiThreadedExecutor
+
+        return MultiThreadedExecutor()
+    raise ValueError(f"executor {name!r} is not one of {EXECUTORS}")
+
+
+def spin(executor, name: str) -> None:
+    """Run callbacks until the context shuts down (SIGINT/SIGTERM or rclpy.shutdown())."""
+    if name == "events":
+        context = executor.context
+        while context.ok():
+            executor.spin_once(timeout_sec=0.5)
+    else:
+        executor.spin()
+
+
+def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
+    """Create the node with ``factory()``, spin it on ``node.executor_name``; return the exit code.
+
+    ``startup_errors``: exception types that mean "cannot start with this configuration";
+    they are logged as one line and give exit code 2.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = factory()
+        except startup_errors as exc:
+            print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+            return 2
+        name = getattr(node, "executor_name", "events")
+        executor = make_executor(name)
+        executor.add_node(node)
+        spin(executor, name)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
