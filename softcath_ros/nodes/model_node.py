@@ -49,6 +49,8 @@ class ModelNode(Node):
                               f"finite pressures outside [0, max_pressure]: {' | '.join(POLICIES)}")
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)} ({startup})")
         self.reuse_messages = p("reuse_messages", True, "fill preallocated messages in place (faster)")
+        self.realtime_priority = p("realtime_priority", 0,
+                                   "SCHED_FIFO priority 1-99 for all node threads, 0 = normal scheduling")
         diag_period = p("diagnostics_period", 1.0, "seconds between /diagnostics reports")
         for name, value, allowed in (("out_of_range", self.out_of_range, POLICIES),
                                      ("executor", self.executor_name, EXECUTORS),
@@ -57,6 +59,8 @@ class ModelNode(Node):
                 raise ValueError(f"parameter {name} = {value!r}: not one of {allowed}")
         if n_points < 2:
             raise ValueError(f"parameter backbone_points = {n_points}: needs at least 2 (base and tip)")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ValueError(f"parameter realtime_priority = {self.realtime_priority}: must be 0..99")
         if diag_period <= 0:
             raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
 

@@ -1,0 +1,1 @@
+"""Small ROS clients for scripts, demos and benchmarks (not nodes of the suite)."""
