@@ -1,0 +1,196 @@
+"""Feed a running model_node a pressure sweep and collect its predicted poses.
+
+    python -m softcath_ros.tools.pressure_sweep --from 0 --to 0.35 --steps 8 --unit bar --plot runs/x.png
+
+Sends one command at a time on /softcath/pressure_cmd and waits for the node's
+/softcath/tip_pose and /softcath/backbone answer before the next one (lock-step, so
+every pose belongs to a known command). R_C and the bending angle are recovered from
+the received tip position alone (core.kinematics.curvature_for_tip), so the table shows
+what the topics say, not a second computation. Reusable: ``SweepClient.run(pressures)``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+PA_PER_BAR = 1.0e5
+
+
+@dataclass
+class SweepPoint:
+    pressures_pa: list[float]
+    tip_position_m: list[float]
+    tip_orientation_xyzw: list[float]
+    backbone_m: list[list[float]]       # (points, 3) positions, base to tip
+    stamp_ns: int
+
+    def radius_and_angle(self) -> tuple[float, float]:
+        """(R_C in m, inf when straight; bending angle in rad) of the arc through the tip."""
+        from ..core.kinematics import curvature_for_tip
+
+        x, y, z = self.tip_position_m
+        inv = curvature_for_tip(np.array(self.tip_position_m), 1.0)
+        kappa = float(np.hypot(*inv.curvature))
+        return (1.0 / kappa if kappa > 0 else math.inf), 2.0 * math.atan2(math.hypot(x, y), z)
+
+
+class SweepClient:
+    """A small rclpy node that sends commands and waits for the model node's answers."""
+
+    def __init__(self, node_name: str = "softcath_sweep", timeout_s: float = 5.0):
+        import rclpy
+        from geometry_msgs.msg import PoseArray, PoseStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from std_msgs.msg import Float64MultiArray
+
+        from ..nodes.qos import stream_qos
+
+        self._msg_type = Float64MultiArray
+        self.node = rclpy.create_node(node_name)
+        self.timeout_s = timeout_s
+        qos = stream_qos(100)
+        self._tips: list = []
+        self._backbones: list = []
+        self._tip_sub = self.node.create_subscription(PoseStamped, "/softcath/tip_pose", self._tips.append, qos)
+        self._bb_sub = self.node.create_subscription(PoseArray, "/softcath/backbone", self._backbones.append, qos)
+        self._pub = self.node.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
+        self._executor = SingleThreadedExecutor()
+        self._executor.add_node(self.node)
+
+    def _spin_until(self, done, timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while not done():
+            if time.monotonic() > end:
+                return False
+            self._executor.spin_once(timeout_sec=0.02)
+        return True
+
+    def wait_for_model_node(self, timeout_s: float = 20.0) -> None:
+        ok = self._spin_until(lambda: (self._pub.get_subscription_count() > 0 and self._tip_sub.get_publisher_count() > 0
+                                       and self._bb_sub.get_publisher_count() > 0), timeout_s)
+        if not ok:
+            raise TimeoutError(f"no model_node on /softcath/pressure_cmd after {timeout_s:g} s")
+        self._spin_until(lambda: False, 0.3)  # let the match settle in both directions
+
+    def send(self, pressures_pa) -> SweepPoint | None:
+        """Publish one command; the node's answer, or None if none came within the timeout."""
+        n_tip, n_bb = len(self._tips), len(self._backbones)
+        self._pub.publish(self._msg_type(data=[float(p) for p in pressures_pa]))
+        if not self._spin_until(lambda: len(self._tips) > n_tip and len(self._backbones) > n_bb, self.timeout_s):
+            return None
+        tip, bb = self._tips[n_tip], self._backbones[n_bb]
+        p, q = tip.pose.position, tip.pose.orientation
+        return SweepPoint(pressures_pa=[float(v) for v in pressures_pa], tip_position_m=[p.x, p.y, p.z],
+                          tip_orientation_xyzw=[q.x, q.y, q.z, q.w],
+                          backbone_m=[[b.position.x, b.position.y, b.position.z] for b in bb.poses],
+                          stamp_ns=tip.header.stamp.sec * 1_000_000_000 + tip.header.stamp.nanosec)
+
+    def run(self, commands) -> list[SweepPoint | None]:
+        return [self.send(c) for c in commands]
+
+    def close(self) -> None:
+        self._executor.shutdown()
+        self.node.destroy_node()
+
+
+def sweep_commands(start: float, stop: float, steps: int, n_channels: int, channel: int) -> np.ndarray:
+    """(steps, n_channels) Pa: ``channel`` ramps from ``start`` to ``stop``, the others stay at 0."""
+    p = np.zeros((steps, n_channels))
+    p[:, channel] = np.linspace(start, stop, steps)
+    return p
+
+
+def print_table(points: list[SweepPoint | None], commands, file=sys.stdout) -> None:
+    print(f"{'pressure [bar]':>16} {'R_C [mm]':>10} {'angle [deg]':>12} {'tip x, y, z [mm]':>28}", file=file)
+    for cmd, pt in zip(commands, points):
+        ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in cmd)
+        if pt is None:
+            print(f"{ps:>16}  no pose (rejected by the node or timed out; see /diagnostics)", file=file)
+            continue
+        rc, angle = pt.radius_and_angle()
+        tip = ", ".join(f"{v * 1e3:7.2f}" for v in pt.tip_position_m)
+        rc_s = "inf" if math.isinf(rc) else f"{rc * 1e3:.2f}"
+        print(f"{ps:>16} {rc_s:>10} {math.degrees(angle):12.2f} {tip:>28}", file=file)
+
+
+def plot_backbones(points: list[SweepPoint | None], path: Path, title: str = "") -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    good = [p for p in points if p is not None]
+    cmap = plt.get_cmap("viridis")
+    pmax = max((max(p.pressures_pa) for p in good), default=1.0) or 1.0
+    for p in good:
+        b = np.asarray(p.backbone_m) * 1e3
+        ax.plot(b[:, 1], b[:, 2], color=cmap(max(p.pressures_pa) / pmax),
+                label=f"{max(p.pressures_pa) / PA_PER_BAR:.3f} bar")
+        ax.plot(b[-1, 1], b[-1, 2], "o", color=cmap(max(p.pressures_pa) / pmax), ms=3)
+    ax.set_aspect("equal")
+    ax.set_xlabel("y [mm] (softcath_base)")
+    ax.set_ylabel("z [mm]")
+    ax.set_title(title or "predicted backbones from /softcath/backbone")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="send a pressure sweep to a running model_node and show its poses")
+    ap.add_argument("--from", dest="start", type=float, default=0.0)
+    ap.add_argument("--to", dest="stop", type=float, default=0.35)
+    ap.add_argument("--steps", type=int, default=8)
+    ap.add_argument("--unit", choices=("bar", "Pa"), default="bar")
+    ap.add_argument("--channels", type=int, default=1, help="channels of the node's design")
+    ap.add_argument("--channel", type=int, default=0, help="channel that is swept")
+    ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
+    ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
+    ap.add_argument("--timeout", type=float, default=5.0, help="s to wait for each answer")
+    args = ap.parse_args(argv)
+    if args.steps < 1 or not 0 <= args.channel < args.channels:
+        ap.error("need --steps >= 1 and 0 <= --channel < --channels")
+    scale = PA_PER_BAR if args.unit == "bar" else 1.0
+    commands = sweep_commands(args.start * scale, args.stop * scale, args.steps, args.channels, args.channel)
+
+    import rclpy
+
+    rclpy.init()
+    client = None
+    try:
+        client = SweepClient(timeout_s=args.timeout)
+        client.wait_for_model_node()
+        points = client.run(commands)
+    except TimeoutError as exc:
+        print(f"pressure_sweep: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("pressure_sweep: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+        rclpy.try_shutdown()
+    print_table(points, commands)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps([p.__dict__ if p else None for p in points], indent=1))
+    if args.plot:
+        print(f"backbone plot: {plot_backbones(points, args.plot)}")
+    return 0 if all(p is not None for p in points) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
