@@ -151,7 +151,7 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=1.0)
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--out-dir", default=str(HERE / "results"))
-    ap.add_argument("--domain-base", type=int, default=180, help="ROS_DOMAIN_IDs used: base .. base+runs-1")
+    ap.add_argument("--domain-base", type=int, default=180, help="ROS_DOMAIN_IDs used: base .. base+19")
     args = ap.parse_args()
     from tqdm import tqdm
 
@@ -165,7 +165,7 @@ def main() -> int:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for i, (rep, name) in enumerate(tqdm(schedule, desc="node latency runs", unit="run")):
-                domain = args.domain_base + (i % 50)
+                domain = args.domain_base + (i % 20)
                 runs[name].append(run_once(name, CONFIGS[name][1], args, domain, Path(tmp)))
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)

@@ -74,7 +74,7 @@ class ModelNode(Node):
         self.declare_parameter("max_pressure", self.max_pressure, ParameterDescriptor(
             description="Pa, from the design file; read-only", read_only=True), ignore_override=True)
         if "max_pressure" in self._parameter_overrides:
-            self.get_logger().warn(f"max_pressure override ignored: the limit is the design's "
+            self.get_logger().warning(f"max_pressure override ignored: the limit is the design's "
                                    f"{self.max_pressure:g} Pa")
         # Rungs with a one-command fast path (closed form) skip the BendState allocation.
         self._fast = getattr(self.model, "curvature_single", None)
@@ -118,15 +118,18 @@ class ModelNode(Node):
             c.last_reason = check.reason
             if check.status == "rejected":
                 c.rejected += 1
-                self.get_logger().warn(f"command rejected: {check.reason}", throttle_duration_sec=WARN_THROTTLE_S)
+                self.get_logger().warning(f"command rejected: {check.reason}", throttle_duration_sec=WARN_THROTTLE_S)
                 return
             c.clamped += 1
-            self.get_logger().warn(f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}",
+            self.get_logger().warning(f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}",
                                    throttle_duration_sec=WARN_THROTTLE_S)
         if self._fast is not None:
             curvature, stretch = self._fast(check.pressures)
         else:
-            state = self.model.evaluate(check.pressures)
+            try:
+                state = self.model.evaluate(check.pressures)
+            except SoftcathError as exc:  # a rung refusing this command (e.g. outside its range)
+                return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
             if not bool(state.converged):
                 return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
             curvature, stretch = state.curvature, float(state.axial_stretch)
@@ -139,7 +142,7 @@ class ModelNode(Node):
     def _model_failed(self, reason: str) -> None:
         self.counters.model_failed += 1
         self.counters.last_reason = reason
-        self.get_logger().warn(reason, throttle_duration_sec=WARN_THROTTLE_S)
+        self.get_logger().warning(reason, throttle_duration_sec=WARN_THROTTLE_S)
 
     def _publish(self, stamp_ns: int, positions: list, quats: list) -> None:
         if not self.reuse_messages:

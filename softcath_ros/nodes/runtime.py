@@ -90,7 +90,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
         if priority:
             problem = set_realtime_priority(priority)
             if problem:
-                node.get_logger().warn(problem + "; running with normal scheduling")
+                node.get_logger().warning(problem + "; running with normal scheduling")
         spin(executor, name)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -44,7 +44,7 @@ class SweepPoint:
 class SweepClient:
     """A small rclpy node that sends commands and waits for the model node's answers."""
 
-    def __init__(self, node_name: str = "softcath_sweep", timeout_s: float = 5.0):
+    def __init__(self, node_name: str = "softcath_sweep", timeout_s: float = 5.0, context=None):
         import rclpy
         from geometry_msgs.msg import PoseArray, PoseStamped
         from rclpy.executors import SingleThreadedExecutor
@@ -53,7 +53,7 @@ class SweepClient:
         from ..nodes.qos import stream_qos
 
         self._msg_type = Float64MultiArray
-        self.node = rclpy.create_node(node_name)
+        self.node = rclpy.create_node(node_name, context=context)
         self.timeout_s = timeout_s
         qos = stream_qos(100)
         self._tips: list = []
@@ -61,10 +61,11 @@ class SweepClient:
         self._tip_sub = self.node.create_subscription(PoseStamped, "/softcath/tip_pose", self._tips.append, qos)
         self._bb_sub = self.node.create_subscription(PoseArray, "/softcath/backbone", self._backbones.append, qos)
         self._pub = self.node.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
-        self._executor = SingleThreadedExecutor()
+        self._executor = SingleThreadedExecutor(context=context)
         self._executor.add_node(self.node)
 
-    def _spin_until(self, done, timeout_s: float) -> bool:
+    def spin_until(self, done, timeout_s: float) -> bool:
+        """Run callbacks until ``done()`` is true (True) or ``timeout_s`` passes (False)."""
         end = time.monotonic() + timeout_s
         while not done():
             if time.monotonic() > end:
@@ -73,17 +74,23 @@ class SweepClient:
         return True
 
     def wait_for_model_node(self, timeout_s: float = 20.0) -> None:
-        ok = self._spin_until(lambda: (self._pub.get_subscription_count() > 0 and self._tip_sub.get_publisher_count() > 0
+        ok = self.spin_until(lambda: (self._pub.get_subscription_count() > 0 and self._tip_sub.get_publisher_count() > 0
                                        and self._bb_sub.get_publisher_count() > 0), timeout_s)
         if not ok:
             raise TimeoutError(f"no model_node on /softcath/pressure_cmd after {timeout_s:g} s")
-        self._spin_until(lambda: False, 0.3)  # let the match settle in both directions
+        self.spin_until(lambda: False, 0.3)  # let the match settle in both directions
 
-    def send(self, pressures_pa) -> SweepPoint | None:
+    @property
+    def n_received(self) -> int:
+        """Tip poses received so far."""
+        return len(self._tips)
+
+    def send(self, pressures_pa, timeout_s: float | None = None) -> SweepPoint | None:
         """Publish one command; the node's answer, or None if none came within the timeout."""
         n_tip, n_bb = len(self._tips), len(self._backbones)
         self._pub.publish(self._msg_type(data=[float(p) for p in pressures_pa]))
-        if not self._spin_until(lambda: len(self._tips) > n_tip and len(self._backbones) > n_bb, self.timeout_s):
+        if not self.spin_until(lambda: len(self._tips) > n_tip and len(self._backbones) > n_bb,
+                               self.timeout_s if timeout_s is None else timeout_s):
             return None
         tip, bb = self._tips[n_tip], self._backbones[n_bb]
         p, q = tip.pose.position, tip.pose.orientation

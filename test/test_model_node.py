@@ -1,0 +1,194 @@
+"""model_node in its own process over DDS: poses, bad inputs, diagnostics, clean shutdown.
+
+Each test runs the node with ``sys.executable -m softcath_ros.nodes.model_node`` on its
+own ROS_DOMAIN_ID (range 210-229, used by this file only) on loopback, and talks to it
+from this process through the reusable sweep client (softcath_ros.tools.pressure_sweep).
+"""
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.design import load_design
+from softcath_ros.core.kinematics import backbone_poses
+from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import predict
+
+REPO = Path(__file__).resolve().parents[1]
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+
+_domains = itertools.cycle(range(210, 230))
+DESIGN = load_design("implemented_5mm")
+MODEL = make_model("closed_form", DESIGN)
+
+
+def expected_tip(pressure_pa: float):
+    r = predict(MODEL, np.array([[pressure_pa]]))[0]
+    return np.array(r.tip_position_m), np.array(r.tip_orientation_xyzw)
+
+
+class Running:
+    """A model_node process plus a client in this process on the same private domain."""
+
+    def __init__(self, *ros_args: str):
+        self.domain = next(_domains)
+        env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        self.proc = subprocess.Popen([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args],
+                                     env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from softcath_ros.tools.pressure_sweep import SweepClient
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=self.domain)
+        self.client = SweepClient(node_name="test_model_node_client", timeout_s=5.0, context=self.context)
+        self.diagnostics = []
+        self.client.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        self.client.wait_for_model_node(timeout_s=30.0)
+
+    def counters(self, timeout_s: float = 4.0, **wanted) -> dict:
+        """The first /diagnostics report whose counters include ``wanted`` (waits for it)."""
+        found = {}
+
+        def match():
+            for arr in self.diagnostics:
+                for st in arr.status:
+                    kv = {v.key: v.value for v in st.values}
+                    if st.name.startswith("softcath_model") and all(kv.get(k) == str(w) for k, w in wanted.items()):
+                        found.update(kv, _level=st.level)
+                        return True
+            return False
+
+        self.client.spin_until(match, timeout_s)
+        return found
+
+    def stop(self, sig=signal.SIGINT, timeout_s: float = 10.0):
+        """Signal the node; (exit code, stderr)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            _, err = self.proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate()
+            return "hung", err
+        return self.proc.returncode, err
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()
+        self.client.close()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def start_node():
+    running = []
+
+    def start(*ros_args):
+        r = Running(*ros_args)
+        running.append(r)
+        return r
+
+    yield start
+    for r in running:
+        r.close()
+
+
+def test_poses_arrive_match_core_and_backbone_ends_at_tip(start_node):
+    node = start_node("-p", "backbone_points:=7", "-p", "design:=implemented_5mm")
+    before = time.time_ns()
+    pt = node.client.send([30000.0])
+    after = time.time_ns()
+    assert pt is not None, "no pose for a valid command"
+    pos, quat = expected_tip(30000.0)
+    np.testing.assert_allclose(pt.tip_position_m, pos, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(pt.tip_orientation_xyzw, quat, rtol=0, atol=1e-12)
+    # Stamped with the time the node received the command: between our send and our receipt.
+    assert before <= pt.stamp_ns <= after
+    assert node.client._tips[-1].header.frame_id == "softcath_base"
+    bb_msg = node.client._backbones[-1]
+    assert bb_msg.header.frame_id == "softcath_base"
+    assert bb_msg.header.stamp == node.client._tips[-1].header.stamp
+    backbone = np.array(pt.backbone_m)
+    assert backbone.shape == (7, 3)
+    k, stretch = MODEL.curvature_single(np.array([30000.0]))
+    np.testing.assert_allclose(backbone, backbone_poses(k, DESIGN.length * stretch, 7)[0], atol=1e-12)
+    np.testing.assert_allclose(backbone[0], [0, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(backbone[-1], pt.tip_position_m, rtol=0, atol=0)
+    # Bending towards -y for the channel at +y, and a unit quaternion.
+    assert pos[1] < 0
+    assert abs(np.linalg.norm(pt.tip_orientation_xyzw) - 1) < 1e-12
+    code, err = node.stop(signal.SIGTERM)
+    assert code == 0 and "Traceback" not in err, err
+
+
+def test_bad_inputs_rejected_counted_reported_and_node_survives(start_node):
+    # The safety limit is the design's: an override on the command line must not raise it.
+    node = start_node("-p", "max_pressure:=1000000.0", "-p", "out_of_range:=reject")
+    bad = [[float("nan")], [float("inf")], [10000.0, 10000.0], [-1.0], [DESIGN.max_pressure * 1.01], [1.0e6]]
+    for cmd in bad:
+        assert node.client.send(cmd, timeout_s=0.3) is None, f"a pose was published for bad command {cmd}"
+    assert node.client.n_received == 0
+    diag = node.counters(rejected=len(bad))
+    assert diag, f"no /diagnostics report with rejected={len(bad)}; got {node.diagnostics[-1:] }"
+    assert diag["accepted"] == "0" and diag["clamped"] == "0"
+    assert "max_pressure" in diag["last_reason"]
+    assert diag["max_pressure_pa"] == f"{DESIGN.max_pressure:g}"
+    assert node.proc.poll() is None, "node died on bad input"
+    # Still answers a good command correctly afterwards.
+    pt = node.client.send([20000.0])
+    assert pt is not None
+    np.testing.assert_allclose(pt.tip_position_m, expected_tip(20000.0)[0], atol=1e-12)
+    assert node.counters(accepted=1, rejected=len(bad))
+    code, err = node.stop(signal.SIGINT)
+    assert code == 0 and "Traceback" not in err, err
+    assert "rejected" in err  # the (throttled) warning was logged
+
+
+def test_clamp_policy_clamps_out_of_range_but_rejects_non_finite(start_node):
+    node = start_node("-p", "out_of_range:=clamp")
+    high = node.client.send([DESIGN.max_pressure * 3])
+    assert high is not None
+    np.testing.assert_allclose(high.tip_position_m, expected_tip(DESIGN.max_pressure)[0], atol=1e-12)
+    low = node.client.send([-5000.0])
+    assert low is not None
+    np.testing.assert_allclose(low.tip_position_m, [0, 0, DESIGN.length], atol=1e-15)
+    assert node.client.send([float("nan")], timeout_s=0.3) is None
+    diag = node.counters(clamped=2, rejected=1)
+    assert diag and diag["accepted"] == "2" and diag["out_of_range"] == "clamp"
+    assert all(np.isfinite(v) for v in high.tip_position_m + low.tip_position_m)
+
+
+def test_params_file_is_loaded(start_node):
+    node = start_node("--params-file", str(REPO / "config" / "model_node.yaml"), "-p", "backbone_points:=5")
+    pt = node.client.send([10000.0])
+    assert pt is not None and len(pt.backbone_m) == 5
+    code, err = node.stop(signal.SIGINT)
+    assert code == 0 and "Traceback" not in err, err
+    assert "design implemented_5mm" in err  # start-up line from the params file's design
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_ends_node_cleanly(start_node, sig):
+    node = start_node()
+    assert node.client.send([5000.0]) is not None
+    code, err = node.stop(sig)
+    assert code == 0, f"exit code {code} on {sig.name}: {err}"
+    assert "Traceback" not in err
+
+
+def test_bad_configuration_exits_with_one_line_error():
+    env = dict(os.environ, ROS_DOMAIN_ID=str(next(_domains)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args",
+                           "-p", "model:=no_such_rung"], env=env, capture_output=True, text=True, timeout=30)
+    assert proc.returncode == 2
+    assert "no_such_rung" in proc.stderr and "Traceback" not in proc.stderr
