@@ -191,18 +191,18 @@ def test_plain_load_stepping_without_step_control_fails_loudly(implemented_desig
 
 
 def test_batch_is_path_independent_and_cached(implemented_design, tmp_path):
-    model = make_model("section", implemented_design, cache_dir=tmp_path)
+    model = make_model("section", implemented_design, cache=tmp_path)
     sweep = model.evaluate(np.array([[0.05 * BAR], [0.10 * BAR], [0.15 * BAR]]))
     single = make_model("section", implemented_design).evaluate([0.15 * BAR])
     np.testing.assert_allclose(single.curvature, sweep.curvature[2], rtol=0,
                                atol=1e-6 * np.hypot(*sweep.curvature[2]))
     # a new model instance with the same design, mesh and settings reads the result back
-    again = make_model("section", implemented_design, cache_dir=tmp_path).evaluate(
+    again = make_model("section", implemented_design, cache=tmp_path).evaluate(
         np.array([[0.05 * BAR], [0.10 * BAR], [0.15 * BAR]]))
     assert again.extras.get("cached") is True
     np.testing.assert_array_equal(again.curvature, sweep.curvature)
     # other settings, other key
-    other = make_model("section", implemented_design, cache_dir=tmp_path, mesh_size=0.4e-3)
+    other = make_model("section", implemented_design, cache=tmp_path, mesh_size=0.4e-3)
     assert other.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))
 
 

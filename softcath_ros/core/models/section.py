@@ -49,7 +49,7 @@ class SectionSettings:
     max_newton: int = 10
     initial_step: float = 2000.0        # Pa
     max_step: float = 4000.0            # Pa
-    min_step: float = 100.0             # Pa: where a failure is located to (gauges read +-2 kPa)
+    min_step: float = 250.0             # Pa: how finely a failure is located (gauges read +-2 kPa)
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
@@ -63,8 +63,11 @@ class SectionSettings:
 class SectionModel(BendModel):
     name = "section"
 
-    def __init__(self, design: Design, cache_dir: str | Path | None = None, progress: bool = False,
+    def __init__(self, design: Design, cache: bool | str | Path = False, progress: bool = False,
                  **settings):
+        """``cache``: False, True (the project's cache directory, core/cache.py) or a directory;
+        results of whole batches are kept there under a hash of design, mesh, settings and
+        pressures. ``progress``: a tqdm bar per batch. ``settings``: ``SectionSettings`` fields."""
         super().__init__(design)
         try:
             self.settings = SectionSettings(**settings)
@@ -82,7 +85,12 @@ class SectionModel(BendModel):
                                       end_cap_only=self.settings.pressure_load == "end_cap")
         self.linear = LinearSolver()
         self.progress = progress
-        self.cache_dir = None if cache_dir is None else Path(cache_dir)
+        if cache is True:
+            from ..cache import cache_dir
+
+            self.cache_dir = cache_dir("section")
+        else:
+            self.cache_dir = Path(cache) if cache else None
         # converged states by pressure vector (Pa): starting points for later commands
         self._states: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self._states[tuple([0.0] * design.n_channels)] = self.problem.initial_state()
