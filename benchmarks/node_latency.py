@@ -37,10 +37,11 @@ REPO = HERE.parent
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {
-    "default": ("events executor, preallocated messages, reliable depth 100, 20 points", {}),
+    "default": ("events executor, preallocated CDR bytes, reliable depth 100, 20 points", {}),
     "single": ("SingleThreadedExecutor", {"executor": "single"}),
     "multi": ("MultiThreadedExecutor", {"executor": "multi"}),
-    "fresh_msgs": ("new messages built per command", {"reuse_messages": False}),
+    "reuse_msgs": ("preallocated message objects filled in place", {"message_preparation": "reuse"}),
+    "fresh_msgs": ("new message objects built per command", {"message_preparation": "fresh"}),
     "depth10": ("reliable, keep-last 10", {"qos_depth": 10}),
     "best_effort": ("best-effort, keep-last 100", {"reliability": "best_effort"}),
     "points100": ("100 backbone points", {"backbone_points": 100}),
@@ -154,6 +155,8 @@ def main() -> int:
     ap.add_argument("--domain-base", type=int, default=180, help="ROS_DOMAIN_IDs used: base .. base+19")
     args = ap.parse_args()
     from tqdm import tqdm
+
+    signal.signal(signal.SIGTERM, signal.default_int_handler)  # SIGTERM stops like Ctrl-C
 
     names = [n.strip() for n in args.configs.split(",") if n.strip()]
     unknown = [n for n in names if n not in CONFIGS]

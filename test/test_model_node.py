@@ -103,8 +103,10 @@ def start_node():
         r.close()
 
 
-def test_poses_arrive_match_core_and_backbone_ends_at_tip(start_node):
-    node = start_node("-p", "backbone_points:=7", "-p", "design:=implemented_5mm")
+@pytest.mark.parametrize("preparation", ["serialized", "reuse"])
+def test_poses_arrive_match_core_and_backbone_ends_at_tip(start_node, preparation):
+    node = start_node("-p", "backbone_points:=7", "-p", "design:=implemented_5mm",
+                      "-p", f"message_preparation:={preparation}")
     before = time.time_ns()
     pt = node.client.send([30000.0])
     after = time.time_ns()
@@ -192,3 +194,40 @@ def test_bad_configuration_exits_with_one_line_error():
                            "-p", "model:=no_such_rung"], env=env, capture_output=True, text=True, timeout=30)
     assert proc.returncode == 2
     assert "no_such_rung" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("frame_id", ["softcath_base", "", "ab", "abc"])
+@pytest.mark.parametrize("n", [1, 2, 7, 20])
+def test_preallocated_cdr_buffers_deserialise_to_the_same_messages(frame_id, n):
+    from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from softcath_ros.nodes.cdr import PoseArrayBuffer, PoseStampedBuffer
+
+    values = np.random.default_rng(n).normal(size=(n, 7))
+    stamp_ns = 1_795_359_200_123_456_789
+
+    def fill(pose, row):
+        p, q = pose.position, pose.orientation
+        p.x, p.y, p.z, q.x, q.y, q.z, q.w = row
+
+    buf = PoseArrayBuffer(frame_id, n)
+    buf.poses[:] = values
+    buf.set_stamp(stamp_ns)
+    msg = PoseArray(poses=[Pose() for _ in range(n)])
+    msg.header.frame_id = frame_id
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    for pose, row in zip(msg.poses, values.tolist()):
+        fill(pose, row)
+    assert deserialize_message(buf.to_bytes(), PoseArray) == msg
+    assert len(buf.to_bytes()) == len(serialize_message(msg))  # padding bytes differ, so compare content + size
+
+    tip = PoseStampedBuffer(frame_id)
+    tip.poses[0] = values[-1]
+    tip.set_stamp(stamp_ns)
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    fill(msg.pose, values[-1].tolist())
+    assert deserialize_message(tip.to_bytes(), PoseStamped) == msg
+    assert len(tip.to_bytes()) == len(serialize_message(msg))

@@ -1,0 +1,58 @@
+"""Preallocated, fixed-layout CDR buffers for the pose messages a node publishes at kHz rates.
+
+rclpy converts a Python message to C field by field (a PoseArray of 20 poses is ~150
+attribute reads) before serialising it; a publisher also accepts the serialised bytes.
+For messages whose size never changes (fixed frame_id, fixed number of poses) the byte
+layout is fixed too, so we keep one buffer and write only the stamp and the doubles
+through numpy views. The layout is plain CDR (XCDR1, little endian, the encoding ROS 2
+uses); test/test_model_node.py checks it byte for byte against rclpy.serialization.
+"""
+from __future__ import annotations
+
+import struct
+import sys
+
+import numpy as np
+
+CDR_LE_HEADER = b"\x00\x01\x00\x00"   # encapsulation: plain CDR, little endian
+HOST_IS_LITTLE_ENDIAN = sys.byteorder == "little"
+
+
+def _align(offset: int, n: int) -> int:
+    return (offset + n - 1) // n * n
+
+
+class _PoseBuffer:
+    """Header + ``n`` poses; ``sequence``: poses are a sequence (PoseArray) or one field (PoseStamped)."""
+
+    def __init__(self, frame_id: str, n: int, sequence: bool):
+        body = bytearray(8)  # builtin_interfaces/Time: int32 sec, uint32 nanosec (filled per message)
+        fid = frame_id.encode() + b"\0"
+        body += struct.pack("<I", len(fid)) + fid
+        if sequence:
+            body += b"\0" * (_align(len(body), 4) - len(body)) + struct.pack("<I", n)
+        body += b"\0" * (_align(len(body), 8) - len(body))  # CDR aligns relative to the body start
+        data_offset = len(CDR_LE_HEADER) + len(body)
+        self._buf = bytearray(CDR_LE_HEADER + body + bytes(56 * n))
+        self.stamp = np.frombuffer(self._buf, dtype="<u4", count=2, offset=len(CDR_LE_HEADER))
+        self.poses = np.frombuffer(self._buf, dtype="<f8", count=7 * n, offset=data_offset).reshape(n, 7)
+
+    def set_stamp(self, stamp_ns: int) -> None:
+        self.stamp[0], self.stamp[1] = divmod(stamp_ns, 1_000_000_000)
+
+    def to_bytes(self) -> bytes:
+        return bytes(self._buf)
+
+
+class PoseArrayBuffer(_PoseBuffer):
+    """geometry_msgs/PoseArray with ``n`` poses; rows of ``poses`` are (x, y, z, qx, qy, qz, qw)."""
+
+    def __init__(self, frame_id: str, n: int):
+        super().__init__(frame_id, n, sequence=True)
+
+
+class PoseStampedBuffer(_PoseBuffer):
+    """geometry_msgs/PoseStamped; ``poses`` has one row (x, y, z, qx, qy, qz, qw)."""
+
+    def __init__(self, frame_id: str):
+        super().__init__(frame_id, 1, sequence=False)
