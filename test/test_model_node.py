@@ -231,3 +231,48 @@ def test_preallocated_cdr_buffers_deserialise_to_the_same_messages(frame_id, n):
     fill(msg.pose, values[-1].tolist())
     assert deserialize_message(tip.to_bytes(), PoseStamped) == msg
     assert len(tip.to_bytes()) == len(serialize_message(msg))
+
+
+def test_non_converged_or_non_finite_model_result_publishes_nothing_and_is_counted():
+    """In-process (no DDS traffic needed): a rung that fails must not reach the topics."""
+    from std_msgs.msg import Float64MultiArray
+
+    from softcath_ros.core.models.base import BendModel, BendState
+    from softcath_ros.nodes.model_node import ModelNode
+
+    class FailingRung(BendModel):
+        name = "failing"
+
+        def __init__(self, design, result):
+            super().__init__(design)
+            self.result = result
+
+        def _evaluate_batch(self, pressures):
+            n = len(pressures)
+            if self.result == "diverged":
+                return BendState(np.zeros((n, 2)), np.ones(n), np.zeros(n, bool), message="Newton diverged at step 3")
+            return BendState(np.full((n, 2), np.nan), np.ones(n), np.ones(n, bool))
+
+    class Recorder:
+        def __init__(self):
+            self.sent = []
+
+        def publish(self, msg):
+            self.sent.append(msg)
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=next(_domains))
+    node = ModelNode(context=context)
+    try:
+        for result, reason in (("diverged", "Newton diverged"), ("nan", "non-finite")):
+            node.model, node._fast = FailingRung(DESIGN, result), None
+            node._tip_pub, node._backbone_pub = Recorder(), Recorder()
+            before = node.counters.model_failed
+            node._on_command(Float64MultiArray(data=[10000.0]))
+            assert node._tip_pub.sent == [] and node._backbone_pub.sent == []
+            assert node.counters.model_failed == before + 1
+            assert reason in node.counters.last_reason
+        assert node.counters.accepted == 0
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -42,8 +42,9 @@ PREPARATIONS = ("serialized", "reuse", "fresh")
 
 
 class ModelNode(Node):
-    def __init__(self):
-        super().__init__("softcath_model")
+    def __init__(self, **node_options):
+        """``node_options`` go to rclpy's Node (e.g. ``context`` for in-process tests)."""
+        super().__init__("softcath_model", **node_options)
         startup = "applied at start-up"
         p = self._declare
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
