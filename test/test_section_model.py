@@ -243,3 +243,15 @@ def test_predict_cli_with_the_section_rung():
     assert results[0]["converged"] and results[0]["radius_of_curvature_m"] == pytest.approx(0.028, rel=0.05)
     assert not results[1]["converged"] and results[1]["radius_of_curvature_m"] is None
     assert "did not converge at p = " in results[1]["reason"]
+
+
+def test_device_in_the_lumen_stiffens_about_linearly(design_dict):
+    radii = []
+    for ei in (0.0, 1e-6, 2e-6):     # N m^2 (1 N mm^2 = 1e-6 N m^2)
+        design_dict["device"] = None if ei == 0 else {"diameter": 1.0e-3, "bending_stiffness": ei}
+        state = make_model("section", design_from_dict(design_dict)).evaluate([0.15 * BAR])
+        assert state.converged
+        radii.append(_radius(state.curvature, state.axial_stretch))
+    # measured: +15 % per 1e-6 N m^2, increments equal within a few %
+    assert radii[0] < radii[1] < radii[2]
+    assert (radii[2] - radii[1]) == pytest.approx(radii[1] - radii[0], rel=0.05)

@@ -49,7 +49,7 @@ class SectionSettings:
     max_newton: int = 10
     initial_step: float = 2000.0        # Pa
     max_step: float = 4000.0            # Pa
-    min_step: float = 250.0             # Pa: how finely a failure is located (gauges read +-2 kPa)
+    min_step: float = 50.0              # Pa: smallest step (sharp turns of the path need it)
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
