@@ -122,10 +122,15 @@ def allocator():
     return Allocator(make_model("closed_form", load_design("three_channel_5mm")))
 
 
-def settle_value(op, seconds=0.3):
-    """Latest published pressures after streaming has settled."""
-    op.spin(seconds)
-    return np.array(op.pressures[-1][1])
+def reaches(op, expected, since, seconds=5.0):
+    """Spin until a message published after index ``since`` equals ``expected`` exactly (to
+    rounding). The operator may lag behind a fast stream, and once the stream stops the watchdog
+    vents, so "some message since the command" rather than "the latest one"."""
+    expected = np.asarray(expected, dtype=float)
+
+    def seen():
+        return any(np.allclose(p, expected, rtol=1e-9, atol=1e-6) for _, p in op.pressures[since:])
+    return op.spin(seconds, until=seen)
 
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
@@ -136,27 +141,31 @@ def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
     op, proc = wire
     assert np.all(np.array(op.pressures[-1][1]) == 0.0)  # vented before any command
     for k in ([3.0, 0.0], [-4.0, 4.0], [0.0, -20.0]):
+        mark = len(op.pressures)
         op.stream_bend(k, 0.4)
-        got = np.array(op.pressures[-1][1])
         expected = allocator.allocate(k).pressures
-        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-6)
-    assert np.max(got) == 50e3  # the last request is beyond reach: saturated at max_pressure
+        assert reaches(op, expected, mark), (k, op.pressures[-1][1], expected)
+    assert np.max(op.pressures[-1][1]) == 50e3  # the last request is beyond reach: saturated at max_pressure
     op.spin(0.3)
     assert op.last_diag()["saturated"] == "true"
     tip = [0.004, 0.001, 0.0392]
+    mark = len(op.pressures)
     end = time.monotonic() + 0.4
     while time.monotonic() < end:
         op.send_tip(*tip)
         op.spin(0.01)
-    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate_tip(tip).pressures, rtol=1e-9, atol=1e-6)
+    assert reaches(op, allocator.allocate_tip(tip).pressures, mark)
     assert proc.poll() is None
 
 
 @pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.4", "diagnostics_period:=0.2")], indirect=True, ids=[""])
 def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     op, proc = wire
+    mark = len(op.pressures)
     op.stream_bend([3.0, 0.0], 0.3)
-    good = np.array(op.pressures[-1][1])
+    good = allocator.allocate([3.0, 0.0]).pressures
+    assert reaches(op, good, mark)
+    mark = len(op.pressures)  # from here on: the good command's output, held, or the vent
     bad = [(float("nan"), 0.0, "softcath_base"), (float("inf"), 1.0, "softcath_base"),
            (1e9, 0.0, "softcath_base"), (1.0, 0.0, "world"), (1.0, 0.0, "")]
     for kx, ky, frame in bad:
@@ -166,14 +175,16 @@ def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     op.send_tip(0.0, 0.0, 50.0)            # absurdly far
     op.send_tip(0.0, 0.0, -0.01)           # behind the base: no arc ends there
     op.send_tip(0.001, 0.0, 0.039, frame="camera")
-    assert op.spin(3.0, until=lambda: op.last_diag().get("commands_rejected") == "9"), op.last_diag()
+    assert op.spin(5.0, until=lambda: op.last_diag().get("commands_rejected") == "9"), op.last_diag()
     diag = op.diagnostics[-1]
     assert diag.level == DiagnosticStatus.WARN and "rejected" in diag.message
-    # None of them changed the output (the good command's pressures are held until the timeout).
-    later = [np.array(p) for t, p in op.pressures if p != [0.0, 0.0, 0.0]]
-    np.testing.assert_allclose(later[-1], good)
+    # None of them changed the output: every non-zero message is the good command's (held until
+    # the timeout vents; the rate limit here is fast enough to make each change one step).
+    nonzero = np.array([p for _, p in op.pressures[mark:] if p != [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(nonzero, np.broadcast_to(good, nonzero.shape), rtol=1e-9, atol=1e-6)
+    mark = len(op.pressures)
     op.stream_bend([-3.0, 0.0], 0.3)
-    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate([-3.0, 0.0]).pressures, rtol=1e-9)
+    assert reaches(op, allocator.allocate([-3.0, 0.0]).pressures, mark)
     assert proc.poll() is None
 
 
@@ -187,8 +198,9 @@ def test_watchdog_vents_after_timeout_and_resumes(wire, allocator):
     assert 0.3 <= vent_time < 1.0, vent_time  # not before the timeout, soon after it
     assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "vented")
     assert op.diagnostics[-1].level == DiagnosticStatus.WARN and "vented" in op.diagnostics[-1].message
+    mark = len(op.pressures)
     op.stream_bend([0.0, 5.0], 0.4)
-    np.testing.assert_allclose(op.pressures[-1][1], allocator.allocate([0.0, 5.0]).pressures, rtol=1e-9)
+    assert reaches(op, allocator.allocate([0.0, 5.0]).pressures, mark)
     assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "ok")
 
 
@@ -203,12 +215,15 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     times = np.array([t for t, _ in samples])
     assert values.max() == pytest.approx(20e3) and values.max() <= 20e3
     rising = values[:, 0]
-    first = np.argmax(rising > 0)
-    # Channel 0 climbs at <= 50 kPa/s: 20 kPa takes >= 0.4 s (less a publish period of jitter).
     reached = np.argmax(rising >= 20e3 - 1e-9)
-    assert times[reached] - times[first] >= 0.4 - 0.05, times[reached] - times[first]
-    steps = np.diff(rising[first:reached + 1])
-    assert steps.max() <= 50e3 * 0.05  # never a jump: a step per message <= rate x (a few periods)
+    # Channel 0 may climb at most 50 kPa/s after the first command (sent at t0, received later);
+    # the first step may count the time since the previous publish (one 10 ms period), so 20 kPa
+    # cannot be reached before t0 + 0.4 s - 10 ms. Reception only adds delay: one-sided.
+    assert times[reached] - t0 >= 0.4 - 0.01, times[reached] - t0
+    # And it is a ramp, not a jump: many intermediate values on the way up.
+    ramp = rising[:reached]
+    assert np.count_nonzero((ramp > 0) & (ramp < 20e3)) >= 10
+    assert np.all(np.diff(rising[:reached + 1]) >= 0)
     # Read-only at run time: setting it is refused, and it still reads back 20000.
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import GetParameters, SetParameters
@@ -218,16 +233,17 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     req = SetParameters.Request(parameters=[Parameter(name="max_pressure", value=ParameterValue(
         type=ParameterType.PARAMETER_DOUBLE, double_value=90e3))])
     future = client.call_async(req)
-    op.spin(5.0, until=future.done)
+    op.spin(20.0, until=future.done)
     assert future.done() and not future.result().results[0].successful
     get = op.node.create_client(GetParameters, "/softcath_allocation/get_parameters")
     assert get.wait_for_service(timeout_sec=10.0)
     fut = get.call_async(GetParameters.Request(names=["max_pressure"]))
-    op.spin(5.0, until=fut.done)
+    op.spin(20.0, until=fut.done)
     value = fut.result().values[0]
     assert (value.double_value or value.integer_value) == 20e3
+    mark = len(op.pressures)
     op.stream_bend([0.0, -50.0], 0.3)
-    assert max(op.pressures[-1][1]) == 20e3
+    assert reaches(op, [20e3, 0.0, 0.0], mark)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

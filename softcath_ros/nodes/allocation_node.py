@@ -80,13 +80,14 @@ class AllocationNode(Node):
         self.rejected = 0
         self.last_rejection = ""
         self.published = 0
-        self._last_tick = time.monotonic()
+        self._last_publish = time.monotonic()
 
         self.pub = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(Vector3Stamped, "/softcath/bend_cmd", self._on_bend, 10)
         self.create_subscription(PointStamped, "/softcath/tip_target", self._on_tip, 10)
-        self.create_timer(1.0 / publish_rate, self._tick)
+        self.period = 1.0 / publish_rate
+        self.create_timer(self.period, self._tick)
         self.create_timer(diag_period, self._publish_diagnostics)
         self.get_logger().info(
             f"design {self.design.name} ({n} channels), model {model_name}, max_pressure {self.max_pressure:g} Pa, "
@@ -142,16 +143,24 @@ class AllocationNode(Node):
             self.vented = False
             self.get_logger().info("command stream resumed")
             self._publish_diagnostics()
+        # A new target goes out at once (rate limited): a fast command stream sets the output rate
+        # and costs one callback per command instead of two.
+        self._publish_step(time.monotonic())
 
     # ------------------------------------------------------------------ output
 
     def _tick(self) -> None:
+        """Timer: the output never falls below publish_rate, and the watchdog is checked."""
         now = time.monotonic()
-        dt, self._last_tick = now - self._last_tick, now
         if self.watchdog.expired(now) and not self.vented:
             self.vented = True
             self.get_logger().warning(f"no command for {self.timeout:g} s: venting (ramping all pressures to zero)")
             self._publish_diagnostics()
+        if now - self._last_publish >= 0.9 * self.period or self.vented:
+            self._publish_step(now)
+
+    def _publish_step(self, now: float) -> None:
+        dt, self._last_publish = now - self._last_publish, now
         target = np.zeros_like(self.target) if self.vented else self.target
         out = self.limiter.step(target, dt)
         # Last guard before the wire: the limit is enforced here whatever happened upstream.
@@ -201,6 +210,7 @@ def main(args=None) -> int:
     rclpy.init(args=args)
     # The executor exists before the (slower) node set-up, so a SIGTERM during set-up does not
     # leave rclpy half-building one (its __del__ then prints spurious tracebacks).
+    # (rclpy 9.1's experimental EventsExecutor was tried: it ignored SIGTERM here.)
     executor = SingleThreadedExecutor()
     node = None
     try:
