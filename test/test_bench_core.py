@@ -162,8 +162,49 @@ def test_analysis_statistics_on_known_values():
     assert f.force_mean == pytest.approx(0.011)  # tared: (0.010 + 0.012) / 2
     assert f.force_std == pytest.approx(np.std([0.010, 0.012], ddof=1))
     assert stats[("force", "loading", 0.0)].force_mean == pytest.approx(0.0)
-    (h,) = hysteresis(summarise(rows))
-    assert h.difference == pytest.approx(0.04 / 0.02) and h.significant  # unloading bends more, consistently
+    assert hysteresis(summarise(rows)) == []  # one loading step: no loading curve to compare with
+
+
+def _hysteresis_of(design, seed, **rig):
+    rig = SimulatedRig(make_model("closed_form", design), RigParams(seed=seed, **rig))
+    events, streams = run_offline(load_protocol("default"), rig)
+    stats = summarise(rows_from_events(events, streams))
+    return stats, hysteresis(stats)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("tau", [0.08, 0.2])
+def test_no_hysteresis_is_flagged_without_hysteresis(implemented_design, seed, tau):
+    """No hysteresis simulated. With a slow regulator (tau 0.2 s) the steps are sampled ~1 kPa short
+    of the command, low while loading and high while unloading: at equal *level* unloading reads
+    more bend, at equal *measured pressure* it does not. (Seeds fixed: the flag's false-positive
+    rate is 1% per curve by construction.)"""
+    stats, hyst = _hysteresis_of(implemented_design, seed, regulator_time_constant=tau)
+    assert len(hyst) == 2 * 7 and not any(h.significant for h in hyst)
+    assert abs(np.mean([h.t_statistic for h in hyst])) < 1.0
+    if tau == 0.2:  # the trap the analysis avoids: the same levels differ by ~1 kPa in pressure
+        by = {(s.bench, s.phase, s.level): s for s in stats}
+        lag = [by["angle", "unloading", lv].pressure_magnitude - by["angle", "loading", lv].pressure_magnitude
+               for lv in (10e3, 20e3, 30e3)]
+        assert min(lag) > 500.0
+        naive = [(by["angle", "unloading", lv].curvature_mean - by["angle", "loading", lv].curvature_mean)
+                 for lv in (10e3, 15e3, 20e3, 25e3, 30e3)]
+        assert np.mean(naive) > 0.3  # 1/m: what a comparison at equal level would call hysteresis
+
+
+def test_injected_hysteresis_is_flagged(implemented_design):
+    """A rig whose bend lags its pressure through a 2 kPa play: unloading bends more at every level."""
+    stats, hyst = _hysteresis_of(implemented_design, 0, hysteresis_pressure=2000.0)
+    inner = [h for h in hyst if h.level > 0]
+    assert all(h.significant and h.difference > 0 for h in inner)
+    # Size: the loading branch bends as at p - 1 kPa, the unloading one as at p + 1 kPa, so the
+    # difference is the play's width times the loading curve's local slope, within 30%.
+    up = sorted((s for s in stats if s.bench == "angle" and s.phase == "loading"), key=lambda s: s.level)
+    p, k = np.array([s.pressure_magnitude for s in up]), np.array([s.curvature_mean for s in up])
+    slope = np.gradient(k, p)
+    for h in inner:
+        if h.bench == "angle" and h.level >= 10e3:
+            assert h.difference == pytest.approx(2000.0 * np.interp(h.pressure, p, slope), rel=0.3)
 
 
 def test_offline_run_and_calibration_recover_the_simulated_truth(implemented_design):

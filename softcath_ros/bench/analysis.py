@@ -5,7 +5,7 @@ pressures, angle and force received before the marker. On the force bench the sc
 reading at p = 0 of the same trial (its first loading step) is subtracted (tare).
 Per step (bench, drive, phase, level) the mean and standard deviation over trials and
 samples are reported for pressure, curvature, R_C = l / theta and force; loading and
-unloading at the same level are compared (hysteresis) with Welch's t statistic.
+unloading are compared at equal measured pressure (hysteresis), see ``hysteresis``.
 """
 from __future__ import annotations
 
@@ -167,28 +167,73 @@ def summarise(rows: list[SampleRow], angle_resolution: float = math.radians(1.0)
 class Hysteresis:
     bench: str
     drive: str
-    level: float
+    level: float            # the unloading step's level
     quantity: str           # "curvature" (1/m) or "force" (N)
-    loading: float
+    pressure: float         # Pa, the unloading step's mean measured pressure (largest channel)
+    loading: float          # the loading curve interpolated at ``pressure``
     unloading: float
-    difference: float       # unloading - loading
-    t_statistic: float      # Welch
-    significant: bool       # |t| > 2
+    difference: float       # unloading - loading, at equal measured pressure
+    t_statistic: float      # Welch-type: difference / its standard error
+    significant: bool       # |t| beyond the family-wise threshold of its curve
+    threshold: float = 0.0  # that threshold
 
 
-def hysteresis(stats: list[StepStats]) -> list[Hysteresis]:
-    by_key = {(s.bench, s.drive, s.phase, s.level): s for s in stats}
+def _interp_terms(x: float, xs: np.ndarray, mus: np.ndarray, ses: np.ndarray, ns: np.ndarray):
+    """Linear interpolation of the mean at ``x``; returns (mean, [(variance term, n)]) where the
+    terms (1-w)^2 se_a^2 and w^2 se_b^2 make the interpolated mean's variance (independent
+    steps). Beyond the ends the end step is held (no extrapolation)."""
+    if x <= xs[0]:
+        return float(mus[0]), [(ses[0] ** 2, ns[0])]
+    if x >= xs[-1]:
+        return float(mus[-1]), [(ses[-1] ** 2, ns[-1])]
+    j = int(np.searchsorted(xs, x)) - 1
+    w = (x - xs[j]) / (xs[j + 1] - xs[j])
+    return (float((1 - w) * mus[j] + w * mus[j + 1]),
+            [((1 - w) ** 2 * ses[j] ** 2, ns[j]), (w ** 2 * ses[j + 1] ** 2, ns[j + 1])])
+
+
+def hysteresis(stats: list[StepStats], family_alpha: float = 0.01) -> list[Hysteresis]:
+    """Loading vs unloading at equal *measured* pressure, per curve (bench, drive).
+
+    Each unloading step is compared with the loading curve interpolated at the unloading
+    step's measured pressure: the regulator approaches a level from below on the way up and
+    from above on the way down, so comparing at equal commanded level would show a
+    difference from that lag alone. t = difference / its standard error, with
+    Welch-Satterthwaite degrees of freedom. A curve's levels are tested together: a level is
+    significant when |t| exceeds the two-sided Bonferroni threshold for ``family_alpha`` over
+    the curve's levels, so a run without hysteresis flags nothing in a curve with probability
+    about 1 - family_alpha, however many levels it has.
+    """
+    from scipy.stats import t as student_t
+
+    curves: dict[tuple, dict[str, list[StepStats]]] = {}
+    for s in stats:
+        curves.setdefault((s.bench, s.drive), {"loading": [], "unloading": []})[s.phase].append(s)
     out = []
-    for (bench, drive, phase, level), up in by_key.items():
-        down = by_key.get((bench, drive, "unloading", level))
-        if phase != "loading" or down is None:
+    for (bench, drive), phases in curves.items():
+        up = sorted(phases["loading"], key=lambda s: s.pressure_magnitude)
+        down = phases["unloading"]
+        if len(up) < 2 or not down:
             continue
         q = "curvature" if bench == "angle" else "force"
-        mu_u, sd_u = getattr(up, f"{q}_mean"), getattr(up, f"{q}_std")
-        mu_d, sd_d = getattr(down, f"{q}_mean"), getattr(down, f"{q}_std")
-        se = math.sqrt(sd_u**2 / up.n + sd_d**2 / down.n)
-        t = (mu_d - mu_u) / se if se > 0 else 0.0
-        out.append(Hysteresis(bench, drive, level, q, mu_u, mu_d, mu_d - mu_u, t, abs(t) > 2.0))
+        xs = np.array([s.pressure_magnitude for s in up])
+        mus = np.array([getattr(s, f"{q}_mean") for s in up])
+        ses = np.array([getattr(s, f"{q}_std") / math.sqrt(s.n) for s in up])
+        ns = np.array([s.n for s in up])
+        p_one = family_alpha / (2 * len(down))
+        for d in down:
+            mu_l, terms = _interp_terms(d.pressure_magnitude, xs, mus, ses, ns)
+            terms.append((getattr(d, f"{q}_std") ** 2 / d.n, d.n))
+            var = sum(v for v, _ in terms)
+            mu_d = getattr(d, f"{q}_mean")
+            if var > 0:
+                t = (mu_d - mu_l) / math.sqrt(var)
+                dof = var ** 2 / sum(v ** 2 / (n - 1) for v, n in terms if n > 1 and v > 0)
+                threshold = float(student_t.ppf(1.0 - p_one, dof))
+            else:
+                t, threshold = 0.0, math.inf
+            out.append(Hysteresis(bench, drive, d.level, q, d.pressure_magnitude, mu_l, mu_d, mu_d - mu_l, t,
+                                  abs(t) > threshold, threshold))
     out.sort(key=lambda h: (h.bench, h.drive, h.level))
     return out
 

@@ -52,18 +52,24 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     if hyst:
-        lines += ["## Hysteresis: unloading minus loading", "",
-                  "Welch t statistic; |t| > 2 marks a difference larger than the scatter.", "",
-                  "| bench | drive | level | quantity | loading | unloading | difference | t | significant |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+        thresholds = sorted({round(h.threshold, 2) for h in hyst})
+        lines += ["## Hysteresis: unloading minus loading at equal measured pressure", "",
+                  "Each unloading step against the loading curve interpolated at the unloading step's measured "
+                  "pressure (the regulator's lag makes equal commanded levels differ in pressure). t = difference "
+                  "/ its standard error (Welch); significant where |t| exceeds the Bonferroni threshold of its curve "
+                  f"(1% family-wise; here {min(thresholds):g} to {max(thresholds):g}).", "",
+                  "| bench | drive | level | p measured [bar] | quantity | loading | unloading | difference | t "
+                  "| significant |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for h in hyst:
             unit, sc = ("1/m", 1.0) if h.quantity == "curvature" else ("mN", 1e3)
             lv = f"{h.level / PA_PER_BAR:.3f} bar" if h.drive.startswith("channel") else f"{h.level:g}"
-            lines.append(f"| {h.bench} | {h.drive} | {lv} | {h.quantity} [{unit}] | {h.loading * sc:.3f} | "
-                         f"{h.unloading * sc:.3f} | {h.difference * sc:+.3f} | {h.t_statistic:+.2f} | "
-                         f"{'yes' if h.significant else 'no'} |")
+            lines.append(f"| {h.bench} | {h.drive} | {lv} | {h.pressure / PA_PER_BAR:.3f} | {h.quantity} [{unit}] | "
+                         f"{h.loading * sc:.3f} | {h.unloading * sc:.3f} | {h.difference * sc:+.3f} | "
+                         f"{h.t_statistic:+.2f} | {'yes' if h.significant else 'no'} |")
         n_sig = sum(h.significant for h in hyst)
-        lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference.", ""]
+        lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
+                  + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
     if calibration:
         c = calibration
         lines += ["## Calibration", "",

@@ -4,6 +4,10 @@
   (time constant ``regulator_time_constant``), never below zero.
 - Gauge: reads the true pressure with a fixed per-channel error drawn once in
   +-``gauge_error`` (0.02 bar, actuator.md) plus white noise.
+- Hysteresis (off by default): the actuator bends with a pressure that lags the true one
+  through a play of width ``hysteresis_pressure`` (rate-independent backlash: up to half
+  the width below it while loading, above it while unloading), so at equal pressure the
+  unloading branch bends more.
 - Truth: a model rung (closed form by default). ``pressure_shift`` mimics the published
   gap between model and experiment (the model's curve lies on the experiment's when its
   input pressure is shifted by about 25%): the rig bends as the model does at
@@ -38,6 +42,7 @@ class RigParams:
     angle_noise: float = math.radians(0.5)  # rad, std of reading the graph paper
     force_noise: float = 0.2e-3             # N, std of the scale
     scale_offset: float = 3.0e-3            # N, scale reading with nothing on it
+    hysteresis_pressure: float = 0.0        # Pa, width of the play between true and bending pressure
     seed: int = 0
 
     @classmethod
@@ -63,6 +68,7 @@ class SimulatedRig:
         self.rng = np.random.default_rng(self.params.seed)
         n = model.n_channels
         self.true_pressures = np.zeros(n)
+        self.bending_pressures = np.zeros(n)  # after the hysteresis play
         self.gauge_bias = self.rng.uniform(-self.params.gauge_error, self.params.gauge_error, n)
         self.force_model = BlockingForce(model)
         self.bench = "angle"
@@ -82,9 +88,12 @@ class SimulatedRig:
         cmd = np.clip(np.asarray(command, dtype=float), 0.0, self.max_pressure)
         a = 1.0 - math.exp(-max(dt, 0.0) / self.params.regulator_time_constant)
         self.true_pressures = self.true_pressures + a * (cmd - self.true_pressures)
+        half = 0.5 * self.params.hysteresis_pressure
+        self.bending_pressures = np.clip(self.bending_pressures, self.true_pressures - half,
+                                         self.true_pressures + half)
 
     def true_curvature(self) -> np.ndarray:
-        state = self.model.evaluate(self.true_pressures * (1.0 - self.params.pressure_shift))
+        state = self.model.evaluate(np.clip(self.bending_pressures, 0.0, None) * (1.0 - self.params.pressure_shift))
         return np.asarray(state.curvature, dtype=float)
 
     def read(self) -> RigReading:
