@@ -34,6 +34,8 @@ class StepControl:
     shrink: float = 0.5              # after a failed attempt
     target_iterations: int = 4
     adaptive: bool = True            # False: fixed steps of initial_step, no cutting (stability studies)
+    domain_step: float | None = None  # stop cutting at this step when the failure is outside_domain
+                                      # (a validity limit needs less precision than a hard turn)
 
 
 @dataclass
@@ -119,7 +121,10 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
                     step = min(control.max_step, step * control.grow)
                 continue
             result.cuts += 1
-            if not control.adaptive or dt * control.shrink < control.min_step:
+            floor = control.min_step
+            if corr.outside_domain and control.domain_step is not None:
+                floor = max(floor, control.domain_step)
+            if not control.adaptive or dt * control.shrink < floor:
                 why = f": {corr.message}" if corr.message else ""
                 result.converged = False
                 result.message = (f"did not converge at {describe(t_new)} (last converged "

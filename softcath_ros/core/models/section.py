@@ -53,6 +53,7 @@ class SectionSettings:
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
+    contact_resolution: float = 250.0   # Pa: how finely that pressure is located
     pressure_load: str = "follower"     # "follower": on the deformed channel walls and the end caps;
                                         # "end_cap": only the end caps' axial force (the closed form's load)
 
@@ -194,7 +195,7 @@ class SectionModel(BendModel):
 
         s = self.settings
         control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
-                              adaptive=s.adaptive)
+                              adaptive=s.adaptive, domain_step=s.contact_resolution)
         result = ramp(corrector, self._states[start_key], cum[1:], control, describe=describe)
         done = []
         for i, point in zip(todo, result.points):
