@@ -44,6 +44,8 @@ setup(
         ],
         "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6"],
         "bench": ["psutil>=5.9"],
+        # 3D finite-element rung (fe3d): NGSolve with the netgen mesher, imported lazily.
+        "fe": ["ngsolve>=6.2.2404"],
     },
     zip_safe=True,
     maintainer="softcath_ros developers",

@@ -2,7 +2,7 @@
 # Sets up .venv with the ROS and test extras and runs the whole test suite.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh "ros,test"
+bash scripts/setup.sh "ros,test,fe"
 # Each pytest run gets its own DDS domain and stays on loopback, so parallel runs do not see each other.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"

@@ -18,6 +18,7 @@ SUBCOMMANDS = [
     "recover",
     "predict",
     "allocate",
+    "sweep",
 ]
 
 

@@ -1,0 +1,160 @@
+"""`softcath sweep`: a pressure range through any rung, to CSV + JSON + a PNG of R_C and angle.
+
+One channel ramps (``--channel``, default 0), the others stay at zero. The whole range goes
+to the model as one batch so continuation rungs (section, fe3d) ramp once and show their
+progress. Points that did not converge are written with ``converged = false`` and no
+numbers; the sweep exits 1 if any did not.
+"""
+from __future__ import annotations
+
+import csv
+import inspect
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import SoftcathError
+from .common import PA_PER_BAR
+
+
+def register(sub) -> None:
+    from ..core.models import available_models
+
+    p = sub.add_parser("sweep", help="pressure sweep through a model: CSV, JSON and a plot")
+    p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
+    p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
+    p.add_argument("--from", dest="p_from", type=float, default=0.0, help="first pressure (default 0)")
+    p.add_argument("--to", dest="p_to", type=float, required=True, help="last pressure")
+    p.add_argument("--steps", type=int, default=11, help="number of pressures, ends included (default 11)")
+    p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --from/--to (default Pa)")
+    p.add_argument("--channel", type=int, default=0, help="which channel ramps (0-based; default 0)")
+    p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--out", default=None, help="output prefix: writes PREFIX.csv, PREFIX.json, PREFIX.png "
+                                               "(default: sweep_<design>_<model>)")
+    p.add_argument("--no-cache", action="store_true", help="recompute even if cached (rungs that cache)")
+    p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    p.add_argument("--json", action="store_true", help="print the JSON to stdout as well")
+    p.set_defaults(func=run)
+
+
+def _model_options(name: str, progress: bool, cache: bool) -> dict:
+    """Options the rung understands among progress/cache (rungs differ)."""
+    from importlib import import_module
+
+    from ..core.models import RUNGS
+
+    module, cls = RUNGS[name].split(":")
+    try:
+        params = inspect.signature(getattr(import_module(module), cls).__init__).parameters
+    except ImportError:
+        return {}
+    opts = {}
+    if "progress" in params:
+        opts["progress"] = progress
+    if "cache" in params:
+        opts["cache"] = cache
+    return opts
+
+
+def run(args) -> int:
+    from ..core.design import load_design
+    from ..core.models import RUNGS, make_model
+    from ..core.prediction import predict
+
+    design = load_design(args.design)
+    if args.length is not None:
+        if args.length <= 0:
+            raise SoftcathError(f"--length {args.length}: must be positive (m)")
+        design = design.with_length(args.length)
+    if args.steps < 2:
+        raise SoftcathError(f"--steps {args.steps}: need at least 2")
+    if not 0 <= args.channel < design.n_channels:
+        raise SoftcathError(f"--channel {args.channel}: design '{design.name}' has channels 0..{design.n_channels - 1}")
+    scale = PA_PER_BAR if args.unit == "bar" else 1.0
+    lo, hi = args.p_from * scale, args.p_to * scale
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or hi <= lo:
+        raise SoftcathError(f"--from {args.p_from} --to {args.p_to}: need 0 <= from < to")
+    if args.model not in RUNGS:
+        make_model(args.model, design)  # raises the 'unknown model' error listing the rungs
+    levels = np.linspace(lo, hi, args.steps)
+    pressures = np.zeros((args.steps, design.n_channels))
+    pressures[:, args.channel] = levels
+    model = make_model(args.model, design, **_model_options(args.model, sys.stderr.isatty() or True,
+                                                             not args.no_cache))
+    results = predict(model, pressures, design.length)
+    rows = []
+    for p, r in zip(levels, results):
+        ok = r.converged
+        rows.append({
+            "pressure_pa": float(p), "pressure_bar": float(p / PA_PER_BAR), "converged": ok,
+            "bending_angle_deg": math.degrees(r.bending_angle_rad) if ok else None,
+            "radius_l_over_theta_m": (design.length / r.bending_angle_rad
+                                      if ok and r.bending_angle_rad > 0 else None),
+            "radius_of_curvature_m": r.radius_of_curvature_m if ok else None,
+            "curvature_x_per_m": r.curvature_per_m[0] if ok else None,
+            "curvature_y_per_m": r.curvature_per_m[1] if ok else None,
+            "axial_stretch": r.axial_stretch if ok else None,
+            "tip_x_m": r.tip_position_m[0] if ok else None, "tip_y_m": r.tip_position_m[1] if ok else None,
+            "tip_z_m": r.tip_position_m[2] if ok else None,
+            "reason": "" if ok else r.reason})
+    prefix = Path(args.out or f"sweep_{design.name}_{args.model}")
+    prefix.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"model": model.name, "design": design.name, "length_m": design.length, "channel": args.channel,
+           "results": rows}
+    Path(f"{prefix}.json").write_text(json.dumps(doc, indent=2))
+    with open(f"{prefix}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    written = [f"{prefix}.csv", f"{prefix}.json"]
+    if not args.no_plot:
+        written.append(plot_sweep(rows, f"{prefix}.png", f"{design.name}, {model.name}, "
+                                  f"L = {design.length * 1e3:.0f} mm, channel {args.channel}"))
+    if args.json:
+        json.dump(doc, sys.stdout, indent=2)
+        print()
+    else:
+        print(f"{'p [bar]':>8} {'angle [deg]':>12} {'L/theta [mm]':>13}")
+        for r in rows:
+            if r["converged"]:
+                rc = r["radius_l_over_theta_m"]
+                print(f"{r['pressure_bar']:8.4f} {r['bending_angle_deg']:12.2f} "
+                      f"{'inf' if rc is None else f'{rc * 1e3:.2f}':>13}")
+            else:
+                print(f"{r['pressure_bar']:8.4f}  did not converge: {r['reason']}")
+        for path in written:
+            print(f"wrote {path}")
+    return 0 if all(r["converged"] for r in rows) else 1
+
+
+def plot_sweep(rows: list[dict], path: str, title: str) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if r["converged"]]
+    p = [r["pressure_bar"] for r in ok]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    ax1.plot(p, [r["bending_angle_deg"] for r in ok], "o-")
+    ax1.set_xlabel("pressure [bar]")
+    ax1.set_ylabel("bending angle [deg]")
+    rc = [(r["pressure_bar"], r["radius_l_over_theta_m"] * 1e3) for r in ok if r["radius_l_over_theta_m"]]
+    if rc:
+        ax2.plot(*zip(*rc), "o-")
+    ax2.set_xlabel("pressure [bar]")
+    ax2.set_ylabel("R_C = L / theta [mm]")
+    ax2.set_yscale("log")
+    failed = [r["pressure_bar"] for r in rows if not r["converged"]]
+    if failed:
+        for ax in (ax1, ax2):
+            ax.axvline(min(failed), color="r", ls="--", label=f"no convergence from {min(failed):.3f} bar")
+        ax1.legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

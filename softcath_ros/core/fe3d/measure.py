@@ -1,0 +1,95 @@
+"""What the 3D solution says about the bending: a constant-curvature arc fitted to the tip.
+
+* Bending angle and direction: the rigid rotation that best maps the tip face's reference
+  points onto their deformed positions (Kabsch); theta is the angle between the rotated
+  and the original axis, the bending direction is where the rotated axis leans.
+* Arc length: the constant-curvature arc with that angle that best reaches the deformed
+  body axis at the tip (least squares); axial stretch = arc length / L.
+* Channel volume (the enclosed fluid) and the area of the channel's deformed section
+  half way along the open channel.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _kabsch(ref: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Rotation R minimising sum |R (ref - mean) - (cur - mean)|^2."""
+    a = ref - ref.mean(axis=0)
+    b = cur - cur.mean(axis=0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(u @ vt))
+    return (u @ np.diag([1.0, 1.0, d]) @ vt).T
+
+
+def _evaluate(problem, pts: np.ndarray) -> np.ndarray:
+    mesh = problem.mesh
+    vals = problem.u(mesh(pts[:, 0], pts[:, 1], pts[:, 2]))
+    return np.asarray(vals).reshape(len(pts), 3)
+
+
+def _mirror(pts: np.ndarray) -> np.ndarray:
+    m = pts.copy()
+    m[:, 0] *= -1.0
+    return np.vstack([pts, m])
+
+
+def measure(problem) -> dict:
+    """Bending angle (rad), bending direction (unit (2,)), arc length (m), tip position (m),
+    channel volumes (m^3) and mid-channel areas (m^2) of the current state."""
+    design = problem.design
+    prism = problem.prism
+    sec = prism.section
+    length = design.length
+    # --- tip rotation (section vertices at z = L)
+    tip_ref = np.column_stack([sec.points, np.full(len(sec.points), length)])
+    solid = np.zeros(len(sec.points), dtype=bool)
+    for tri, reg in zip(sec.triangles, sec.region):
+        if reg in ("silicone", "fibre") or reg.startswith("channel"):
+            solid[tri] = True
+    tip_ref = tip_ref[solid]
+    tip_cur = tip_ref + _evaluate(problem, tip_ref)
+    if problem.half:
+        tip_ref, tip_cur = _mirror(tip_ref), _mirror(tip_cur)
+    rot = _kabsch(tip_ref, tip_cur)
+    axis = rot[:, 2]
+    theta = math.acos(max(-1.0, min(1.0, axis[2])))
+    lean = np.hypot(axis[0], axis[1])
+    direction = axis[:2] / lean if lean > 1e-14 else np.array([0.0, -1.0])
+    # --- arc length through the deformed tip of the body axis
+    tip = np.array([0.0, 0.0, length]) + _evaluate(problem, np.array([[0.0, 0.0, length]]))[0]
+    if theta > 1e-9:
+        g = np.array([direction[0] * (1 - math.cos(theta)) / theta,
+                      direction[1] * (1 - math.cos(theta)) / theta, math.sin(theta) / theta])
+    else:
+        g = np.array([0.0, 0.0, 1.0])
+    arc = float(tip @ g / (g @ g))
+    # --- channels
+    volumes = problem.channel_volumes()
+    areas = [channel_area(problem, i) for i in range(design.n_channels)]
+    return {"bending_angle_rad": theta, "bending_direction": direction, "arc_length_m": arc,
+            "tip_position_m": tip, "tip_rotation": rot, "channel_volume_m3": volumes,
+            "channel_area_m2": np.array(areas)}
+
+
+def channel_area(problem, i: int) -> float:
+    """Area of channel i's deformed section at mid-length of its open part (Newell's formula)."""
+    prism = problem.prism
+    sec = prism.section
+    hole = problem.design.channels[i]
+    z_mid = prism.z_levels[prism.n_layers_channel // 2]
+    on = np.abs(np.hypot(sec.points[:, 0] - hole.center[0], sec.points[:, 1] - hole.center[1])
+                - hole.radius) < 0.1 * hole.radius
+    pts2 = sec.points[on]
+    ang = np.arctan2(pts2[:, 1] - hole.center[1], pts2[:, 0] - hole.center[0])
+    order = np.argsort(ang)  # counter-clockwise; the half model (x >= 0) runs -90 -> +90 deg
+    ref = np.column_stack([pts2[order], np.full(len(order), z_mid)])
+    cur = ref + _evaluate(problem, ref)
+    if problem.half:
+        back = cur[::-1].copy()
+        back[:, 0] *= -1.0
+        cur = np.vstack([cur, back])
+    nxt = np.roll(cur, -1, axis=0)
+    return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))

@@ -1,0 +1,242 @@
+"""Prism mesh of the actuator: the cross-section meshed in 2D (netgen), extruded along z.
+
+The body is a straight extrusion, so prisms fit it far better than tetrahedra: the
+section can be fine where the walls are thin while layers along z stay long.
+Layers are split at z = L - cap so the channels end in a silicone cap.
+
+Regions of the 2D section: ``silicone``, ``fibre`` (strain-limiting thread), ``channel{i}``,
+``lumen``. In 3D the channel regions become silicone above L - cap (the cap), the lumen
+becomes the ``device`` region when the design has a device, else stays empty.
+Boundaries: ``base`` (z = 0, fixed), ``tip``, ``outer`` (reinforcement), ``sym`` (x = 0
+when the half model is used), ``channel{i}`` (walls and the cap's inner face, normals
+pointing into the silicone's outside, i.e. into the channel), ``lumen``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..design import Design
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """Mesh size parameters, metres. ``section_h`` is the target edge length on the section,
+    ``wall_h`` the edge length on hole boundaries, ``layer_h`` the prism height along z."""
+
+    section_h: float = 0.35e-3
+    wall_h: float = 0.2e-3
+    layer_h: float = 1.0e-3
+    cap_layers: int = 2
+
+    def scaled(self, factor: float) -> "MeshSettings":
+        return MeshSettings(self.section_h * factor, self.wall_h * factor, self.layer_h * factor,
+                            max(1, round(self.cap_layers / factor)))
+
+
+def can_use_half_model(design: Design) -> bool:
+    """Mirror symmetry about the y-z plane: every hole and the fibre centred on x = 0."""
+    centres = [c.center for c in design.channels]
+    if design.lumen is not None:
+        centres.append(design.lumen.center)
+    if design.limiting_fibre is not None:
+        centres.append(design.limiting_fibre.center)
+    return all(abs(c[0]) < 1e-12 for c in centres)
+
+
+@dataclass
+class SectionMesh:
+    points: np.ndarray      # (P, 2) m
+    triangles: np.ndarray   # (T, 3) point indices, counter-clockwise
+    region: list[str]       # region name per triangle
+
+
+def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionMesh:
+    """Triangulate the section with netgen's OCC kernel (imported lazily)."""
+    from netgen.occ import Circle, Glue, OCCGeometry, Pnt, Rectangle
+
+    big_r = design.outer_radius
+    disk = Circle(Pnt(0, 0), big_r).Face()
+    if half:
+        disk = disk * Rectangle(2 * big_r, 4 * big_r).Face().Move((0, -2 * big_r, 0))
+    parts = []
+    body = disk
+    holes = [(f"channel{i}", c.center, c.radius) for i, c in enumerate(design.channels)]
+    if design.lumen is not None:
+        holes.append(("lumen", design.lumen.center, design.lumen.radius))
+    if design.limiting_fibre is not None:
+        f = design.limiting_fibre
+        holes.append(("fibre", f.center, 0.5 * f.diameter))
+    for name, centre, radius in holes:
+        face = Circle(Pnt(*centre), radius).Face()
+        body = body - face
+        piece = face * disk if half else face
+        piece.name = name
+        # A thin fibre needs a few elements across it.
+        piece.maxh = min(settings.wall_h, radius / 1.5) if name == "fibre" else settings.section_h
+        for e in piece.edges:
+            e.maxh = min(settings.wall_h, radius / 1.5)
+        parts.append(piece)
+    body.name = "silicone"
+    body.maxh = settings.section_h
+    for e in body.edges:
+        e.maxh = min(e.maxh, settings.wall_h) if hasattr(e, "maxh") else settings.wall_h
+    geo = OCCGeometry(Glue([body] + parts), dim=2)
+    ngmesh = geo.GenerateMesh(maxh=settings.section_h)
+    pts = np.array([[p[0], p[1]] for p in ngmesh.Points()])
+    names = [ngmesh.GetMaterial(i + 1) for i in range(len(parts) + 1)]
+    tris, region = [], []
+    for el in ngmesh.Elements2D():
+        v = [int(x.nr) - 1 if hasattr(x, "nr") else int(x) - 1 for x in el.vertices]
+        a, b, c = pts[v[0]], pts[v[1]], pts[v[2]]
+        if (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) < 0:
+            v = [v[0], v[2], v[1]]
+        tris.append(v)
+        region.append(names[el.index - 1])
+    section = SectionMesh(points=pts, triangles=np.array(tris, dtype=int), region=region)
+    _snap_circles(section, design, holes, half)
+    return section
+
+
+def _snap_circles(section: SectionMesh, design: Design, holes, half: bool) -> None:
+    """Move the vertices of each polygonal circle outward so the polygon encloses the circle's
+    exact area: straight-sided elements would otherwise shrink the channel by ~1/n^2,
+    which is a systematic error in the pressure's moment."""
+    pts = section.points
+    circles = [(design.outer_radius, (0.0, 0.0))] + [(r, c) for _, c, r in holes]
+    for radius, centre in circles:
+        d = np.hypot(pts[:, 0] - centre[0], pts[:, 1] - centre[1])
+        on = np.abs(d - radius) < 1e-6 * max(radius, 1e-4)
+        idx = np.nonzero(on)[0]
+        if len(idx) < 3:
+            continue
+        ang = np.sort(np.arctan2(pts[idx, 1] - centre[1], pts[idx, 0] - centre[0]))
+        gaps = np.diff(np.concatenate([ang, ang[:1] + 2 * math.pi]))
+        if half and abs(centre[0]) < 1e-12:
+            gaps = gaps[gaps < math.pi - 1e-9]  # the cut along x = 0 is not an arc segment
+        polygon = 0.5 * np.sum(np.sin(gaps))   # area of the inscribed polygon / r^2
+        exact = 0.5 * np.sum(gaps)
+        pts[idx] = np.asarray(centre) + (pts[idx] - np.asarray(centre)) * math.sqrt(exact / polygon)
+
+
+@dataclass
+class PrismMesh:
+    ngmesh: object            # netgen.meshing.Mesh
+    z_levels: np.ndarray      # (K+1,) m
+    section: SectionMesh
+    half: bool
+    n_layers_channel: int     # layers below the cap
+
+
+def z_levels(design: Design, settings: MeshSettings) -> tuple[np.ndarray, int]:
+    l_open = design.length - design.cap_thickness
+    n_open = max(2, math.ceil(l_open / settings.layer_h - 1e-9))
+    n_cap = max(1, settings.cap_layers)
+    z = np.concatenate([np.linspace(0.0, l_open, n_open + 1),
+                        np.linspace(l_open, design.length, n_cap + 1)[1:]])
+    return z, n_open
+
+
+def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None) -> PrismMesh:
+    """The 3D prism mesh (netgen Mesh with named regions and boundaries)."""
+    import netgen.meshing as nm
+
+    if half is None:
+        half = can_use_half_model(design)
+    sec = mesh_section(design, settings, half)
+    z, n_open = z_levels(design, settings)
+    n_pts, n_lev = len(sec.points), len(z)
+    m = nm.Mesh(dim=3)
+    pnums = []
+    for zk in z:
+        for x, y in sec.points:
+            pnums.append(m.Add(nm.MeshPoint(nm.Pnt(float(x), float(y), float(zk)))))
+
+    def pid(i, k):
+        return pnums[k * n_pts + i]
+
+    has_device = design.device is not None
+    domains = ["silicone", "fibre"] + (["device"] if has_device else [])
+    dom_index = {name: i + 1 for i, name in enumerate(domains)}
+    for name, idx in dom_index.items():
+        m.SetMaterial(idx, name)
+
+    def solid_region(reg: str, layer: int) -> str | None:
+        """Which 3D domain a section triangle becomes in a layer (None: empty)."""
+        if reg in ("silicone", "fibre"):
+            return reg
+        if reg.startswith("channel"):
+            return "silicone" if layer >= n_open else None
+        if reg == "lumen":
+            return "device" if has_device else None
+        return None
+
+    n_tri = len(sec.triangles)
+    layer_domain = [[solid_region(sec.region[t], k) for t in range(n_tri)] for k in range(n_lev - 1)]
+    for k in range(n_lev - 1):
+        for t, (a, b, c) in enumerate(sec.triangles):
+            dom = layer_domain[k][t]
+            if dom is None:
+                continue
+            m.Add(nm.Element3D(dom_index[dom], [pid(a, k), pid(b, k), pid(c, k),
+                                                  pid(a, k + 1), pid(b, k + 1), pid(c, k + 1)]))
+
+    bc_names: list[str] = []
+
+    def bc(name: str) -> int:
+        if name not in bc_names:
+            bc_names.append(name)
+            m.Add(nm.FaceDescriptor(surfnr=len(bc_names), domin=1, domout=0, bc=len(bc_names)))
+            m.SetBCName(len(bc_names) - 1, name)
+        return bc_names.index(name) + 1
+
+    # Section edges: which triangles touch each edge (to find region interfaces).
+    edge_tris: dict[tuple[int, int], list[int]] = {}
+    for t, tri in enumerate(sec.triangles):
+        for j in range(3):
+            a, b = int(tri[j]), int(tri[(j + 1) % 3])
+            edge_tris.setdefault((min(a, b), max(a, b)), []).append(t)
+    pts = sec.points
+    outer_r = design.outer_radius
+    for k in range(n_lev - 1):
+        for (a, b), ts in edge_tris.items():
+            doms = [layer_domain[k][t] for t in ts]
+            solid = [t for t, d in zip(ts, doms) if d is not None]
+            if len(solid) != 1:
+                continue  # interior edge of the solid, or an edge in empty space
+            t_in = solid[0]
+            other = [t for t in ts if t != t_in]
+            if other:  # interface to an empty region: a hole wall
+                reg = sec.region[other[0]]
+                name = reg  # channel{i} or lumen
+            else:
+                mid = 0.5 * (pts[a] + pts[b])
+                if half and abs(pts[a][0]) < 1e-12 and abs(pts[b][0]) < 1e-12:
+                    name = "sym"
+                elif abs(math.hypot(*mid) - outer_r) < 0.05 * outer_r:
+                    name = "outer"
+                else:  # a half hole cut by the symmetry plane has no other free edges
+                    name = "sym"
+            # Quad a_k b_k b_k+1 a_k+1 oriented with its normal pointing out of the solid.
+            tri = sec.triangles[t_in]
+            centroid = pts[tri].mean(axis=0)
+            edge = pts[b] - pts[a]
+            normal = np.array([edge[1], -edge[0]])   # (b-a) x e_z
+            if np.dot(normal, 0.5 * (pts[a] + pts[b]) - centroid) < 0:
+                a, b = b, a
+            m.Add(nm.Element2D(bc(name), [pid(a, k), pid(b, k), pid(b, k + 1), pid(a, k + 1)]))
+    # Flat faces: base, tip and the channel caps' inner faces (z = L - cap).
+    for t, (a, b, c) in enumerate(sec.triangles):
+        d0 = layer_domain[0][t]
+        if d0 is not None:  # base: outward normal -z, so clockwise seen from +z
+            m.Add(nm.Element2D(bc("base"), [pid(a, 0), pid(c, 0), pid(b, 0)]))
+        if layer_domain[-1][t] is not None:
+            kt = n_lev - 1
+            m.Add(nm.Element2D(bc("tip"), [pid(a, kt), pid(b, kt), pid(c, kt)]))
+        reg = sec.region[t]
+        if reg.startswith("channel"):
+            # The cap's inner face, seen from the channel below: normal -z out of the cap.
+            m.Add(nm.Element2D(bc(reg), [pid(a, n_open), pid(c, n_open), pid(b, n_open)]))
+    return PrismMesh(ngmesh=m, z_levels=z, section=sec, half=half, n_layers_channel=n_open)

@@ -1,0 +1,114 @@
+"""Pressure ramps on the 3D problem: the generic continuation (core/continuation.py) with
+the 3D Newton as corrector and a tangent predictor.
+
+The load parameter t is the pressure, Pa, of the most pressurised channel; channel i gets
+t * direction[i]. Every checkpoint reached gives one ``Fe3dPoint`` (measured there); a
+ramp that cannot go on stops with "did not converge at p = ... bar" and keeps what
+converged. Ctrl-C stops the ramp the same way (``interrupted``).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..continuation import Correction, StepControl, ramp
+from .measure import measure
+from .solver import Fe3dProblem, NewtonFailure
+
+PA_PER_BAR = 1.0e5
+
+
+def describe_pressure(t: float) -> str:
+    return f"p = {t / PA_PER_BAR:.4f} bar"
+
+
+def default_step_control(adaptive: bool = True, step: float = 1000.0) -> StepControl:
+    """Pa. The first step is small: Newton from the straight state overshoots on long bodies."""
+    return StepControl(initial_step=step, max_step=4000.0, min_step=20.0, grow=1.6, shrink=0.5,
+                       target_iterations=5, adaptive=adaptive)
+
+
+@dataclass
+class Fe3dPoint:
+    load: float                     # Pa (most pressurised channel)
+    pressures: np.ndarray           # (C,) Pa
+    measured: dict                  # measure(): angle, direction, arc length, tip, volumes, areas
+    iterations: int                 # Newton iterations of the step that landed here
+    wall_time: float                # s since the ramp started
+
+
+@dataclass
+class Fe3dRamp:
+    points: list[Fe3dPoint] = field(default_factory=list)
+    converged: bool = True
+    message: str = ""
+    interrupted: bool = False
+    steps: int = 0
+    cuts: int = 0
+    iterations: int = 0
+    wall_time: float = 0.0
+
+
+def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
+             tangent_predictor: bool = True, progress=None) -> Fe3dRamp:
+    """Ramp from the straight state through increasing ``checkpoints`` (Pa).
+
+    ``progress``: an object with ``update(n)`` and ``set_postfix_str(s)`` (a tqdm bar).
+    """
+    control = control or default_step_control()
+    direction = np.asarray(direction, dtype=float)
+    problem.set_direction(direction)
+    problem.set_state(np.zeros(problem.fes.ndof))
+    out = Fe3dRamp()
+    t_start = time.perf_counter()
+    targets = [float(c) for c in checkpoints]
+    shown = [0.0]
+
+    def corrector(guess, t, previous):
+        problem.set_state(guess)
+        problem.load.Set(t)
+        try:
+            its = problem.newton()
+        except NewtonFailure as exc:
+            problem.set_state(previous)
+            return Correction(state=previous, converged=False, iterations=exc.iterations, message=exc.reason)
+        return Correction(state=problem.get_state(), converged=True, iterations=its)
+
+    def predictor(t0, s0, t1, s1, t):
+        if not tangent_predictor:
+            return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
+        problem.set_state(s1)
+        try:
+            return s1 + (t - t1) * problem.tangent()
+        except Exception:  # noqa: BLE001 - a singular tangent falls back to the secant
+            return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
+
+    def on_step(t, corr):
+        # The problem holds the accepted state: measure it when it is a checkpoint.
+        if any(abs(t - c) <= 1e-9 * max(1.0, c) for c in targets) and \
+                (not out.points or out.points[-1].load != t):
+            out.points.append(Fe3dPoint(load=t, pressures=t * direction, measured=measure(problem),
+                                        iterations=corr.iterations,
+                                        wall_time=time.perf_counter() - t_start))
+        if progress is not None:
+            progress.update(t - shown[0])
+            shown[0] = t
+            progress.set_postfix_str(f"{t / PA_PER_BAR:.3f} bar, {corr.iterations} it")
+
+    if targets and targets[0] <= 0.0:  # the straight state needs no solve
+        out.points.append(Fe3dPoint(0.0, 0.0 * direction, measure(problem), 0, 0.0))
+        targets = [t for t in targets if t > 0.0]
+    try:
+        result = ramp(corrector, problem.get_state(), targets, control, start=0.0,
+                      extrapolate=predictor if control.adaptive else None,
+                      describe=describe_pressure, on_step=on_step)
+        out.converged, out.message = result.converged, result.message
+        out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
+    except KeyboardInterrupt:
+        done = out.points[-1].load if out.points else 0.0
+        out.converged, out.interrupted = False, True
+        out.message = f"interrupted after {describe_pressure(done)}"
+    out.wall_time = time.perf_counter() - t_start
+    return out

@@ -1,0 +1,260 @@
+"""The 3D hyperelastic problem on a prism mesh, solved with NGSolve (imported lazily).
+
+Unknowns: P2 displacement u and an element-wise constant pressure q (perturbed
+Lagrangian, statically condensed). Total potential, stationary at equilibrium:
+
+    Pi(u, q) = int W_iso(F) + q (J - 1) - q^2 / (2 K) dX        (body, fibre, device)
+             + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement, outer surface)
+             - s sum_i d_i V_i(u)                                 (follower pressure on channel i)
+
+with s the load factor and d_i the pressure per unit s of channel i. V_i, the enclosed
+channel volume, is a surface integral over the channel's walls and cap:
+V = int x_z n_z da = int x_z (cof F N)_z dA (the base, z = 0, and the symmetry plane,
+n_z = 0, add nothing), so -p V is exactly the potential of a follower pressure.
+All energies are differentiated by NGSolve (``Variation``).
+
+Because q is element-wise constant, its optimum for a given u is the element mean of
+K (J - 1); after each Newton update q is reset to it, so Pi becomes the condensed,
+minimised energy and a backtracking line search on Pi is meaningful.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..design import Design
+from .mesh import MeshSettings, PrismMesh, build_mesh
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    max_iterations: int = 12
+    rtol: float = 1e-8          # residual norm relative to the load's norm
+    energy_tol: float = 1e-9    # |du . r| relative to c1 * volume (displacement error ~ sqrt of it)
+    min_step: float = 1.0 / 64  # smallest line-search factor before the step is rejected
+    threads: int = 2
+
+
+class NewtonFailure(Exception):
+    """One Newton solve failed; ``reason`` says how (diverged, inverted, max iterations)."""
+
+    def __init__(self, reason: str, iterations: int):
+        super().__init__(reason)
+        self.reason = reason
+        self.iterations = iterations
+
+
+def _ng():
+    import ngsolve
+
+    return ngsolve
+
+
+class Fe3dProblem:
+    """Everything NGSolve needs for one design and mesh; holds the current state."""
+
+    def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
+                 newton: NewtonSettings = NewtonSettings(), half: bool | None = None):
+        ng = _ng()
+        ng.SetNumThreads(newton.threads)
+        self.design = design
+        self.newton_settings = newton
+        self.prism: PrismMesh = build_mesh(design, mesh_settings, half)
+        self.half = self.prism.half
+        self.mirror = 2.0 if self.half else 1.0
+        mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
+        v = ng.VectorH1(mesh, order=2, dirichlet="base", dirichletx="sym" if self.half else "")
+        q = ng.L2(mesh, order=0)
+        self.fes = fes = v * q
+        self.gf = ng.GridFunction(fes)
+        self.u, self.q = self.gf.components
+        self.load = ng.Parameter(0.0)   # load factor s; pressure of channel i is s * d_i
+        self.direction = [ng.Parameter(0.0) for _ in design.channels]
+
+        (u, qq) = fes.TrialFunction()
+        F = ng.Id(3) + ng.Grad(u)
+        mats = self._materials()
+        energy = self._body_energy(F, qq, mats)
+        self.a = a = ng.BilinearForm(fes, symmetric=True, condense=True)
+        a += ng.Variation(energy.Compile() * ng.dx)
+        r = design.reinforcement
+        if r is not None:
+            a += ng.Variation(self._hoop_energy(u, r.hoop_stiffness_per_length) * ng.ds("outer"))
+        self.volume_forms = []
+        for i, _ in enumerate(design.channels):
+            vol_i = self._volume_density(u)
+            a += ng.Variation(-self.load * self.direction[i] * self.mirror * vol_i * ng.ds(f"channel{i}"))
+            # The same volume alone: its value (Energy) and derivative (Apply) for the tangent.
+            bv = ng.BilinearForm(fes, symmetric=True)
+            bv += ng.Variation(self.mirror * vol_i * ng.ds(f"channel{i}"))
+            self.volume_forms.append(bv)
+
+        self.J = ng.Det(ng.Id(3) + ng.Grad(self.u))
+        self.bulk_cf = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=0.0)
+        self.reference_volume = ng.Integrate(ng.CF(1.0), mesh) * self.mirror
+        self.energy_scale = design.material.c1 * self.reference_volume
+        free = fes.FreeDofs(True)
+        self.free = free
+        self.res = self.gf.vec.CreateVector()
+        self.du = self.gf.vec.CreateVector()
+        self.inverse = None
+        self.iterations_total = 0
+
+    # ------------------------------------------------------------------ energies
+    def _materials(self):
+        d = self.design
+        mats = {"silicone": (d.material.c1, d.material.c2, d.material.c3, d.material.bulk_modulus)}
+        if d.limiting_fibre is not None:
+            f = d.limiting_fibre.material
+            mats["fibre"] = (f.c1, f.c2, f.c3, f.bulk_modulus)
+        if d.device is not None:
+            mats["device"] = self._device_material()
+        return mats
+
+    def _device_material(self):
+        """A device in the lumen as a bonded neo-Hookean cylinder filling the lumen, with the
+        modulus that adds the device's bending stiffness EI to the section about its neutral
+        axis (own second moment plus the parallel-axis term of the transformed section)."""
+        from ..section_properties import transformed_section
+
+        d = self.design
+        na = transformed_section(d.with_length(d.length)).neutral_axis
+        r = d.lumen.radius
+        area = math.pi * r * r
+        dy = d.lumen.center[1] - na[1]
+        inertia = math.pi * r**4 / 4 + area * dy * dy
+        youngs = d.device.bending_stiffness / inertia
+        return (youngs / 6.0, 0.0, 0.0, max(d.material.bulk_modulus, 1e3 * youngs))
+
+    def _body_energy(self, F, q, mats):
+        ng = _ng()
+        mesh = self.mesh
+        C = F.trans * F
+        J = ng.Det(F)
+        i1_bar = J ** (-2.0 / 3.0) * ng.Trace(C)
+        c1 = mesh.MaterialCF({k: m[0] for k, m in mats.items()}, default=0.0)
+        c2 = mesh.MaterialCF({k: m[1] for k, m in mats.items()}, default=0.0)
+        c3 = mesh.MaterialCF({k: m[2] for k, m in mats.items()}, default=0.0)
+        bulk = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=1.0)
+        d1 = i1_bar - 3.0
+        return c1 * d1 + c2 * d1 * d1 + c3 * d1 * d1 * d1 + q * (J - 1.0) - q * q / (2.0 * bulk)
+
+    def _hoop_energy(self, u, stiffness_per_length):
+        """Homogenised rings: a membrane on the outer surface that resists only hoop stretch."""
+        ng = _ng()
+        rad = ng.sqrt(ng.x * ng.x + ng.y * ng.y)
+        e_theta = ng.CF((-ng.y / rad, ng.x / rad, 0.0))
+        fs = ng.Id(3) + ng.Grad(u).Trace()   # surface gradient: exact on tangent vectors
+        stretch = ng.Norm(fs * e_theta)
+        return 0.5 * stiffness_per_length * (stretch - 1.0) ** 2
+
+    def _volume_density(self, u):
+        """x_z (cof F N)_z per reference area; N is the mesh normal (into the channel), so the
+        enclosed volume, whose outward normal is -N, gets a minus sign."""
+        ng = _ng()
+        n = ng.specialcf.normal(3)
+        fs = ng.Id(3) + ng.Grad(u).Trace()
+        cof_n = ng.Cof(fs) * n
+        return -(ng.z + u.Trace()[2]) * cof_n[2]
+
+    # ------------------------------------------------------------------ state
+    def set_direction(self, pressures_per_unit) -> None:
+        for p, d in zip(self.direction, pressures_per_unit):
+            p.Set(float(d))
+
+    def get_state(self) -> np.ndarray:
+        return np.array(self.gf.vec.FV().NumPy(), copy=True)
+
+    def set_state(self, values: np.ndarray) -> None:
+        self.gf.vec.FV().NumPy()[:] = values
+
+    def _update_pressure_field(self) -> None:
+        """Element-wise optimum of q for the current u (L2 projection onto constants)."""
+        self.q.Set(self.bulk_cf * (self.J - 1.0))
+
+    def channel_volumes(self) -> np.ndarray:
+        return np.array([bv.Energy(self.gf.vec) for bv in self.volume_forms])
+
+    def min_jacobian_ok(self) -> bool:
+        """No element inverted or degenerate: det F > 0 at every integration point tested."""
+        ng = _ng()
+        bad = ng.Integrate(ng.IfPos(0.02 - self.J, 1.0, 0.0) * ng.dx(bonus_intorder=2), self.mesh)
+        return bad == 0.0
+
+    def energy(self) -> float:
+        return self.a.Energy(self.gf.vec)
+
+    # ------------------------------------------------------------------ Newton
+    def _factorize(self):
+        self.a.AssembleLinearization(self.gf.vec)
+        self.inverse = self.a.mat.Inverse(self.free, inverse="sparsecholesky")
+
+    def _solve(self, rhs, out):
+        """Solve with the last linearisation, static condensation included (rhs is modified)."""
+        a = self.a
+        rhs.data += a.harmonic_extension_trans * rhs
+        out.data = self.inverse * rhs
+        out.data += a.harmonic_extension * out
+        out.data += a.inner_solve * rhs
+
+    def tangent(self) -> np.ndarray:
+        """du/ds at the current (converged) state: K du/ds = sum_i d_i dV_i/du."""
+        if self.inverse is None:
+            self._factorize()
+        rhs = self.gf.vec.CreateVector()
+        tmp = self.gf.vec.CreateVector()
+        rhs[:] = 0.0
+        for bv, d in zip(self.volume_forms, self.direction):
+            if d.Get() != 0.0:
+                bv.Apply(self.gf.vec, tmp)
+                rhs.data += d.Get() * tmp
+        out = self.gf.vec.CreateVector()
+        self._solve(rhs, out)
+        return np.array(out.FV().NumPy(), copy=True)
+
+    def newton(self) -> int:
+        """Solve for the current load from the current state (Newton on u and q together).
+        Returns the iterations; raises NewtonFailure (the state is then undefined: the
+        caller restores a converged one). A step that inverts an element (det F <= 0) or
+        gives non-finite values is halved; below ``min_step`` the solve fails."""
+        ng = _ng()
+        st = self.newton_settings
+        with ng.TaskManager():
+            if not self.min_jacobian_ok():
+                raise NewtonFailure("the predictor inverted an element (det F <= 0)", 0)
+            for it in range(1, st.max_iterations + 1):
+                t_it = time.perf_counter()
+                self.a.Apply(self.gf.vec, self.res)
+                rnorm = ng.Norm(self.res)
+                if not math.isfinite(rnorm):
+                    raise NewtonFailure("residual is not finite", it)
+                self._factorize()
+                self._solve(self.res, self.du)
+                self.a.Apply(self.gf.vec, self.res)   # (condensation overwrote it)
+                work = abs(ng.InnerProduct(self.du, self.res))
+                if not math.isfinite(work):
+                    raise NewtonFailure("Newton increment is not finite", it)
+                base = self.get_state()
+                alpha = 1.0
+                while True:
+                    self.gf.vec.data = base
+                    self.gf.vec.data -= alpha * self.du
+                    if self.min_jacobian_ok():
+                        break
+                    alpha *= 0.5
+                    if alpha < st.min_step:
+                        raise NewtonFailure("every Newton step length inverts an element (det F <= 0)", it)
+                self.iterations_total += 1
+                self.last_work = work
+                log.debug("load %.1f Pa it %d |du.r| %.3e alpha %g (%.2f s)", self.load.Get(), it, work,
+                          alpha, time.perf_counter() - t_it)
+                if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
+                    return it
+            raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
+                                f"(last |du.r| = {work:.2e} J)", st.max_iterations)

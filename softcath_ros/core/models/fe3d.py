@@ -1,0 +1,202 @@
+"""3D finite-element rung (``fe3d``): the full body in NGSolve, pressure ramped with continuation.
+
+Needs the ``fe`` extra (``pip install softcath_ros[fe]``: NGSolve). See core/fe3d/ for the
+mesh (prisms, half model by symmetry), the mixed Yeoh problem and the ramp.
+
+Each distinct pressure direction (ratio between channels) is one ramp from zero through
+the requested magnitudes. Results are cached on disk by a hash of the design, mesh, solver
+and step settings. A pressure the ramp cannot reach comes back ``converged = False`` with
+"did not converge at p = ..." in ``message``; its numbers are NaN, never a guess.
+
+Outputs: curvature vector (1/m) and axial stretch of the arc fitted to the tip (see
+core/fe3d/measure.py); ``extras`` per command: bending_angle_rad, radius_l_over_theta_m
+(R_C = L / theta, the published definition), tip_position_m, channel_volume_m3,
+channel_area_m2 (mid-length), newton_iterations, time_s.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+
+import numpy as np
+
+from ..cache import cache_dir, key_of
+from ..design import Design
+from ..errors import ModelError
+from .base import BendModel, BendState
+
+CODE_VERSION = "fe3d-1"   # bump when a change alters results, so old cache entries are not reused
+
+
+class Fe3dModel(BendModel):
+    name = "fe3d"
+
+    def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
+                 step_control=None, tangent_predictor: bool = True, half: bool | None = None,
+                 cache: bool = True, progress: bool = False, threads: int = 2):
+        """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
+        ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
+        load stepping). ``progress`` shows a tqdm bar per ramp."""
+        super().__init__(design)
+        try:
+            import ngsolve  # noqa: F401
+        except ImportError as exc:
+            raise ModelError("model 'fe3d' needs NGSolve: pip install 'softcath_ros[fe]' "
+                             f"(or pip install ngsolve) ({exc})") from None
+        from ..fe3d.mesh import MeshSettings, can_use_half_model
+        from ..fe3d.ramp import default_step_control
+        from ..fe3d.solver import NewtonSettings
+
+        self.mesh_settings = mesh if mesh is not None else MeshSettings().scaled(mesh_size)
+        self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
+        self.step_control = step_control if step_control is not None else default_step_control()
+        self.tangent_predictor = tangent_predictor
+        self.half = can_use_half_model(design) if half is None else half
+        self.use_cache = cache
+        self.progress = progress
+        self._problem = None
+        self.last_ramps = []
+        self.cache_key = key_of(CODE_VERSION, design.content_hash(), asdict(self.mesh_settings),
+                                asdict(self.newton_settings), asdict(self.step_control),
+                                tangent_predictor, self.half)
+
+    # ------------------------------------------------------------------ plumbing
+    @property
+    def problem(self):
+        if self._problem is None:
+            from ..fe3d.solver import Fe3dProblem
+
+            self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half)
+        return self._problem
+
+    def _cache_path(self):
+        return cache_dir("fe3d") / f"{self.cache_key}.json"
+
+    def _load_cache(self) -> dict:
+        if not self.use_cache:
+            return {}
+        path = self._cache_path()
+        try:
+            return json.loads(path.read_text())
+        except (OSError, ValueError):
+            return {}
+
+    def _save_cache(self, entries: dict) -> None:
+        if not self.use_cache:
+            return
+        path = self._cache_path()
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(entries))
+        tmp.replace(path)
+
+    @staticmethod
+    def _key(p: np.ndarray) -> str:
+        return ",".join(f"{v:.6g}" for v in p)
+
+    # ------------------------------------------------------------------ evaluation
+    def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
+        n, c = pressures.shape
+        if np.any(pressures < 0) or not np.all(np.isfinite(pressures)):
+            raise ModelError("fe3d: pressures must be finite gauge pressures >= 0 Pa")
+        cached = self._load_cache()
+        results: dict[int, dict] = {}
+        messages: list[str] = []
+        todo: dict[tuple, list[int]] = {}
+        for i, p in enumerate(pressures):
+            entry = cached.get(self._key(p))
+            if entry is not None:
+                results[i] = entry
+                continue
+            peak = float(p.max())
+            if peak == 0.0:
+                results[i] = _straight(self.design, c)
+                continue
+            direction = tuple(np.round(p / peak, 12))
+            todo.setdefault(direction, []).append(i)
+        for direction, idx in todo.items():
+            loads = sorted({float(pressures[i].max()) for i in idx})
+            ramp = self._ramp(np.array(direction), loads)
+            self.last_ramps.append(ramp)
+            by_load = {pt.load: pt for pt in ramp.points}
+            for i in idx:
+                pt = by_load.get(float(pressures[i].max()))
+                if pt is None:
+                    results[i] = None
+                    continue
+                results[i] = _entry(self.design, pt)
+                cached[self._key(pressures[i])] = results[i]
+            if not ramp.converged:
+                messages.append(ramp.message)
+        if todo:
+            self._save_cache(cached)
+        return _bend_state(results, n, c, "; ".join(messages))
+
+    def _ramp(self, direction, loads):
+        from ..fe3d.ramp import PA_PER_BAR, run_ramp
+
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=max(loads), unit="Pa", desc=f"fe3d {self.design.name}",
+                       bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} Pa [{elapsed}<{remaining}{postfix}]")
+        try:
+            return run_ramp(self.problem, direction, loads, self.step_control,
+                            tangent_predictor=self.tangent_predictor, progress=bar)
+        finally:
+            if bar is not None:
+                bar.close()
+        _ = PA_PER_BAR
+
+    def sweep(self, pressures: np.ndarray):
+        """Evaluate a ramp of commands (N, C) ignoring the cache; returns (BendState, Fe3dRamp)."""
+        saved = self.use_cache
+        self.use_cache = False
+        try:
+            self.last_ramps = []
+            state = self.evaluate(pressures)
+            return state, (self.last_ramps[0] if self.last_ramps else None)
+        finally:
+            self.use_cache = saved
+
+
+def _straight(design: Design, c: int) -> dict:
+    return {"curvature": [0.0, 0.0], "axial_stretch": 1.0, "bending_angle_rad": 0.0,
+            "radius_l_over_theta_m": float("inf"), "tip_position_m": [0.0, 0.0, design.length],
+            "channel_volume_m3": None, "channel_area_m2": None, "newton_iterations": 0, "time_s": 0.0}
+
+
+def _entry(design: Design, pt) -> dict:
+    m = pt.measured
+    theta = float(m["bending_angle_rad"])
+    arc = float(m["arc_length_m"])
+    k = (theta / arc) * np.asarray(m["bending_direction"]) if arc > 0 else np.zeros(2)
+    return {"curvature": [float(v) for v in k], "axial_stretch": arc / design.length,
+            "bending_angle_rad": theta,
+            "radius_l_over_theta_m": design.length / theta if theta > 0 else float("inf"),
+            "tip_position_m": [float(v) for v in m["tip_position_m"]],
+            "channel_volume_m3": [float(v) for v in m["channel_volume_m3"]],
+            "channel_area_m2": [float(v) for v in m["channel_area_m2"]],
+            "newton_iterations": int(pt.iterations), "time_s": float(pt.wall_time)}
+
+
+_EXTRAS = ("bending_angle_rad", "radius_l_over_theta_m", "tip_position_m", "channel_volume_m3",
+           "channel_area_m2", "newton_iterations", "time_s")
+
+
+def _bend_state(results: dict, n: int, c: int, message: str) -> BendState:
+    curvature = np.full((n, 2), np.nan)
+    stretch = np.full(n, np.nan)
+    converged = np.zeros(n, dtype=bool)
+    extras = {k: [None] * n for k in _EXTRAS}
+    for i in range(n):
+        r = results.get(i)
+        if r is None:
+            continue
+        curvature[i] = r["curvature"]
+        stretch[i] = r["axial_stretch"]
+        converged[i] = True
+        for k in _EXTRAS:
+            extras[k][i] = r[k]
+    return BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
+                     message=message, extras=extras)

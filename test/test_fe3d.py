@@ -1,0 +1,150 @@
+"""3D finite-element rung (fe3d): geometry, physics direction, symmetry, failure reporting,
+cache and command line. Coarse meshes and short bodies keep these fast; the accuracy
+validation against the published FE (40 mm, 0.15/0.20 bar) and the mesh study live in
+benchmarks/fe3d_sweep.py and docs/validation_fe3d.md, with one slow check here."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("ngsolve", reason="fe3d needs the 'fe' extra (scripts/test.sh installs it)")
+
+from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
+from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
+from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
+from softcath_ros.core.models import make_model  # noqa: E402
+from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+
+COARSE = MeshSettings(section_h=0.9e-3, wall_h=0.6e-3, layer_h=2.5e-3, cap_layers=1)
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("SOFTCATH_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture
+def short_design(implemented_design):
+    return implemented_design.with_length(0.010)
+
+
+def test_mesh_volumes_are_exact(short_design):
+    """Body and channel volumes of the (half) mesh equal the design's, so the pressure's
+    work is not biased by the polygonal circles."""
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False)
+    pb = model.problem
+    d = short_design
+    holes = sum(h.area for h in d.channels) + d.lumen.area
+    body = math.pi * d.outer_radius**2 * d.length - holes * d.length + d.channels[0].area * d.cap_thickness
+    assert pb.half
+    assert pb.reference_volume == pytest.approx(body, rel=1e-9)
+    v_channel = d.channels[0].area * (d.length - d.cap_thickness)
+    assert pb.channel_volumes()[0] == pytest.approx(v_channel, rel=1e-9)
+
+
+def test_bends_away_from_the_channel_and_inflates(short_design):
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False)
+    state = model.evaluate(np.array([[0.0], [5000.0], [10000.0]]))
+    assert state.converged.all(), state.message
+    k = state.curvature
+    assert k[0] == pytest.approx([0.0, 0.0], abs=1e-12)
+    # channel at +y lengthens the +y side: the backbone bends towards -y, more with pressure
+    assert k[1, 1] < 0 and k[2, 1] < 1.5 * k[1, 1]
+    assert abs(k[2, 0]) < 1e-6 * abs(k[2, 1])
+    vol = state.extras["channel_volume_m3"]
+    assert vol[2][0] > vol[1][0] > short_design.channels[0].area * (short_design.length - short_design.cap_thickness)
+    assert state.extras["channel_area_m2"][2][0] > short_design.channels[0].area
+    angle = state.extras["bending_angle_rad"][2]
+    assert state.extras["radius_l_over_theta_m"][2] == pytest.approx(short_design.length / angle)
+    assert state.extras["newton_iterations"][2] >= 1
+
+
+def test_half_model_matches_full_model(short_design):
+    """The symmetry cut must not change the answer."""
+    p = np.array([[8000.0]])
+    half = Fe3dModel(short_design, mesh=COARSE, cache=False).evaluate(p)
+    full = Fe3dModel(short_design, mesh=COARSE, cache=False, half=False)
+    assert not full.problem.half
+    full_state = full.evaluate(p)
+    assert half.converged.all() and full_state.converged.all()
+    # the two meshes differ (netgen meshes the full disk differently), so agree to mesh error
+    assert full_state.curvature[0, 1] == pytest.approx(half.curvature[0, 1], rel=0.03)
+    assert abs(full_state.curvature[0, 0]) < 1e-3 * abs(full_state.curvature[0, 1])
+
+
+def test_reinforcement_and_fibre_matter(short_design):
+    """Rings stop ballooning (less bending without them is impossible); a fibre moves the
+    neutral axis: taking either out changes the result in the physical direction."""
+    p = np.array([[8000.0]])
+    base = Fe3dModel(short_design, mesh=COARSE, cache=False).evaluate(p)
+    no_rings = Fe3dModel(dataclasses.replace(short_design, reinforcement=None), mesh=COARSE,
+                         cache=False).evaluate(p)
+    assert base.converged.all() and no_rings.converged.all()
+    # without rings the channel balloons: much more volume
+    assert no_rings.extras["channel_volume_m3"][0][0] > 1.05 * base.extras["channel_volume_m3"][0][0]
+
+
+def test_non_convergence_is_reported_not_hidden(short_design):
+    """A deliberately tiny iteration budget: the rung says so and returns no numbers."""
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False, newton=NewtonSettings(max_iterations=1))
+    state = model.evaluate(np.array([[2000.0], [4000.0]]))
+    assert not state.converged.any()
+    assert "did not converge at p = " in state.message
+    assert np.isnan(state.curvature).all()
+
+
+def test_fixed_large_steps_fail_and_report_the_last_converged_pressure(short_design):
+    """Step control off: plain load stepping with a huge step fails (no cutting), and the
+    message names the pressure it failed at and the last one that converged."""
+    control = dataclasses.replace(default_step_control(adaptive=False), initial_step=30000.0)
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False, step_control=control,
+                      newton=NewtonSettings(max_iterations=8))
+    state = model.evaluate(np.array([[30000.0]]))
+    assert not state.converged[0]
+    assert "did not converge at p = 0.3000 bar" in state.message
+    assert "last converged p = 0.0000 bar" in state.message
+
+
+def test_results_are_cached_by_design_mesh_and_settings(short_design):
+    p = np.array([[3000.0]])
+    first = Fe3dModel(short_design, mesh=COARSE).evaluate(p)
+    again = Fe3dModel(short_design, mesh=COARSE)
+    second = again.evaluate(p)
+    assert again._problem is None  # answered from the cache, nothing was built
+    np.testing.assert_allclose(second.curvature, first.curvature)
+    finer = Fe3dModel(short_design, mesh=COARSE.scaled(0.8))
+    assert finer.cache_key != again.cache_key
+    other = Fe3dModel(short_design.with_length(0.012), mesh=COARSE)
+    assert other.cache_key != again.cache_key
+
+
+def test_make_model_and_predict_cli(short_design, tmp_path):
+    model = make_model("fe3d", short_design, mesh_size=2.0)
+    assert model.name == "fe3d"
+    out = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
+                          "--model", "fe3d", "--length", "0.01", "--pressure", "0.03", "--unit", "bar", "--json"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    res = json.loads(out.stdout)["results"][0]
+    assert res["converged"] is True
+    assert res["curvature_per_m"][1] < 0
+
+
+def test_sweep_cli_writes_csv_json_png(tmp_path):
+    prefix = tmp_path / "s"
+    out = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "sweep", "--design", "implemented_5mm",
+                          "--model", "closed_form", "--from", "0", "--to", "0.2", "--steps", "5", "--unit", "bar",
+                          "--out", str(prefix)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert len(doc["results"]) == 5 and doc["results"][0]["pressure_pa"] == 0.0
+    angles = [r["bending_angle_deg"] for r in doc["results"]]
+    assert all(b > a for a, b in zip(angles, angles[1:]))
+    assert (tmp_path / "s.csv").read_text().count("\n") == 6
+    assert (tmp_path / "s.png").stat().st_size > 1000
