@@ -101,3 +101,57 @@ def test_unwritable_output_fails_at_start_with_a_clear_message(tmp_path, procs):
     out, _ = bench.communicate(timeout=30)
     assert bench.returncode == 2
     assert "cannot create recording directory" in out
+
+
+def test_direction_protocol_runs_through_allocation_node(tmp_path, procs):
+    """bench_node sends /softcath/bend_cmd, allocation_node (the only pressure_cmd publisher) turns it
+    into pressures, the simulated three-channel rig follows: the top step bends towards the direction."""
+    import numpy as np
+
+    from softcath_ros.bench.analysis import rows_from_recording
+    from softcath_ros.core.allocation import Allocator
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.models import make_model
+
+    protocol = tmp_path / "dir.yaml"
+    protocol.write_text(yaml.safe_dump({
+        "name": "dir_test", "design": "three_channel_5mm", "drive": "direction", "directions_deg": [60.0],
+        "staircase": {"levels": [0.0, 0.5, 1.0], "down": True}, "trials": 1, "dwell": 0.2,
+        "settle": {"tolerance": 1000.0, "max_offset": 3000.0, "hold": 0.1, "timeout": 3.0},
+        "samples_per_step": 2, "sample_period": 0.03,
+        "benches": [{"kind": "angle", "samples": [{"name": "a", "length": 0.02}]}]}))
+    env = _env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
+    _start(procs, ["allocation_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={protocol}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=dir"], env)
+    out, _ = bench.communicate(timeout=90)
+    assert bench.returncode == 0, out
+    s = _summary(out)
+    assert s["state"] == "done" and s["dropped"] == 0 and s["unsettled_steps"] == []
+    assert s["per_topic"]["/softcath/bend_cmd"] > 20 and s["per_topic"]["/softcath/pressure_cmd"] > 20
+    path = tmp_path / "dir" / "dir_0.mcap"
+    from softcath_ros.recording.reader import iter_messages
+    bends = [m.message for m in iter_messages(path, topics=["/softcath/bend_cmd"])]
+    assert all(b.header.frame_id == "softcath_base" for b in bends)
+    top = max(bends, key=lambda b: np.hypot(b.vector.x, b.vector.y))
+    assert np.degrees(np.arctan2(top.vector.y, top.vector.x)) == pytest.approx(60.0, abs=1e-6)
+    expected = Allocator(make_model("closed_form", load_design("three_channel_5mm"))).allocate(
+        (top.vector.x, top.vector.y)).pressures
+    rows = [r for r in rows_from_recording(path) if r.level == 1.0]
+    assert len(rows) == 2
+    for r in rows:  # the rig reached what the allocator asks for (gauge error +-2 kPa)
+        assert np.allclose(r.pressure, expected, atol=3000.0) and r.curvature > 1.0
+
+
+def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, procs):
+    """allocation_node publishes /softcath/pressure_cmd too: a staircase would be fought, so no run."""
+    env = _env()
+    _start(procs, ["sim_bench_node"], env)
+    _start(procs, ["allocation_node", "--ros-args", "-p", "design:=implemented_5mm"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                           "-p", "name:=fight"], env)
+    out, _ = bench.communicate(timeout=60)
+    assert bench.returncode == 4, out
+    assert "softcath_allocation also publish(es) /softcath/pressure_cmd" in out
+    assert (tmp_path / "fight" / "fight_0.mcap").is_file()  # the recording is still finalised

@@ -209,6 +209,30 @@ def test_write_to_unknown_topic_is_an_error(tmp_path):
             w.write("/nope", cdr_float64(1.0), 1)
 
 
+def test_background_writer_keeps_order_flushes_after_the_queue_and_counts_refusals(tmp_path):
+    """Writer thread: every message lands in call order; flush() returns only once everything queued
+    before it is on disk (recover of the flushed prefix finds it); writes after close are counted."""
+    w = BagWriter(tmp_path / "bg", flush_period_s=1e9, fsync=False, background=True)
+    w.add_topic("/x", F64)
+    with pytest.raises(RecordingError, match="not added"):
+        w.write("/nope", cdr_float64(0.0), 1)
+    for i in range(3000):
+        w.write("/x", cdr_float64(float(i)), log_time_ns=i + 1)
+    w.flush()
+    assert w.queued == 0 and w.message_count == 3000
+    prefix = tmp_path / "prefix.mcap"
+    prefix.write_bytes(w.path.read_bytes())
+    recover(prefix)
+    assert [struct.unpack("<d", d[4:])[0] for _, _, d in _messages(prefix)] == [float(i) for i in range(3000)]
+    for i in range(3000, 5000):
+        w.write("/x", cdr_float64(float(i)), log_time_ns=i + 1)
+    w.close()
+    assert [struct.unpack("<d", d[4:])[0] for _, _, d in _messages(w.path)] == [float(i) for i in range(5000)]
+    assert w.write_failures == 0
+    w.write("/x", cdr_float64(1.0), 9999)
+    assert w.write_failures == 1 and "closed" in w.error
+
+
 # --------------------------------------------------------------------------- recovery
 
 def test_recover_complete_file_keeps_everything(tmp_path):

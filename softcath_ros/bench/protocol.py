@@ -82,12 +82,16 @@ class Step:
     phase: str                     # "loading" | "unloading"
     drive: str                     # "channel 0" | "direction 120.0 deg"
     level: float                   # Pa or fraction
-    pressures: tuple[float, ...]   # Pa, commanded per channel
+    pressures: tuple[float, ...]   # Pa, commanded per channel (by direction: the allocator's answer)
+    bend: tuple[float, float] | None = None  # 1/m, curvature requested (drive 'direction' only)
 
     def describe(self) -> dict:
-        return {"step": self.index, "bench": self.bench, "sample_name": self.sample.name,
-                "sample_length_m": self.sample.length, "trial": self.trial, "phase": self.phase,
-                "drive": self.drive, "level": self.level, "pressure_cmd_pa": list(self.pressures)}
+        d = {"step": self.index, "bench": self.bench, "sample_name": self.sample.name,
+             "sample_length_m": self.sample.length, "trial": self.trial, "phase": self.phase,
+             "drive": self.drive, "level": self.level, "pressure_cmd_pa": list(self.pressures)}
+        if self.bend is not None:
+            d["bend_cmd_per_m"] = list(self.bend)
+        return d
 
 
 # --------------------------------------------------------------------------- loading
@@ -219,7 +223,7 @@ def protocol_from_dict(data) -> Protocol:
 def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, allocator=None) -> list[Step]:
     """Every step in execution order. ``allocator`` (core.allocation.Allocator) is needed for
     drive 'direction'; pressures beyond ``max_pressure`` are refused, never clipped silently."""
-    drives: list[tuple[str, callable]] = []
+    drives: list[tuple[str, callable, callable]] = []  # name, level -> pressures, level -> bend or None
     if protocol.drive == "channels":
         for c in protocol.channels:
             if c >= n_channels:
@@ -230,7 +234,7 @@ def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, alloc
                 p = np.zeros(n_channels)
                 p[c] = level
                 return p
-            drives.append((f"channel {c}", unit))
+            drives.append((f"channel {c}", unit, lambda level: None))
     else:
         if allocator is None:
             raise ProtocolError("drive", "direction", "needs the allocator (softcath_ros.core.allocation)")
@@ -240,12 +244,14 @@ def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, alloc
             if kmax <= 0:
                 raise ProtocolError("directions_deg", deg, "the design cannot bend in this direction")
 
-            def by_direction(frac, phi=phi, kmax=kmax):
+            def bend(frac, phi=phi, kmax=kmax):
+                return (frac * kmax * math.cos(phi), frac * kmax * math.sin(phi))
+
+            def by_direction(frac, bend=bend):
                 if frac == 0:
                     return np.zeros(n_channels)
-                a = allocator.allocate((frac * kmax * math.cos(phi), frac * kmax * math.sin(phi)))
-                return np.asarray(a.pressures, dtype=float)
-            drives.append((f"direction {deg:g} deg", by_direction))
+                return np.asarray(allocator.allocate(bend(frac)).pressures, dtype=float)
+            drives.append((f"direction {deg:g} deg", by_direction, bend))
 
     up = list(protocol.levels)
     sequence = [(lv, "loading") for lv in up]
@@ -254,15 +260,17 @@ def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, alloc
     steps: list[Step] = []
     for bench in protocol.benches:
         for sample in bench.samples:
-            for drive_name, to_pressures in drives:
+            for drive_name, to_pressures, to_bend in drives:
                 for trial in range(protocol.trials):
                     for level, phase in sequence:
                         p = to_pressures(level)
                         if np.any(p > max_pressure * (1 + 1e-9)) or np.any(p < 0):
                             raise ProtocolError("staircase", level, f"needs pressures {p.tolist()} Pa outside "
                                                 f"[0, max_pressure {max_pressure:g}]")
+                        k = to_bend(level)
                         steps.append(Step(len(steps), bench.kind, sample, trial, phase, drive_name, float(level),
-                                          tuple(float(x) for x in p)))
+                                          tuple(float(x) for x in p),
+                                          None if k is None else (float(k[0]), float(k[1]))))
     return steps
 
 
@@ -300,6 +308,12 @@ class ProtocolRunner:
     def command(self) -> np.ndarray:
         s = self.step
         return np.zeros(len(self.steps[0].pressures)) if s is None else np.asarray(s.pressures)
+
+    @property
+    def bend_command(self) -> tuple[float, float]:
+        """Curvature requested (1/m) for drive 'direction'; (0, 0) before and after the steps."""
+        s = self.step
+        return (0.0, 0.0) if s is None or s.bend is None else s.bend
 
     def _event(self, name: str, t: float, **extra) -> dict:
         ev = {"event": name, "t": t}

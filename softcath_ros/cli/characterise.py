@@ -1,11 +1,14 @@
-"""`softcath characterise`: the main job. Brings up sim_bench_node, model_node (when
-installed) and bench_node as separate processes on a private ROS domain, runs the default characterisation (0 -> 0.35 -> 0 bar, three trials, angle
-and blocking-force benches), then writes the report and prints where both are.
+"""`softcath characterise`: the main job. Brings up sim_bench_node, model_node (so the
+predicted /softcath/tip_pose and /softcath/backbone are recorded), allocation_node for
+protocols by bending direction, and bench_node, as separate processes on a private ROS
+domain; runs the default characterisation (0 -> 0.35 -> 0 bar, three trials, angle and
+blocking-force benches), then writes the report and prints where both are.
 Ctrl-C stops the run cleanly: bench_node finalises the recording first.
 
-allocation_node is not started: it publishes /softcath/pressure_cmd continuously (zeros
-while vented), which would fight bench_node's staircase on the same topic. Protocols
-that drive by bending direction use the same core Allocator inside bench_node instead.
+allocation_node runs only for protocols by direction (bench_node sends /softcath/bend_cmd,
+allocation_node publishes /softcath/pressure_cmd). A per-channel protocol publishes
+/softcath/pressure_cmd itself and must be its only publisher: allocation_node publishes
+there too (at least while it ramps down after its watchdog), so the two would fight.
 """
 from __future__ import annotations
 
@@ -70,7 +73,9 @@ def run(args) -> int:
     env["PYTHONUNBUFFERED"] = "1"
     design_arg = design.source or design.name
     helpers = [("sim_bench_node", ["-p", f"design:={design_arg}", "-p", f"model:={args.sim_model}"]),
-               ("model_node", ["-p", f"design:={design_arg}"])]
+               ("model_node", ["-p", f"design:={design_arg}", "-p", f"model:={args.model[0]}"])]
+    if protocol.drive == "direction":
+        helpers.append(("allocation_node", ["-p", f"design:={design_arg}", "-p", f"model:={args.model[0]}"]))
     procs: list[tuple[str, subprocess.Popen]] = []
     logs = out_dir / f"{name}_logs"
     logs.mkdir(parents=True, exist_ok=True)
@@ -92,7 +97,8 @@ def run(args) -> int:
         if bench_cmd is None:
             raise SoftcathError("bench_node is not installed")
         bench = subprocess.Popen(bench_cmd + ["--ros-args", "-p", f"protocol:={args.protocol}",
-                                              "-p", f"design:={design_arg}", "-p", f"output_dir:={out_dir}",
+                                              "-p", f"design:={design_arg}", "-p", f"model:={args.model[0]}",
+                                              "-p", f"output_dir:={out_dir}",
                                               "-p", f"name:={name}"],
                                  env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         watchdog = threading.Timer(args.timeout, lambda: (timed_out.append(True), _stop(bench, 15.0)))

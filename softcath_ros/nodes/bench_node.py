@@ -1,15 +1,26 @@
 """bench_node (node ``softcath_bench``): runs a test protocol and records everything to MCAP.
 
 The protocol engine (bench.protocol.ProtocolRunner) decides; this node publishes its
-commands on /softcath/pressure_cmd and its markers (JSON) on /softcath/bench/step, feeds
-it the measured pressures, and records the listed topics with a TopicRecorder into a
-rosbag2-style bag directory under ``output_dir``. Chunks are flushed every second and at
-each step end; SIGINT/SIGTERM vent nothing it does not own but always finalise the file.
+commands and its markers (JSON) on /softcath/bench/step, feeds it the measured pressures,
+and records the listed topics with a TopicRecorder into a rosbag2-style bag directory
+under ``output_dir``. Chunks are flushed every second and at each step end; SIGINT/SIGTERM
+vent nothing it does not own but always finalise the file.
+
+Commands: a per-channel protocol publishes /softcath/pressure_cmd itself and must be its
+only publisher (another one, e.g. allocation_node, would fight the staircase: the run
+stops with an error, exit code 4). A protocol by bending direction publishes the requested
+curvature on /softcath/bend_cmd and allocation_node, then the only publisher allowed,
+turns it into /softcath/pressure_cmd.
 
 It waits (up to ``wait_timeout`` s) for a rig: a publisher of /softcath/pressure_measured
-and a subscriber of /softcath/pressure_cmd. If that rig is sim_bench_node (its node is in
-the graph or it announced itself on /softcath/bench/rig), the recording is marked
-simulated. At the end it prints ``recording: PATH`` and a one-line summary.
+and a subscriber of /softcath/pressure_cmd (by direction also allocation_node: a
+subscriber of /softcath/bend_cmd that publishes /softcath/pressure_cmd). If that rig is
+sim_bench_node (its node is in the graph or it announced itself on /softcath/bench/rig),
+the recording is marked simulated. At the end it prints ``recording: PATH`` and a
+one-line summary.
+
+The node spins on the EventsExecutor and writes in a background thread by default
+(``executor`` parameter; see nodes/recorder.py and benchmarks/recorder_throughput.py).
 """
 from __future__ import annotations
 
@@ -21,15 +32,17 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_TOPICS = ["/softcath/pressure_cmd", "/softcath/pressure_measured", "/softcath/bench/angle",
+DEFAULT_TOPICS = ["/softcath/pressure_cmd", "/softcath/bend_cmd", "/softcath/pressure_measured", "/softcath/bench/angle",
                   "/softcath/bench/force", "/softcath/bench/step", "/softcath/bench/rig", "/softcath/tip_pose",
                   "/softcath/backbone", "/diagnostics"]
 SIM_NODE = "softcath_sim_bench"
+ALLOCATION_NODE = "softcath_allocation"
 
 
 def main(argv=None) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from geometry_msgs.msg import Vector3Stamped
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -40,6 +53,7 @@ def main(argv=None) -> int:
     from ..core.errors import SoftcathError
     from ..recording import BagWriter
     from .recorder import TopicRecorder
+    from .runtime import EXECUTORS, make_executor
 
     class BenchNode(Node):
         def __init__(self):
@@ -55,7 +69,11 @@ def main(argv=None) -> int:
             self.declare_parameter("wait_timeout", 20.0)
             self.declare_parameter("start_delay", 1.0)
             self.declare_parameter("min_free_mb", 64)
+            self.declare_parameter("executor", "events")
             gp = lambda n: self.get_parameter(n).value  # noqa: E731
+            self.executor_name = gp("executor")
+            if self.executor_name not in EXECUTORS:
+                raise SoftcathError(f"parameter executor = {self.executor_name!r}: not one of {EXECUTORS}")
 
             self.protocol = load_protocol(gp("protocol"))
             design_name = gp("design") or self.protocol.design
@@ -71,11 +89,15 @@ def main(argv=None) -> int:
             stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
             name = gp("name") or f"bench_{self.protocol.name}_{stamp}"
             self.writer = BagWriter(Path(gp("output_dir")) / name, flush_period_s=float(gp("flush_period")),
-                                    min_free_bytes=int(gp("min_free_mb")) << 20,
+                                    min_free_bytes=int(gp("min_free_mb")) << 20, background=True,
                                     custom_data={"protocol": self.protocol.name, "design": self.design.name})
             self.runner = ProtocolRunner(self.protocol, self.steps)
             reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-            self.pub_cmd = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", reliable)
+            self.by_direction = self.protocol.drive == "direction"
+            if self.by_direction:
+                self.pub_bend = self.create_publisher(Vector3Stamped, "/softcath/bend_cmd", reliable)
+            else:
+                self.pub_cmd = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", reliable)
             self.pub_step = self.create_publisher(String, "/softcath/bench/step", reliable)
             self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.measured = None
@@ -84,7 +106,8 @@ def main(argv=None) -> int:
             self.create_subscription(String, "/softcath/bench/rig", self.on_rig,
                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
-            self.recorder = TopicRecorder(self, self.writer, list(gp("record_topics")))
+            self.recorder = TopicRecorder(self, self.writer, list(gp("record_topics")),
+                                          message_info=self.executor_name != "events")
             self.state = "waiting"
             self.t0 = time.monotonic()
             self.t_ready: float | None = None
@@ -122,8 +145,35 @@ def main(argv=None) -> int:
                     self.writer.flush()
 
         def rig_ready(self) -> bool:
-            return (self.count_publishers("/softcath/pressure_measured") > 0
-                    and self.count_subscribers("/softcath/pressure_cmd") > 0 and self.measured is not None)
+            rig = (self.count_publishers("/softcath/pressure_measured") > 0
+                   and self.count_subscribers("/softcath/pressure_cmd") > 0 and self.measured is not None)
+            if self.by_direction:  # allocation_node: listens to bend_cmd, publishes pressure_cmd
+                return rig and self.count_subscribers("/softcath/bend_cmd") > 0 and \
+                    self.count_publishers("/softcath/pressure_cmd") > 0
+            return rig
+
+        def other_commanders(self) -> list[str]:
+            """Nodes publishing /softcath/pressure_cmd that should not: besides this node (per channel)
+            or besides allocation_node (by direction)."""
+            allowed = ALLOCATION_NODE if self.by_direction else self.get_name()
+            return [f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                    for i in self.get_publishers_info_by_topic("/softcath/pressure_cmd")
+                    if i.node_name != allowed]
+
+        def fail(self, message: str, code: int) -> None:
+            self.get_logger().error(message)
+            self.result = code
+            self.state = "done"
+
+        def publish_command(self, pressures, bend) -> None:
+            if self.by_direction:
+                msg = Vector3Stamped()
+                msg.header.stamp = self.get_clock().now().to_msg()
+                msg.header.frame_id = "softcath_base"
+                msg.vector.x, msg.vector.y = float(bend[0]), float(bend[1])
+                self.pub_bend.publish(msg)
+            else:
+                self.pub_cmd.publish(Float64MultiArray(data=[float(x) for x in pressures]))
 
         def tick(self):
             t = self.now()
@@ -134,23 +184,29 @@ def main(argv=None) -> int:
                     elif t - self.t_ready >= float(self.get_parameter("start_delay").value):
                         self.begin(t)
                 elif t > float(self.get_parameter("wait_timeout").value):
-                    self.get_logger().error("no rig: nothing publishes /softcath/pressure_measured or listens to "
-                                            "/softcath/pressure_cmd (start sim_bench_node or the hardware driver)")
-                    self.result = 3
-                    self.state = "done"
+                    self.fail("no rig: nothing publishes /softcath/pressure_measured or listens to "
+                              "/softcath/pressure_cmd (start sim_bench_node or the hardware driver)"
+                              + ("; a protocol by direction also needs allocation_node" if self.by_direction
+                                 else ""), 3)
                 return
             if self.state == "running":
                 self.publish_events(self.runner.update(t, self.measured))
-                self.pub_cmd.publish(Float64MultiArray(data=[float(x) for x in self.runner.command]))
+                self.publish_command(self.runner.command, self.runner.bend_command)
                 if self.runner.done:
                     self.state = "finishing"
                     self.t_end = t
             elif self.state == "finishing":
-                self.pub_cmd.publish(Float64MultiArray(data=[0.0] * self.design.n_channels))
+                self.publish_command(np.zeros(self.design.n_channels), (0.0, 0.0))
                 if t - self.t_end > 0.5:  # the last readings and markers reach the recorder
                     self.state = "done"
 
         def begin(self, t: float):
+            others = self.other_commanders()
+            if others:
+                return self.fail(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: " + (
+                    "a protocol by direction needs allocation_node as its only publisher" if self.by_direction
+                    else "a per-channel protocol must be its only publisher (stop allocation_node, or run a "
+                    "protocol by direction through it)"), 4)
             simulated = SIM_NODE in self.get_node_names() or bool(self.rig_info and self.rig_info.get("simulated"))
             self.simulated = simulated
             self.writer.custom_data["simulated"] = str(simulated).lower()
@@ -168,6 +224,10 @@ def main(argv=None) -> int:
             self.publish_events(self.runner.start(t))
 
         def diagnostics(self):
+            others = self.other_commanders() if self.state == "running" else []
+            if others:
+                self.fail(f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
+                          "stopped (the commands would fight)", 4)
             r = self.recorder
             level = DiagnosticStatus.OK if r.dropped == 0 and r.error is None else DiagnosticStatus.WARN
             step = self.runner.step
@@ -198,9 +258,11 @@ def main(argv=None) -> int:
         rclpy.try_shutdown()
         return 2
     interrupted = False
+    executor = make_executor(node.executor_name)
+    executor.add_node(node)
     try:
         while rclpy.ok() and node.state != "done":
-            rclpy.spin_once(node, timeout_sec=0.05)
+            executor.spin_once(timeout_sec=0.05)
     except (KeyboardInterrupt, ExternalShutdownException):
         interrupted = True
     finally:

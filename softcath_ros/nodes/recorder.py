@@ -6,6 +6,14 @@ reliability and durability are adapted to what every publisher offers
 the graph go into the channel's metadata; messages arrive raw (CDR bytes, never
 deserialized); log time is the reception time, publish time the source timestamp.
 Messages the middleware reports lost, and writes that fail, are counted as dropped.
+
+Speed (benchmarks/recorder_throughput.py): the node should spin on the EventsExecutor
+(C++ dispatch; rclpy's wait-set executors cost ~100 us per message) and the writer run
+in the background (BagWriter(background=True)) so callbacks never wait for compression
+or fsync. The EventsExecutor does not pass MessageInfo (rclpy 9.1 fails on two-argument
+callbacks), so with ``message_info=False`` log time is the clock read on entry to the
+callback and publish time equals it; with ``message_info=True`` (wait-set executors)
+they are the middleware's reception and source timestamps, as rosbag2 writes them.
 """
 from __future__ import annotations
 
@@ -44,7 +52,8 @@ def message_class(type_name: str):
 
 
 class TopicRecorder:
-    def __init__(self, node, writer: BagWriter, topics: list[str], *, depth: int = 1000, poll_period: float = 0.25):
+    def __init__(self, node, writer: BagWriter, topics: list[str], *, depth: int = 10000, poll_period: float = 0.25,
+                 message_info: bool = True):
         self.node = node
         self.writer = writer
         self.pending = list(dict.fromkeys(topics))
@@ -53,14 +62,23 @@ class TopicRecorder:
         self.lost = 0
         self.write_failures = 0
         self.depth = depth
-        self.error: str | None = None
+        self.message_info = message_info
+        self._error: str | None = None
         self.poll()
         self._timer = node.create_timer(poll_period, self.poll)
         self._flush_timer = node.create_timer(0.2, self._flush_if_due)
 
     @property
     def dropped(self) -> int:
-        return self.lost + self.write_failures
+        return self.lost + self.write_failures + self.writer.write_failures
+
+    @property
+    def error(self) -> str | None:
+        return self._error or self.writer.error
+
+    @error.setter
+    def error(self, value: str | None) -> None:
+        self._error = value
 
     def poll(self) -> None:
         for topic in list(self.pending):
@@ -96,9 +114,10 @@ class TopicRecorder:
     def _callback(self, topic: str):
         write = self.writer.write
         received = self.received
+        now_ns = time.time_ns
 
-        def on_message(data: bytes, info) -> None:
-            t = info.get("received_timestamp") or time.time_ns()
+        def on_message_info(data: bytes, info) -> None:
+            t = info.get("received_timestamp") or now_ns()
             try:
                 write(topic, data, t, info.get("source_timestamp") or t)
             except RecordingError as exc:
@@ -106,7 +125,17 @@ class TopicRecorder:
                 self.error = str(exc)
                 return
             received[topic] += 1
-        return on_message
+
+        def on_message(data: bytes) -> None:
+            t = now_ns()
+            try:
+                write(topic, data, t, t)
+            except RecordingError as exc:
+                self.write_failures += 1
+                self.error = str(exc)
+                return
+            received[topic] += 1
+        return on_message_info if self.message_info else on_message
 
     def _on_lost(self, status) -> None:
         self.lost += int(status.total_count_change)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from dataclasses import asdict
 
 import numpy as np
@@ -59,6 +60,7 @@ def main(argv=None) -> int:
             self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self.on_command, 10)
             self.create_subscription(String, "/softcath/bench/step", self.on_step, 100)
             self.dt = 1.0 / float(self.get_parameter("rate_hz").value)
+            self.t_last = time.monotonic()
             self.create_timer(self.dt, self.tick)
             self.create_timer(1.0, self.diagnostics)
             self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
@@ -85,7 +87,11 @@ def main(argv=None) -> int:
                     self.get_logger().warn(f"cannot mount sample from marker: {exc}")
 
         def tick(self):
-            self.rig.advance(self.dt, self.command)
+            # The regulator advances by the time that really passed: on a loaded machine the
+            # timer fires late, and a fixed dt would slow the simulated rig down.
+            now = time.monotonic()
+            dt, self.t_last = min(now - self.t_last, 0.5), now
+            self.rig.advance(dt, self.command)
             r = self.rig.read()
             self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
             self.pub_a.publish(Float64(data=r.angle))

@@ -11,6 +11,13 @@ No data lost: the open chunk is closed and written (and fsynced) at least every
 ``flush_period_s`` and whenever ``flush()`` is called (the bench calls it at each
 step end), so a killed recorder loses at most the last period; ``recover`` rebuilds
 the rest. An unwritable path or a nearly full disk fails in the constructor.
+
+``background=True`` moves the writing to a writer thread: ``write`` only appends to a
+queue (a deque append, well under a microsecond), so the DDS callbacks that call it
+never wait for chunk compression or fsync; ``flush`` and ``close`` first drain the
+queue, so order and the flush guarantees are the same as in the synchronous mode. A
+write that fails in the thread is counted in ``write_failures`` (``error`` says why);
+beyond ``max_queued`` messages waiting, new ones are refused and counted there too.
 """
 from __future__ import annotations
 
@@ -18,6 +25,7 @@ import os
 import shutil
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
@@ -38,7 +46,8 @@ class RecordingError(SoftcathError):
 class BagWriter:
     def __init__(self, bag_dir, *, compression: str = "zstd", chunk_size: int = 1 << 20,
                  flush_period_s: float = 1.0, fsync: bool = True, min_free_bytes: int = 64 << 20,
-                 custom_data: dict[str, str] | None = None, distro: str | None = None):
+                 custom_data: dict[str, str] | None = None, distro: str | None = None,
+                 background: bool = False, max_queued: int = 2_000_000):
         self.bag_dir = Path(bag_dir)
         self.path = self.bag_dir / f"{self.bag_dir.name}_0.mcap"
         self.flush_period_s = float(flush_period_s)
@@ -65,6 +74,15 @@ class BagWriter:
         self._writer.start(profile="ros2", library=LIBRARY)
         self._sync()
         self._last_flush = time.monotonic()
+        self.write_failures = 0
+        self.error: str | None = None
+        self._queue: deque | None = None
+        if background:
+            self._queue = deque()
+            self._max_queued = int(max_queued)
+            self._stop = False
+            self._thread = threading.Thread(target=self._drain_loop, name="bag-writer", daemon=True)
+            self._thread.start()
 
     def _check_destination(self, min_free_bytes: int) -> None:
         try:
@@ -105,7 +123,23 @@ class BagWriter:
             self.topics[name] = info
 
     def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
-        """One serialized (CDR) message. ``log_time_ns``: reception time; publish time defaults to it."""
+        """One serialized (CDR) message. ``log_time_ns``: reception time; publish time defaults to it.
+
+        In background mode the message is queued and errors surface in ``write_failures``/``error``."""
+        q = self._queue
+        if q is not None:
+            if len(q) >= self._max_queued or self._closed:
+                self.write_failures += 1
+                self.error = self.error or (f"recording {self.path} is closed" if self._closed else
+                                            f"writer queue full ({self._max_queued} messages waiting)")
+                return
+            if topic not in self._channel_ids:
+                raise RecordingError(f"topic {topic} was not added to the recording")
+            q.append((topic, data, log_time_ns, publish_time_ns))
+            return
+        self._write_now(topic, data, log_time_ns, publish_time_ns)
+
+    def _write_now(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None) -> None:
         with self._lock:
             if self._closed:
                 raise RecordingError(f"recording {self.path} is closed")
@@ -125,6 +159,42 @@ class BagWriter:
             if time.monotonic() - self._last_flush >= self.flush_period_s:
                 self._flush_locked()
 
+    # ------------------------------------------------------------------ writer thread
+    def _drain_loop(self) -> None:
+        q = self._queue
+        while True:
+            if not q:
+                if self._stop:
+                    return
+                try:
+                    self.flush_if_due()
+                except RecordingError as exc:
+                    self.error = str(exc)
+                time.sleep(0.002)  # idle poll: cheaper than waking on every message
+                continue
+            item = q.popleft()
+            if item[0] is None:  # a flush/close barrier: everything before it is written
+                item[1].set()
+                continue
+            try:
+                self._write_now(*item)
+            except RecordingError as exc:
+                self.write_failures += 1
+                self.error = str(exc)
+
+    def _drain(self) -> None:
+        """Wait until the writer thread has written everything queued so far."""
+        if self._queue is None or not self._thread.is_alive():
+            return
+        done = threading.Event()
+        self._queue.append((None, done))
+        done.wait()
+
+    @property
+    def queued(self) -> int:
+        """Messages waiting for the writer thread (0 in synchronous mode)."""
+        return 0 if self._queue is None else len(self._queue)
+
     def flush_if_due(self) -> None:
         """Call periodically (timer): closes the open chunk once it is older than the flush period."""
         with self._lock:
@@ -132,7 +202,8 @@ class BagWriter:
                 self._flush_locked()
 
     def flush(self) -> None:
-        """Close the open chunk and push it to disk now (step ends)."""
+        """Close the open chunk and push it to disk now (step ends), after every queued message."""
+        self._drain()
         with self._lock:
             if not self._closed:
                 self._flush_locked()
@@ -169,6 +240,16 @@ class BagWriter:
 
     def close(self) -> None:
         """Write the rosbag2 metadata record and the summary; idempotent."""
+        if self._queue is not None and not self._closed:
+            self._drain()
+            self._stop = True
+            self._thread.join()
+            while self._queue:  # a write that raced the stop
+                item = self._queue.popleft()
+                if item[0] is None:
+                    item[1].set()
+                else:
+                    self._write_now(*item)
         with self._lock:
             if self._closed:
                 return
