@@ -55,14 +55,17 @@ class Operator:
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.pressures = []   # (monotonic time, [Pa ...])
-        self.diagnostics = []
+        self.diagnostics = {}  # status name suffix ("commands" | "output") -> latest status
         self.node.create_subscription(Float64MultiArray, "/softcath/pressure_cmd",
                                       lambda m: self.pressures.append((time.monotonic(), list(m.data))), 50)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                      lambda m: self.diagnostics.extend(
-                                          s for s in m.status if s.name.startswith("softcath_allocation")), 50)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self.bend = self.node.create_publisher(Vector3Stamped, "/softcath/bend_cmd", 10)
         self.tip = self.node.create_publisher(PointStamped, "/softcath/tip_target", 10)
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name.startswith("softcath_allocation: "):
+                self.diagnostics[status.name.split(": ", 1)[1]] = status
 
     def spin(self, seconds, until=None):
         end = time.monotonic() + seconds
@@ -94,8 +97,9 @@ class Operator:
             if time.monotonic() >= end:
                 return sent
 
-    def last_diag(self):
-        return {kv.key: kv.value for kv in self.diagnostics[-1].values} if self.diagnostics else {}
+    def last_diag(self, which):
+        status = self.diagnostics.get(which)
+        return {kv.key: kv.value for kv in status.values} if status is not None else {}
 
     def close(self):
         self.node.destroy_node()
@@ -147,7 +151,7 @@ def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
         assert reaches(op, expected, mark), (k, op.pressures[-1][1], expected)
     assert np.max(op.pressures[-1][1]) == 50e3  # the last request is beyond reach: saturated at max_pressure
     op.spin(0.3)
-    assert op.last_diag()["saturated"] == "true"
+    assert op.spin(3.0, until=lambda: op.last_diag("output").get("saturated") == "true")
     tip = [0.004, 0.001, 0.0392]
     mark = len(op.pressures)
     end = time.monotonic() + 0.4
@@ -175,8 +179,8 @@ def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     op.send_tip(0.0, 0.0, 50.0)            # absurdly far
     op.send_tip(0.0, 0.0, -0.01)           # behind the base: no arc ends there
     op.send_tip(0.001, 0.0, 0.039, frame="camera")
-    assert op.spin(5.0, until=lambda: op.last_diag().get("commands_rejected") == "9"), op.last_diag()
-    diag = op.diagnostics[-1]
+    assert op.spin(5.0, until=lambda: op.last_diag("commands").get("rejected") == "9"), op.last_diag("commands")
+    diag = op.diagnostics["commands"]
     assert diag.level == DiagnosticStatus.WARN and "rejected" in diag.message
     # None of them changed the output: every non-zero message is the good command's (held until
     # the timeout vents; the rate limit here is fast enough to make each change one step).
@@ -196,12 +200,13 @@ def test_watchdog_vents_after_timeout_and_resumes(wire, allocator):
     assert op.spin(3.0, until=lambda: op.pressures[-1][1] == [0.0, 0.0, 0.0])
     vent_time = time.monotonic() - t_last
     assert 0.3 <= vent_time < 1.0, vent_time  # not before the timeout, soon after it
-    assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "vented")
-    assert op.diagnostics[-1].level == DiagnosticStatus.WARN and "vented" in op.diagnostics[-1].message
+    assert op.spin(2.0, until=lambda: op.last_diag("output").get("watchdog") == "vented")
+    vented = op.diagnostics["output"]
+    assert vented.level == DiagnosticStatus.WARN and "vented" in vented.message
     mark = len(op.pressures)
     op.stream_bend([0.0, 5.0], 0.4)
     assert reaches(op, allocator.allocate([0.0, 5.0]).pressures, mark)
-    assert op.spin(2.0, until=lambda: op.last_diag().get("watchdog") == "ok")
+    assert op.spin(2.0, until=lambda: op.last_diag("output").get("watchdog") == "ok")
 
 
 @pytest.mark.parametrize("wire", [("max_pressure_rate:=50000.0", "max_pressure:=20000", "command_timeout:=0.5",

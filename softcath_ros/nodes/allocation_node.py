@@ -14,16 +14,15 @@ design's limit (at start-up), never raised, and it is enforced again on every me
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import replace
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import ParameterException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
@@ -33,8 +32,12 @@ from ..core.command_shaping import CommandWatchdog, RateLimiter, check_frame, ch
 from ..core.design import load_design
 from ..core.models import make_model
 from ..core.pressure_command import check_pressure_command
+from .diagnostics import DiagnosticsReporter, InputCounters
+from .qos import RELIABILITIES, stream_qos
+from .runtime import EXECUTORS, run_node
 
 NODE_NAME = "softcath_allocation"
+RCLError = _rclpy.RCLError
 
 
 class AllocationNode(Node):
@@ -51,6 +54,19 @@ class AllocationNode(Node):
                                        "bend_cmd above this |k| (1/m) is a fault and rejected (below it saturates)")
         hysteresis = p("hysteresis_deg", 0.2, "angular hysteresis of the active channel pair, degrees")
         diag_period = p("diagnostics_period", 1.0, "period of /diagnostics, s")
+        depth = int(p("qos_depth", 100, "keep-last depth of the command subscriptions and pressure publisher"))
+        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}")
+        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)} (at start-up)")
+        self.realtime_priority = int(p("realtime_priority", 0, "SCHED_FIFO priority 1-99 for the node's threads, "
+                                                               "0 = normal scheduling"))
+        for name, value, allowed in (("executor", self.executor_name, EXECUTORS),
+                                     ("reliability", reliability, RELIABILITIES)):
+            if value not in allowed:
+                raise ValueError(f"parameter {name} = {value!r}: not one of {allowed}")
+        if not 0 <= self.realtime_priority <= 99:
+            raise ValueError(f"parameter realtime_priority = {self.realtime_priority}: must be 0..99")
+        if not diag_period > 0:
+            raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
 
         design = load_design(design_name)
         requested_max = self._declare("max_pressure", design.max_pressure,
@@ -76,22 +92,27 @@ class AllocationNode(Node):
         self.target = np.zeros(n)
         self.last = None            # last Allocation
         self.vented = True          # no command yet counts as vented
-        self.received = 0
-        self.rejected = 0
-        self.last_rejection = ""
+        self.counters = InputCounters(extra={"design": self.design.name, "model": model_name,
+                                             "max_pressure_pa": f"{self.max_pressure:g}"})
         self.published = 0
         self._last_publish = time.monotonic()
 
-        self.pub = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(Vector3Stamped, "/softcath/bend_cmd", self._on_bend, 10)
-        self.create_subscription(PointStamped, "/softcath/tip_target", self._on_tip, 10)
+        qos = stream_qos(depth, reliability)
+        self.pub = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
+        self.create_subscription(Vector3Stamped, "/softcath/bend_cmd", self._on_bend, qos)
+        self.create_subscription(PointStamped, "/softcath/tip_target", self._on_tip, qos)
         self.period = 1.0 / publish_rate
         self.create_timer(self.period, self._tick)
+        # Two statuses: the shared input counters (accepted/rejected, as every node reports them)
+        # and this node's output state (watchdog, saturation), published on each change too.
+        self._inputs_report = DiagnosticsReporter(self, self.counters, f"{NODE_NAME}: commands",
+                                                  self.design.name, diag_period)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(diag_period, self._publish_diagnostics)
         self.get_logger().info(
             f"design {self.design.name} ({n} channels), model {model_name}, max_pressure {self.max_pressure:g} Pa, "
-            f"rate limit {self.max_rate:g} Pa/s, timeout {self.timeout:g} s, publishing at {publish_rate:g} Hz")
+            f"rate limit {self.max_rate:g} Pa/s, timeout {self.timeout:g} s, executor {self.executor_name}, "
+            f"publishing at {publish_rate:g} Hz")
 
     def _declare(self, name, default, description, read_only=False):
         # Numbers accept an integer too (``-p max_pressure:=40000``), then count as float.
@@ -107,12 +128,12 @@ class AllocationNode(Node):
     # ------------------------------------------------------------------ inputs
 
     def _reject(self, reason: str) -> None:
-        self.rejected += 1
-        self.last_rejection = reason
-        self.get_logger().warning(f"rejected command ({self.rejected} so far): {reason}", throttle_duration_sec=1.0)
+        c = self.counters
+        c.rejected += 1
+        c.last_reason = reason
+        self.get_logger().warning(f"rejected command ({c.rejected} so far): {reason}", throttle_duration_sec=1.0)
 
     def _on_bend(self, msg: Vector3Stamped) -> None:
-        self.received += 1
         k = (msg.vector.x, msg.vector.y)
         for check in (check_frame(msg.header.frame_id, self.frame_id),
                       check_vector(k, self.max_request_curvature, "bend_cmd curvature", "1/m")):
@@ -121,7 +142,6 @@ class AllocationNode(Node):
         self._apply(lambda: self.allocator.allocate(k))
 
     def _on_tip(self, msg: PointStamped) -> None:
-        self.received += 1
         tip = (msg.point.x, msg.point.y, msg.point.z)
         for check in (check_frame(msg.header.frame_id, self.frame_id),
                       check_vector(tip, self.max_tip_distance, "tip_target", "m")):
@@ -134,8 +154,14 @@ class AllocationNode(Node):
             result = allocate()
         except SoftcathError as exc:
             return self._reject(str(exc))
-        if not result.reachable or not result.converged:
+        if not result.reachable:
             return self._reject(result.message)
+        if not result.converged:
+            self.counters.model_failed += 1
+            self.counters.last_reason = result.message
+            self.get_logger().warning(result.message, throttle_duration_sec=1.0)
+            return
+        self.counters.accepted += 1
         self.last = result
         self.target = result.pressures
         self.watchdog.feed(time.monotonic())
@@ -171,68 +197,53 @@ class AllocationNode(Node):
             values = self.limiter.output
         else:
             values = check.pressures
-        self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
+        try:
+            self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
+        except RCLError:
+            if self.context.ok():
+                raise
+            return  # SIGINT/SIGTERM shut the context down while this callback ran: nothing to do
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
-        level, words = DiagnosticStatus.OK, []
-        if self.vented:
-            level = DiagnosticStatus.WARN
-            words.append("vented: no command within the timeout" if self.received else "waiting for commands")
-        if self.last is not None and self.last.saturated and not self.vented:
-            level = DiagnosticStatus.WARN
-            words.append("saturated: request beyond the reachable set")
-        if self.rejected:
-            words.append(f"{self.rejected} command(s) rejected")
-            level = max(level, DiagnosticStatus.WARN)
+        """Output state: WARN while vented (after commands stopped) or saturated."""
         last = self.last
+        if self.vented:
+            level = DiagnosticStatus.WARN if self.counters.accepted else DiagnosticStatus.OK
+            message = "vented: no command within the timeout" if self.counters.accepted else "waiting for commands"
+        elif last is not None and last.saturated:
+            level, message = DiagnosticStatus.WARN, "saturated: request beyond the reachable set"
+        else:
+            level, message = DiagnosticStatus.OK, "tracking commands"
         values = {
-            "design": self.design.name, "model": self.allocator.model.name,
-            "max_pressure_pa": f"{self.max_pressure:g}",
             "watchdog": "vented" if self.vented else "ok",
-            "commands_received": str(self.received), "commands_rejected": str(self.rejected),
-            "last_rejection": self.last_rejection,
-            "saturated": str(bool(last is not None and last.saturated)).lower(),
+            "saturated": str(bool(last is not None and last.saturated and not self.vented)).lower(),
             "active_channels": "" if last is None else ",".join(map(str, last.active_channels)),
             "target_pa": ",".join(f"{v:.1f}" for v in self.target),
             "output_pa": ",".join(f"{v:.1f}" for v in self.limiter.output),
+            "max_pressure_pa": f"{self.max_pressure:g}",
             "messages_published": str(self.published),
         }
-        status = DiagnosticStatus(level=level, name=f"{NODE_NAME}: allocation", hardware_id=self.design.name,
-                                  message="; ".join(words) or "ok",
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        status = DiagnosticStatus(level=level, name=f"{NODE_NAME}: output", hardware_id=self.design.name,
+                                  message=message, values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.diag_pub.publish(msg)
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    # The executor exists before the (slower) node set-up, so a SIGTERM during set-up does not
-    # leave rclpy half-building one (its __del__ then prints spurious tracebacks).
-    # (rclpy 9.1's experimental EventsExecutor was tried: it ignored SIGTERM here.)
-    executor = SingleThreadedExecutor()
-    node = None
     try:
-        node = AllocationNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SoftcathError, ValueError) as exc:  # bad parameters: one line, non-zero exit
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        return 2
-    except Exception:  # noqa: BLE001
-        # SIGTERM shuts the context down under the executor, which may then fail to build its
-        # wait set: that is the requested shutdown, not a fault. Anything else is re-raised.
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        return run_node(AllocationNode, args, startup_errors=(SoftcathError, ValueError, ParameterException))
+    except RCLError as exc:
+        # A signal can shut the context down between the spin loop's ok() check and the
+        # executor's next wait: rcl then reports the context invalid. That is the requested
+        # shutdown, not a fault (anything else is re-raised).
+        if "context" in str(exc) and ("not valid" in str(exc) or "invalid" in str(exc)):
+            return 0
+        raise
 
 
 if __name__ == "__main__":
+    import sys
+
     sys.exit(main())
