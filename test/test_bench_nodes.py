@@ -155,3 +155,20 @@ def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, proc
     assert bench.returncode == 4, out
     assert "softcath_allocation also publish(es) /softcath/pressure_cmd" in out
     assert (tmp_path / "fight" / "fight_0.mcap").is_file()  # the recording is still finalised
+
+
+def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, procs):
+    """The main job on the quick protocol: sim_bench_node, model_node, bench_node as processes."""
+    env = _env()
+    run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path),
+                         "--json"], env)
+    out, _ = run.communicate(timeout=150)
+    assert run.returncode == 0, out
+    result = json.loads(out[out.index("{"):])
+    assert result["dropped"] == 0 and Path(result["report"]).is_file()
+    with open(result["recording"], "rb") as f:
+        summary = make_reader(f).get_summary()
+    counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+    assert counts["/softcath/tip_pose"] > 50 and counts["/softcath/backbone"] > 50
+    assert counts["/softcath/pressure_cmd"] > 50 and "/softcath/bend_cmd" not in counts  # no allocation_node
+    assert "## Hysteresis" in Path(result["report"]).read_text()
