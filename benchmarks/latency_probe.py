@@ -49,7 +49,7 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=1000.0, help="commands per second")
     ap.add_argument("--duration", type=float, default=10.0, help="measured seconds")
     ap.add_argument("--warmup", type=float, default=1.0, help="seconds sent before measuring")
-    ap.add_argument("--qos-depth", type=int, default=100)
+    ap.add_argument("--qos-depth", type=int, default=1000)
     ap.add_argument("--reliability", default="reliable")
     ap.add_argument("--node-pid", type=int, required=True)
     ap.add_argument("--out", required=True, help="summary JSON path")

@@ -37,18 +37,20 @@ REPO = HERE.parent
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {
-    "default": ("events executor, preallocated CDR bytes, reliable depth 100, 20 points", {}),
+    "default": ("events executor, preallocated CDR bytes, reliable keep-last 1000, 20 points", {}),
     "single": ("SingleThreadedExecutor", {"executor": "single"}),
     "multi": ("MultiThreadedExecutor", {"executor": "multi"}),
     "reuse_msgs": ("preallocated message objects filled in place", {"message_preparation": "reuse"}),
     "fresh_msgs": ("new message objects built per command", {"message_preparation": "fresh"}),
     "depth10": ("reliable, keep-last 10", {"qos_depth": 10}),
-    "best_effort": ("best-effort, keep-last 100", {"reliability": "best_effort"}),
+    "depth100": ("reliable, keep-last 100", {"qos_depth": 100}),
+    "best_effort": ("best-effort, keep-last 1000", {"reliability": "best_effort"}),
     "points100": ("100 backbone points", {"backbone_points": 100}),
-    "depth1000": ("reliable, keep-last 1000", {"qos_depth": 1000}),
     "rt": ("SCHED_FIFO 50 for node and probe threads", {"realtime_priority": 50}),
     "rt_single": ("SCHED_FIFO 50, SingleThreadedExecutor", {"realtime_priority": 50, "executor": "single"}),
-    "rt_depth1000": ("SCHED_FIFO 50, keep-last 1000", {"realtime_priority": 50, "qos_depth": 1000}),
+    "rt_multi": ("SCHED_FIFO 50, MultiThreadedExecutor", {"realtime_priority": 50, "executor": "multi"}),
+    "rt_fresh_msgs": ("SCHED_FIFO 50, new message objects per command",
+                      {"realtime_priority": 50, "message_preparation": "fresh"}),
 }
 
 
@@ -61,13 +63,14 @@ def node_command(params: dict) -> list[str]:
 
 def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    load = os.getloadavg()[0]
     node = subprocess.Popen(node_command(params), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
     out = workdir / f"{name}-{domain}.json"
     try:
         probe = [sys.executable, str(HERE / "latency_probe.py"), "--node-pid", str(node.pid), "--out", str(out),
                  "--rate", str(args.rate), "--duration", str(args.duration), "--warmup", str(args.warmup),
-                 "--qos-depth", str(params.get("qos_depth", 100)),
+                 "--qos-depth", str(params.get("qos_depth", 1000)),
                  "--reliability", params.get("reliability", "reliable"),
                  "--realtime-priority", str(params.get("realtime_priority", 0))]
         subprocess.run(probe, env=env, check=True, timeout=args.duration + args.warmup + 60)
@@ -81,7 +84,7 @@ def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
             node_rc = "killed"
     result = json.loads(out.read_text())
     lat = np.load(out.with_suffix(".npz"))
-    result.update(config=name, node_exit_code=node_rc, node_stderr_tail=node.stderr.read()[-500:],
+    result.update(config=name, loadavg_1min_at_start=load, node_exit_code=node_rc, node_stderr_tail=node.stderr.read()[-500:],
                   _node_ms=lat["node_ms"], _e2e_ms=lat["e2e_ms"])
     return result
 
@@ -104,6 +107,7 @@ def median_row(name: str, runs: list[dict]) -> dict:
         "node_cpu_cores": med(lambda r: r["node_cpu_cores"]),
         "probe_cpu_cores": med(lambda r: r["probe_cpu_cores"]),
         "clean_exit": all(r["node_exit_code"] == 0 for r in runs),
+        "loadavg_1min": med(lambda r: r["loadavg_1min_at_start"]),
     }
 
 
@@ -114,12 +118,14 @@ def plot(rows: list[dict], runs: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
-    for row in rows:
+    colors = plt.get_cmap("tab20")(np.linspace(0, 1, 20))
+    for i, row in enumerate(rows):
         # The run whose p99 is the median one, so the curve is a typical run, not a best case.
         rs = sorted(runs[row["config"]], key=lambda r: r["node_latency"]["p99_ms"])
         r = rs[len(rs) // 2]
         x = np.sort(r["_node_ms"])
-        ax1.plot(x, np.arange(1, len(x) + 1) / len(x), label=row["config"])
+        ax1.plot(x, np.arange(1, len(x) + 1) / len(x), label=row["config"], color=colors[i % 20],
+                 ls="-" if row["config"].startswith("rt") else "--")
     ax1.axvline(2.0, color="k", ls="--", lw=0.8)
     ax1.set_xscale("log")
     ax1.set_xlabel("command received at node -> pose received by probe [ms]")
@@ -139,7 +145,8 @@ def plot(rows: list[dict], runs: dict, path: Path) -> None:
     ax3.set_ylabel("node CPU [cores]")
     ax2.legend(loc="upper left", fontsize=8)
     ax3.legend(loc="upper right", fontsize=8)
-    ax2.set_title("medians over repeats")
+    ax2.set_title(f"medians over repeats (1-min load average ~{np.median([r['loadavg_1min'] for r in rows]):.0f} "
+                  f"on {os.cpu_count()} cores)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

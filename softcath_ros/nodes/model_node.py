@@ -50,7 +50,9 @@ class ModelNode(Node):
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
         model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form")
         n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip (>= 2)")
-        depth = p("qos_depth", 100, "keep-last depth of the command subscription and pose publishers")
+        # 1000 = 1 s at 1 kHz: a reliable keep-last writer overwrites samples a late reader has
+        # not acknowledged yet, so a shallower history loses poses whenever the node lags.
+        depth = p("qos_depth", 1000, "keep-last depth of the command subscription and pose publishers")
         reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}")
         self.out_of_range = p("out_of_range", "reject",
                               f"finite pressures outside [0, max_pressure]: {' | '.join(POLICIES)}")
