@@ -251,6 +251,48 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     assert reaches(op, [20e3, 0.0, 0.0], mark)
 
 
+def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
+    """bend_cmd -> allocation_node -> pressure_cmd -> model_node -> tip_pose, all over DDS:
+    the tip bends in the commanded direction by the commanded amount, and after the command
+    stream stops the watchdog vents and the tip returns to straight."""
+    from geometry_msgs.msg import PoseStamped
+
+    from softcath_ros.core.kinematics import curvature_for_tip, tip_pose
+
+    design = load_design("three_channel_5mm")
+    domain = next(DOMAINS)
+    alloc = start_node(EXE, domain, "command_timeout:=0.4", "max_pressure_rate:=1.0e6")
+    model = start_node(EXE.parent / "model_node", domain, "design:=three_channel_5mm")
+    op = Operator(domain)
+    tips = []
+    op.node.create_subscription(PoseStamped, "/softcath/tip_pose",
+                                lambda m: tips.append((m.pose.position.x, m.pose.position.y, m.pose.position.z)), 50)
+    try:
+        assert op.spin(30.0, until=lambda: len(tips) > 3), "no tip_pose from model_node"
+        model_cf = make_model("closed_form", design)
+        for deg in (0.0, 100.0, 215.0, 300.0):
+            phi = math.radians(deg)
+            k = 6.0 * np.array([math.cos(phi), math.sin(phi)])
+            state = model_cf.evaluate(allocator.allocate(k).pressures)
+            expected, _ = tip_pose(state.curvature, design.length * state.axial_stretch)
+            mark = len(tips)
+            op.stream_bend(k, 0.3)
+            assert op.spin(5.0, until=lambda: any(np.allclose(t, expected, atol=1e-9) for t in tips[mark:])), \
+                (deg, tips[-1], expected)
+            got = next(t for t in tips[mark:] if np.allclose(t, expected, atol=1e-9))
+            # The pose that came back over DDS bends the commanded way: direction within 0.5 deg
+            # and curvature within 1% (the arc through the received tip, constant curvature).
+            k_back = curvature_for_tip(np.array(got), design.length).curvature
+            assert abs(math.degrees(math.remainder(math.atan2(got[1], got[0]) - phi, 2 * math.pi))) < 0.5
+            assert np.hypot(*k_back) == pytest.approx(6.0, rel=0.01)
+        # Stream stops: vent, the tip goes back to straight.
+        assert op.spin(5.0, until=lambda: np.allclose(tips[-1], [0.0, 0.0, design.length], atol=1e-12)), tips[-1]
+    finally:
+        op.close()
+        stop(alloc)
+        stop(model)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_exit_on_signal(sig):
     proc = start_node(EXE, next(DOMAINS))
