@@ -113,6 +113,7 @@ def main(argv=None) -> int:
             self.t_ready: float | None = None
             self.t_end: float | None = None
             self.result = 0
+            self.error: str | None = None
             self.create_timer(1.0 / float(gp("rate_hz")), self.tick)
             self.create_timer(1.0, self.diagnostics)
             self.get_logger().info(f"protocol {self.protocol.name}: {len(self.steps)} steps on design "
@@ -162,6 +163,7 @@ def main(argv=None) -> int:
 
         def fail(self, message: str, code: int) -> None:
             self.get_logger().error(message)
+            self.error = message
             self.result = code
             self.state = "done"
 
@@ -244,10 +246,11 @@ def main(argv=None) -> int:
         def finalise(self) -> dict:
             self.writer.close()
             return {"recording": str(self.writer.path), "messages": self.writer.message_count,
-                    "dropped": self.recorder.dropped, "lost_in_middleware": self.recorder.lost,
+                    "dropped": self.recorder.dropped,
+                    "lost_in_middleware": self.recorder.lost if self.recorder.counts_middleware_loss else None,
                     "write_failures": self.recorder.write_failures,
                     "per_topic": {k: v.message_count for k, v in self.writer.topics.items()},
-                    "not_seen": list(self.recorder.pending), "state": self.state,
+                    "not_seen": list(self.recorder.pending), "state": self.state, "error": self.error,
                     "unsettled_steps": [k for k, ok in enumerate(self.runner.settled_flags) if not ok]}
 
     rclpy.init(args=argv if argv is not None else sys.argv)
