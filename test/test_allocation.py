@@ -310,15 +310,39 @@ def test_bad_requests_raise(three):
 # ---------------------------------------------------------------------------- every registered rung
 
 
-def test_three_channel_design_runs_on_every_rung(three):
-    """Loads and evaluates on each rung of the ladder; the allocator's channel directions follow
-    the 120 degree symmetry on each (cheap checks only: the round trip per rung is below)."""
+def test_three_channel_design_loads_on_every_rung(three):
+    """Every rung of the ladder accepts the design (construction validates it against the rung)."""
     from softcath_ros.core.models import available_models
 
     for name in available_models():
-        model = make_model(name, three)
-        state = model.evaluate(np.array([0.3, 0.0, 0.0]) * three.max_pressure)
-        assert state.converged and state.curvature[1] < 0 and abs(state.curvature[0]) < 1e-6 * abs(state.curvature[1])
+        assert make_model(name, three).n_channels == 3
+
+
+@pytest.mark.slow
+def test_round_trip_section_rung(three):
+    """The Newton path on the real non-linear rung (section FE, seconds per evaluation): a few
+    requests across sectors, on and between channel directions, plus one saturation. The rung
+    does not converge beyond about 0.44 bar with two channels on this design, so the allocator
+    is given a 30 kPa limit inside the rung's range (and says so when asked for more)."""
+    model = make_model("section", three)
+    with pytest.raises(Exception, match="lower max_pressure"):
+        Allocator(model)  # 0.5 bar on one channel is beyond the rung's convergence: said, not guessed
+    allocator = Allocator(model, max_pressure=30e3)
+    assert np.degrees(allocator.channel_directions) == pytest.approx([270, 30, 150], abs=0.1)
+    k1 = allocator.channel_max_curvature.min()
+    for deg, f in ((45.0, 0.2), (270.0, 0.5), (200.0, 0.7)):
+        phi = math.radians(deg)
+        k = f * k1 * np.array([math.cos(phi), math.sin(phi)])
+        res = allocator.allocate(k)
+        assert res.converged and res.reachable and not res.saturated, res.message
+        assert np.count_nonzero(res.pressures) <= 2 and res.pressures.max() <= 30e3
+        back = model.evaluate(res.pressures).curvature
+        assert abs(math.degrees(math.remainder(math.atan2(back[1], back[0]) - phi, 2 * math.pi))) <= DIRECTION_TOL_DEG
+        assert np.hypot(*back) == pytest.approx(np.hypot(*k), rel=MAGNITUDE_RTOL)
+    sat = allocator.allocate([0.0, 100.0])
+    assert sat.saturated and sat.pressures.max() == pytest.approx(30e3)
+    back = model.evaluate(sat.pressures).curvature
+    assert abs(math.degrees(math.atan2(back[1], back[0])) - 90.0) <= DIRECTION_TOL_DEG
 
 
 # ---------------------------------------------------------------------------- command line

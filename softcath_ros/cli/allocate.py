@@ -27,6 +27,8 @@ def register(sub) -> None:
                         help="bending direction, degrees from +x towards +y (use with --angle)")
     target.add_argument("--tip", metavar="X,Y,Z", help="desired tip position in softcath_base, m")
     p.add_argument("--angle", type=float, metavar="DEG", help="bending angle, degrees (with --direction)")
+    p.add_argument("--max-pressure", type=float, default=None, metavar="PA",
+                   help="lower the design's max_pressure (Pa), e.g. to stay where a rung converges")
     p.add_argument("--reachable-set", type=int, default=0, metavar="N",
                    help="also report the maximum curvature on N equally spaced directions")
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -50,7 +52,7 @@ def run(args) -> int:
     if (args.direction is None) != (args.angle is None):
         raise SoftcathError("--direction and --angle go together")
     design = load_design(args.design)
-    allocator = Allocator(make_model(args.model, design))
+    allocator = Allocator(make_model(args.model, design), max_pressure=args.max_pressure)
     if args.curvature is not None:
         k = _floats(args.curvature, 2, "--curvature")
         result = allocator.allocate(k)
@@ -66,7 +68,7 @@ def run(args) -> int:
         result = allocator.allocate_bend(direction, math.radians(args.angle))
     if not math.isfinite(result.max_curvature) and result.reachable:
         result.max_curvature = allocator.max_curvature(direction)
-    out = {"model": allocator.model.name, "design": design.name, "max_pressure_pa": design.max_pressure,
+    out = {"model": allocator.model.name, "design": design.name, "max_pressure_pa": allocator.max_pressure,
            **result.to_json(),
            "max_bending_angle_rad": result.max_curvature * design.length * result.axial_stretch}
     if args.reachable_set > 0:
