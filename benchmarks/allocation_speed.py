@@ -11,7 +11,7 @@ takes, so its overhead is visible apart from the rung's own cost), and any furth
 rungs named with --model (they take the Newton path with their real cost).
 
     .venv/bin/python benchmarks/allocation_speed.py [--design three_channel_5mm] [--calls 20000]
-        [--model section ...]
+        [--model section --rung-calls 8 --rung-max-pressure 30000]   (the committed results)
 
 Writes benchmarks/results/allocation_speed.{json,csv,png}.
 """
@@ -69,6 +69,9 @@ def main() -> None:
     ap.add_argument("--design", default="three_channel_5mm")
     ap.add_argument("--calls", type=int, default=20000, help="calls per fast case (slower cases use fewer)")
     ap.add_argument("--model", nargs="*", default=[], help="further rungs to time on the Newton path")
+    ap.add_argument("--rung-calls", type=int, default=10, help="calls per further rung")
+    ap.add_argument("--rung-max-pressure", type=float, default=None,
+                    help="Pa: allocator limit for the further rungs (inside their convergence range)")
     args = ap.parse_args()
 
     design = load_design(args.design)
@@ -110,10 +113,13 @@ def main() -> None:
             generic.allocate, requests_for(fast, m // 4, rng, True), "newton saturated"))
 
         for name in args.model:
-            alloc = Allocator(make_model(name, design))
-            k = max(m // 20, 20)
+            alloc = Allocator(make_model(name, design), max_pressure=args.rung_max_pressure)
+            # Requests inside the smallest single-channel reach: no boundary solves just to pick them.
+            kmin = float(alloc.channel_max_curvature.min())
+            reqs = [rng.uniform(0.05, 0.8) * kmin * np.array([math.cos(a), math.sin(a)])
+                    for a in rng.uniform(0, 2 * math.pi, args.rung_calls)]
             record("allocate (inside reach)", name, "linear" if alloc.linear else "newton",
-                   time_calls(alloc.allocate, requests_for(alloc, k, rng, False), name))
+                   time_calls(alloc.allocate, reqs, name))
     except KeyboardInterrupt:
         print("interrupted: writing the cases timed so far")
 
