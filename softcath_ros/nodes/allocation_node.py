@@ -232,15 +232,7 @@ class AllocationNode(Node):
 
 
 def main(args=None) -> int:
-    try:
-        return run_node(AllocationNode, args, startup_errors=(SoftcathError, ValueError, ParameterException))
-    except RCLError as exc:
-        # A signal can shut the context down between the spin loop's ok() check and the
-        # executor's next wait: rcl then reports the context invalid. That is the requested
-        # shutdown, not a fault (anything else is re-raised).
-        if "context" in str(exc) and ("not valid" in str(exc) or "invalid" in str(exc)):
-            return 0
-        raise
+    return run_node(AllocationNode, args, startup_errors=(SoftcathError, ValueError, ParameterException))
 
 
 if __name__ == "__main__":

@@ -74,6 +74,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
     rclpy.init(args=args)
     node = None
@@ -94,6 +95,12 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
         spin(executor, name)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        # A signal can shut the context down between the loop's ok() check and the
+        # executor's next wait; rcl then reports an invalid context. That is the requested
+        # shutdown, not a fault: only re-raise while the context is still up.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
