@@ -21,8 +21,9 @@ writer's overhead against a bare mcap writer.
 
 The machine has 2 cores shared with other jobs: the load average before each run is recorded.
 
-Run:  .venv/bin/python benchmarks/recorder_throughput.py [--quick] [--repeats N] [--publishers P]
-Writes benchmarks/results/recorder_throughput.{json,csv} and recorder_throughput.png.
+Run:  .venv/bin/python benchmarks/recorder_throughput.py [--quick] [--repeats N] [--publishers P] [--nice -10]
+Writes benchmarks/results/recorder_throughput.{json,csv} and recorder_throughput.png (with --nice:
+recorder_throughput_nice<N>.*).
 """
 from __future__ import annotations
 
@@ -148,17 +149,18 @@ RECORDER = textwrap.dedent("""
 """)
 
 
-def from_dds(n: int, rate: float, config: str, publishers: int, domain: int) -> dict:
+def from_dds(n: int, rate: float, config: str, publishers: int, domain: int, nice: int = 0) -> dict:
     from mcap.reader import make_reader
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     load = os.getloadavg()[0]
     shares = [n // publishers + (1 if k < n % publishers else 0) for k in range(publishers)]
     with tempfile.TemporaryDirectory() as d:
+        pre = (lambda: os.nice(nice)) if nice else None  # every thread (DDS ones too) inherits it
         rec = subprocess.Popen([sys.executable, "-c", RECORDER, str(n), str(Path(d) / "bag"), config], env=env,
-                               stdout=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, text=True, preexec_fn=pre)
         pubs = [subprocess.Popen([sys.executable, "-c", PUBLISHER, str(s), str(rate / publishers)], env=env,
-                                 stdout=subprocess.PIPE, text=True) for s in shares]
+                                 stdout=subprocess.PIPE, text=True, preexec_fn=pre) for s in shares]
         try:
             pub_out = [json.loads(p.communicate(timeout=240)[0].splitlines()[0]) for p in pubs]
             rec_out = json.loads(rec.communicate(timeout=150)[0].splitlines()[-1])
@@ -178,7 +180,8 @@ def from_dds(n: int, rate: float, config: str, publishers: int, domain: int) -> 
             "in_file": in_file, "publish_failed": failed, "lost": sent - in_file, "loss_fraction": (sent - in_file) / sent,
             "middleware_lost_events": rec_out["lost_events"], "write_failures": rec_out["write_failures"],
             "recorder_cpu_us_per_msg": rec_out["cpu"] / max(in_file, 1) * 1e6,
-            "publisher_cpu_us_per_msg": sum(p["cpu"] for p in pub_out) / sent * 1e6, "load_avg_1min": load}
+            "publisher_cpu_us_per_msg": sum(p["cpu"] for p in pub_out) / sent * 1e6, "load_avg_1min": load,
+            "nice": nice}
 
 
 def median_row(rows: list[dict]) -> dict:
@@ -202,6 +205,9 @@ def main() -> int:
     ap.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=CONFIGS)
     ap.add_argument("--rates", nargs="+", type=float, default=None)
     ap.add_argument("--seconds", type=float, default=None, help="publishing time per run")
+    ap.add_argument("--nice", type=int, default=0,
+                    help="run publishers and recorder at this nice value (e.g. -10: a larger CPU share on a "
+                         "shared machine); results then go to recorder_throughput_nice*")
     ap.add_argument("--max-rate-single", type=float, default=20000.0,
                     help="highest rate tried on single_sync (it is saturated well below; runs above are slow)")
     args = ap.parse_args()
@@ -220,7 +226,7 @@ def main() -> int:
     for config, rate in plan:
         runs = []
         for _ in range(args.repeats):
-            runs.append(from_dds(int(rate * seconds), rate, config, args.publishers, domain))
+            runs.append(from_dds(int(rate * seconds), rate, config, args.publishers, domain, args.nice))
             domain = 150 + (domain - 149) % 20
             if bar:
                 bar.update()
@@ -232,10 +238,12 @@ def main() -> int:
         bar.close()
     keys = list(dict.fromkeys(k for r in rows for k in r))
     rows = [{k: r.get(k, "") for k in keys} for r in rows]
-    write_results("recorder_throughput", {
+    name = "recorder_throughput" + (f"_nice{args.nice}" if args.nice else "")
+    write_results(name, {
         "note": "2 cores shared with other engineers' jobs (numbers under load; see load_avg_1min per row); "
                 "from_dds rows are medians over repeats",
-        "quick": args.quick, "repeats": args.repeats, "publishers": args.publishers, "seconds_per_run": seconds},
+        "quick": args.quick, "repeats": args.repeats, "publishers": args.publishers, "seconds_per_run": seconds,
+        "nice": args.nice},
         rows)
     import matplotlib
     matplotlib.use("Agg")
@@ -255,9 +263,10 @@ def main() -> int:
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle("recorder: Float64 from DDS into MCAP (2 shared cores, under load)")
+    fig.suptitle("recorder: Float64 from DDS into MCAP (2 shared cores, under load"
+                 + (f", processes at nice {args.nice})" if args.nice else ")"))
     fig.tight_layout()
-    fig.savefig(RESULTS / "recorder_throughput.png", dpi=110)
+    fig.savefig(RESULTS / f"{name}.png", dpi=110)
     return 0
 
 
