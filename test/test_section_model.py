@@ -177,7 +177,9 @@ def test_sweep_reports_the_lumen_closing_instead_of_numbers(implemented_design):
     assert not ok[-1]                                      # 0.35 bar: the lumen has closed
     assert np.all(np.diff(ok.astype(int)) <= 0)            # one boundary, nothing after it
     assert np.isnan(state.curvature[~ok]).all() and np.isfinite(state.curvature[ok]).all()
+    # it stops where the lumen closes (walls touching, or Newton failing just before)
     assert "did not converge at p = " in state.message and "lumen" in state.message
+    assert ps[~ok][0, 0] > 0.25 * BAR
     last = state.extras["last_converged"][-1]
     assert ps[ok][-1, 0] <= last["pressure"][0] < ps[~ok][0, 0]
     # curvature grows monotonically along the converged part of the sweep

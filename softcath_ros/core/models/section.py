@@ -179,7 +179,12 @@ class SectionModel(BendModel):
         def corrector(guess, t, previous) -> Correction:
             corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                           max_iterations=self.settings.max_newton, linear=self.linear)
-            if corr.converged:
+            if not corr.converged:
+                # say how close the holes were to closing: failures cluster just before contact
+                gaps = self.problem.hole_gaps(previous)
+                i = int(np.argmin(gaps))
+                corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
+            else:
                 gaps = self.problem.hole_gaps(corr.state)
                 if gaps.min() < self.settings.min_hole_gap:
                     name = hole_names[int(np.argmin(gaps))]

@@ -33,6 +33,7 @@ class SectionMesh:
     outer_edges: np.ndarray      # (b, 3) quadratic edges on the outer circle: (start, mid, end)
     hole_edges: list[np.ndarray] = field(default_factory=list)  # per hole, (b, 3) counter-clockwise about the hole
     h: float = 0.0
+    symmetric: bool = False      # exactly mirror-symmetric about x = 0
 
     @property
     def n_nodes(self) -> int:
@@ -53,25 +54,78 @@ def _signed_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.nd
     return d
 
 
+def _mirror_partner(c: Circle, holes: list[Circle], tol: float) -> int | None:
+    """Index of the hole that is ``c`` mirrored in x = 0 (itself if centred on the axis)."""
+    for i, o in enumerate(holes):
+        if (abs(o.center[0] + c.center[0]) < tol and abs(o.center[1] - c.center[1]) < tol
+                and abs(o.radius - c.radius) < tol):
+            return i
+    return None
+
+
+def _axis_circle_points(c: Circle, h: float) -> np.ndarray:
+    """Counter-clockwise points on a circle centred on x = 0, exactly mirror-symmetric."""
+    n = 4 * max(4, int(math.ceil(2 * math.pi * c.radius / h / 4)))
+    pts = _circle_points(Circle((0.0, c.center[1]), c.radius), 2 * math.pi * c.radius / n, min_points=n)
+    k = np.arange(n // 4 + 1, 3 * n // 4)
+    pts[k, 0] = -pts[n // 2 - k, 0]
+    pts[k, 1] = pts[n // 2 - k, 1]
+    pts[[n // 4, 3 * n // 4], 0] = 0.0
+    return pts
+
+
 def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8) -> SectionMesh:
-    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m)."""
+    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m).
+
+    A geometry symmetric about x = 0 gets an exactly mirror-symmetric mesh, so a symmetric
+    design under symmetric load gives an exactly symmetric answer (no sideways bending)."""
     if h <= 0 or h > outer.radius:
         raise ModelError(f"section mesh size h = {h} m must lie in (0, outer radius {outer.radius} m]")
-    boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
-    n_boundary = sum(len(b) for b in boundary)
+    tol = 1e-9 * outer.radius
+    partners = [_mirror_partner(c, holes, tol) for c in holes]
+    symmetric = abs(outer.center[0]) < tol and all(p is not None for p in partners)
+    if symmetric:
+        boundary = [_axis_circle_points(outer, h)]
+        for i, c in enumerate(holes):
+            j = partners[i]
+            if j == i:
+                boundary.append(_axis_circle_points(c, h))
+            elif c.center[0] > 0:
+                boundary.append(_circle_points(c, h))
+            else:  # the mirror image of the partner's points, reversed to stay counter-clockwise
+                q = _circle_points(holes[j], h)
+                q[:, 0] = -q[:, 0]
+                boundary.append(np.concatenate([q[:1], q[:0:-1]]))
+        # points on the symmetry axis inside the silicone (its ends are circle points)
+        cuts = sorted([(c.center[1] - c.radius, c.center[1] + c.radius) for c in holes if abs(c.center[0]) < tol])
+        edges = [outer.center[1] - outer.radius] + [v for cut in cuts for v in cut] + [outer.center[1] + outer.radius]
+        axis = []
+        for a, b in zip(edges[0::2], edges[1::2]):
+            m = max(1, int(round((b - a) / h)))
+            axis += [(0.0, a + (b - a) * t / m) for t in range(1, m)]
+        boundary_pts = boundary + [np.array(axis).reshape(-1, 2)]
+    else:
+        boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
+        boundary_pts = boundary
+    n_boundary = sum(len(b) for b in boundary_pts)
     # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges.
     dy = h * math.sqrt(3) / 2
     ys = np.arange(-outer.radius, outer.radius + dy, dy)
     pts = []
     for j, y in enumerate(ys):
-        xs = np.arange(-outer.radius, outer.radius + h, h) + (0.5 * h if j % 2 else 0.0)
+        half = np.arange(0.0, outer.radius + h, h) + (0.5 * h if j % 2 else 0.0)
+        xs = np.concatenate([-half[::-1], half[1:] if half[0] == 0 else half])
         pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
     interior = np.concatenate(pts)
-    interior = interior[_signed_distance(interior, outer, holes) > 0.7 * h]
-    points = np.concatenate(boundary + [interior])
+    keep = _signed_distance(interior, outer, holes) > 0.7 * h
+    if symmetric:
+        keep &= np.abs(interior[:, 0]) > 0.7 * h
+    interior = interior[keep]
+    points = np.concatenate(boundary_pts + [interior])
+    mirror = _mirror_map(points, tol) if symmetric else None
 
     for _ in range(smoothing_rounds + 1):
-        tri = _triangulate(points, outer, holes)
+        tri = _triangulate(points, outer, holes, mirror)
         if _ == smoothing_rounds:
             break
         # Laplacian smoothing of interior nodes (boundary fixed), kept inside the domain.
@@ -86,16 +140,34 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         movable = np.arange(len(points)) >= n_boundary
         movable &= cnt > 0
         new[movable] = acc[movable] / cnt[movable, None]
+        if mirror is not None:  # keep the points exactly mirror-symmetric
+            new = 0.5 * (new + new[mirror] * np.array([-1.0, 1.0]))
         ok = _signed_distance(new, outer, holes) > 0.5 * h
         points = np.where((movable & ok)[:, None], new, points)
     _check_conforming(points, tri, boundary)
-    return _to_p2(points, tri, boundary, [outer] + list(holes), h)
+    mesh = _to_p2(points, tri, boundary, [outer] + list(holes), h)
+    mesh.symmetric = symmetric
+    return mesh
 
 
-def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
+def _mirror_map(points: np.ndarray, tol: float) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    d, idx = cKDTree(points).query(points * np.array([-1.0, 1.0]))
+    if np.max(d) > tol:
+        raise ModelError("section mesher: the mirror-symmetric point set is not symmetric (internal error)")
+    return idx
+
+
+def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], mirror=None) -> np.ndarray:
     tri = Delaunay(points).simplices
     centroids = points[tri].mean(axis=1)
     tri = tri[_signed_distance(centroids, outer, holes) > 0]
+    if mirror is not None:
+        # the right half and its mirror image (Delaunay may pick either diagonal of the
+        # lattice's cocircular quadrilaterals, so the full triangulation need not be symmetric)
+        right = tri[points[tri].mean(axis=1)[:, 0] > 0]
+        tri = np.concatenate([right, mirror[right]])
     # Counter-clockwise corners.
     p = points[tri]
     area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])

@@ -165,8 +165,10 @@ class SectionProblem:
         self._centroid = self._w_node @ X / area
         r2 = np.sum(self._w_node * np.sum((X - self._centroid) ** 2, 1))
         self._rot_weights = self._w_node / r2
-        a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1)))
-        b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0])))
+        # on a mirror-symmetric mesh both pins sit on the axis, so the gauge keeps the symmetry
+        off_axis = 0.0 if not mesh.symmetric else np.where(X[:, 0] == 0.0, 0.0, np.inf)
+        a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1) + off_axis))
+        b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0]) - off_axis))
         self.pinned = np.array([2 * a, 2 * a + 1, 2 * b])
         self._build_pattern()
 
