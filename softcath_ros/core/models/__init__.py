@@ -12,6 +12,7 @@ RUNGS: dict[str, str] = {
     "closed_form": "softcath_ros.core.models.closed_form:ClosedFormModel",
     "section": "softcath_ros.core.models.section:SectionModel",
     "fe3d": "softcath_ros.core.models.fe3d:Fe3dModel",
+    "surrogate": "softcath_ros.core.models.surrogate:SurrogateModel",
 }
 
 
