@@ -26,9 +26,9 @@ class MeshSettings:
     """Mesh size parameters, metres. ``section_h`` is the target edge length on the section,
     ``wall_h`` the edge length on hole boundaries, ``layer_h`` the prism height along z."""
 
-    section_h: float = 0.35e-3
-    wall_h: float = 0.2e-3
-    layer_h: float = 1.0e-3
+    section_h: float = 0.7e-3
+    wall_h: float = 0.45e-3
+    layer_h: float = 4.0e-3
     cap_layers: int = 2
 
     def scaled(self, factor: float) -> "MeshSettings":

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..continuation import Correction, StepControl, ramp
 from .measure import measure
-from .solver import Fe3dProblem, NewtonFailure
+from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
 
 PA_PER_BAR = 1.0e5
 
@@ -26,7 +26,7 @@ def describe_pressure(t: float) -> str:
 
 def default_step_control(adaptive: bool = True, step: float = 1000.0) -> StepControl:
     """Pa. The first step is small: Newton from the straight state overshoots on long bodies."""
-    return StepControl(initial_step=step, max_step=4000.0, min_step=20.0, grow=1.6, shrink=0.5,
+    return StepControl(initial_step=step, max_step=2000.0, min_step=20.0, grow=1.6, shrink=0.5,
                        target_iterations=5, adaptive=adaptive)
 
 
@@ -52,10 +52,12 @@ class Fe3dRamp:
 
 
 def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
-             tangent_predictor: bool = True, progress=None) -> Fe3dRamp:
+             tangent_predictor: bool = True, progress=None, corotational: bool = False) -> Fe3dRamp:
     """Ramp from the straight state through increasing ``checkpoints`` (Pa).
 
     ``progress``: an object with ``update(n)`` and ``set_postfix_str(s)`` (a tqdm bar).
+    ``corotational``: extrapolate in the bent frame (CorotationalPredictor) instead of along
+    the tangent; experimental (in trials it predicted no better than the tangent).
     """
     control = control or default_step_control()
     direction = np.asarray(direction, dtype=float)
@@ -76,9 +78,16 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
             return Correction(state=previous, converged=False, iterations=exc.iterations, message=exc.reason)
         return Correction(state=problem.get_state(), converged=True, iterations=its)
 
+    corot = CorotationalPredictor(problem) if tangent_predictor and corotational else None
+    curvature_at: dict[float, np.ndarray] = {}   # fitted curvature of accepted states, by load
+
     def predictor(t0, s0, t1, s1, t):
         if not tangent_predictor:
             return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
+        if corot is not None and t0 in curvature_at and t1 in curvature_at:
+            guess = corot.predict(t0, s0, curvature_at[t0], t1, s1, curvature_at[t1], t)
+            if guess is not None:
+                return guess
         problem.set_state(s1)
         try:
             return s1 + (t - t1) * problem.tangent()
@@ -86,10 +95,14 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
             return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
 
     def on_step(t, corr):
-        # The problem holds the accepted state: measure it when it is a checkpoint.
+        # The problem holds the accepted state: measure it (the predictor needs its curvature).
+        problem.set_state(corr.state)
+        m = measure(problem)
+        if m["arc_length_m"] > 0:
+            curvature_at[t] = m["bending_angle_rad"] / m["arc_length_m"] * m["bending_direction"]
         if any(abs(t - c) <= 1e-9 * max(1.0, c) for c in targets) and \
                 (not out.points or out.points[-1].load != t):
-            out.points.append(Fe3dPoint(load=t, pressures=t * direction, measured=measure(problem),
+            out.points.append(Fe3dPoint(load=t, pressures=t * direction, measured=m,
                                         iterations=corr.iterations,
                                         wall_time=time.perf_counter() - t_start))
         if progress is not None:

@@ -38,6 +38,8 @@ class NewtonSettings:
     rtol: float = 1e-8          # residual norm relative to the load's norm
     energy_tol: float = 1e-9    # |du . r| relative to c1 * volume (displacement error ~ sqrt of it)
     min_step: float = 1.0 / 64  # smallest line-search factor before the step is rejected
+    line_search: bool = False   # backtrack on the condensed energy (q reset to its optimum); experimental:
+                                # in trials it stalled where plain Newton converged
     threads: int = 2
 
 
@@ -89,10 +91,11 @@ class Fe3dProblem:
         self.volume_forms = []
         for i, _ in enumerate(design.channels):
             vol_i = self._volume_density(u)
-            a += ng.Variation(-self.load * self.direction[i] * self.mirror * vol_i * ng.ds(f"channel{i}"))
+            # The model's share of the volume (half of it in the half model, like every energy).
+            a += ng.Variation(-self.load * self.direction[i] * vol_i * ng.ds(f"channel{i}"))
             # The same volume alone: its value (Energy) and derivative (Apply) for the tangent.
             bv = ng.BilinearForm(fes, symmetric=True)
-            bv += ng.Variation(self.mirror * vol_i * ng.ds(f"channel{i}"))
+            bv += ng.Variation(vol_i * ng.ds(f"channel{i}"))
             self.volume_forms.append(bv)
 
         self.J = ng.Det(ng.Id(3) + ng.Grad(self.u))
@@ -179,7 +182,8 @@ class Fe3dProblem:
         self.q.Set(self.bulk_cf * (self.J - 1.0))
 
     def channel_volumes(self) -> np.ndarray:
-        return np.array([bv.Energy(self.gf.vec) for bv in self.volume_forms])
+        """Enclosed volume of each channel (whole body, mirrored in the half model), m^3."""
+        return self.mirror * np.array([bv.Energy(self.gf.vec) for bv in self.volume_forms])
 
     def min_jacobian_ok(self) -> bool:
         """No element inverted or degenerate: det F > 0 at every integration point tested."""
@@ -228,6 +232,9 @@ class Fe3dProblem:
         with ng.TaskManager():
             if not self.min_jacobian_ok():
                 raise NewtonFailure("the predictor inverted an element (det F <= 0)", 0)
+            if st.line_search:
+                self._update_pressure_field()
+                e0 = self.energy()
             for it in range(1, st.max_iterations + 1):
                 t_it = time.perf_counter()
                 self.a.Apply(self.gf.vec, self.res)
@@ -245,11 +252,21 @@ class Fe3dProblem:
                 while True:
                     self.gf.vec.data = base
                     self.gf.vec.data -= alpha * self.du
-                    if self.min_jacobian_ok():
+                    if st.line_search:
+                        # merit: the energy with q at its optimum for u (see module docstring)
+                        self._update_pressure_field()
+                        e = self.energy()
+                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
+                    else:
+                        ok = self.min_jacobian_ok()
+                    if ok:
                         break
                     alpha *= 0.5
                     if alpha < st.min_step:
-                        raise NewtonFailure("every Newton step length inverts an element (det F <= 0)", it)
+                        raise NewtonFailure("line search failed: every step length raises the energy or "
+                                            "inverts an element (det F <= 0)", it)
+                if st.line_search:
+                    e0 = e
                 self.iterations_total += 1
                 self.last_work = work
                 log.debug("load %.1f Pa it %d |du.r| %.3e alpha %g (%.2f s)", self.load.Get(), it, work,
@@ -258,3 +275,82 @@ class Fe3dProblem:
                     return it
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
                                 f"(last |du.r| = {work:.2e} J)", st.max_iterations)
+
+
+class CorotationalPredictor:
+    """Secant predictor in a bent frame: each state is split into an arc of constant
+    curvature (kappa along a bending direction) and a small displacement w relative to that
+    arc; kappa and w are extrapolated linearly and mapped back.
+
+    Why: the ordinary (tangent or secant) predictor extrapolates displacements linearly, so
+    a rotating section is pushed along its tangent and stretched by ~theta^2; with a bulk
+    modulus 8000x the shear modulus that spurious volume change is so expensive that Newton
+    overshoots. Extrapolating in the bent frame keeps rotations rotations.
+    """
+
+    def __init__(self, problem: Fe3dProblem):
+        ng = _ng()
+        self.p = problem
+        mesh = problem.mesh
+        self.wspace = ng.VectorH1(mesh, order=2)
+        self.w0 = ng.GridFunction(self.wspace)
+        self.w1 = ng.GridFunction(self.wspace)
+        self.fixed = ~np.array(list(problem.fes.FreeDofs(False)), dtype=bool)
+        self.nu = self.wspace.ndof
+
+    def _frame(self, direction):
+        d = np.asarray(direction, dtype=float)
+        return d, np.array([-d[1], d[0]])
+
+    def _to_straight(self, gf_target, kappa, direction):
+        """gf_target <- Phi^-1(X + u) - X for the problem's current u."""
+        ng = _ng()
+        d, e = self._frame(direction)
+        pos = ng.CF((ng.x, ng.y, ng.z)) + self.p.u
+        a_def = d[0] * pos[0] + d[1] * pos[1]
+        b = e[0] * pos[0] + e[1] * pos[1]
+        radius = 1.0 / kappa
+        r = ng.sqrt((radius - a_def) ** 2 + pos[2] ** 2)
+        a = radius - r
+        zs = ng.atan2(pos[2], radius - a_def) / kappa
+        xs = a * d[0] + b * e[0]
+        ys = a * d[1] + b * e[1]
+        gf_target.Set(ng.CF((xs - ng.x, ys - ng.y, zs - ng.z)))
+
+    def _from_straight(self, w, kappa, direction):
+        """The problem's u <- Phi(X + w) - X."""
+        ng = _ng()
+        d, e = self._frame(direction)
+        xs = ng.CF((ng.x, ng.y, ng.z)) + w
+        a = d[0] * xs[0] + d[1] * xs[1]
+        b = e[0] * xs[0] + e[1] * xs[1]
+        radius = 1.0 / kappa
+        ang = kappa * xs[2]
+        a_def = radius - (radius - a) * ng.cos(ang)
+        z_def = (radius - a) * ng.sin(ang)
+        px = a_def * d[0] + b * e[0]
+        py = a_def * d[1] + b * e[1]
+        self.p.u.Set(ng.CF((px - ng.x, py - ng.y, z_def - ng.z)))
+
+    def predict(self, t0, s0, k0, t1, s1, k1, t) -> np.ndarray | None:
+        """States s0, s1 at loads t0, t1 with fitted curvature vectors k0, k1 (1/m). None when
+        the bend is too small for a frame (the caller then uses the tangent)."""
+        k0, k1 = np.asarray(k0), np.asarray(k1)
+        f = (t - t1) / (t1 - t0)
+        k = k1 + f * (k1 - k0)
+        kap0, kap1, kap = (float(np.hypot(*v)) for v in (k0, k1, k))
+        if min(kap0, kap1, kap) < 1e-3:   # 1/m: practically straight
+            return None
+        ng = _ng()
+        with ng.TaskManager():
+            self.p.set_state(s0)
+            self._to_straight(self.w0, kap0, k0 / kap0)
+            self.p.set_state(s1)
+            self._to_straight(self.w1, kap1, k1 / kap1)
+            w = ng.GridFunction(self.wspace)
+            w.vec.data = (1.0 + f) * self.w1.vec - f * self.w0.vec
+            self.p.set_state(s1 + f * (s1 - s0))   # q (and anything else) by the plain secant
+            self._from_straight(w, kap, k / kap)
+            vec = self.p.gf.vec.FV().NumPy()
+            vec[self.fixed] = 0.0
+        return self.p.get_state()

@@ -1,0 +1,97 @@
+"""fe3d benchmark and validation runs: pressure sweeps through the 3D rung, timed, with peak memory.
+
+    .venv/bin/python benchmarks/fe3d_sweep.py                      # 0 -> 0.20 bar, 40 mm, default mesh
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_sweep_20mm
+    .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 0.7 --name fe3d_mesh_0.7
+    .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
+
+Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending angle,
+R_C = L/theta, curvature, stretch, channel volume/area, Newton iterations, wall time; the
+meta block holds the total time, peak RSS, DOF count, convergence and the failure message.
+Ctrl-C stops the sweep and writes what converged. Times are wall clock on a shared machine.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from results_io import write_results  # noqa: E402
+
+from softcath_ros.core.design import load_design  # noqa: E402
+from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
+from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+
+PUBLISHED_40MM = {15000.0: 31.13e-3, 20000.0: 16.86e-3}   # actuator.md: R_C of the published FE
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--design", default="implemented_5mm")
+    ap.add_argument("--length", type=float, default=0.040, help="m")
+    ap.add_argument("--to", type=float, default=0.20, help="bar")
+    ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
+    ap.add_argument("--mesh-size", type=float, default=1.0, help="scale of the default mesh (smaller = finer)")
+    ap.add_argument("--fixed-steps", type=float, default=None,
+                    help="step control off: plain load steps of this size (bar), no cutting, no predictor")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--name", default="fe3d_sweep")
+    args = ap.parse_args(argv)
+
+    design = load_design(args.design).with_length(args.length)
+    checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * 1e5
+    control = None
+    if args.fixed_steps is not None:
+        control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * 1e5)
+    model = Fe3dModel(design, mesh_size=args.mesh_size, step_control=control, cache=False, progress=True,
+                      tangent_predictor=args.fixed_steps is None, threads=args.threads)
+    t0 = time.perf_counter()
+    ndof = model.problem.fes.ndof
+    t_setup = time.perf_counter() - t0
+    state, ramp = model.sweep(checkpoints[:, None])
+    total = time.perf_counter() - t0
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rows = []
+    for i, p in enumerate(checkpoints):
+        ok = bool(state.converged[i])
+        ex = {k: v[i] for k, v in state.extras.items()}
+        rc = ex["radius_l_over_theta_m"] if ok else None
+        pub = PUBLISHED_40MM.get(float(p)) if abs(args.length - 0.040) < 1e-9 else None
+        rows.append({
+            "pressure_bar": float(p) / 1e5, "converged": ok,
+            "bending_angle_deg": float(np.degrees(ex["bending_angle_rad"])) if ok else None,
+            "radius_l_over_theta_mm": (rc * 1e3 if rc is not None and np.isfinite(rc) else None),
+            "published_radius_mm": pub * 1e3 if pub else None,
+            "error_vs_published": ((rc - pub) / pub if (pub and rc) else None),
+            "curvature_y_per_m": float(state.curvature[i, 1]) if ok else None,
+            "axial_stretch": float(state.axial_stretch[i]) if ok else None,
+            "channel_volume_mm3": (ex["channel_volume_m3"][0] * 1e9 if ok and ex["channel_volume_m3"] else None),
+            "channel_area_mm2": (ex["channel_area_m2"][0] * 1e6 if ok and ex["channel_area_m2"] else None),
+            "newton_iterations": ex["newton_iterations"] if ok else None,
+            "time_s": ex["time_s"] if ok else None})
+    meta = {"design": design.name, "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
+            "mesh_size": args.mesh_size, "ndof": ndof, "half_model": model.half,
+            "step_control": "fixed" if args.fixed_steps else "adaptive",
+            "step_settings": dataclasses.asdict(model.step_control), "threads": args.threads,
+            "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
+            "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
+            "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,
+            "newton_iterations_total": ramp.iterations if ramp else 0,
+            "note": "wall clock on a 2-core machine shared with other jobs (load average in meta)"}
+    path = write_results(args.name, meta, rows)
+    print(f"{args.name}: {total:.1f} s, peak {peak_mb:.0f} MB, {ndof} DOF, converged={meta['converged']} "
+          f"{meta['message']}")
+    for r in rows:
+        print(r)
+    print(f"wrote {path}.json/.csv")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
