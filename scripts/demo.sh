@@ -7,7 +7,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh ros
-# Own DDS domain on loopback, so the demo neither sees nor disturbs other ROS graphs.
+# DDS on loopback; unless ROS_DOMAIN_ID is set, characterise picks a domain no other graph uses.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 50) + 50 ))}"
 exec .venv/bin/softcath characterise "$@"

@@ -173,3 +173,17 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     assert counts["/softcath/tip_pose"] > 50 and counts["/softcath/backbone"] > 50
     assert counts["/softcath/pressure_cmd"] > 50 and "/softcath/bend_cmd" not in counts  # no allocation_node
     assert "## Hysteresis" in Path(result["report"]).read_text()
+
+
+def test_characterise_avoids_a_domain_another_graph_uses(procs, monkeypatch):
+    from softcath_ros.cli import characterise
+
+    busy, free = 189, 188  # this file's range
+    env = dict(_env(), ROS_DOMAIN_ID=str(busy))
+    sim = _start(procs, ["sim_bench_node"], env)
+    assert "simulated bench" in sim.stdout.readline()  # its node is up
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    candidates = iter([busy, free])
+    monkeypatch.setattr(characterise.random, "randint", lambda a, b: next(candidates))
+    assert characterise._free_domain(listen_s=1.5) == free

@@ -48,6 +48,27 @@ def _command(name: str) -> list[str] | None:
     return [str(script)] if script.exists() else [sys.executable, "-m", f"softcath_ros.nodes.{name}"]
 
 
+def _free_domain(listen_s: float = 1.0, tries: int = 5) -> int:
+    """A ROS domain in 120..230 where no other participant shows up within ``listen_s``: another
+    graph on the same domain (a test, another run) could publish on our topics and spoil the data."""
+    import rclpy
+
+    for _ in range(tries):
+        domain = random.randint(120, 230)
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        try:
+            node = rclpy.create_node("softcath_characterise_probe", context=context)
+            time.sleep(listen_s)
+            busy = [n for n in node.get_node_names() if n != "softcath_characterise_probe"]
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)
+        if not busy:
+            return domain
+    return domain  # all busy (unlikely): bench_node still refuses foreign pressure_cmd publishers
+
+
 def _stop(proc: subprocess.Popen, timeout: float = 5.0) -> None:
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
@@ -68,8 +89,10 @@ def run(args) -> int:
     out_dir = Path(args.output_dir).resolve()
     name = f"bench_{protocol.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
     env = dict(os.environ)
-    env.setdefault("ROS_DOMAIN_ID", str(random.randint(120, 230)))  # a private domain unless told
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if "ROS_DOMAIN_ID" not in env:  # a private domain unless told
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = env["ROS_AUTOMATIC_DISCOVERY_RANGE"]
+        env["ROS_DOMAIN_ID"] = str(_free_domain())
     env["PYTHONUNBUFFERED"] = "1"
     design_arg = design.source or design.name
     helpers = [("sim_bench_node", ["-p", f"design:={design_arg}", "-p", f"model:={args.sim_model}"]),
