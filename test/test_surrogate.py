@@ -56,12 +56,14 @@ def test_table_cached_by_design_content(one_channel, tmp_path):
     assert other.path != m.path and other.meta["design_hash"] == softer.content_hash()
 
 
-def test_three_channel_rotation_matches_linear_source_exactly(tmp_path):
+@pytest.mark.parametrize("pairs", ["rotated", "each"])
+def test_three_channel_pairs_match_linear_source_exactly(tmp_path, pairs):
     """With the closed form as source (linear, so the table is exact), the rotated pair table must
     give the closed form's answer on every pair and, because a common pressure only stretches a
     linear symmetric body, for commands with all three channels pressurised too."""
     d = load_design("three_channel_5mm")
-    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9)
+    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9, pairs=pairs)
+    assert m.table["table"].shape[0] == (1 if pairs == "rotated" else 3)
     cf = make_model("closed_form", d)
     rng = np.random.default_rng(3)
     p = rng.uniform(0, d.max_pressure, (300, 3))
@@ -92,12 +94,12 @@ def test_three_channel_within_half_percent_of_section_and_refuses_common_pressur
     assert not st.converged and "all three pressures > 0" in st.message
 
 
-def test_non_symmetric_multichannel_design_is_refused(tmp_path):
+def test_rotated_pairs_refuse_a_non_symmetric_design(tmp_path):
     d = load_design("three_channel_5mm")
     ch = list(d.channels)
     ch[0] = replace(ch[0], center=(0.0002, ch[0].center[1]))
     with pytest.raises(Exception, match="3-fold symmetric"):
-        make_model("surrogate", replace(d, channels=tuple(ch)), cache=tmp_path)
+        make_model("surrogate", replace(d, channels=tuple(ch)), cache=tmp_path, pairs="rotated")
 
 
 def test_predict_cli_with_surrogate(one_channel):

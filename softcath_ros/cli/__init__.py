@@ -19,6 +19,7 @@ SUBCOMMANDS = [
     "predict",
     "allocate",
     "sweep",
+    "chart",
 ]
 
 

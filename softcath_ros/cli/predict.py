@@ -22,6 +22,7 @@ def register(sub) -> None:
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
     p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -37,7 +38,15 @@ def run(args) -> int:
     if np.any(pressures < 0):
         raise SoftcathError("pressures are gauge pressures and must not be negative")
     over = pressures.max() > design.max_pressure
-    model = make_model(args.model, design)
+    if args.model == "auto":
+        from ..core.scene import load_scene
+
+        if args.scene is None:
+            raise SoftcathError("--model auto needs --scene FILE (what the model must handle)")
+        model = make_model("auto", design, scene=load_scene(args.scene))
+        print(model.selection.reason, file=sys.stderr)
+    else:
+        model = make_model(args.model, design)
     results = predict(model, pressures, args.length)
     if args.json:
         json.dump({"model": model.name, "design": design.name,

@@ -21,7 +21,12 @@ def available_models() -> list[str]:
 
 
 def make_model(name: str, design: Design, **options) -> BendModel:
-    """Instantiate the rung ``name`` for ``design``; unknown names list the known ones."""
+    """Instantiate the rung ``name`` for ``design``; unknown names list the known ones.
+    ``"auto"`` picks a rung for ``scene=`` (core/model_selection.py)."""
+    if name == "auto":
+        from ..model_selection import make_auto_model
+
+        return make_auto_model(design, **options)
     if name not in RUNGS:
         raise ModelError(f"unknown model '{name}'; available: {', '.join(available_models())}")
     module_name, cls_name = RUNGS[name].split(":")

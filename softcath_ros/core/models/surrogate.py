@@ -5,12 +5,15 @@ stops converging, whichever comes first; the table ends there):
 
 - 1 channel: curvature vector and axial stretch over the channel pressure, a cubic spline
   through the source's answers on a grid (plus the last pressure the source reached).
-- 3 channels at 120 degrees (3-fold symmetric section): the response to two active channels
-  (a, b) = (p_0, p_1) with p_2 = 0, which is how the allocator drives the body. A cubic spline
-  through the source's grid over (a, b), resampled onto a fine grid that is read bilinearly
+- 3 channels: the response to two active channels (a, b) = (p_r, p_r+1) with the third at
+  zero, which is how the allocator drives the body: one table over (a, b) per pair, a cubic
+  spline through the source's grid resampled onto a fine grid that is read bilinearly
   (bilinear on the fine grid is what makes a batch of 1e6 commands take a fraction of a
-  second). The other two pairs are the same table rotated by 120 and 240 degrees: rotating the
-  body by 120 degrees maps channel i onto channel i + 1.
+  second). With ``pairs="rotated"`` (3-fold symmetric sections only) just pair 0-1 is built
+  and rotated by 120 and 240 degrees for the others (rotating the body by 120 degrees maps
+  channel i onto channel i + 1): a third of the cost, but the section rung's mesh is not
+  exactly symmetric, which costs up to ~2% in R_C near lumen contact, so the default
+  tabulates each pair.
 - Commands with all three pressures > 0 (the allocator never sends them, an operator might):
   the common part m = min(p) is subtracted and treated as pure stretch,
       k(p) ~ k_pair(p - m),   lambda(p) ~ lambda_pair(p - m) + lambda_common(m) - 1,
@@ -42,7 +45,7 @@ from ..errors import ModelError
 from .base import BendModel, BendState
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-1"
+SURROGATE_VERSION = "surrogate-2"
 PA_PER_BAR = 1.0e5
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
@@ -58,6 +61,10 @@ class SurrogateSettings:
     common_points: int = 9              # equal-pressure commands for lambda_common
     common_checks: int = 5              # commands with all three pressures > 0 to bound that error
     common_tolerance: float = 0.005     # relative R_C error above which such commands are refused
+    pairs: str = "each"                 # 3 channels: "each" tabulates all three pairs; "rotated" only
+                                        # pair 0-1 and rotates it (a third of the cost, exact only if
+                                        # the source is exactly 3-fold symmetric: the section rung's
+                                        # mesh is not, up to ~2% in R_C near lumen contact)
 
 
 def _symmetric_three(design: Design, tol: float = 1e-7) -> bool:
@@ -110,11 +117,14 @@ class SurrogateModel(BendModel):
             raise ModelError("model 'surrogate': source 'surrogate' would tabulate itself")
         if design.n_channels == 1:
             self.kind = "one_channel"
-        elif _symmetric_three(design):
+        elif design.n_channels == 3 and (self.settings.pairs == "each" or _symmetric_three(design)):
             self.kind = "three_channel"
         else:
-            raise ModelError(f"model 'surrogate': design '{design.name}' has {design.n_channels} channels; the "
-                             "surrogate tabulates 1-channel designs and 3-fold symmetric 3-channel designs only")
+            raise ModelError(f"model 'surrogate': design '{design.name}' has {design.n_channels} channels and "
+                             f"pairs='{self.settings.pairs}'; the surrogate tabulates 1-channel designs, 3-channel "
+                             "designs (pairs='each') and 3-fold symmetric 3-channel designs (pairs='rotated')")
+        if self.settings.pairs not in ("each", "rotated"):
+            raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'each' or 'rotated'")
         self.progress = progress
         if cache is True:
             from ..cache import cache_dir
@@ -136,7 +146,18 @@ class SurrogateModel(BendModel):
     def _key(self) -> str:
         from ..cache import key_of
 
-        return key_of(SURROGATE_VERSION, self.design.content_hash(), asdict(self.settings))
+        from importlib import import_module
+
+        from . import RUNGS
+
+        # the source's own code version: a changed solver rebuilds the table
+        module = RUNGS.get(self.settings.source, "").split(":")[0]
+        try:
+            mod = import_module(module) if module else None
+        except ImportError:
+            mod = None
+        version = getattr(mod, "SOLVER_VERSION", None) or getattr(mod, "CODE_VERSION", None)
+        return key_of(SURROGATE_VERSION, self.design.content_hash(), asdict(self.settings), version)
 
     @property
     def path(self) -> Path | None:
@@ -227,37 +248,21 @@ class SurrogateModel(BendModel):
         pmax = self.design.max_pressure
         g = np.linspace(0.0, pmax, s.grid_points)
         n = len(g)
-        # One monotone ramp per row, each from a fresh source: (0, 0) -> (a, 0) -> (a, b) with b rising.
-        # Why fresh: the section rung's answers were seen to depend on the path after it had visited
-        # high pressures or failed (up to ~10% in R_C on a serpentine path), so no row inherits another's.
-        z = np.full((n, n, 3), np.nan)
-        conv = np.zeros((n, n), dtype=bool)
-        messages = []
-        with self._stage("pair grid", n * n) as bar:
-            for i, a in enumerate(g):
-                row = np.column_stack([np.full(n, a), g, np.zeros(n)])
-                st = self._source(progress=False).evaluate(row)
-                conv[i] = st.converged
-                z[i] = np.column_stack([st.curvature, st.axial_stretch])
-                if st.message:
-                    messages.append(st.message.split("; ")[0])
-                bar.update(n)
-        # a cell is usable when its four corners converged; NaN corners are filled from the nearest
-        # converged neighbour only so that the spline can be built (the cells around them are refused)
-        cell_ok = conv[:-1, :-1] & conv[1:, :-1] & conv[:-1, 1:] & conv[1:, 1:]
-        # and not next to a failed cell: the response turns sharply where the source is about to fail
-        # (lumen walls closing), which a spline through the grid does not follow
-        near = np.pad(cell_ok, 1, constant_values=True)
-        cell_ok = cell_ok & near[:-2, 1:-1] & near[2:, 1:-1] & near[1:-1, :-2] & near[1:-1, 2:]
-        if not conv.all():
-            good = np.argwhere(conv)
-            for i, j in np.argwhere(~conv):
-                gi, gj = good[np.argmin(np.abs(good - (i, j)).sum(1))]
-                z[i, j] = z[gi, gj]
-        from scipy.interpolate import RectBivariateSpline
-
+        # pair r: channel r at a, channel r + 1 at b, the third at zero; "rotated" builds pair 0 only
+        pairs = 1 if s.pairs == "rotated" else 3
+        tabs, oks, messages, failed = [], [], [], 0
+        for r in range(pairs):
+            z, conv, msgs = self._pair_grid(g, r)
+            cell_ok = conv[:-1, :-1] & conv[1:, :-1] & conv[:-1, 1:] & conv[1:, 1:]
+            # and not next to a failed cell: the response turns sharply where the source is about to
+            # fail (lumen walls closing), which a spline through the grid does not follow
+            near = np.pad(cell_ok, 1, constant_values=True)
+            oks.append(cell_ok & near[:-2, 1:-1] & near[2:, 1:-1] & near[1:-1, :-2] & near[1:-1, 2:])
+            tabs.append(self._resample(g, z, conv))
+            messages += msgs
+            failed += int((~conv).sum())
         fine = np.linspace(0.0, pmax, s.fine_points)
-        tab = np.stack([RectBivariateSpline(g, g, z[..., c], kx=3, ky=3, s=0)(fine, fine) for c in range(3)], -1)
+        tab, cell_ok = np.stack(tabs), np.stack(oks)
         # equal pressures: pure stretch (the curvature there is the source's asymmetry, kept as a check)
         cm = np.linspace(0.0, pmax, s.common_points)
         stc = self._run(src, np.repeat(cm[:, None], 3, 1), "common pressure")
@@ -274,9 +279,9 @@ class SurrogateModel(BendModel):
         while len(held) < s.held_out:
             a, b = rng.uniform(0.05 * pmax, pmax, 2)
             ia, ib = min(int(a / g[1]), n - 2), min(int(b / g[1]), n - 2)
-            if not cell_ok[ia, ib]:
-                continue
             zero = len(held) % 3
+            if not cell_ok[((zero + 1) % 3) % pairs, ia, ib]:
+                continue
             p = np.zeros(3)
             p[(zero + 1) % 3], p[(zero + 2) % 3] = a, b
             held.append(p)
@@ -294,7 +299,7 @@ class SurrogateModel(BendModel):
         cbound = self._errors(self.evaluate(common), refc, refc.converged, common)
         failure = "; ".join(messages[:3] + [stc.message.split("; ")[0]] if stc.message else messages[:3])
         meta = {"max_pressure": float(pmax), "max_common_pressure": self.meta["max_common_pressure"],
-                "source_failure": failure, "failed_grid_points": int((~conv).sum()),
+                "source_failure": failure, "failed_grid_points": failed,
                 "source_evaluations": int(n * n + len(cm) + len(held) + len(common)),
                 "error_bound": {"pair": bound, "common_mode": cbound},
                 "common_checks_bar": (common / PA_PER_BAR).round(4).tolist(),
@@ -312,6 +317,41 @@ class SurrogateModel(BendModel):
                          axial_stretch=np.concatenate([st.axial_stretch for st in states]),
                          converged=np.concatenate([st.converged for st in states]),
                          message="; ".join(st.message for st in states if st.message))
+
+    def _pair_grid(self, g: np.ndarray, r: int):
+        """The source on the grid g x g for pair r, one monotone ramp per row, each from a fresh
+        source: (0, 0) -> (a, 0) -> (a, b) with b rising. Fresh because the section rung's answers
+        were seen to depend on the path after it had visited high pressures or failed (up to ~10%
+        in R_C on one serpentine path through the grid), so no row inherits another's."""
+        n = len(g)
+        z = np.full((n, n, 3), np.nan)
+        conv = np.zeros((n, n), dtype=bool)
+        messages = []
+        with self._stage(f"pair {r}-{(r + 1) % 3} grid", n * n) as bar:
+            for i, a in enumerate(g):
+                row = np.zeros((n, 3))
+                row[:, r], row[:, (r + 1) % 3] = a, g
+                st = self._source(progress=False).evaluate(row)
+                conv[i] = st.converged
+                z[i] = np.column_stack([st.curvature, st.axial_stretch])
+                if st.message:
+                    messages.append(st.message.split("; ")[0])
+                bar.update(n)
+        return z, conv, messages
+
+    def _resample(self, g: np.ndarray, z: np.ndarray, conv: np.ndarray) -> np.ndarray:
+        """Cubic spline through the grid, sampled on the fine grid. Failed grid points are filled
+        from the nearest converged one only so the spline can be built (their cells are refused)."""
+        from scipy.interpolate import RectBivariateSpline
+
+        z = z.copy()
+        if not conv.all():
+            good = np.argwhere(conv)
+            for i, j in np.argwhere(~conv):
+                gi, gj = good[np.argmin(np.abs(good - (i, j)).sum(1))]
+                z[i, j] = z[gi, gj]
+        fine = np.linspace(g[0], g[-1], self.settings.fine_points)
+        return np.stack([RectBivariateSpline(g, g, z[..., c], kx=3, ky=3, s=0)(fine, fine) for c in range(3)], -1)
 
     @staticmethod
     def _errors(mine: BendState, ref: BendState, good: np.ndarray, pressures: np.ndarray) -> dict:
@@ -364,6 +404,7 @@ class SurrogateModel(BendModel):
             self._nf = len(fine) - 1
             self._hf = float(fine[1] - fine[0])
             self._flat = np.ascontiguousarray(t["table"].reshape(-1, 3))
+            self._rotated = t["table"].shape[0] == 1
             g = t["grid"]
             self._hg = float(g[1] - g[0])
             self._ng = len(g) - 1
@@ -419,18 +460,22 @@ class SurrogateModel(BendModel):
         rows = np.arange(len(p))
         a = np.clip(q[rows, r], 0.0, self._pmax)
         b = np.clip(q[rows, (zero + 2) % 3], 0.0, self._pmax)
-        kl = self._bilinear(a, b)
-        c, s = _COS[r], _SIN[r]
-        k = np.column_stack([c * kl[:, 0] - s * kl[:, 1], s * kl[:, 0] + c * kl[:, 1]])
+        pair = np.zeros_like(r) if self._rotated else r
+        kl = self._bilinear(pair, a, b)
+        if self._rotated:
+            c, s = _COS[r], _SIN[r]
+            k = np.column_stack([c * kl[:, 0] - s * kl[:, 1], s * kl[:, 0] + c * kl[:, 1]])
+        else:
+            k = kl[:, :2]
         lam = kl[:, 2] + np.interp(m, self._cp, self._cs) - 1.0
         ok = inside & (m <= self._max_common)
         if not self._all_ok:
             ia = np.minimum((a / self._hg).astype(np.intp), self._ng - 1)
             ib = np.minimum((b / self._hg).astype(np.intp), self._ng - 1)
-            ok &= self._cell_ok[ia, ib]
+            ok &= self._cell_ok[pair, ia, ib]
         return k, lam, ok
 
-    def _bilinear(self, a: np.ndarray, b: np.ndarray, chunk: int = 1 << 15) -> np.ndarray:
+    def _bilinear(self, pair: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 1 << 15) -> np.ndarray:
         n, f = self._nf, self._flat
         out = np.empty((a.size, 3))
         for s0 in range(0, a.size, chunk):  # chunks keep the temporaries in cache
@@ -440,7 +485,7 @@ class SurrogateModel(BendModel):
             j = np.minimum(y.astype(np.intp), n - 1)
             t = (x - i)[:, None]
             u = (y - j)[:, None]
-            k0 = i * (n + 1) + j
+            k0 = (pair[s0:s0 + chunk] * (n + 1) + i) * (n + 1) + j
             f00, f01, f10, f11 = f[k0], f[k0 + 1], f[k0 + n + 1], f[k0 + n + 2]
             lo = f00 + (f01 - f00) * u
             out[s0:s0 + chunk] = lo + (f10 + (f11 - f10) * u - lo) * t

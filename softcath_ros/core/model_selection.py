@@ -1,0 +1,96 @@
+"""`model: auto`: the cheapest rung that models everything in a scene, is valid over its pressure
+range, and meets its accuracy and rate, judged from the measured envelope (config/ladder_envelope.yaml,
+written by benchmarks/ladder_chart.py). It says what it picked and why, or why nothing qualifies.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import ModelError
+from .scene import Scene
+from .yaml_io import load_yaml
+
+ENVELOPE_PATH = Path(__file__).resolve().parents[2] / "config" / "ladder_envelope.yaml"
+
+
+@dataclass
+class Selection:
+    rung: str
+    reason: str                 # why this rung (one line)
+    rejected: dict[str, str]    # rung -> why not
+
+
+def load_envelope(path: str | Path | None = None) -> dict:
+    """The measured envelope: {"reference": ..., "rungs": {name: {capabilities, designs: {design: {...}}}}}."""
+    p = Path(path) if path is not None else ENVELOPE_PATH
+    if not p.is_file():
+        raise ModelError(f"no ladder envelope at {p}: run benchmarks/ladder_chart.py to measure the rungs")
+    data = load_yaml(p.read_text())
+    if not isinstance(data, dict) or not isinstance(data.get("rungs"), dict):
+        raise ModelError(f"ladder envelope {p}: expected a mapping with 'rungs'")
+    return data
+
+
+def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
+    """The cheapest qualifying rung for ``scene``; ModelError listing every rung's reason if none."""
+    env = envelope if envelope is not None else load_envelope()
+    design = scene.design.name
+    lo, hi = scene.pressure_range
+    period = 1.0 / scene.required_rate
+    candidates, rejected = [], {}
+    for name, rung in env["rungs"].items():
+        caps = set(rung.get("capabilities", []))
+        missing = [f for f in scene.features if f not in caps]
+        if missing:
+            rejected[name] = f"does not model {', '.join(missing)}"
+            continue
+        measured = (rung.get("designs") or {}).get(design)
+        if measured is None:
+            rejected[name] = f"no measured envelope for design '{design}'"
+            continue
+        v_lo, v_hi = measured["valid_pressure_pa"]
+        if lo < v_lo or hi > v_hi:
+            rejected[name] = (f"valid over {v_lo:g}..{v_hi:g} Pa only, the scene needs {lo:g}..{hi:g} Pa")
+            continue
+        err = measured["error_rc_rel_max"]
+        if err is None or err > scene.required_accuracy:
+            rejected[name] = (f"measured R_C error {_pct(err)} exceeds the required {_pct(scene.required_accuracy)}")
+            continue
+        cost = measured["cost_s_per_eval"]
+        if cost > period:
+            rejected[name] = (f"{cost * 1e3:.3g} ms per evaluation cannot keep up with "
+                              f"{scene.required_rate:g} Hz ({period * 1e3:.3g} ms)")
+            continue
+        candidates.append((cost, name, err))
+    if not candidates:
+        why = "; ".join(f"{n}: {r}" for n, r in rejected.items())
+        raise ModelError(f"model auto: no rung qualifies for scene '{scene.name}' "
+                         f"(needs {', '.join(scene.features)}, {lo:g}..{hi:g} Pa, R_C error <= "
+                         f"{_pct(scene.required_accuracy)}, {scene.required_rate:g} Hz): {why}")
+    cost, name, err = min(candidates)
+    reason = (f"model auto picked '{name}' for scene '{scene.name}': the cheapest rung ({cost * 1e6:.3g} us per "
+              f"evaluation) that models {', '.join(scene.features)}, is valid over {lo:g}..{hi:g} Pa and whose "
+              f"measured R_C error {_pct(err)} (against {env.get('reference', 'the reference')}) meets "
+              f"{_pct(scene.required_accuracy)} at {scene.required_rate:g} Hz")
+    return Selection(rung=name, reason=reason, rejected=rejected)
+
+
+def _pct(x) -> str:
+    return "unmeasured" if x is None else f"{x:.2%}"
+
+
+def make_auto_model(design, scene: Scene | None = None, envelope: dict | None = None, **options):
+    """``make_model("auto", design, scene=...)``: the selected rung for the scene's design (the scene's
+    device included). The returned model carries the ``selection`` (what was picked and why)."""
+    from .models import make_model
+
+    if scene is None:
+        raise ModelError("model auto needs a scene (CLI: --scene FILE; model_node: parameter 'scene')")
+    if scene.design.name != design.name:
+        raise ModelError(f"model auto: scene '{scene.name}' is for design '{scene.design.name}', "
+                         f"not '{design.name}'")
+    selection = select_model(scene, envelope)
+    model = make_model(selection.rung, scene.design, **options)
+    model.selection = selection
+    return model

@@ -1,0 +1,160 @@
+"""Scenes: what is in the world and what the user needs from a model (architecture.md "Scenes").
+
+A scene file (YAML, SI units) names the design, a device in the lumen, loads or contact,
+gravity, the pressure range, the accuracy and the rate required:
+
+    name: free_bending_live
+    design: implemented_5mm            # shipped design name or path (relative to the scene file)
+    device: null                       # or {diameter: m, bending_stiffness: N m^2}
+    loads: {tip_force: null, contact: null}   # tip_force: [fx, fy, fz] N; contact: {plane_z: m}
+    gravity: false
+    pressure_range: [0.0, 20000.0]     # Pa, per channel
+    required_accuracy: 0.05            # largest acceptable relative error in R_C against the reference
+    required_rate: 1000.0              # Hz, commands the model must answer per second
+
+``features`` lists what a model must model for the scene (free bending always; device
+stiffness, tip load, contact, gravity when present); model selection (core/model_selection.py)
+matches them against the rungs' capabilities.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from .design import Design, Device, load_design
+from .errors import SoftcathError
+from .yaml_io import load_yaml
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "config" / "scenes"
+FEATURES = ("free_bending", "device_stiffness", "tip_load", "contact", "gravity")
+
+
+class SceneError(SoftcathError):
+    """A scene field is missing or malformed; names the field and the value found."""
+
+    def __init__(self, field: str, value, reason: str):
+        self.field, self.value, self.reason = field, value, reason
+        super().__init__(f"scene field '{field}' = {value!r}: {reason}")
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    design: Design                       # with the scene's device, if it names one
+    tip_force: tuple[float, float, float] | None
+    contact_plane_z: float | None        # m, a plane normal to the base axis the tip presses on
+    gravity: bool
+    pressure_range: tuple[float, float]  # Pa
+    required_accuracy: float             # relative R_C error
+    required_rate: float                 # Hz
+    description: str = ""
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        need = ["free_bending"]
+        if self.design.device is not None:
+            need.append("device_stiffness")
+        if self.tip_force is not None:
+            need.append("tip_load")
+        if self.contact_plane_z is not None:
+            need.append("contact")
+        if self.gravity:
+            need.append("gravity")
+        return tuple(need)
+
+
+_KEYS = {"name", "description", "design", "device", "loads", "gravity", "pressure_range", "required_accuracy",
+         "required_rate"}
+
+
+def _number(value, field: str, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise SceneError(field, value, "must be a finite number")
+    if positive and value <= 0:
+        raise SceneError(field, value, "must be positive")
+    return float(value)
+
+
+def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
+    if not isinstance(raw, dict):
+        raise SceneError("<scene>", raw, "a scene is a mapping of fields")
+    unknown = set(raw) - _KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise SceneError(key, raw[key], f"unknown field; known: {', '.join(sorted(_KEYS))}")
+    for key in ("name", "design", "pressure_range", "required_accuracy", "required_rate"):
+        if key not in raw:
+            raise SceneError(key, None, "required")
+    name = raw["name"]
+    if not isinstance(name, str) or not name:
+        raise SceneError("name", name, "must be a non-empty string")
+    ref = raw["design"]
+    if not isinstance(ref, str):
+        raise SceneError("design", ref, "must be a shipped design name or a path")
+    if base_dir is not None and (base_dir / ref).is_file():
+        ref = str(base_dir / ref)
+    try:
+        design = load_design(ref)
+    except SoftcathError as exc:
+        raise SceneError("design", raw["design"], str(exc)) from None
+    dev = raw.get("device")
+    if dev is not None:
+        if not isinstance(dev, dict) or set(dev) != {"diameter", "bending_stiffness"}:
+            raise SceneError("device", dev, "must be null or {diameter: m, bending_stiffness: N m^2}")
+        if design.lumen is None:
+            raise SceneError("device", dev, f"design '{design.name}' has no lumen to hold it")
+        d = _number(dev["diameter"], "device.diameter", positive=True)
+        if d >= design.lumen.diameter:
+            raise SceneError("device.diameter", d, f"must be smaller than the lumen ({design.lumen.diameter} m)")
+        ei = _number(dev["bending_stiffness"], "device.bending_stiffness")
+        if ei < 0:
+            raise SceneError("device.bending_stiffness", ei, "must not be negative")
+        design = replace(design, device=Device(diameter=d, bending_stiffness=ei))
+    loads = raw.get("loads") or {}
+    if not isinstance(loads, dict) or set(loads) - {"tip_force", "contact"}:
+        raise SceneError("loads", loads, "must be a mapping with tip_force and/or contact")
+    tip = loads.get("tip_force")
+    if tip is not None:
+        if not isinstance(tip, list) or len(tip) != 3:
+            raise SceneError("loads.tip_force", tip, "must be null or [fx, fy, fz] in N")
+        tip = tuple(_number(v, "loads.tip_force") for v in tip)
+    contact = loads.get("contact")
+    plane = None
+    if contact is not None:
+        if not isinstance(contact, dict) or set(contact) != {"plane_z"}:
+            raise SceneError("loads.contact", contact, "must be null or {plane_z: m}")
+        plane = _number(contact["plane_z"], "loads.contact.plane_z", positive=True)
+    gravity = raw.get("gravity", False)
+    if not isinstance(gravity, bool):
+        raise SceneError("gravity", gravity, "must be true or false")
+    pr = raw["pressure_range"]
+    if not isinstance(pr, list) or len(pr) != 2:
+        raise SceneError("pressure_range", pr, "must be [low, high] in Pa")
+    lo, hi = (_number(v, "pressure_range") for v in pr)
+    if not 0 <= lo < hi:
+        raise SceneError("pressure_range", pr, "needs 0 <= low < high (Pa)")
+    if hi > design.max_pressure:
+        raise SceneError("pressure_range", pr, f"exceeds the design's max_pressure {design.max_pressure:g} Pa")
+    acc = _number(raw["required_accuracy"], "required_accuracy", positive=True)
+    rate = _number(raw["required_rate"], "required_rate", positive=True)
+    desc = raw.get("description", "")
+    return Scene(name=name, design=design, tip_force=tip, contact_plane_z=plane, gravity=gravity,
+                 pressure_range=(lo, hi), required_accuracy=acc, required_rate=rate,
+                 description=desc if isinstance(desc, str) else "")
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """A scene file, or the name of one in config/scenes/."""
+    path = Path(name_or_path)
+    if not path.is_file():
+        shipped = SCENES_DIR / f"{name_or_path}.yaml"
+        if not shipped.is_file():
+            raise SceneError("<file>", str(name_or_path), "no such file or shipped scene "
+                             f"(shipped: {', '.join(sorted(p.stem for p in SCENES_DIR.glob('*.yaml')))})")
+        path = shipped
+    try:
+        raw = load_yaml(path.read_text())
+    except Exception as exc:  # noqa: BLE001 - a YAML syntax error is reported as the scene's fault
+        raise SceneError("<file>", str(path), f"not valid YAML: {exc}") from None
+    return scene_from_dict(raw, base_dir=path.parent)
