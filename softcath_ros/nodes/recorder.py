@@ -96,14 +96,14 @@ class TopicRecorder:
                 continue
             types = {i.topic_type for i in infos}
             if len(types) > 1:
-                self.node.get_logger().warn(f"{topic}: publishers disagree on the type {sorted(types)}; not recorded",
+                self.node.get_logger().warning(f"{topic}: publishers disagree on the type {sorted(types)}; not recorded",
                                             throttle_duration_sec=5.0)
                 continue
             type_name = types.pop()
             offers = [offered_qos(i.qos_profile) for i in infos]
             reliability, durability, warnings = adapt_request_to_offers(offers)
             for w in warnings:
-                self.node.get_logger().warn(f"{topic}: {w}")
+                self.node.get_logger().warning(f"{topic}: {w}")
             h = str(infos[0].topic_type_hash)
             try:
                 self.writer.add_topic(topic, type_name, offers, h if h.startswith("RIHS01_") else None)

@@ -70,7 +70,7 @@ def main(argv=None) -> int:
             p = np.asarray(msg.data, dtype=float)
             if p.shape != self.command.shape or not np.all(np.isfinite(p)):
                 self.rejected += 1
-                self.get_logger().warn(f"rejected pressure command {list(msg.data)} (need "
+                self.get_logger().warning(f"rejected pressure command {list(msg.data)} (need "
                                        f"{self.command.size} finite values)", throttle_duration_sec=2.0)
                 return
             self.command = p  # the regulator clamps to [0, max_pressure]
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
                 try:
                     self.rig.mount(ev["bench"], float(ev["sample_length_m"]))
                 except (KeyError, ValueError) as exc:
-                    self.get_logger().warn(f"cannot mount sample from marker: {exc}")
+                    self.get_logger().warning(f"cannot mount sample from marker: {exc}")
 
         def tick(self):
             # The regulator advances by the time that really passed: on a loaded machine the
