@@ -54,6 +54,7 @@ class SectionSettings:
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
     contact_resolution: float = 250.0   # Pa: how finely that pressure is located
+    local_radius: float = 5000.0        # Pa: a command this close to a solved one starts from it
     pressure_load: str = "follower"     # "follower": on the deformed channel walls and the end caps;
                                         # "end_cap": only the end caps' axial force (the closed form's load)
 
@@ -127,19 +128,26 @@ class SectionModel(BendModel):
             from tqdm import tqdm
 
             bar = tqdm(total=n, desc="section", unit="cmd")
+        origin = tuple([0.0] * c)
         try:
             while todo:
-                done, failed, msg, last = self._solve_path(pressures, todo)
+                path = self._path(pressures, todo)
+                start = self._start_for(pressures[path[0]])
+                done, failed, msg, last = self._solve_path(pressures, path, start)
+                if failed is not None and start != origin:
+                    # another start may lie on another branch (a folded lumen): from rest, along the ray
+                    retry, failed_again, msg, last = self._solve_path(pressures, [failed], origin)
+                    done += retry
+                    failed = failed_again
                 for i, x, its in done:
                     curvature[i], stretch[i], area[i] = self._outputs(x)
                     converged[i] = True
                     iterations[i] = its
                 if bar is not None:
                     bar.update(len(done) + (failed is not None))
-                if failed is None:
-                    break
-                messages.append(msg)
-                last_converged[failed] = last
+                if failed is not None:
+                    messages.append(msg)
+                    last_converged[failed] = last
                 todo = [i for i in todo if i != failed and not converged[i]]
         finally:
             if bar is not None:
@@ -153,13 +161,39 @@ class SectionModel(BendModel):
             self._save_cached(pressures, state)
         return state
 
-    def _solve_path(self, pressures: np.ndarray, todo: list[int]):
-        """Ramp through the commands ``todo`` in order from the nearest converged state.
+    # A command is solved along the ray from rest (channels ramped in proportion, as a bench
+    # does), starting from a solved state on that ray or within local_radius of the command.
+    # States reached along other paths may sit on another branch (the lumen folds), so they
+    # are not used as starting points: answers do not depend on the order of commands.
+    def _near(self, a: np.ndarray, b: np.ndarray) -> bool:
+        return float(np.max(np.abs(a - b))) <= self.settings.local_radius
+
+    @staticmethod
+    def _same_ray(a: np.ndarray, b: np.ndarray) -> bool:
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        return na == 0 or nb == 0 or float(a @ b) >= (1 - 1e-12) * na * nb
+
+    def _start_for(self, target: np.ndarray) -> tuple:
+        ok = [k for k in self._states
+              if self._same_ray(np.asarray(k), target) or self._near(np.asarray(k), target)]
+        return min(ok, key=lambda k: float(np.max(np.abs(np.asarray(k) - target))))
+
+    def _path(self, pressures: np.ndarray, todo: list[int]) -> list[int]:
+        """The longest prefix of ``todo`` that one continuation can walk (same ray or close)."""
+        path = [todo[0]]
+        for i in todo[1:]:
+            a, b = pressures[path[-1]], pressures[i]
+            if not (self._same_ray(a, b) or self._near(a, b)):
+                break
+            path.append(i)
+        return path
+
+    def _solve_path(self, pressures: np.ndarray, todo: list[int], start_key: tuple):
+        """Ramp from the converged state at ``start_key`` through the commands ``todo`` in order.
 
         The path is the polyline start -> p[todo[0]] -> p[todo[1]] ...; its arc length (Pa) is
         the continuation parameter. Stops at the first command it cannot reach."""
         first = pressures[todo[0]]
-        start_key = min(self._states, key=lambda k: float(np.max(np.abs(np.asarray(k) - first))))
         known = self._known_failure(start_key, first)
         if known is not None:
             return [], todo[0], self._failure_message(first, known[0]), known[1]
