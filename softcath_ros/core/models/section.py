@@ -134,7 +134,7 @@ class SectionModel(BendModel):
                 path = self._path(pressures, todo)
                 start = self._start_for(pressures[path[0]])
                 done, failed, msg, last = self._solve_path(pressures, path, start)
-                if failed is not None and start != origin:
+                if failed is not None and not self._same_ray(np.asarray(start), pressures[failed]):
                     # another start may lie on another branch (a folded lumen): from rest, along the ray
                     retry, failed_again, msg, last = self._solve_path(pressures, [failed], origin)
                     done += retry
@@ -218,6 +218,10 @@ class SectionModel(BendModel):
                 gaps = self.problem.hole_gaps(previous)
                 i = int(np.argmin(gaps))
                 corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
+                if gaps[i] < 2 * self.settings.min_hole_gap:
+                    # the walls are about to touch: the same validity limit as contact itself
+                    corr.outside_domain = True
+                    corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"
             else:
                 gaps = self.problem.hole_gaps(corr.state)
                 if gaps.min() < self.settings.min_hole_gap:
