@@ -48,7 +48,8 @@ class ModelNode(Node):
         startup = "applied at start-up"
         p = self._declare
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
-        model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form")
+        model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form, or auto (needs scene)")
+        scene_name = p("scene", "", "scene YAML file or shipped scene name: with model auto, picks the rung")
         n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip (>= 2)")
         # 1000 = 1 s at 1 kHz: a reliable keep-last writer overwrites samples a late reader has
         # not acknowledged yet, so a shallower history loses poses whenever the node lags.
@@ -76,7 +77,15 @@ class ModelNode(Node):
             raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
 
         self.design = load_design(design_name)
-        self.model = make_model(model_name, self.design)
+        if model_name == "auto":
+            from ..core.scene import load_scene
+
+            scene = load_scene(scene_name) if scene_name else None
+            self.model = make_model("auto", self.design, scene=scene)
+            self.design = self.model.design       # the scene's device included
+            self.get_logger().info(self.model.selection.reason)
+        else:
+            self.model = make_model(model_name, self.design)
         self.n_channels = self.design.n_channels
         self.length = self.design.length
         self.n_points = int(n_points)

@@ -1,0 +1,33 @@
+"""model_node with the surrogate rung and with `model: auto` from a scene, over DDS: the pose for
+one command is the core's prediction with the same rung. Reuses test_model_node's process harness
+(its ROS_DOMAIN_ID range)."""
+import signal
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.models import make_model
+from softcath_ros.core.model_selection import select_model
+from softcath_ros.core.prediction import predict
+from softcath_ros.core.scene import load_scene
+
+pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+from test_model_node import DESIGN, Running  # noqa: E402
+
+
+@pytest.mark.parametrize("params,rung", [(["-p", "model:=surrogate"], "surrogate"),
+                                         (["-p", "model:=auto", "-p", "scene:=free_bending_live"], None)])
+def test_model_node_with_surrogate_and_auto_matches_core(params, rung):
+    rung = rung or select_model(load_scene("free_bending_live")).rung
+    model = make_model(rung, DESIGN)     # builds the surrogate's table into the cache first if needed
+    node = Running("-p", "design:=implemented_5mm", *params)
+    try:
+        pt = node.client.send([15000.0])
+        assert pt is not None, "no pose for a valid command"
+        r = predict(model, np.array([[15000.0]]))[0]
+        np.testing.assert_allclose(pt.tip_position_m, r.tip_position_m, rtol=0, atol=1e-12)
+        assert node.counters(model=model.name)
+        code, err = node.stop(signal.SIGTERM)
+        assert code == 0 and "Traceback" not in err, err
+    finally:
+        node.close()

@@ -1,0 +1,89 @@
+"""Scenes and `model: auto`: validation that names field and value, and the selection rule
+(cheapest rung that models the scene, is valid over its pressures, meets accuracy and rate)."""
+import subprocess
+import sys
+
+import pytest
+
+from softcath_ros.core.errors import ModelError
+from softcath_ros.core.model_selection import load_envelope, select_model
+from softcath_ros.core.models import make_model
+from softcath_ros.core.scene import SCENES_DIR, SceneError, load_scene, scene_from_dict
+
+ENV = {"reference": "fe3d mesh 1.0", "rungs": {
+    "closed_form": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
+        "error_rc_rel_max": 0.60, "cost_s_per_eval": 5e-6, "valid_pressure_pa": [0, 50000]}}},
+    "surrogate": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
+        "error_rc_rel_max": 0.04, "cost_s_per_eval": 2e-5, "valid_pressure_pa": [0, 27500]}}},
+    "section": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
+        "error_rc_rel_max": 0.03, "cost_s_per_eval": 0.05, "valid_pressure_pa": [0, 27500]}}},
+    "fe3d": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
+        "error_rc_rel_max": 0.0, "cost_s_per_eval": 30.0, "valid_pressure_pa": [0, 25000]}}},
+}}
+
+
+def scene(**over):
+    raw = {"name": "t", "design": "implemented_5mm", "pressure_range": [0.0, 20000.0],
+           "required_accuracy": 0.05, "required_rate": 1000.0}
+    raw.update(over)
+    return scene_from_dict(raw)
+
+
+def test_shipped_scenes_load():
+    names = sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
+    assert {"free_bending_live", "device_in_lumen", "blocking_force_bench", "design_study_accurate"} <= set(names)
+    assert load_scene("device_in_lumen").features == ("free_bending", "device_stiffness")
+    assert "contact" in load_scene("blocking_force_bench").features
+
+
+@pytest.mark.parametrize("over,field", [
+    ({"pressure_range": [0, 9e5]}, "pressure_range"),
+    ({"required_rate": -1}, "required_rate"),
+    ({"gravity": "yes"}, "gravity"),
+    ({"device": {"diameter": 0.01, "bending_stiffness": 1e-6}}, "device.diameter"),
+    ({"loads": {"tip_force": [0, 1]}}, "loads.tip_force"),
+    ({"colour": "red"}, "colour"),
+])
+def test_scene_errors_name_field_and_value(over, field):
+    with pytest.raises(SceneError) as e:
+        scene(**over)
+    assert e.value.field == field and f"'{field}'" in str(e.value)
+
+
+def test_picks_cheapest_rung_meeting_accuracy_and_rate():
+    sel = select_model(scene(), ENV)
+    assert sel.rung == "surrogate"          # closed form is cheaper but 60% off
+    assert "surrogate" in sel.reason and "closed_form" in sel.rejected
+    assert "exceeds the required" in sel.rejected["closed_form"]
+    # looser accuracy: the closed form qualifies and is cheapest
+    assert select_model(scene(required_accuracy=0.8), ENV).rung == "closed_form"
+    # tighter accuracy at a slow rate: only the reference, with its pressure range
+    assert select_model(scene(required_accuracy=0.01, required_rate=0.01), ENV).rung == "fe3d"
+
+
+def test_refuses_when_nothing_qualifies():
+    with pytest.raises(ModelError, match="no rung qualifies.*does not model contact"):
+        select_model(scene(loads={"contact": {"plane_z": 0.017}}), ENV)
+    with pytest.raises(ModelError, match="cannot keep up"):
+        select_model(scene(required_accuracy=0.035), ENV)       # section is accurate enough but too slow
+    with pytest.raises(ModelError, match="valid over 0..27500 Pa only"):
+        select_model(scene(pressure_range=[0, 40000]), ENV)
+
+
+def test_committed_envelope_drives_the_shipped_scenes():
+    env = load_envelope()
+    assert env["rungs"] and all("capabilities" in r for r in env["rungs"].values())
+    live = select_model(load_scene("free_bending_live"), env)
+    cost = env["rungs"][live.rung]["designs"]["implemented_5mm"]["cost_s_per_eval"]
+    assert cost <= 1e-3
+    with pytest.raises(ModelError, match="contact"):
+        select_model(load_scene("blocking_force_bench"), env)
+    model = make_model("auto", load_scene("free_bending_live").design, scene=load_scene("free_bending_live"))
+    assert model.name == live.rung and model.selection.rung == live.rung
+
+
+def test_predict_cli_auto_says_what_it_picked():
+    r = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
+                        "--model", "auto", "--scene", "blocking_force_bench", "--pressure", "0.1", "--unit", "bar"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "no rung qualifies" in r.stderr and "contact" in r.stderr
