@@ -35,6 +35,7 @@ import json
 import math
 import os
 import time
+from bisect import bisect_right
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -427,6 +428,8 @@ class SurrogateModel(BendModel):
         n = pressures.shape[0]
         inside = (pressures >= 0.0).all(1) & (pressures <= self._pmax).all(1)
         if self.kind == "one_channel":
+            if n == 1 and inside[0]:  # one command (model_node): the spline's polynomial in plain floats
+                return self._one_command(float(pressures[0, 0]))
             y = self._spline(np.clip(pressures[:, 0], 0.0, self._pmax))
             k, lam = y[:, :2], y[:, 2]
             ok = inside
@@ -450,6 +453,14 @@ class SurrogateModel(BendModel):
         else:
             msg = ""
         return BendState(curvature=k, axial_stretch=lam, converged=ok, message=msg,
+                         extras={"error_bound": self.meta.get("error_bound")})
+
+    def _one_command(self, p: float) -> BendState:
+        j = min(max(bisect_right(self._breaks, p) - 1, 0), len(self._breaks) - 2)
+        x = p - self._breaks[j]
+        c = self._coeffs[:, j]                      # (4, 3): highest power first
+        y = ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
+        return BendState(curvature=y[None, :2], axial_stretch=y[None, 2], converged=np.ones(1, dtype=bool),
                          extras={"error_bound": self.meta.get("error_bound")})
 
     def _three(self, p: np.ndarray, inside: np.ndarray):
