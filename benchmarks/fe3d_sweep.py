@@ -42,7 +42,11 @@ def main(argv=None) -> int:
                     help="step control off: plain load steps of this size (bar), no cutting, no predictor")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--name", default="fe3d_sweep")
+    ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
     args = ap.parse_args(argv)
+    if args.plot_only:
+        print(plot(args.name))
+        return 0
 
     design = load_design(args.design).with_length(args.length)
     checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * 1e5
@@ -89,8 +93,44 @@ def main(argv=None) -> int:
           f"{meta['message']}")
     for r in rows:
         print(r)
-    print(f"wrote {path}.json/.csv")
+    print(f"wrote {path}.json/.csv, {plot(args.name)}")
     return 0
+
+
+def plot(name: str) -> str:
+    """R_C = L/theta and bending angle against pressure, published FE points overlaid."""
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from results_io import RESULTS
+
+    doc = json.loads((RESULTS / f"{name}.json").read_text())
+    rows = [r for r in doc["results"] if r["converged"] and r["radius_l_over_theta_mm"]]
+    meta = doc["meta"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    ax1.plot([r["pressure_bar"] for r in rows], [r["radius_l_over_theta_mm"] for r in rows], "o-", label="fe3d")
+    pub = [(r["pressure_bar"], r["published_radius_mm"]) for r in doc["results"] if r.get("published_radius_mm")]
+    if pub:
+        ax1.plot(*zip(*pub), "rs", label="published FE")
+    ax1.set_yscale("log")
+    ax1.set_xlabel("pressure [bar]")
+    ax1.set_ylabel("R_C = L / theta [mm]")
+    ax1.legend()
+    ax2.plot([r["pressure_bar"] for r in rows], [r["bending_angle_deg"] for r in rows], "o-")
+    ax2.set_xlabel("pressure [bar]")
+    ax2.set_ylabel("bending angle [deg]")
+    status = "converged" if meta["converged"] else meta["message"][:70]
+    fig.suptitle(f"{name}: L = {meta['length_m'] * 1e3:.0f} mm, {meta['ndof']} DOF, {meta['total_s']:.0f} s "
+                 f"(load avg {meta['load_average'][0]:.1f}); {status}", fontsize=9)
+    fig.tight_layout()
+    out = RESULTS / f"{name}.png"
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return str(out)
 
 
 if __name__ == "__main__":

@@ -82,7 +82,7 @@ def run(args) -> int:
     levels = np.linspace(lo, hi, args.steps)
     pressures = np.zeros((args.steps, design.n_channels))
     pressures[:, args.channel] = levels
-    model = make_model(args.model, design, **_model_options(args.model, sys.stderr.isatty() or True,
+    model = make_model(args.model, design, **_model_options(args.model, True,
                                                              not args.no_cache))
     results = predict(model, pressures, design.length)
     rows = []
