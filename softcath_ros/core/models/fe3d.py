@@ -132,7 +132,7 @@ class Fe3dModel(BendModel):
         return _bend_state(results, n, c, "; ".join(messages))
 
     def _ramp(self, direction, loads):
-        from ..fe3d.ramp import PA_PER_BAR, run_ramp
+        from ..fe3d.ramp import run_ramp
 
         bar = None
         if self.progress:
@@ -146,7 +146,6 @@ class Fe3dModel(BendModel):
         finally:
             if bar is not None:
                 bar.close()
-        _ = PA_PER_BAR
 
     def sweep(self, pressures: np.ndarray):
         """Evaluate a ramp of commands (N, C) ignoring the cache; returns (BendState, Fe3dRamp)."""
