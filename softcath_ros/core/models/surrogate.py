@@ -301,7 +301,7 @@ class SurrogateModel(BendModel):
         failure = "; ".join(messages[:3] + [stc.message.split("; ")[0]] if stc.message else messages[:3])
         meta = {"max_pressure": float(pmax), "max_common_pressure": self.meta["max_common_pressure"],
                 "source_failure": failure, "failed_grid_points": failed,
-                "source_evaluations": int(n * n + len(cm) + len(held) + len(common)),
+                "source_evaluations": int(pairs * n * n + len(cm) + len(held) + len(common)),
                 "error_bound": {"pair": bound, "common_mode": cbound},
                 "common_checks_bar": (common / PA_PER_BAR).round(4).tolist(),
                 "common_curvature_max_per_m": float(np.nanmax(np.abs(stc.curvature[:n_cm]))) if n_cm else 0.0}
