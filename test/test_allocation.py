@@ -319,14 +319,15 @@ def test_three_channel_design_loads_on_every_rung(three):
 
 
 @pytest.mark.slow
-def test_round_trip_section_rung(three):
+def test_round_trip_section_rung(three, three_dict):
     """The Newton path on the real non-linear rung (section FE, seconds per evaluation): a few
     requests across sectors, on and between channel directions, plus one saturation. The rung
-    does not converge beyond about 0.44 bar with two channels on this design, so the allocator
-    is given a 30 kPa limit inside the rung's range (and says so when asked for more)."""
-    model = make_model("section", three)
+    stops where the lumen walls touch (about 0.5 bar on one channel of this design), so a limit
+    beyond that is refused with a message, not guessed; the round trip uses a 30 kPa limit."""
+    risky = dict(three_dict, limits={"max_pressure": 1.5e5})  # 1.5 bar: beyond the rung's convergence
     with pytest.raises(Exception, match="lower max_pressure"):
-        Allocator(model)  # 0.5 bar on one channel is beyond the rung's convergence: said, not guessed
+        Allocator(make_model("section", design_from_dict(risky)))
+    model = make_model("section", three)
     allocator = Allocator(model, max_pressure=30e3)
     assert np.degrees(allocator.channel_directions) == pytest.approx([270, 30, 150], abs=0.1)
     k1 = allocator.channel_max_curvature.min()
