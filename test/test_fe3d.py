@@ -148,3 +148,22 @@ def test_sweep_cli_writes_csv_json_png(tmp_path):
     assert all(b > a for a, b in zip(angles, angles[1:]))
     assert (tmp_path / "s.csv").read_text().count("\n") == 6
     assert (tmp_path / "s.png").stat().st_size > 1000
+
+
+def test_bending_angle_beyond_half_circle_from_tip():
+    """The tip rotation alone is ambiguous past 180 degrees; the tip position decides."""
+    from scipy.spatial.transform import Rotation
+
+    from softcath_ros.core.fe3d.measure import bending_from_tip
+    from softcath_ros.core.kinematics import tip_pose
+
+    length = 0.02
+    for deg, direction in ((30.0, -90.0), (170.0, -90.0), (200.0, -90.0), (250.0, 45.0), (0.0, 0.0)):
+        theta = math.radians(deg)
+        u = np.array([math.cos(math.radians(direction)), math.sin(math.radians(direction))])
+        pos, quat = tip_pose(theta / length * u, length)
+        rot = Rotation.from_quat(quat).as_matrix()
+        got_theta, got_u = bending_from_tip(rot, pos)
+        assert got_theta == pytest.approx(theta, abs=1e-9)
+        if deg > 0:
+            np.testing.assert_allclose(got_u, u, atol=1e-9)

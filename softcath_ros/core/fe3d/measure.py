@@ -36,6 +36,29 @@ def _mirror(pts: np.ndarray) -> np.ndarray:
     return np.vstack([pts, m])
 
 
+def bending_from_tip(rot: np.ndarray, tip: np.ndarray) -> tuple[float, np.ndarray]:
+    """Bending angle theta in [0, 2 pi) and bending direction u from the tip's rotation and position.
+
+    A constant-curvature bend towards u by theta rotates the tip about (-uy, ux, 0) by theta.
+    The rotation alone cannot tell (u, theta) from (-u, 2 pi - theta), so beyond a half
+    circle we use the tip position, whose sideways part always points along u.
+    """
+    from scipy.spatial.transform import Rotation
+
+    rotvec = Rotation.from_matrix(rot).as_rotvec()
+    phi = float(np.linalg.norm(rotvec))           # in [0, pi]
+    lateral = np.asarray(tip[:2], dtype=float)
+    if phi < 1e-12:
+        lean = np.hypot(*lateral)
+        return phi, (lateral / lean if lean > 0 else np.array([0.0, -1.0]))
+    n = rotvec / phi
+    u = np.array([n[1], -n[0]])
+    u /= np.hypot(*u)
+    if lateral @ u < 0.0:                          # bent past a half circle
+        return 2.0 * math.pi - phi, -u
+    return phi, u
+
+
 def measure(problem) -> dict:
     """Bending angle (rad), bending direction (unit (2,)), arc length (m), tip position (m),
     channel volumes (m^3) and mid-channel areas (m^2) of the current state."""
@@ -54,12 +77,9 @@ def measure(problem) -> dict:
     if problem.half:
         tip_ref, tip_cur = _mirror(tip_ref), _mirror(tip_cur)
     rot = _kabsch(tip_ref, tip_cur)
-    axis = rot[:, 2]
-    theta = math.acos(max(-1.0, min(1.0, axis[2])))
-    lean = np.hypot(axis[0], axis[1])
-    direction = axis[:2] / lean if lean > 1e-14 else np.array([0.0, -1.0])
-    # --- arc length through the deformed tip of the body axis
     tip = np.array([0.0, 0.0, length]) + _evaluate(problem, np.array([[0.0, 0.0, length]]))[0]
+    theta, direction = bending_from_tip(rot, tip)
+    # --- arc length through the deformed tip of the body axis
     if theta > 1e-9:
         g = np.array([direction[0] * (1 - math.cos(theta)) / theta,
                       direction[1] * (1 - math.cos(theta)) / theta, math.sin(theta) / theta])

@@ -16,6 +16,7 @@ channel_area_m2 (mid-length), newton_iterations, time_s.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict
 
 import numpy as np
@@ -25,7 +26,7 @@ from ..design import Design
 from ..errors import ModelError
 from .base import BendModel, BendState
 
-CODE_VERSION = "fe3d-1"   # bump when a change alters results, so old cache entries are not reused
+CODE_VERSION = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
 
 
 class Fe3dModel(BendModel):
@@ -123,7 +124,13 @@ class Fe3dModel(BendModel):
                 if pt is None:
                     results[i] = None
                     continue
-                results[i] = _entry(self.design, pt)
+                entry = _entry(self.design, pt)
+                if entry is None:  # the arc fit failed: report, never a made-up straight answer
+                    results[i] = None
+                    messages.append(f"no constant-curvature arc fits the solution at p = {pt.load:g} Pa "
+                                    f"(fitted arc length {pt.measured['arc_length_m']:.4g} m)")
+                    continue
+                results[i] = entry
                 cached[self._key(pressures[i])] = results[i]
             if not ramp.converged:
                 messages.append(ramp.message)
@@ -165,11 +172,14 @@ def _straight(design: Design, c: int) -> dict:
             "channel_volume_m3": None, "channel_area_m2": None, "newton_iterations": 0, "time_s": 0.0}
 
 
-def _entry(design: Design, pt) -> dict:
+def _entry(design: Design, pt) -> dict | None:
+    """Outputs at one converged ramp point, or None when no arc fits (e.g. a non-positive arc length)."""
     m = pt.measured
     theta = float(m["bending_angle_rad"])
     arc = float(m["arc_length_m"])
-    k = (theta / arc) * np.asarray(m["bending_direction"]) if arc > 0 else np.zeros(2)
+    if not (arc > 0.0 and math.isfinite(arc)):
+        return None
+    k = (theta / arc) * np.asarray(m["bending_direction"])
     return {"curvature": [float(v) for v in k], "axial_stretch": arc / design.length,
             "bending_angle_rad": theta,
             "radius_l_over_theta_m": design.length / theta if theta > 0 else float("inf"),

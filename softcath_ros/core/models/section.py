@@ -35,7 +35,7 @@ from ..section_fe.solver import LinearSolver, newton
 from .base import BendModel, BendState
 
 # Bump when the discretisation or the solver changes what a cached result would be.
-SOLVER_VERSION = "section-1"
+SOLVER_VERSION = "section-2"
 PA_PER_BAR = 1.0e5
 
 
