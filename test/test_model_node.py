@@ -276,3 +276,45 @@ def test_non_converged_or_non_finite_model_result_publishes_nothing_and_is_count
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_answer_load_reports_a_rung_too_slow_for_its_commands():
+    """In-process: a rung slower than the command stream turns /diagnostics' answer-load status to WARN."""
+    import time
+
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from std_msgs.msg import Float64MultiArray
+
+    from softcath_ros.core.models.base import BendModel, BendState
+    from softcath_ros.nodes.model_node import ModelNode
+
+    class SlowRung(BendModel):
+        name = "slow"
+
+        def _evaluate_batch(self, pressures):
+            time.sleep(0.02)            # 20 ms per command: sustains about 50 commands/s
+            n = len(pressures)
+            return BendState(np.tile([0.0, -10.0], (n, 1)), np.ones(n), np.ones(n, bool))
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=next(_domains))
+    node = ModelNode(context=context)
+    try:
+        cmd = Float64MultiArray(data=[10000.0])
+        node._diagnostics._load_status()                 # start a fresh window
+        for _ in range(500):                             # closed form, 1 ms apart: keeping up
+            node._on_command(cmd)
+            time.sleep(0.001)
+        ok = node._diagnostics._load_status()
+        assert ok.level == DiagnosticStatus.OK and "keeping up" in ok.message
+        node.model, node._fast = SlowRung(DESIGN), None
+        for _ in range(25):                              # back to back, as a queue of waiting commands
+            node._on_command(cmd)
+        slow = node._diagnostics._load_status()
+        values = {kv.key: kv.value for kv in slow.values}
+        assert slow.level == DiagnosticStatus.WARN and "falling behind" in slow.message, slow.message
+        assert values["behind"] == "true" and 20.0 <= float(values["mean_answer_ms"]) < 60.0
+        assert node.counters.accepted == 525
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

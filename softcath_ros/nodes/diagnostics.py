@@ -33,7 +33,9 @@ class DiagnosticsReporter:
     """Publishes ``counters`` on /diagnostics every ``period`` seconds from ``node``'s timer."""
 
     def __init__(self, node, counters: InputCounters, status_name: str, hardware_id: str,
-                 period: float = 1.0, topic: str = "/diagnostics"):
+                 period: float = 1.0, topic: str = "/diagnostics", answer_load=None):
+        """``answer_load`` (core.answer_load.AnswerLoad), when given, adds a second status
+        saying whether the node keeps up with its commands (WARN when it falls behind)."""
         from diagnostic_msgs.msg import DiagnosticArray
 
         self._node = node
@@ -42,6 +44,7 @@ class DiagnosticsReporter:
         self._hardware_id = hardware_id
         self._pub = node.create_publisher(DiagnosticArray, topic, 10)
         self._problems_at_last_report = 0
+        self._answer_load = answer_load
         self._timer = node.create_timer(period, self.publish)
 
     def publish(self) -> None:
@@ -57,5 +60,26 @@ class DiagnosticsReporter:
         status = DiagnosticStatus(level=level, name=self._name, message=message, hardware_id=self._hardware_id,
                                   values=[KeyValue(key=k, value=v) for k, v in c.key_values()])
         msg = DiagnosticArray(status=[status])
+        if self._answer_load is not None:
+            msg.status.append(self._load_status())
         msg.header.stamp = self._node.get_clock().now().to_msg()
         self._pub.publish(msg)
+
+    def _load_status(self):
+        import time
+
+        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+        r = self._answer_load.report(time.monotonic())
+        if r.behind:
+            level = DiagnosticStatus.WARN
+            message = (f"falling behind: busy {r.busy_fraction:.0%} of the time answering "
+                       f"{r.command_rate_hz:.0f} commands/s; this rung sustains about {r.max_rate_hz:.0f}/s")
+        else:
+            level, message = DiagnosticStatus.OK, f"keeping up: busy {r.busy_fraction:.0%} of the time"
+        values = {"commands_per_s": f"{r.command_rate_hz:.1f}", "mean_answer_ms": f"{r.mean_answer_s * 1e3:.3f}",
+                  "max_rate_hz": f"{r.max_rate_hz:.1f}", "busy_fraction": f"{r.busy_fraction:.3f}",
+                  "behind": str(r.behind).lower()}
+        return DiagnosticStatus(level=level, name=f"{self._name} (answer load)", message=message,
+                                hardware_id=self._hardware_id,
+                                values=[KeyValue(key=k, value=v) for k, v in values.items()])

@@ -24,6 +24,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
+from ..core.answer_load import AnswerLoad
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
@@ -116,8 +117,10 @@ class ModelNode(Node):
         self._backbone_pub = self.create_publisher(PoseArray, "/softcath/backbone", qos)
         self._tip, self._backbone = self._new_messages()
         self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self._on_command, qos)
+        # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
+        self.answer_load = AnswerLoad(time.monotonic())
         self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
-                                                self.design.name, diag_period)
+                                                self.design.name, diag_period, answer_load=self.answer_load)
         self.get_logger().info(
             f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
             f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
@@ -140,6 +143,11 @@ class ModelNode(Node):
     # -- the hot path ----------------------------------------------------------------------
     def _on_command(self, msg: Float64MultiArray) -> None:
         stamp_ns = self._now_ns()   # time the command was received
+        started = time.perf_counter()
+        self._answer(msg, stamp_ns)
+        self.answer_load.record(time.perf_counter() - started)
+
+    def _answer(self, msg: Float64MultiArray, stamp_ns: int) -> None:
         check = check_pressure_command(msg.data, self.n_channels, self.max_pressure, self.out_of_range)
         c = self.counters
         if check.status != "ok":
