@@ -268,7 +268,10 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
     op.node.create_subscription(PoseStamped, "/softcath/tip_pose",
                                 lambda m: tips.append((m.pose.position.x, m.pose.position.y, m.pose.position.z)), 50)
     try:
-        assert op.spin(30.0, until=lambda: len(tips) > 3), "no tip_pose from model_node"
+        # Poses flowing proves model_node hears allocation_node; the operator's bend_cmd must
+        # also be matched by allocation_node before streaming, or the first stream is lost.
+        assert op.spin(30.0, until=lambda: len(tips) > 3 and op.bend.get_subscription_count() > 0), \
+            "no tip_pose from model_node, or allocation_node does not hear bend_cmd"
         model_cf = make_model("closed_form", design)
         for deg in (0.0, 100.0, 215.0, 300.0):
             phi = math.radians(deg)
