@@ -26,8 +26,8 @@ import yaml
 
 from ..core.errors import SoftcathError
 from ..core.yaml_io import load_yaml
+from ..core.units import PA_PER_BAR
 
-PA_PER_BAR = 1.0e5
 BENCHES = ("angle", "force")
 
 

@@ -8,8 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .analysis import Hysteresis, StepStats
-
-PA_PER_BAR = 1.0e5
+from ..core.units import PA_PER_BAR
 
 
 def _fmt(x: float, scale: float = 1.0, digits: int = 2) -> str:

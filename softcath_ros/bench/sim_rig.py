@@ -27,8 +27,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .blocking import BlockingForce
-
-PA_PER_BAR = 1.0e5
+from ..core.units import PA_PER_BAR
 
 
 @dataclass

@@ -6,8 +6,7 @@ import math
 import numpy as np
 
 from ..core.errors import SoftcathError
-
-PA_PER_BAR = 1.0e5
+from ..core.units import PA_PER_BAR
 
 
 def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray:

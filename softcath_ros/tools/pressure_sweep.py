@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-PA_PER_BAR = 1.0e5
+from ..core.units import PA_PER_BAR
 
 
 @dataclass

@@ -16,8 +16,7 @@ import numpy as np
 from ..continuation import Correction, StepControl, ramp
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
-
-PA_PER_BAR = 1.0e5
+from ..units import PA_PER_BAR
 
 
 def describe_pressure(t: float) -> str:

@@ -33,10 +33,10 @@ from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
 from ..section_fe.solver import LinearSolver, newton
 from .base import BendModel, BendState
+from ..units import PA_PER_BAR
 
 # Bump when the discretisation or the solver changes what a cached result would be.
 SOLVER_VERSION = "section-2"
-PA_PER_BAR = 1.0e5
 
 
 @dataclass(frozen=True)

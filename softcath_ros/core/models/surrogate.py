@@ -44,10 +44,10 @@ import numpy as np
 from ..design import Design
 from ..errors import ModelError
 from .base import BendModel, BendState
+from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
 SURROGATE_VERSION = "surrogate-2"
-PA_PER_BAR = 1.0e5
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
 
