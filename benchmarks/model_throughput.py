@@ -10,20 +10,15 @@ Writes benchmarks/results/model_throughput.{json,csv,png}.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
-import platform
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
+from results_io import RESULTS, write_results
 
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose, tip_pose_single
 from softcath_ros.core.models import make_model
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def per_call_seconds(fn, calls: int, repeats: int) -> list[float]:
@@ -77,16 +72,9 @@ def main() -> None:
         record("evaluate + tip_pose (batched)", n, per_call_seconds(
             lambda: tip_pose(model.evaluate(batch).curvature, design.length), calls, args.repeats))
 
-    meta = {"model": args.model, "design": args.design, "repeats": args.repeats,
-            "python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
-            "cpu_count": __import__("os").cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "model_throughput.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
-    with open(RESULTS / "model_throughput.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    plot(rows, RESULTS / "model_throughput.png", args.model)
+    stem = write_results("model_throughput", {"model": args.model, "design": args.design,
+                                              "repeats": args.repeats}, rows)
+    plot(rows, stem.with_suffix(".png"), args.model)
     print(f"results in {RESULTS}/model_throughput.{{json,csv,png}}")
 
 
