@@ -7,6 +7,7 @@ import csv
 from pathlib import Path
 
 from ..core.errors import SoftcathError
+from ..core.units import PA_PER_BAR
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 
@@ -63,10 +64,10 @@ def draw(rows: list[dict], path: str) -> str:
             a1.scatter([rs[0]["s_per_eval"]], [max(errs) * 100], color=colours[s], s=50, label=s)
             a1.annotate(s, (rs[0]["s_per_eval"], max(errs) * 100), fontsize=7, xytext=(4, 4),
                         textcoords="offset points")
-            pts = [(r["pressure_pa"] / 1e5, r["rc_rel_error"] * 100) for r in rs if r["rc_rel_error"] is not None]
+            pts = [(r["pressure_pa"] / PA_PER_BAR, r["rc_rel_error"] * 100) for r in rs if r["rc_rel_error"] is not None]
             a2.plot(*zip(*pts), "o-", color=colours[s], label=s)
-        a3.barh(s, rs[0]["boundary_pa"] / 1e5, color=colours[s])
-        a3.annotate("fails beyond" if rs[0]["fails_beyond"] else "reached the end", (rs[0]["boundary_pa"] / 1e5, s),
+        a3.barh(s, rs[0]["boundary_pa"] / PA_PER_BAR, color=colours[s])
+        a3.annotate("fails beyond" if rs[0]["fails_beyond"] else "reached the end", (rs[0]["boundary_pa"] / PA_PER_BAR, s),
                     fontsize=7, xytext=(3, 0), textcoords="offset points", va="center")
     a1.set_xscale("log")
     a1.set_yscale("log")
