@@ -6,7 +6,9 @@ and receives /softcath/tip_pose and /softcath/backbone on an EventsExecutor in t
 thread. Writes one JSON summary (and the raw arrays as .npz next to it).
 
 How poses are matched to commands (honest, checkable): command i carries pressure
-p(i) = 0.9 max_pressure (i mod 997) / 997, so 997 consecutive commands are distinct. The
+p(i) = 0.9 p_top (i mod 997) / 997 on channel 0, so 997 consecutive commands are distinct;
+p_top is the top of the rung's own valid range (``model.pressure_range``, at most the
+design's max_pressure: the surrogate's table ends where its source stopped converging). The
 probe predicts the tip position for each of the 997 values with the core (same design
 and rung as the node), identifies every received pose's residue i mod 997 by the nearest
 predicted tip, and takes the first sequence number after the previous pose's with that
@@ -20,6 +22,9 @@ Latencies, all on the machine's wall clock (CLOCK_REALTIME, which ROS stamps use
 - ``e2e``: probe callback time - probe send time of the matched command: adds the command's
   transport and any queueing in the node's executor before its callback runs.
 CPU: psutil user+system time of the node's pid (``--node-pid``) over the measured window.
+The node's own /diagnostics reports during the window are kept too: its answer load (mean
+answer time, busy fraction, WARN when behind) and its model_failed counter (a rung refusing
+commands would show there, not as silently missing poses).
 """
 from __future__ import annotations
 
@@ -35,11 +40,39 @@ import numpy as np
 RESIDUES = 997
 
 
-def command_pressures(n_seq: int, n_channels: int, max_pressure: float) -> np.ndarray:
-    """(n_seq, C) Pa: channel 0 steps through 997 distinct values, the others stay at 0."""
+def command_pressures(n_seq: int, n_channels: int, top_pressure: float) -> np.ndarray:
+    """(n_seq, C) Pa: channel 0 steps through 997 distinct values in [0, 0.9 top_pressure), the
+    others stay at 0."""
     p = np.zeros((n_seq, n_channels))
-    p[:, 0] = 0.9 * max_pressure * (np.arange(n_seq) % RESIDUES) / RESIDUES
+    p[:, 0] = 0.9 * top_pressure * (np.arange(n_seq) % RESIDUES) / RESIDUES
     return p
+
+
+def top_pressure(model) -> float:
+    """Pa: the highest channel pressure both the design allows and the rung answers."""
+    return min(float(model.pressure_range[1]), float(model.design.max_pressure))
+
+
+def diagnostics_summary(reports: list[dict]) -> dict:
+    """The node's /diagnostics reports over the window: answer load and refusals."""
+    load = [r for r in reports if r["name"].endswith("(answer load)")]
+    counters = [r for r in reports if not r["name"].endswith("(answer load)")]
+
+    def values(key):
+        return [float(r["values"][key]) for r in load if key in r["values"]]
+
+    out = {"reports": len(load),
+           "answer_load_warn_reports": sum(r["level"] != 0 for r in load),
+           "mean_answer_ms_median": float(np.median(values("mean_answer_ms"))) if load else None,
+           "busy_fraction_max": max(values("busy_fraction"), default=None),
+           "commands_per_s_median": float(np.median(values("commands_per_s"))) if load else None,
+           "max_rate_hz_median": float(np.median(values("max_rate_hz"))) if load else None,
+           "answer_load_messages": sorted({r["message"] for r in load})[:3]}
+    if counters:
+        last = counters[-1]["values"]
+        out.update(model_failed=int(last.get("model_failed", 0)), rejected=int(last.get("rejected", 0)),
+                   model=last.get("model"), last_reason=last.get("last_reason", ""))
+    return out
 
 
 def main() -> int:
@@ -63,6 +96,7 @@ def main() -> int:
 
     import psutil
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseArray, PoseStamped
     from rclpy.experimental import EventsExecutor
     from std_msgs.msg import Float64MultiArray
@@ -78,7 +112,7 @@ def main() -> int:
     n_warm = int(round(args.warmup * args.rate))
     n_meas = int(round(args.duration * args.rate))
     n_total = n_warm + n_meas
-    pressures = command_pressures(n_total, design.n_channels, design.max_pressure)
+    pressures = command_pressures(n_total, design.n_channels, top_pressure(model))
     state = model.evaluate(pressures[:RESIDUES])
     expected_tip, _ = tip_pose(state.curvature, design.length * state.axial_stretch)
 
@@ -104,6 +138,20 @@ def main() -> int:
         counts["backbone"] += 1
         counts["backbone_points"] = len(msg.poses)
 
+    diagnostics: list[dict] = []
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        if "wall0" not in window or done.is_set():
+            return  # only reports from the measured window
+        for st in msg.status:
+            if st.name.startswith("softcath_model"):
+                diagnostics.append({"name": st.name, "level": int.from_bytes(st.level, "little")
+                                    if isinstance(st.level, bytes) else int(st.level), "message": st.message,
+                                    "values": {kv.key: kv.value for kv in st.values}})
+
+    window = {}
+    done = threading.Event()
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     tip_sub = node.create_subscription(PoseStamped, "/softcath/tip_pose", on_tip, qos)
     bb_sub = node.create_subscription(PoseArray, "/softcath/backbone", on_backbone, qos)
     pub = node.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
@@ -128,8 +176,6 @@ def main() -> int:
     node_proc = psutil.Process(args.node_pid)
     me = psutil.Process()
     msgs = [Float64MultiArray(data=row.tolist()) for row in pressures]  # built before timing starts
-    window = {}
-    done = threading.Event()
 
     def send(i: int) -> None:
         if i == n_warm:
@@ -198,6 +244,8 @@ def main() -> int:
         "node_latency": stats(node_lat), "e2e_latency": stats(e2e_lat),
         "node_cpu_cores": busy(window["node_cpu0"], node_cpu) / wall,
         "probe_cpu_cores": busy(window["probe_cpu0"], probe_cpu) / wall,
+        "model": args.model, "design": args.design, "top_pressure_pa": top_pressure(model),
+        "node_diagnostics": diagnostics_summary(diagnostics),
     }
     out = Path(args.out)
     out.write_text(json.dumps(summary, indent=1, default=float))

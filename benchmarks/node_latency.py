@@ -11,18 +11,24 @@ medians over repeats.
 Targets (issue 2): 1 kHz sustained with zero lost poses (reliable QoS), p99 latency
 <= 2 ms, node under half a core.
 
+With ``--model`` (and ``--design``) the node runs that rung (its ``model``/``design``
+parameters); the probe drives channel 0 over 90% of the rung's own valid pressure range
+(``model.pressure_range``: the 1-channel surrogate's table ends at 0.275 bar). The rung is
+built once before the runs, so a table the surrogate has to build first (into the cache) is
+timed and reported, not charged to the node's start-up in every run.
+
     .venv/bin/python benchmarks/node_latency.py                 # all configurations, 3 repeats, 10 s
     .venv/bin/python benchmarks/node_latency.py --configs default,single --repeats 1 --duration 3
+    .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default,rt --repeats 3
 
-Writes benchmarks/results/node_latency.{csv,json,png}. Ctrl-C stops cleanly.
+Writes benchmarks/results/<name>.{csv,json,png} through results_io.write_results (name:
+``--name``, default node_latency, node_latency_<model> for another rung). Ctrl-C stops cleanly.
 """
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
-import platform
 import signal
 import subprocess
 import sys
@@ -34,6 +40,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path.insert(0, str(HERE))
+from results_io import write_results  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {
@@ -69,6 +77,7 @@ def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
     out = workdir / f"{name}-{domain}.json"
     try:
         probe = [sys.executable, str(HERE / "latency_probe.py"), "--node-pid", str(node.pid), "--out", str(out),
+                 "--model", params["model"], "--design", params["design"],
                  "--rate", str(args.rate), "--duration", str(args.duration), "--warmup", str(args.warmup),
                  "--qos-depth", str(params.get("qos_depth", 1000)),
                  "--reliability", params.get("reliability", "reliable"),
@@ -89,12 +98,37 @@ def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
     return result
 
 
+def prepare_model(model: str, design: str) -> dict:
+    """Build the rung once before the runs (a surrogate table is built into the cache here if it is
+    not there yet), so node and probe load it; returns what was built and how long it took."""
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.models import make_model
+
+    t0 = time.perf_counter()
+    load = os.getloadavg()[0]
+    m = make_model(model, load_design(design))
+    out = {"model": model, "design": design, "prepare_s": time.perf_counter() - t0, "loadavg_1min": load,
+           "pressure_range_pa": list(m.pressure_range)}
+    meta = getattr(m, "meta", None)
+    if isinstance(meta, dict):  # the surrogate: its table's build time and error bound
+        out.update(table_build_s=meta.get("build_seconds"), error_bound=meta.get("error_bound"))
+    print(f"model {model} for {design}: ready in {out['prepare_s']:.2f} s, valid over "
+          f"{out['pressure_range_pa'][0]:g}..{out['pressure_range_pa'][1]:g} Pa", flush=True)
+    return out
+
+
 def median_row(name: str, runs: list[dict]) -> dict:
     def med(get):
         return float(np.median([get(r) for r in runs]))
 
+    def diag(key):
+        vals = [r["node_diagnostics"].get(key) for r in runs]
+        vals = [v for v in vals if v is not None]
+        return float(np.median(vals)) if vals else None
+
     return {
-        "config": name, "description": CONFIGS[name][0], "runs": len(runs),
+        "config": name, "model": runs[0]["model"], "design": runs[0]["design"],
+        "top_pressure_pa": runs[0]["top_pressure_pa"], "description": CONFIGS[name][0], "runs": len(runs),
         "node_p50_ms": med(lambda r: r["node_latency"]["p50_ms"]),
         "node_p99_ms": med(lambda r: r["node_latency"]["p99_ms"]),
         "node_p99_min_ms": min(r["node_latency"]["p99_ms"] for r in runs),
@@ -107,6 +141,11 @@ def median_row(name: str, runs: list[dict]) -> dict:
         "node_cpu_cores": med(lambda r: r["node_cpu_cores"]),
         "probe_cpu_cores": med(lambda r: r["probe_cpu_cores"]),
         "clean_exit": all(r["node_exit_code"] == 0 for r in runs),
+        # what the node itself reports on /diagnostics (answer load; refusals counted as model_failed)
+        "node_mean_answer_ms": diag("mean_answer_ms_median"),
+        "node_busy_fraction_max": max((r["node_diagnostics"].get("busy_fraction_max") or 0.0) for r in runs),
+        "node_answer_load_warn_reports": sum(r["node_diagnostics"].get("answer_load_warn_reports", 0) for r in runs),
+        "node_model_failed_max": max(r["node_diagnostics"].get("model_failed", 0) for r in runs),
         "loadavg_1min": med(lambda r: r["loadavg_1min_at_start"]),
     }
 
@@ -158,7 +197,10 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="measured seconds per run (>= 10 for the target)")
     ap.add_argument("--warmup", type=float, default=1.0)
     ap.add_argument("--rate", type=float, default=1000.0)
-    ap.add_argument("--out-dir", default=str(HERE / "results"))
+    ap.add_argument("--model", default="closed_form", help="model_node's rung (parameter 'model'), e.g. surrogate")
+    ap.add_argument("--design", default="implemented_5mm", help="model_node's design (parameter 'design')")
+    ap.add_argument("--name", default=None, help="results stem under benchmarks/results/ "
+                    "(default node_latency, or node_latency_<model> for another rung)")
     ap.add_argument("--domain-base", type=int, default=180, help="ROS_DOMAIN_IDs used: base .. base+19")
     args = ap.parse_args()
     from tqdm import tqdm
@@ -169,6 +211,7 @@ def main() -> int:
     unknown = [n for n in names if n not in CONFIGS]
     if unknown:
         ap.error(f"unknown configuration(s) {unknown}; known: {', '.join(CONFIGS)}")
+    model_meta = prepare_model(args.model, args.design)
     schedule = [(rep, n) for rep in range(args.repeats) for n in names]
     runs: dict[str, list] = {n: [] for n in names}
     load_before = os.getloadavg()
@@ -176,30 +219,25 @@ def main() -> int:
         with tempfile.TemporaryDirectory() as tmp:
             for i, (rep, name) in enumerate(tqdm(schedule, desc="node latency runs", unit="run")):
                 domain = args.domain_base + (i % 20)
-                runs[name].append(run_once(name, CONFIGS[name][1], args, domain, Path(tmp)))
+                params = {"model": args.model, "design": args.design, **CONFIGS[name][1]}
+                runs[name].append(run_once(name, params, args, domain, Path(tmp)))
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
         return 130
     rows = [median_row(n, runs[n]) for n in names]
-    out = Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "node_latency.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: (f"{v:.4g}" if isinstance(v, float) else v) for k, v in row.items()})
-    meta = {"command": " ".join([Path(sys.executable).name] + sys.argv), "date": time.strftime("%Y-%m-%d %H:%M"),
-            "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
-                        "loadavg_before": load_before, "loadavg_after": os.getloadavg()},
+    name = args.name or ("node_latency" if args.model == "closed_form" else f"node_latency_{args.model}")
+    meta = {"command": " ".join([Path(sys.executable).name] + sys.argv), "loadavg_before": load_before,
+            "loadavg_after": os.getloadavg(), "model": model_meta,
             "note": "2 cores shared with other engineers' jobs; medians over interleaved repeats",
-            "table": rows,
             "runs": {n: [{k: v for k, v in r.items() if not k.startswith("_")} for r in rs] for n, rs in runs.items()}}
-    (out / "node_latency.json").write_text(json.dumps(meta, indent=1, default=float))
-    plot(rows, runs, out / "node_latency.png")
+    stem = write_results(name, json.loads(json.dumps(meta, default=float)), rows)
+    plot(rows, runs, stem.with_suffix(".png"))
     for row in rows:
         print(f"{row['config']:>12}: p50 {row['node_p50_ms']:.3f} ms, p99 {row['node_p99_ms']:.3f} ms "
-              f"(e2e p99 {row['e2e_p99_ms']:.3f}), lost {row['lost_tip_max']}, cpu {row['node_cpu_cores']:.2f} cores")
-    print(f"wrote {out / 'node_latency.csv'}, .json, .png (load average before {load_before[0]:.1f})")
+              f"(e2e p99 {row['e2e_p99_ms']:.3f}), lost {row['lost_tip_max']}, cpu {row['node_cpu_cores']:.2f} cores; "
+              f"node reports mean answer {row['node_mean_answer_ms']} ms, busy max {row['node_busy_fraction_max']:.1%}, "
+              f"{row['node_answer_load_warn_reports']} WARN report(s), model_failed {row['node_model_failed_max']}")
+    print(f"wrote {stem}.csv, .json, .png (load average before {load_before[0]:.1f}, after {os.getloadavg()[0]:.1f})")
     return 0
 
 

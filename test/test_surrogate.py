@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,6 +51,7 @@ def test_table_cached_by_design_content(one_channel, tmp_path):
     m = one_channel
     again = make_model("surrogate", m.design, cache=m.cache_dir)
     assert again.meta == m.meta                     # loaded, not rebuilt
+    assert m.built_now and not again.built_now      # what model_node reports at start-up
     softer = replace(m.design, length=0.03)
     assert softer.content_hash() != m.design.content_hash()
     other = make_model("surrogate", softer, cache=tmp_path, source="closed_form")
@@ -126,3 +128,18 @@ def test_predict_cli_with_surrogate(one_channel):
     k = one_channel.evaluate([0.15e5]).curvature
     assert ok["curvature_per_m"] == pytest.approx(k.tolist())
     assert "outside" in refused["reason"]
+
+
+def test_latency_probe_drives_only_pressures_the_rung_answers(one_channel):
+    """benchmarks/latency_probe.py takes its pressure sweep from the rung's own range: the
+    surrogate answers every command of it; the closed form keeps the design's range."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from latency_probe import command_pressures, top_pressure
+
+    m = one_channel
+    assert top_pressure(m) == m.pressure_range[1] < m.design.max_pressure
+    p = command_pressures(2000, 1, top_pressure(m))
+    assert p.max() < m.pressure_range[1] and len(np.unique(p)) == 997
+    assert m.evaluate(p).converged.all()
+    cf = make_model("closed_form", m.design)
+    assert top_pressure(cf) == cf.pressure_range[1] == m.design.max_pressure

@@ -86,7 +86,7 @@ class ModelNode(Node):
             self.design = self.model.design       # the scene's device included
             self.get_logger().info(self.model.selection.reason)
         else:
-            self.model = make_model(model_name, self.design)
+            self.model = self._make_model(model_name)
         self.n_channels = self.design.n_channels
         self.length = self.design.length
         self.n_points = int(n_points)
@@ -125,6 +125,23 @@ class ModelNode(Node):
             f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
             f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
             f"executor={self.executor_name}, qos {reliability} depth {depth}, messages {self.preparation}")
+
+    def _make_model(self, model_name: str):
+        """The rung, saying so when start-up waits for it: a surrogate whose table is not in the
+        cache builds it here (about a second for 1 channel, minutes for 3 channels)."""
+        if model_name == "surrogate":
+            self.get_logger().info("model surrogate: loading its table (built now if not in the cache)")
+        t0 = time.perf_counter()
+        model = make_model(model_name, self.design)
+        took = time.perf_counter() - t0
+        if getattr(model, "built_now", False):
+            self.get_logger().warning(
+                f"model {model_name}: its table for design {self.design.name} was not in the cache and was built "
+                f"at start-up in {took:.1f} s (now cached at {model.path}); max R_C error against its source: "
+                + ", ".join(f"{part} {b.get('rc_rel_max', float('nan')):.2%}" for part, b in model.error_bound.items()))
+        elif took > 1.0:
+            self.get_logger().info(f"model {model_name}: ready in {took:.1f} s")
+        return model
 
     def _declare(self, name, default, description):
         return self.declare_parameter(name, default, ParameterDescriptor(

@@ -39,6 +39,12 @@ class BendModel:
     def n_channels(self) -> int:
         return self.design.n_channels
 
+    @property
+    def pressure_range(self) -> tuple[float, float]:
+        """Pa: the channel pressures this rung answers. The design's limit unless the rung knows a
+        narrower range up front (a table refuses outside the range it was built on)."""
+        return 0.0, float(self.design.max_pressure)
+
     def evaluate(self, pressures) -> BendState:
         """Bend state for one pressure vector (shape (C,)) or a batch (shape (N, C)), Pa."""
         p = np.asarray(pressures, dtype=float)

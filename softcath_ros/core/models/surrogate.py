@@ -135,6 +135,7 @@ class SurrogateModel(BendModel):
             self.cache_dir = Path(cache) if cache else None
         self.key = self._key()
         loaded = None if rebuild or self.cache_dir is None else self._load()
+        self.built_now = loaded is None   # the table was built by this constructor (not from the cache)
         if loaded is None:
             self.table, self.meta = self._build()
             if self.cache_dir is not None:
