@@ -46,6 +46,8 @@ setup(
         "bench": ["psutil>=5.9"],
         # 3D finite-element rung (fe3d): NGSolve with the netgen mesher, imported lazily.
         "fe": ["ngsolve>=6.2.2404"],
+        # `softcath study --scheduler ADDR`: run study cases on an existing Dask cluster (imported lazily).
+        "cluster": ["dask[distributed]>=2023.1"],
     },
     zip_safe=True,
     maintainer="softcath_ros developers",

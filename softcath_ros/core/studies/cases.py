@@ -1,0 +1,109 @@
+"""One case of a study: a design at a batch of pressures through one rung, solved anywhere.
+
+``CaseSpec`` is plain data (the design-file mapping, the rung's name and options, the
+pressures) so that it pickles to a worker process or a cluster worker; ``solve_case`` is the
+function the workers run. It never raises for a physics failure: a command the rung cannot
+reach comes back with ``converged = False`` and the rung's message.
+"""
+from __future__ import annotations
+
+import importlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cache import key_of
+from ..design import design_from_dict
+
+# Bump when what a case records changes (it is part of every case's cache key).
+STUDY_CODE_VERSION = "studies-1"
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    design: dict                    # design-file mapping (Design.to_dict())
+    rung: str                       # model rung name (core/models RUNGS)
+    pressures: tuple                # ((p_0, .., p_C-1), ...) Pa, one row per command
+    options: dict = field(default_factory=dict)   # rung options, e.g. {"mesh_size": 4e-4}
+
+    def key(self) -> str:
+        """Cache key: design content, rung, its options and code version, pressures, this code's version."""
+        design = design_from_dict(self.design)
+        return key_of(design.content_hash(), self.rung, self.options, _rung_version(self.rung),
+                      [list(map(float, p)) for p in self.pressures], STUDY_CODE_VERSION)
+
+
+def _rung_version(rung: str) -> str | None:
+    """The rung module's SOLVER_VERSION (bumped when its answers change), if it declares one."""
+    from ..models import RUNGS
+
+    if rung not in RUNGS:
+        return None
+    try:
+        module = importlib.import_module(RUNGS[rung].split(":")[0])
+    except ImportError:
+        return None
+    return getattr(module, "SOLVER_VERSION", None)
+
+
+def solve_case(spec: CaseSpec) -> dict:
+    """Evaluate one case: {"results": [per command], "solve_time_s": wall time of the solve}.
+
+    Per command: curvature (1/m), R_C = 1/|k| (m; None if straight or not converged), axial
+    stretch, converged, message, and for the section rung the largest principal stretch in
+    the silicone (``max_principal_stretch``), the strain measure the optimiser limits."""
+    from ..models import make_model
+
+    design = design_from_dict(spec.design)
+    pressures = np.asarray(spec.pressures, dtype=float)
+    t0 = time.perf_counter()
+    model = make_model(spec.rung, design, **spec.options)
+    state = model.evaluate(pressures)
+    elapsed = time.perf_counter() - t0
+    messages = _split_messages(state.message, int(np.sum(~np.asarray(state.converged))))
+    results = []
+    j = 0
+    for i, p in enumerate(pressures):
+        ok = bool(state.converged[i])
+        k = state.curvature[i]
+        kappa = float(np.hypot(*k)) if ok else float("nan")
+        row = {"pressures_pa": [float(v) for v in p], "converged": ok,
+               "curvature_per_m": [float(v) for v in k] if ok else None,
+               "radius_of_curvature_m": (1.0 / kappa) if ok and kappa > 0 else None,
+               "axial_stretch": float(state.axial_stretch[i]) if ok else None,
+               "max_principal_stretch": max_principal_stretch(model, p) if ok else None,
+               "message": ""}
+        if not ok:
+            row["message"] = messages[j] if j < len(messages) else (state.message or "did not converge")
+            j += 1
+        results.append(row)
+    return {"results": results, "solve_time_s": elapsed}
+
+
+def _split_messages(message: str, n_failed: int) -> list[str]:
+    """The rung joins one message per failed command with '; ' (section.py); split them back
+    when the count matches, else give every failed command the whole message."""
+    parts = [m for m in message.split("; section model:")] if message else []
+    if len(parts) == n_failed and n_failed > 1:
+        return [parts[0]] + [f"section model:{m}" for m in parts[1:]]
+    return [message] * n_failed
+
+
+def max_principal_stretch(model, pressures) -> float | None:
+    """Largest principal stretch anywhere in the silicone at a converged command (section rung).
+
+    Read from the rung's converged state for that command (kept by the model for
+    continuation); the deformation gradient is block diagonal (in-plane 2x2, axial F33), so
+    the principal stretches are the singular values of the 2x2 block and F33. None for rungs
+    that do not resolve the section's strain field."""
+    states = getattr(model, "_states", None)
+    problem = getattr(model, "problem", None)
+    if states is None or problem is None:
+        return None
+    x = states.get(tuple(float(v) for v in pressures))
+    if x is None:
+        return None
+    F2, f33, _, _ = problem._element_kinematics(x)
+    in_plane = np.linalg.svd(F2, compute_uv=False)   # (e, q, 2)
+    return float(max(in_plane.max(), np.abs(f33).max()))

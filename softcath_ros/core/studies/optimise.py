@@ -1,0 +1,293 @@
+"""Optimise: maximise bending at the study pressure over channel size and position.
+
+1-DOF (one channel): the implemented stacking along y (bottom wall with the fibre / lumen /
+middle wall / channel / outer wall), the lumen diameter fixed (it carries the device), the three
+wall thicknesses free; the channel fills the rest. Multi-channel (2-DOF): N equal channels at
+360/N degrees around the central lumen, N in COUNTS; the outer and lumen walls free, the
+channel fills the rest; the wall between channels is checked by the design validation.
+
+Constraints: every wall at least the design's own ``min_wall_thickness``; the rung converges at
+the study pressure (no closed lumen or touching walls); the largest principal stretch in the
+silicone at that pressure (section rung) at most ``max_stretch``: the strain margin that keeps
+the thin walls from being driven towards rupture. Default 2.0 (100% strain), a stated choice
+well below Ecoflex 00-30's elongation at break, chosen for repeated cycling; the implemented
+design reaches 1.47 at 0.15 bar.
+
+Search: a coarse grid of wall thicknesses solved in parallel (cached), then scipy's COBYLA from
+the best feasible grid point (wall thicknesses in mm, derivative free: remeshing makes R_C
+slightly noisy in the geometry). The best feasible design seen is the optimum; it is written as
+a design file with R_C-vs-pressure curves against the baseline (and the implemented design).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import yaml
+
+from ..design import Design, load_design
+from ..errors import DesignError
+from ..units import PA_PER_BAR
+from .context import StudyContext, StudyResult
+from .plotting import pyplot, save, where
+from .runner import run_cases
+from .variation import apply_stacked, area_ratio, make_variant, min_wall_of, stacked_layout
+
+COUNTS = (3, 4)
+DEFAULT_MAX_STRETCH = 2.0
+GRID_STEPS_MM = (0.0, 0.1, 0.2, 0.3)       # added to the minimum wall, scaled with D / 5 mm
+CURVE_BAR = tuple(round(0.025 * i, 3) for i in range(1, 11))   # 0.025 .. 0.25 bar
+MAX_ITER = 40
+
+
+def layout_1dof(base: Design, walls: tuple[float, float, float]):
+    t_o, t_m, t_b = walls
+
+    def edit(d):
+        apply_stacked(d, stacked_layout(base.outer_diameter, base.lumen.diameter, t_o, t_m, t_b))
+    return edit
+
+
+def layout_ring(base: Design, count: int, walls: tuple[float, float]):
+    t_o, t_l = walls
+    big_r, r_l = base.outer_radius, base.lumen.radius
+    r_c = 0.5 * (big_r - r_l - t_o - t_l)
+    rho = r_l + t_l + r_c
+    first = math.atan2(base.channels[0].center[1], base.channels[0].center[0]) if base.n_channels > 1 else math.pi / 2
+
+    def edit(d):
+        if r_c <= 0:
+            raise DesignError("channels", None, "no room for the channels between the lumen and outer walls")
+        d["channels"] = [{"diameter": 2 * r_c, "center": [rho * math.cos(first + 2 * math.pi * i / count),
+                                                          rho * math.sin(first + 2 * math.pi * i / count)]}
+                         for i in range(count)]
+        d["lumen"] = {"diameter": base.lumen.diameter, "center": [0.0, 0.0]}
+    return edit
+
+
+class Search:
+    """Evaluations of one layout family (memoised by wall thicknesses), feasibility and history."""
+
+    def __init__(self, base: Design, ctx: StudyContext, count: int, max_stretch: float):
+        self.base, self.ctx, self.count, self.max_stretch = base, ctx, count, max_stretch
+        self.w = base.min_wall_thickness
+        self.history: dict[tuple, dict] = {}
+
+    def variant(self, walls):
+        edit = layout_1dof(self.base, walls) if self.count == 1 else layout_ring(self.base, self.count, walls)
+        return make_variant(self.base, self.label(walls), "walls", walls, edit)
+
+    def label(self, walls) -> str:
+        names = ("outer", "middle", "bottom") if self.count == 1 else ("outer", "lumen")
+        return ", ".join(f"{n} {t * 1e3:.3f}" for n, t in zip(names, walls)) + " mm"
+
+    def evaluate(self, many: list[tuple], stage: str, parallel: bool) -> list[dict]:
+        keys = [tuple(round(t, 9) for t in walls) for walls in many]
+        new = [k for k in dict.fromkeys(keys) if k not in self.history]
+        variants = [self.variant(k) for k in new]
+        feasible = [v for v in variants if v.feasible]
+        specs = [self.ctx.spec(v.design) for v in feasible]
+        if parallel:
+            results = self.ctx.solve(specs, f"optimise {self.count} ch, {stage}")
+        else:   # one candidate at a time (COBYLA): in this process, or on the given executor
+            results = run_cases(specs, executor=self.ctx.executor, workers=1, cache=self.ctx.cache,
+                                progress=False, stats=self.ctx.stats)
+        it = iter(results)
+        for k, v in zip(new, variants):
+            row = {"count": self.count, "stage": stage, "label": v.label,
+                   **{f"wall_{i}_mm": t * 1e3 for i, t in enumerate(k)}}
+            if not v.feasible:
+                row.update(feasible=False, radius_of_curvature_mm=None, max_principal_stretch=None,
+                           status=f"infeasible: {v.reason}", design=None)
+            else:
+                r = next(it)["results"][0]
+                rc, st = r["radius_of_curvature_m"], r["max_principal_stretch"]
+                ok = r["converged"] and rc is not None and st is not None and st <= self.max_stretch
+                status = ("ok" if ok else f"did not converge: {r['message']}" if not r["converged"]
+                          else f"max stretch {st:.3f} > {self.max_stretch}")
+                row.update(feasible=ok, radius_of_curvature_mm=None if rc is None else rc * 1e3,
+                           max_principal_stretch=st, status=status, design=v.design,
+                           channel_diameter_mm=v.design.channels[0].diameter * 1e3,
+                           area_ratio=area_ratio(v.design), thinnest_wall_mm=min_wall_of(v.design) * 1e3)
+            self.history[k] = row
+        return [self.history[k] for k in keys]
+
+    def best(self) -> dict | None:
+        ok = [r for r in self.history.values() if r["feasible"]]
+        return min(ok, key=lambda r: r["radius_of_curvature_mm"]) if ok else None
+
+    def run(self) -> dict | None:
+        scale = self.base.outer_diameter / 5e-3
+        n = 3 if self.count == 1 else 2
+        grid = [tuple(self.w + s * 1e-3 * scale for s in steps) for steps in itertools.product(GRID_STEPS_MM, repeat=n)]
+        self.evaluate(grid, "grid", parallel=True)
+        start = self.best()
+        if start is None:
+            return None
+        from scipy.optimize import minimize
+
+        w_mm = self.w * 1e3
+
+        def solve(x_mm):
+            return self.evaluate([tuple(np.asarray(x_mm) * 1e-3)], "cobyla", parallel=False)[0]
+
+        def objective(x_mm):   # curvature in 1/mm, negated; 0 (straight) where nothing converged
+            r = solve(x_mm)
+            rc = r["radius_of_curvature_mm"]
+            return -1.0 / rc if rc else 0.0
+
+        def stretch_margin(x_mm):
+            if min(x_mm) < w_mm - 1e-9:
+                return -1.0
+            r = solve(x_mm)
+            st = r["max_principal_stretch"]
+            return self.max_stretch - st if st is not None and r["status"] != "infeasible" else -1.0
+
+        x0 = np.array([start[f"wall_{i}_mm"] for i in range(n)])
+        cons = [{"type": "ineq", "fun": lambda x, i=i: x[i] - w_mm} for i in range(n)]
+        cons.append({"type": "ineq", "fun": stretch_margin})
+        minimize(objective, x0, method="COBYLA", constraints=cons,
+                 options={"rhobeg": 0.05 * scale, "tol": 0.002 * scale, "maxiter": MAX_ITER})
+        return self.best()
+
+
+def design_file_text(design: Design, description: str) -> str:
+    data = design.to_dict()
+    data["description"] = description
+    return "# Written by `softcath study optimise` (core/studies/optimise.py). SI units: metres, pascals.\n" + \
+        yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110)
+
+
+def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRETCH,
+        counts: tuple[int, ...] = COUNTS) -> StudyResult:
+    if design.lumen is None:
+        raise DesignError("lumen", None, "the optimiser keeps the lumen (it carries the device); this design has none")
+    kind = "1dof" if design.n_channels == 1 else "2dof"
+    searches = [Search(design, ctx, 1, max_stretch)] if kind == "1dof" else [Search(design, ctx, n, max_stretch)
+                                                                            for n in counts]
+    bests = [(s, s.run()) for s in searches]
+    found = [(s, b) for s, b in bests if b is not None]
+    stem = f"optimised_{kind}_{design.outer_diameter * 1e3:g}mm"
+    p_bar = ctx.pressure / PA_PER_BAR
+
+    # the baseline at the same pressure, as a table row
+    base_case = ctx.solve([ctx.spec(design)], "optimise baseline")[0]["results"][0]
+    rows = [{"design": design.name, "count": design.n_channels, "label": "baseline",
+             "channel_diameter_mm": design.channels[0].diameter * 1e3, "area_ratio": area_ratio(design),
+             "thinnest_wall_mm": min_wall_of(design) * 1e3,
+             "radius_of_curvature_mm": None if base_case["radius_of_curvature_m"] is None
+             else base_case["radius_of_curvature_m"] * 1e3,
+             "max_principal_stretch": base_case["max_principal_stretch"],
+             "status": "ok" if base_case["converged"] else f"did not converge: {base_case['message']}"}]
+    for s, b in bests:
+        rows.append({"design": f"{stem} candidate", "count": s.count, "label": b["label"] if b else "-",
+                     "channel_diameter_mm": b and b["channel_diameter_mm"], "area_ratio": b and b["area_ratio"],
+                     "thinnest_wall_mm": b and b["thinnest_wall_mm"],
+                     "radius_of_curvature_mm": b and b["radius_of_curvature_mm"],
+                     "max_principal_stretch": b and b["max_principal_stretch"],
+                     "status": f"best of {len(s.history)} evaluated" if b else "no feasible design"})
+    findings, extra = [], {}
+    optimum = None
+    if found:
+        s_opt, optimum = min(found, key=lambda sb: sb[1]["radius_of_curvature_mm"])
+        opt_design = optimum["design"].__class__(**{**optimum["design"].__dict__, "name": stem})
+        rows[1 + bests.index((s_opt, optimum))]["design"] = stem
+        extra[f"{stem}.yaml"] = design_file_text(
+            opt_design, f"maximum bending at {p_bar:g} bar from {design.name}: {s_opt.count} channel(s), walls >= "
+                        f"{design.min_wall_thickness * 1e3:g} mm, max principal stretch <= {max_stretch:g} "
+                        f"(softcath study optimise, rung {ctx.rung})")
+        base_rc = rows[0]["radius_of_curvature_mm"]
+        findings.append(
+            f"optimum ({s_opt.count} channel(s)): {optimum['label']}, channel {optimum['channel_diameter_mm']:.3f} mm, "
+            f"area ratio {optimum['area_ratio']:.3f} (baseline {rows[0]['area_ratio']:.3f}); R_C at {p_bar:g} bar "
+            f"{optimum['radius_of_curvature_mm']:.2f} mm vs baseline "
+            + (f"{base_rc:.2f} mm ({base_rc / optimum['radius_of_curvature_mm']:.2f}x the curvature)" if base_rc else
+               "(baseline did not converge)")
+            + f"; max principal stretch {optimum['max_principal_stretch']:.2f} (limit {max_stretch:g})")
+        walls_at_min = all(abs(optimum[f"wall_{i}_mm"] - design.min_wall_thickness * 1e3) < 0.02
+                           for i in range(1 if s_opt.count > 1 else 3))
+        findings.append(
+            "published: the optimised design has one channel of maximal area with walls at a fabricable minimum -> "
+            + ("the optimum sits on the minimum walls (the area ratio is maximal)" if walls_at_min else
+               "the optimum keeps some walls above the minimum (the strain or convergence limit binds)"))
+        if len(found) > 1:
+            findings.append("count: " + ", ".join(f"{s.count} channels R_C {b['radius_of_curvature_mm']:.2f} mm"
+                                                  for s, b in found)
+                            + " (3 is the fewest that bend in every direction)")
+    else:
+        findings.append("no candidate met the constraints; no design file written")
+
+    # R_C against pressure: optimum vs baseline (and the implemented design)
+    curve_designs = [design] + ([opt_design] if optimum else [])
+    if design.name != "implemented_5mm":
+        try:
+            curve_designs.append(load_design("implemented_5mm"))
+        except DesignError:
+            pass
+    levels = [b * PA_PER_BAR for b in CURVE_BAR]
+    curve_results = ctx.solve([ctx.spec(d, levels) for d in curve_designs], "optimise curves")
+    curves = []
+    for d, res in zip(curve_designs, curve_results):
+        for p, r in zip(CURVE_BAR, res["results"]):
+            rc = r["radius_of_curvature_m"]
+            curves.append({"design": d.name, "pressure_bar": p, "converged": r["converged"],
+                           "radius_of_curvature_mm": None if rc is None else rc * 1e3,
+                           "max_principal_stretch": r["max_principal_stretch"], "message": r["message"]})
+    lines = ["design,pressure_bar,converged,radius_of_curvature_mm,max_principal_stretch,message"]
+    lines += [f"{c['design']},{c['pressure_bar']},{c['converged']},{c['radius_of_curvature_mm'] or ''},"
+              f"{c['max_principal_stretch'] or ''},\"{c['message']}\"" for c in curves]
+    extra[f"{stem}_curves.csv"] = "\n".join(lines) + "\n"
+    for d in curve_designs:
+        stop = [c["pressure_bar"] for c in curves if c["design"] == d.name and not c["converged"]]
+        if stop:
+            findings.append(f"{d.name}: the rung did not converge from {min(stop):g} bar on the curve (listed in the "
+                            "curves CSV)")
+
+    history = [{k: v for k, v in r.items() if k != "design"} for s in searches for r in s.history.values()]
+
+    def plot(path: str) -> None:
+        plt = pyplot()
+        from matplotlib.patches import Circle
+
+        fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
+        for i, d in enumerate(curve_designs):
+            pts = [(c["pressure_bar"], c["radius_of_curvature_mm"]) for c in curves
+                   if c["design"] == d.name and c["converged"]]
+            if pts:
+                axes[0].plot(*zip(*pts), "o-", color=f"C{i}", label=d.name)
+        axes[0].set_yscale("log")
+        axes[0].set_xlabel("pressure [bar]")
+        axes[0].set_ylabel("R_C [mm]")
+        axes[0].set_title("R_C against pressure (missing points: did not converge)", fontsize=9)
+        axes[0].legend(fontsize=8)
+        axes[0].grid(alpha=0.3)
+        for j, s in enumerate(searches):
+            ev = [r for r in s.history.values() if r["radius_of_curvature_mm"] is not None]
+            axes[1].scatter([r["area_ratio"] for r in ev], [r["radius_of_curvature_mm"] for r in ev],
+                            c=["C2" if r["feasible"] else "C3" for r in ev], marker="os^"[j % 3], s=18,
+                            label=f"{s.count} channel(s)")
+        axes[1].set_xlabel("channel area / body area")
+        axes[1].set_ylabel(f"R_C at {p_bar:g} bar [mm]")
+        axes[1].set_title(f"candidates (green feasible, red: stretch > {max_stretch:g})", fontsize=9)
+        axes[1].legend(fontsize=8)
+        axes[1].grid(alpha=0.3)
+        ax = axes[2]
+        for d, style in zip(curve_designs[:2], ("--", "-")):
+            ax.add_patch(Circle((0, 0), d.outer_radius * 1e3, fill=False, ls=style))
+            for h in list(d.channels) + ([d.lumen] if d.lumen else []):
+                ax.add_patch(Circle(np.array(h.center) * 1e3, h.radius * 1e3, fill=False, ls=style,
+                                    color="C0" if h in d.channels else "C1"))
+        ax.set_xlim(-3, 3)
+        ax.set_ylim(-3, 3)
+        ax.set_aspect("equal")
+        ax.set_title("sections: baseline dashed, optimum solid (mm)", fontsize=9)
+        save(fig, path, f"optimise {kind} from {where(design, ctx)}")
+
+    cols = [("design", "design"), ("count", "channels"), ("label", "walls"), ("channel_diameter_mm", "channel [mm]"),
+            ("area_ratio", "area ratio"), ("thinnest_wall_mm", "thinnest wall [mm]"),
+            ("radius_of_curvature_mm", f"R_C at {p_bar:g} bar [mm]"), ("max_principal_stretch", "max stretch"),
+            ("status", "status")]
+    return StudyResult("optimise", f"Optimised {kind.upper()} design", design.name, rows, cols, findings, plot,
+                       extra_files=extra, meta={"max_stretch": max_stretch, "history": history, "curves": curves,
+                                                "design_file": f"{stem}.yaml" if optimum else None})

@@ -1,0 +1,97 @@
+"""Writing a study: NAME.csv (rows), NAME.png (chart), NAME.md (table, findings, rung and its
+error from the ladder chart), NAME.json (all of it, machine-readable)."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+from ..errors import ModelError
+from ..units import PA_PER_BAR
+from .context import StudyContext, StudyResult
+
+
+def rung_accuracy(rung: str, design_name: str, options: dict) -> dict:
+    """The rung's measured R_C error from config/ladder_envelope.yaml (benchmarks/ladder_chart.py).
+
+    Errors are measured on shipped designs only; a study's variants inherit the baseline's
+    figure as an indication, which the report says."""
+    from ..model_selection import load_envelope
+
+    try:
+        env = load_envelope()
+    except ModelError as exc:
+        return {"rung": rung, "error_rc_rel_max": None, "note": str(exc)}
+    entry = env["rungs"].get(rung)
+    if entry is None:
+        return {"rung": rung, "error_rc_rel_max": None, "note": f"rung '{rung}' is not in the ladder chart"}
+    designs = entry.get("designs") or {}
+    measured_on = design_name if design_name in designs else next(iter(designs), None)
+    if measured_on is None:
+        return {"rung": rung, "error_rc_rel_max": None, "note": "no design measured"}
+    m = designs[measured_on]
+    lo, hi = m["valid_pressure_pa"]
+    note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {env.get('reference')} on {measured_on} "
+            f"over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar (ladder chart setting '{entry.get('setting')}')")
+    if options:
+        note += f"; this study ran it with options {options}"
+    if measured_on != design_name:
+        note += f"; '{design_name}' itself is not in the chart"
+    note += "; varied designs are not in the chart, so this is an indication for them"
+    return {"rung": rung, "setting": entry.get("setting"), "measured_on": measured_on,
+            "error_rc_rel_max": m["error_rc_rel_max"], "reference": env.get("reference"), "note": note}
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else ""
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "-"
+        return f"{v:.4g}"
+    return str(v).replace("|", "/")
+
+
+def markdown(result: StudyResult, ctx: StudyContext, accuracy: dict, files: dict) -> str:
+    lines = [f"# {result.title} ({result.design})", "",
+             f"- rung: `{ctx.rung}`; {accuracy['note']}",
+             f"- pressure: {ctx.pressure / PA_PER_BAR:g} bar on channel {ctx.channel}, R_C = 1/|k|",
+             f"- cases: {len(result.rows)} rows; {sum(1 for r in result.rows if not r.get('feasible', True))} infeasible, "
+             f"{sum(1 for r in result.rows if r.get('feasible', True) and not r.get('converged', True))} did not converge "
+             "(listed, never dropped)",
+             f"- files: {', '.join(Path(p).name for p in files.values())}", "", "## Findings", ""]
+    lines += [f"- {f}" for f in result.findings]
+    lines += ["", "## Table", "", "| " + " | ".join(h for _, h in result.columns) + " |",
+              "| " + " | ".join("---" for _ in result.columns) + " |"]
+    for r in result.rows:
+        lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in result.columns) + " |")
+    lines += ["", f"![{result.name}]({Path(files['png']).name})", ""]
+    return "\n".join(lines)
+
+
+def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, stem: str | None = None) -> dict:
+    """Write the four files; returns {"csv": path, "png": ..., "md": ..., "json": ...}."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = stem or f"{result.name}_{result.design}"
+    files = {k: str(out / f"{stem}.{k}") for k in ("csv", "png", "md", "json")}
+    keys = list(dict.fromkeys(k for r in result.rows for k in r))
+    with open(files["csv"], "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        for r in result.rows:
+            w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
+    result.plot(files["png"])
+    accuracy = rung_accuracy(ctx.rung, result.design, ctx.options)
+    for name, text in result.extra_files.items():
+        files[name] = str(out / name)
+        Path(files[name]).write_text(text)
+    Path(files["md"]).write_text(markdown(result, ctx, accuracy, files))
+    doc = {"study": result.name, "design": result.design, "rung": ctx.rung, "rung_options": ctx.options,
+           "pressure_pa": ctx.pressure, "channel": ctx.channel, "rung_accuracy": accuracy,
+           "findings": result.findings, "meta": result.meta, "rows": result.rows}
+    Path(files["json"]).write_text(json.dumps(doc, indent=2, default=str))
+    return files
