@@ -1,25 +1,40 @@
-"""The ladder chart's numbers: every rung on the same cases against the reference rung.
+"""The ladder chart's numbers: every rung on the same cases against a reference rung.
 
-Cases: the 1-channel design (implemented_5mm, 40 mm) at 0.05..0.25 bar. Reference: fe3d at its
-default mesh (mesh_size 1.0) if NGSolve is installed and converges there, else the section rung's
-finest mesh (D/40), and the output says which. Each rung/setting records, per pressure, the
-relative error in R_C = 1/|k| and the tip position error (mm), and its time per evaluation
-(single commands for the table rungs; a cold sweep divided by its commands for the solvers).
-A ramp from 0 to max_pressure locates each rung's failure boundary (the last pressure it reached).
+Cases (``CASES``), pressures inside the rungs' ranges (the section rung and the 1-channel
+surrogate end at 0.275 bar on the implemented design):
+- family ``length``: the 1-channel design (implemented_5mm) at 40 mm, 20 mm and 17 mm (the
+  blocking-force sample), 0.05..0.25 bar. Reference: fe3d at its default mesh (mesh_size 1.0,
+  half model, threads=1) where it converges at >= 3 of the pressures, else section D/40.
+- family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel,
+  by two channels at equal pressure and by a non-symmetric pair (2:1), 0.1..0.3 bar. fe3d
+  needs a full model there (> 15 min per direction), so the reference is the section rung's
+  finest mesh (D/40), and the output says so; ``--fe3d-three-channel`` runs fe3d on those
+  cases too (one ramp per direction) and then it is the reference.
 
-Results are cached per rung (.cache/ladder/, keyed by the design's content hash, rung, settings
-and cases), so re-running only redraws. Writes benchmarks/results/ladder_chart.{csv,json} and
-config/ladder_envelope.yaml (what model selection reads); draw with `softcath chart`.
+Settings (``SETTINGS``): closed_form, surrogate (its 1- or 3-channel table of section D/20),
+section at D/12, D/20 and D/40, fe3d, and ``rod`` when that rung is registered (otherwise a
+printed note). Per case and pressure each records the relative error in R_C = 1/|k|, the tip
+position error (mm) and the bending-direction error (degrees), and per case its time per
+evaluation (single commands for the table rungs; a cold sweep divided by its commands for the
+solvers) and its failure boundary: the last pressure reached on a ramp along the case's
+direction up to the design's max_pressure (fe3d: the case's own ramp only, it is too slow).
 
-    .venv/bin/python benchmarks/ladder_chart.py [--no-fe3d] [--refresh]
+Results are cached per rung and case (.cache/ladder/, keyed by the design's content hash, rung,
+settings and pressures), so re-running only redraws. Writes benchmarks/results/ladder_chart.
+{csv,json} and config/ladder_envelope.yaml (what model selection reads); draw with `softcath chart`.
+
+    .venv/bin/python benchmarks/ladder_chart.py [--no-fe3d] [--refresh [RUNG ...]] [--cases NAME ...]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import statistics
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,18 +45,45 @@ from results_io import RESULTS, machine_meta, write_results  # noqa: E402
 from softcath_ros.core.cache import cache_dir, key_of  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
-from softcath_ros.core.models import make_model  # noqa: E402
+from softcath_ros.core.models import RUNGS, make_model  # noqa: E402
 from softcath_ros.core.prediction import predict  # noqa: E402
+from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 ENVELOPE = ROOT / "config" / "ladder_envelope.yaml"
-DESIGN = "implemented_5mm"
-PRESSURES = np.array([5000.0, 10000.0, 15000.0, 20000.0, 25000.0])   # Pa
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    family: str               # "length" (1 channel, lengths) or "direction" (3 channels, directions)
+    design: str
+    length: float             # m
+    direction: tuple          # channel pressures per unit of the largest (the case's ray)
+    magnitudes_pa: tuple      # the largest channel pressure at each point
+
+    @property
+    def pressures(self) -> np.ndarray:
+        return np.outer(self.magnitudes_pa, self.direction)
+
+
+ONE_CH = (5000.0, 10000.0, 15000.0, 20000.0, 25000.0)
+THREE_CH = (10000.0, 20000.0, 30000.0)
+CASES = [
+    Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), ONE_CH),
+    Case("1ch 20mm", "length", "implemented_5mm", 0.020, (1.0,), ONE_CH),
+    Case("1ch 17mm", "length", "implemented_5mm", 0.017, (1.0,), ONE_CH),
+    Case("3ch one channel", "direction", "three_channel_5mm", 0.040, (1.0, 0.0, 0.0), THREE_CH),
+    Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), THREE_CH),
+    Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), THREE_CH),
+]
 # What each rung models (scene features, core/scene.py). The surrogate inherits its source's.
 CAPABILITIES = {"closed_form": ["free_bending", "device_stiffness"],
                 "section": ["free_bending", "device_stiffness"],
                 "surrogate": ["free_bending", "device_stiffness"],
                 "fe3d": ["free_bending", "device_stiffness"]}
+CAPABILITIES_SEEN: dict[str, list] = {}
+FE3D = ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0, "threads": 1}, True)
 # (label, rung, options, is a solver: timed as a cold sweep)
 SETTINGS = [
     ("closed_form", "closed_form", {}, False),
@@ -49,142 +91,217 @@ SETTINGS = [
     ("section D/12", "section", {"mesh_size": 0.005 / 12}, True),
     ("section D/20", "section", {}, True),
     ("section D/40", "section", {"mesh_size": 0.005 / 40}, True),
-    ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0}, True),
+    ("rod", "rod", {}, True),
+    FE3D,
 ]
+# the setting of each rung a scene runs (its default), recorded in the envelope
+DEFAULT_SETTING = {"closed_form": "closed_form", "surrogate": "surrogate (of section D/20)",
+                   "section": "section D/20", "rod": "rod", "fe3d": FE3D[0]}
+SECTION_REFERENCE = "section D/40"
 
 
-def run_rung(design, rung: str, options: dict, solver: bool, refresh: bool) -> dict:
-    """Predictions at the case pressures, time per evaluation and failure boundary (cached)."""
-    path = cache_dir("ladder") / f"{rung}_{key_of(design.content_hash(), rung, options, PRESSURES.tolist())}.json"
+def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool) -> dict:
+    """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
+    design = load_design(case.design).with_length(case.length)
+    pressures = case.pressures
+    path = cache_dir("ladder") / f"{rung}_{key_of(design.content_hash(), rung, options, pressures.tolist())}.json"
     if path.is_file() and not refresh:
         return json.loads(path.read_text())
     opts = dict(options)
-    if solver and rung != "fe3d":
+    if rung == "section":
         opts["cache"] = False   # cold: the time is the solver's
+    load0 = os.getloadavg()[0]
     model = make_model(rung, design, **opts)
     t0 = time.perf_counter()
-    preds = predict(model, PRESSURES[:, None])
+    preds = predict(model, pressures)
     sweep = time.perf_counter() - t0
     if rung == "fe3d":
         # minutes per sweep: its own cache is kept, and the cost is the ramp's recorded wall time
-        times = [t for t in model.evaluate(PRESSURES[:, None]).extras["time_s"] if t is not None]
+        times = [t for t in model.evaluate(pressures).extras["time_s"] if t is not None]
         total = max(times) if times == sorted(times) else sum(times)
-        per_eval = (total or sweep) / len(PRESSURES)
+        per_eval = (total or sweep) / len(pressures)
     elif solver:
-        per_eval = sweep / len(PRESSURES)
+        per_eval = sweep / len(pressures)
     else:
-        p1 = PRESSURES[2:3]
+        one = pressures[len(pressures) // 2]
         times = []
         for _ in range(7):
             t = time.perf_counter()
             for _ in range(2000):
-                model.evaluate(p1)
+                model.evaluate(one)
             times.append((time.perf_counter() - t) / 2000)
         per_eval = statistics.median(times)
-    # failure boundary: a ramp to max_pressure (fe3d: the case ramp only, it is too slow to go further)
+    # failure boundary: a ramp along the case's direction to max_pressure (fe3d: the case ramp only)
     if rung == "fe3d":
         ok = [p.converged for p in preds]
-        boundary = float(PRESSURES[np.argmin(ok) - 1]) if not all(ok) else float(PRESSURES[-1])
+        n_ok = ok.index(False) if not all(ok) else len(ok)
+        boundary = float(case.magnitudes_pa[n_ok - 1]) if n_ok else 0.0
         beyond = not all(ok)
-    elif rung == "surrogate":
-        boundary, beyond = model.pressure_range[1], True
     else:
-        ramp = np.linspace(0.0, design.max_pressure, 41)[:, None]
-        st = make_model(rung, design, **opts).evaluate(ramp)
-        n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(ramp)
-        boundary, beyond = float(ramp[n_ok - 1, 0]), n_ok < len(ramp)
+        mags = np.linspace(0.0, design.max_pressure, 41)
+        st = make_model(rung, design, **opts).evaluate(np.outer(mags, case.direction))
+        n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
+        boundary, beyond = float(mags[max(n_ok - 1, 0)]), n_ok < len(mags)
     out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
-           "fails_beyond": beyond, "predictions": [p.to_json() for p in preds]}
+           # a rung may say what it models (scene features); else the table above
+           "capabilities": list(getattr(model, "capabilities", None) or CAPABILITIES.get(rung, ["free_bending"])),
+           "fails_beyond": beyond, "loadavg_1min": [load0, os.getloadavg()[0]],
+           "predictions": [p.to_json() for p in preds]}
     path.write_text(json.dumps(out))
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--no-fe3d", action="store_true", help="reference = section D/40 (no NGSolve run)")
-    ap.add_argument("--refresh", action="store_true", help="recompute cached rung results")
-    args = ap.parse_args()
-    design = load_design(DESIGN)
+def errors(p: dict, r: dict) -> dict:
+    """R_C relative error, tip position error (mm), bending-direction error (degrees) of p against r."""
+    if not (p["converged"] and r["converged"]):
+        return {"rc_rel_error": None, "tip_error_mm": None, "direction_error_deg": None}
+    kp, kr = p["curvature_per_m"], r["curvature_per_m"]
+    d = math.atan2(kp[1], kp[0]) - math.atan2(kr[1], kr[0])
+    return {"rc_rel_error": abs(p["radius_of_curvature_m"] / r["radius_of_curvature_m"] - 1.0),
+            "tip_error_mm": 1e3 * float(np.linalg.norm(np.subtract(p["tip_position_m"], r["tip_position_m"]))),
+            "direction_error_deg": abs(math.degrees((d + math.pi) % (2 * math.pi) - math.pi))}
+
+
+def run_case(case: Case, args) -> tuple[list[dict], str]:
+    """Rows (one per setting and pressure) for one case, and its reference label."""
     results = {}
     for label, rung, options, solver in SETTINGS:
-        if rung == "fe3d" and args.no_fe3d:
+        if rung not in RUNGS:
+            print(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
             continue
-        print(f"running {label} ...", flush=True)
+        if rung == "fe3d" and (args.no_fe3d or (case.family == "direction" and not args.fe3d_three_channel)):
+            continue
+        t0, load0 = time.perf_counter(), os.getloadavg()[0]
         try:
-            results[label] = run_rung(design, rung, options, solver, args.refresh)
+            results[label] = run_rung(case, rung, options, solver, rung in args.refresh or "all" in args.refresh)
         except ModelError as exc:
             print(f"  {label}: not available ({exc})")
-    for label, res in results.items():
-        # A rung may flag an impossible state converged (fe3d past ~180 degrees of bend returned
-        # k = 0 with a negative axial stretch): such points count as failures, said so.
-        for p in res["predictions"]:
-            if p["converged"] and not (p["axial_stretch"] or 0) > 0:
-                p["converged"] = False
-                p["reason"] = f"reported converged with axial stretch {p['axial_stretch']}: not physical"
-                print(f"  {label}: {p['pressures_pa'][0]:.0f} Pa {p['reason']}")
-        ok = [p["converged"] for p in res["predictions"]]
-        if not all(ok):
-            first = ok.index(False)
-            res["boundary_pa"] = min(res["boundary_pa"], PRESSURES[first - 1] if first else 0.0)
-            res["fails_beyond"] = True
-    ref_label = "fe3d mesh 1.0"
+            continue
+        print(f"  {label:28s} {time.perf_counter() - t0:8.1f} s wall (load {load0:.1f} -> {os.getloadavg()[0]:.1f})",
+              flush=True)
+    ref_label = FE3D[0]
     if ref_label not in results or sum(p["converged"] for p in results[ref_label]["predictions"]) < 3:
-        ref_label = "section D/40"
+        ref_label = SECTION_REFERENCE
     ref = results[ref_label]["predictions"]
-    print(f"reference: {ref_label}")
     rows = []
     for label, res in results.items():
         for p, r in zip(res["predictions"], ref):
-            row = {"setting": label, "rung": res["rung"], "pressure_pa": p["pressures_pa"][0],
-                   "s_per_eval": res["s_per_eval"], "converged": p["converged"],
-                   "reference": ref_label, "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
-                   "rc_m": p["radius_of_curvature_m"], "rc_rel_error": None, "tip_error_mm": None}
-            if p["converged"] and r["converged"]:
-                row["rc_rel_error"] = abs(p["radius_of_curvature_m"] / r["radius_of_curvature_m"] - 1.0)
-                row["tip_error_mm"] = 1e3 * float(np.linalg.norm(np.subtract(p["tip_position_m"],
-                                                                            r["tip_position_m"])))
-            rows.append(row)
-    write_results("ladder_chart", {"design": DESIGN, "length_m": design.length, "reference": ref_label,
-                                   "pressures_pa": PRESSURES.tolist()}, rows)
-    write_envelope(rows, ref_label, design)
-    for label in results:
-        rs = [r for r in rows if r["setting"] == label]
-        errs = [r["rc_rel_error"] for r in rs if r["rc_rel_error"] is not None]
-        print(f"{label:28s} {rs[0]['s_per_eval'] * 1e6:12.2f} us/eval  R_C error max "
-              f"{max(errs) if errs else float('nan'):.2%}  boundary {rs[0]['boundary_pa']:.0f} Pa")
-    print(f"wrote {RESULTS}/ladder_chart.{{csv,json}} and {ENVELOPE}; draw with: softcath chart")
+            rows.append({"case": case.name, "family": case.family, "design": case.design, "length_m": case.length,
+                         "direction": " ".join(f"{v:g}" for v in case.direction),
+                         "setting": label, "rung": res["rung"], "pressure_pa": max(p["pressures_pa"]),
+                         "pressures_pa": " ".join(f"{v:g}" for v in p["pressures_pa"]),
+                         "s_per_eval": res["s_per_eval"], "converged": p["converged"], "reference": ref_label,
+                         "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
+                         "rc_m": p["radius_of_curvature_m"], **errors(p, r)})
+        CAPABILITIES_SEEN[res["rung"]] = res.get("capabilities") or CAPABILITIES.get(res["rung"], ["free_bending"])
+    return rows, ref_label
 
 
-def write_envelope(rows: list[dict], ref_label: str, design) -> None:
-    """Per rung, its default setting's envelope (the cheapest setting per rung is what a scene runs)."""
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--no-fe3d", action="store_true", help="no fe3d runs: the reference is section D/40")
+    ap.add_argument("--fe3d-three-channel", action="store_true",
+                    help="run fe3d on the 3-channel cases too (full model: > 15 min per direction)")
+    ap.add_argument("--refresh", nargs="*", default=None, metavar="RUNG",
+                    help="recompute cached results of these rungs (no names: all)")
+    ap.add_argument("--cases", nargs="*", default=None, help=f"a subset of: {', '.join(c.name for c in CASES)}")
+    args = ap.parse_args()
+    args.refresh = [] if args.refresh is None else (args.refresh or ["all"])
+    cases = [c for c in CASES if args.cases is None or c.name in args.cases]
+    load_before = os.getloadavg()
+    rows, references = [], {}
+    try:
+        for case in cases:
+            print(f"case {case.name} ({case.design}, {case.length * 1e3:g} mm, direction {case.direction}):", flush=True)
+            case_rows, references[case.name] = run_case(case, args)
+            print(f"  reference: {references[case.name]}")
+            rows += case_rows
+    except KeyboardInterrupt:
+        print("interrupted: finished rungs are cached; nothing written", file=sys.stderr)
+        raise SystemExit(130)
+    # a subset of the cases must not replace the full chart nor the envelope model selection reads
+    full = len(cases) == len(CASES)
+    name = "ladder_chart" if full else "ladder_chart_partial"
+    write_results(name, {"cases": [c.__dict__ for c in cases], "references": references,
+                                   "loadavg_before": load_before,
+                                   "note": "3-channel cases: reference section D/40 (fe3d needs a full model, "
+                                           "> 15 min per direction) unless fe3d was run on them"}, rows)
+    if full:
+        write_envelope(rows)
+    report(rows)
+    print(f"wrote {RESULTS}/{name}.{{csv,json}}" + (f" and {ENVELOPE}; draw with: softcath chart" if full else
+                                                     " (a subset of the cases: the envelope is left as it was)"))
+
+
+def report(rows: list[dict]) -> None:
+    def worst(vals):
+        vals = [v for v in vals if v is not None]
+        return max(vals) if vals else float("nan")
+
+    for case in dict.fromkeys(r["case"] for r in rows):
+        rs = [r for r in rows if r["case"] == case]
+        print(f"{case} (reference {rs[0]['reference']}):")
+        for label in dict.fromkeys(r["setting"] for r in rs):
+            s = [r for r in rs if r["setting"] == label]
+            print(f"  {label:28s} {s[0]['s_per_eval'] * 1e6:14.2f} us/eval  R_C error max "
+                  f"{worst(r['rc_rel_error'] for r in s):8.2%}  tip {worst(r['tip_error_mm'] for r in s):6.2f} mm  "
+                  f"direction {worst(r['direction_error_deg'] for r in s):6.2f} deg  "
+                  f"boundary {s[0]['boundary_pa'] / PA_PER_BAR:.3f} bar")
+
+
+def _envelope(rs: list[dict]) -> dict | None:
+    """One rung's measured envelope over rows of one setting (one or more cases)."""
+    if not rs:
+        return None
+    is_ref = all(r["setting"] == r["reference"] for r in rs)
+    inside = [r for r in rs if r["pressure_pa"] <= r["boundary_pa"]]
+
+    def worst(key):
+        vals = [r[key] for r in inside if r[key] is not None]
+        return (0.0 if is_ref else max(vals)) if vals or is_ref else None
+
+    return {
+        # the reference has no error against itself: taken as 0, so a scene asking for more accuracy
+        # than any rung has gets the reference
+        "error_rc_rel_max": worst("rc_rel_error"),
+        "error_tip_mm_max": worst("tip_error_mm"),
+        "error_direction_deg_max": worst("direction_error_deg"),
+        "reference": sorted({r["reference"] for r in rs}),
+        "cost_s_per_eval": max(float(r["s_per_eval"]) for r in rs),
+        "valid_pressure_pa": [0.0, min(float(r["boundary_pa"]) for r in rs)],
+        "measured_pressures_pa": sorted({float(r["pressure_pa"]) for r in inside}),
+        "cases": list(dict.fromkeys(r["case"] for r in rs))}
+
+
+def write_envelope(rows: list[dict]) -> None:
+    """Per rung (its default setting) and design: the worst over that design's cases, and per
+    measured length its own envelope (``by_length``, keyed by the length in m) for selection."""
     import yaml
 
-    default = {"closed_form": "closed_form", "surrogate": "surrogate (of section D/20)",
-               "section": "section D/20", "fe3d": "fe3d mesh 1.0"}
     rungs = {}
-    for rung, label in default.items():
+    for rung, label in DEFAULT_SETTING.items():
         rs = [r for r in rows if r["setting"] == label]
         if not rs:
             continue
-        inside = [r for r in rs if r["pressure_pa"] <= rs[0]["boundary_pa"]]
-        errs = [r["rc_rel_error"] for r in inside if r["rc_rel_error"] is not None]
-        tips = [r["tip_error_mm"] for r in inside if r["tip_error_mm"] is not None]
-        is_ref = label == ref_label
-        rungs[rung] = {
-            "setting": label,
-            "capabilities": CAPABILITIES[rung],
-            "designs": {design.name: {
-                # the reference has no error against itself: its envelope is the reference's own (unmeasured
-                # here, taken as 0), so a scene asking for more accuracy than any rung has gets the reference
-                "error_rc_rel_max": 0.0 if is_ref else (max(errs) if errs else None),
-                "error_tip_mm_max": 0.0 if is_ref else (max(tips) if tips else None),
-                "cost_s_per_eval": float(rs[0]["s_per_eval"]),
-                "valid_pressure_pa": [0.0, float(rs[0]["boundary_pa"])],
-                "measured_pressures_pa": [float(r["pressure_pa"]) for r in inside]}}}
-    doc = {"reference": ref_label, "measured": machine_meta()["date"],
+        designs = {}
+        for design in dict.fromkeys(r["design"] for r in rs):
+            d_rows = [r for r in rs if r["design"] == design]
+            entry = _envelope(d_rows)
+            lengths = list(dict.fromkeys(r["length_m"] for r in d_rows))
+            if len(lengths) > 1:
+                entry["by_length"] = {f"{L:g}": _envelope([r for r in d_rows if r["length_m"] == L])
+                                      for L in lengths}
+            designs[design] = entry
+        rungs[rung] = {"setting": label, "capabilities": CAPABILITIES_SEEN.get(rung, CAPABILITIES.get(rung, ["free_bending"])),
+                       "designs": designs}
+    refs = sorted({r["reference"] for r in rows})
+    doc = {"reference": " / ".join(refs), "measured": machine_meta()["date"],
+           "loadavg": list(os.getloadavg()),
            "note": "written by benchmarks/ladder_chart.py; read by core/model_selection.py (model: auto). "
-                   "Errors are relative R_C errors against the reference over the measured pressures inside "
-                   "each rung's valid range; costs are seconds per evaluation on a shared 2-core machine.",
+                   "Errors are relative R_C errors (and tip mm, direction degrees) against each case's reference "
+                   "over the measured pressures inside each rung's valid range; per design the worst over its cases, "
+                   "per length (by_length) that length's cases. Costs are seconds per evaluation on a shared "
+                   "2-core machine.",
            "rungs": rungs}
     ENVELOPE.write_text(yaml.safe_dump(doc, sort_keys=False))
 

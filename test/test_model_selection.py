@@ -87,3 +87,30 @@ def test_predict_cli_auto_says_what_it_picked():
                         "--model", "auto", "--scene", "blocking_force_bench", "--pressure", "0.1", "--unit", "bar"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no rung qualifies" in r.stderr and "contact" in r.stderr
+
+
+def test_selection_uses_the_envelope_measured_at_the_scenes_length():
+    """by_length entries (benchmarks/ladder_chart.py measures 40, 20 and 17 mm) decide for a scene at
+    that length; another length falls back to the design's worst case, and the reason says which."""
+    sur = ENV["rungs"]["surrogate"]["designs"]["implemented_5mm"]
+    by_length = {"0.04": {**sur, "error_rc_rel_max": 0.03},
+                 "0.017": {**sur, "error_rc_rel_max": 0.09, "valid_pressure_pa": [0, 25000]}}
+    env = {**ENV, "rungs": {**ENV["rungs"], "surrogate": {**ENV["rungs"]["surrogate"], "designs": {
+        "implemented_5mm": {**sur, "error_rc_rel_max": 0.09, "by_length": by_length}}}}}
+    at_40 = select_model(scene(), env)
+    assert at_40.rung == "surrogate" and "scene's length 40 mm" in at_40.reason
+    short = select_model(scene(length=0.017, required_accuracy=0.1), env)
+    assert short.rung == "surrogate" and "scene's length 17 mm" in short.reason
+    slow = select_model(scene(length=0.017, required_rate=10.0), env)  # 17 mm: the surrogate's 9% > 5%
+    assert slow.rung == "section" and "9.00% exceeds" in slow.rejected["surrogate"]
+    with pytest.raises(ModelError, match="valid over 0..25000 Pa only"):
+        select_model(scene(length=0.017, required_accuracy=0.1, pressure_range=[0, 26000]), env)
+    other = select_model(scene(length=0.03, required_accuracy=0.1), env)
+    assert other.rung == "surrogate" and "not at 30 mm" in other.reason
+
+
+def test_scene_length_applies_to_its_design():
+    assert scene(length=0.017).design.length == 0.017
+    assert load_scene("blocking_force_bench").design.length == 0.017
+    with pytest.raises(SceneError, match="'length'"):
+        scene(length=-1.0)

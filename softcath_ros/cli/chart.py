@@ -1,6 +1,12 @@
-"""`softcath chart`: the ladder chart from benchmarks/ladder_chart.py's CSV: speed against accuracy
-(log time per evaluation vs R_C error, one point per rung and setting), error against pressure per
-rung, and each rung's failure boundary (the last pressure it reached on a ramp)."""
+"""`softcath chart`: the ladder charts from benchmarks/ladder_chart.py's CSV.
+
+- ``<stem>.png``: speed against accuracy (log time per evaluation vs worst R_C error, one point per
+  rung setting and case family, against that family's reference), error against pressure per rung
+  on the first case, and each rung's failure boundary per case (the last pressure reached on a ramp).
+- ``<stem>_lengths.png`` (+ CSV): the 1-channel cases, R_C and tip error against pressure per length.
+- ``<stem>_directions.png`` (+ CSV): the 3-channel cases, R_C, tip and bending-direction error
+  against the bending direction (worst over each case's pressures).
+"""
 from __future__ import annotations
 
 import csv
@@ -10,13 +16,17 @@ from ..core.errors import SoftcathError
 from ..core.units import PA_PER_BAR
 
 RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
+NUMBERS = ("pressure_pa", "s_per_eval", "boundary_pa", "rc_rel_error", "tip_error_mm", "direction_error_deg",
+           "length_m", "rc_m")
+MARKERS = {"length": "o", "direction": "^"}
 
 
 def register(sub) -> None:
-    p = sub.add_parser("chart", help="draw the model ladder chart (speed against accuracy) from its CSV")
+    p = sub.add_parser("chart", help="draw the model ladder charts (speed against accuracy, errors per case family)")
     p.add_argument("--csv", default=str(RESULTS / "ladder_chart.csv"),
                    help="results of benchmarks/ladder_chart.py (default: the committed ones)")
-    p.add_argument("--out", default=None, help="PNG to write (default: beside the CSV, same stem)")
+    p.add_argument("--out", default=None, help="main PNG to write (default: beside the CSV, same stem); the "
+                   "family charts go beside it as <stem>_lengths.png and <stem>_directions.png")
     p.set_defaults(func=run)
 
 
@@ -29,59 +39,186 @@ def load_rows(path: str) -> list[dict]:
         raise SoftcathError(f"--csv {path}: no such file; run benchmarks/ladder_chart.py first")
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
+    if not rows:
+        raise SoftcathError(f"--csv {path}: no rows")
+    missing = [k for k in ("case", "family", *NUMBERS) if k not in rows[0]]
+    if missing:
+        raise SoftcathError(f"--csv {path}: columns {missing} missing; re-run benchmarks/ladder_chart.py")
     for r in rows:
-        for k in ("pressure_pa", "s_per_eval", "boundary_pa", "rc_rel_error", "tip_error_mm"):
+        for k in NUMBERS:
             r[k] = _float(r[k])
         r["converged"] = r["converged"] == "True"
         r["fails_beyond"] = r["fails_beyond"] == "True"
-    if not rows:
-        raise SoftcathError(f"--csv {path}: no rows")
     return rows
 
 
 def run(args) -> int:
     rows = load_rows(args.csv)
-    out = args.out or str(Path(args.csv).with_suffix(".png"))
-    draw(rows, out)
-    print(f"wrote {out}")
+    out = Path(args.out or Path(args.csv).with_suffix(".png"))
+    for path in draw_all(rows, out):
+        print(f"wrote {path}")
     return 0
 
 
-def draw(rows: list[dict], path: str) -> str:
+def draw_all(rows: list[dict], out: Path) -> list[Path]:
+    """The main chart and one chart (+ its rows as CSV) per case family present."""
+    written = [Path(draw(rows, str(out)))]
+    for family, drawer in (("length", draw_lengths), ("direction", draw_directions)):
+        rs = [r for r in rows if r["family"] == family]
+        if not rs:
+            continue
+        stem = out.with_name(f"{out.stem}_{family}s")
+        drawer(rs, str(stem.with_suffix(".png")))
+        with open(stem.with_suffix(".csv"), "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rs[0]))
+            w.writeheader()
+            w.writerows(rs)
+        written += [stem.with_suffix(".png"), stem.with_suffix(".csv")]
+    return written
+
+
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    settings = list(dict.fromkeys(r["setting"] for r in rows))
-    ref = rows[0]["reference"]
-    colours = {s: f"C{i}" for i, s in enumerate(settings)}
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.8))
-    for s in settings:
-        rs = [r for r in rows if r["setting"] == s]
-        errs = [r["rc_rel_error"] for r in rs if r["rc_rel_error"] is not None]
-        if s != ref and errs:
-            a1.scatter([rs[0]["s_per_eval"]], [max(errs) * 100], color=colours[s], s=50, label=s)
-            a1.annotate(s, (rs[0]["s_per_eval"], max(errs) * 100), fontsize=7, xytext=(4, 4),
-                        textcoords="offset points")
-            pts = [(r["pressure_pa"] / PA_PER_BAR, r["rc_rel_error"] * 100) for r in rs if r["rc_rel_error"] is not None]
-            a2.plot(*zip(*pts), "o-", color=colours[s], label=s)
-        a3.barh(s, rs[0]["boundary_pa"] / PA_PER_BAR, color=colours[s])
-        a3.annotate("fails beyond" if rs[0]["fails_beyond"] else "reached the end", (rs[0]["boundary_pa"] / PA_PER_BAR, s),
-                    fontsize=7, xytext=(3, 0), textcoords="offset points", va="center")
-    a1.set_xscale("log")
-    a1.set_yscale("log")
-    a1.set_xlabel("time per evaluation [s] (shared 2-core machine)")
-    a1.set_ylabel(f"max R_C error vs {ref} [%]")
-    a1.set_title("speed against accuracy")
-    a2.set_yscale("log")
-    a2.set_xlabel("pressure [bar]")
-    a2.set_ylabel("R_C error [%]")
-    a2.set_title(f"error against pressure (reference: {ref})")
-    a2.legend(fontsize=7)
-    a3.set_xlabel("last pressure reached on a ramp [bar]")
-    a3.set_title("failure boundary")
+    return plt
+
+
+def _save(plt, fig, path: str) -> str:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _colours(rows: list[dict]) -> dict:
+    return {s: f"C{i % 10}" for i, s in enumerate(dict.fromkeys(r["setting"] for r in rows))}
+
+
+def _style(setting: str) -> str:
+    """Line style: the surrogate dashed, so it shows over its source it tracks closely."""
+    return "x--" if setting.startswith("surrogate") else "o-"
+
+
+def _worst(rs: list[dict], key: str):
+    vals = [r[key] for r in rs if r[key] is not None]
+    return max(vals) if vals else None
+
+
+def draw(rows: list[dict], path: str) -> str:
+    plt = _pyplot()
+    colours = _colours(rows)
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(17, 5.2))
+    # speed against accuracy: per setting and family, the worst error over the family's cases
+    for family in dict.fromkeys(r["family"] for r in rows):
+        fam = [r for r in rows if r["family"] == family]
+        refs = sorted({r["reference"] for r in fam})
+        for s in dict.fromkeys(r["setting"] for r in fam):
+            rs = [r for r in fam if r["setting"] == s]
+            err = _worst(rs, "rc_rel_error")
+            if all(r["setting"] == r["reference"] for r in rs) or not err:
+                continue
+            cost = max(r["s_per_eval"] for r in rs)
+            a1.scatter([cost], [err * 100], color=colours[s], marker=MARKERS.get(family, "s"), s=50,
+                       label=f"{s} ({family} cases vs {'/'.join(refs)})")
+            a1.annotate(s, (cost, err * 100), fontsize=7, xytext=(4, 4), textcoords="offset points")
+    a1.set_xscale("log")
+    a1.set_yscale("log")
+    a1.set_xlabel("time per evaluation [s] (shared 2-core machine)")
+    a1.set_ylabel("worst R_C error against the reference [%]")
+    a1.set_title("speed against accuracy (o: 1 channel, lengths; ^: 3 channels, directions)", fontsize=9)
+    a1.legend(fontsize=6)
+    # error against pressure on the first case
+    first = [r for r in rows if r["case"] == cases[0]]
+    for s in dict.fromkeys(r["setting"] for r in first):
+        pts = [(r["pressure_pa"] / PA_PER_BAR, r["rc_rel_error"] * 100) for r in first
+               if r["setting"] == s and r["rc_rel_error"] and r["setting"] != r["reference"]]
+        if pts:
+            a2.plot(*zip(*pts), _style(s), color=colours[s], label=s)
+    a2.set_yscale("log")
+    a2.set_xlabel("pressure [bar]")
+    a2.set_ylabel("R_C error [%]")
+    a2.set_title(f"error against pressure: {cases[0]} (reference: {first[0]['reference']})", fontsize=9)
+    a2.legend(fontsize=7)
+    # failure boundary per setting and case
+    settings = list(dict.fromkeys(r["setting"] for r in rows))
+    for j, case in enumerate(cases):
+        for i, s in enumerate(settings):
+            rs = [r for r in rows if r["case"] == case and r["setting"] == s]
+            if not rs:
+                continue
+            y = i + (j - (len(cases) - 1) / 2) * 0.8 / max(len(cases), 1)
+            a3.scatter([rs[0]["boundary_pa"] / PA_PER_BAR], [y], color=f"C{j % 10}",
+                       marker="x" if rs[0]["fails_beyond"] else ">", label=case if i == 0 or s == settings[0] else None)
+    a3.set_yticks(range(len(settings)), settings, fontsize=7)
+    a3.set_xlabel("last pressure reached on a ramp [bar]\n(x: fails beyond it; >: reached the design's max_pressure)")
+    a3.set_title("failure boundary per case", fontsize=9)
+    handles, labels = a3.get_legend_handles_labels()
+    uniq = dict(zip(labels, handles))
+    a3.legend(uniq.values(), uniq.keys(), fontsize=6)
+    return _save(plt, fig, path)
+
+
+def draw_lengths(rows: list[dict], path: str) -> str:
+    """R_C and tip error against pressure, one column per length (1-channel cases)."""
+    plt = _pyplot()
+    colours = _colours(rows)
+    cases = sorted(dict.fromkeys(r["case"] for r in rows), key=lambda c: -next(
+        r["length_m"] for r in rows if r["case"] == c))
+    fig, axes = plt.subplots(2, len(cases), figsize=(5 * len(cases), 7.5), squeeze=False)
+    for j, case in enumerate(cases):
+        rs = [r for r in rows if r["case"] == case]
+        for s in dict.fromkeys(r["setting"] for r in rs):
+            mine = [r for r in rs if r["setting"] == s and r["setting"] != r["reference"]]
+            for ax, key, scale in ((axes[0, j], "rc_rel_error", 100), (axes[1, j], "tip_error_mm", 1)):
+                pts = [(r["pressure_pa"] / PA_PER_BAR, r[key] * scale) for r in mine if r[key]]
+                if pts:
+                    ax.plot(*zip(*pts), _style(s), color=colours[s], label=s)
+            failed = [r["pressure_pa"] / PA_PER_BAR for r in rs if r["setting"] == s and not r["converged"]]
+            if failed:
+                axes[0, j].scatter(failed, [100.0] * len(failed), marker="x", color=colours[s])
+        axes[0, j].set_title(f"{case}: {rs[0]['length_m'] * 1e3:g} mm (reference {rs[0]['reference']})", fontsize=9)
+        axes[0, j].set_yscale("log")
+        axes[1, j].set_yscale("log")
+        axes[0, j].set_ylabel("R_C error [%] (x at 100: did not converge)")
+        axes[1, j].set_ylabel("tip position error [mm]")
+        axes[1, j].set_xlabel("pressure [bar]")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("1-channel design: error against pressure per length", fontsize=10)
+    return _save(plt, fig, path)
+
+
+def draw_directions(rows: list[dict], path: str) -> str:
+    """R_C, tip and bending-direction error (worst over pressures) against the commanded direction."""
+    plt = _pyplot()
+    colours = _colours(rows)
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    keys = (("rc_rel_error", 100, "R_C error [%]"), ("tip_error_mm", 1, "tip position error [mm]"),
+            ("direction_error_deg", 1, "bending-direction error [deg]"))
+    for s in dict.fromkeys(r["setting"] for r in rows):
+        for ax, (key, scale, _) in zip(axes, keys):
+            xs, ys = [], []
+            for i, case in enumerate(cases):
+                rs = [r for r in rows if r["case"] == case and r["setting"] == s and r["setting"] != r["reference"]]
+                w = _worst(rs, key)
+                if w:
+                    xs.append(i)
+                    ys.append(w * scale)
+            if xs:
+                ax.plot(xs, ys, _style(s), color=colours[s], label=s)
+    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})" for c in cases]
+    for ax, (_, _, name) in zip(axes, keys):
+        ax.set_xticks(range(len(cases)), labels, fontsize=7)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"worst {name} over the case's pressures")
+    axes[2].set_ylim(bottom=1e-3)   # the one-channel direction is exact to ~1e-13 deg for every rung
+    refs = sorted({r["reference"] for r in rows})
+    pressures = sorted({r["pressure_pa"] / PA_PER_BAR for r in rows})
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"3-channel design: error against bending direction, {', '.join(f'{p:g}' for p in pressures)} bar "
+                 f"(largest channel); reference: {'/'.join(refs)}", fontsize=10)
+    return _save(plt, fig, path)

@@ -45,7 +45,7 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
         if missing:
             rejected[name] = f"does not model {', '.join(missing)}"
             continue
-        measured = (rung.get("designs") or {}).get(design)
+        measured = measured_envelope(rung, scene)
         if measured is None:
             rejected[name] = f"no measured envelope for design '{design}'"
             continue
@@ -62,18 +62,36 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
             rejected[name] = (f"{cost * 1e3:.3g} ms per evaluation cannot keep up with "
                               f"{scene.required_rate:g} Hz ({period * 1e3:.3g} ms)")
             continue
-        candidates.append((cost, name, err))
+        candidates.append((cost, name, err, measured))
     if not candidates:
         why = "; ".join(f"{n}: {r}" for n, r in rejected.items())
         raise ModelError(f"model auto: no rung qualifies for scene '{scene.name}' "
                          f"(needs {', '.join(scene.features)}, {lo:g}..{hi:g} Pa, R_C error <= "
                          f"{_pct(scene.required_accuracy)}, {scene.required_rate:g} Hz): {why}")
-    cost, name, err = min(candidates)
+    cost, name, err, measured = min(candidates, key=lambda c: (c[0], c[1]))
+    ref = measured.get("reference") or env.get("reference", "the reference")
     reason = (f"model auto picked '{name}' for scene '{scene.name}': the cheapest rung ({cost * 1e6:.3g} us per "
               f"evaluation) that models {', '.join(scene.features)}, is valid over {lo:g}..{hi:g} Pa and whose "
-              f"measured R_C error {_pct(err)} (against {env.get('reference', 'the reference')}) meets "
-              f"{_pct(scene.required_accuracy)} at {scene.required_rate:g} Hz")
+              f"measured R_C error {_pct(err)} (against {'/'.join(ref) if isinstance(ref, list) else ref}; "
+              f"{measured['_scope']}) meets {_pct(scene.required_accuracy)} at {scene.required_rate:g} Hz")
     return Selection(rung=name, reason=reason, rejected=rejected)
+
+
+def measured_envelope(rung: dict, scene: Scene) -> dict | None:
+    """A rung's measured envelope for the scene's design: the one measured at the scene's length
+    (``by_length``, keyed by the length in m) when there is one, else the design's (the worst over
+    its measured cases). Adds ``_scope`` saying which."""
+    measured = (rung.get("designs") or {}).get(scene.design.name)
+    if measured is None:
+        return None
+    length = scene.design.length
+    for key, entry in (measured.get("by_length") or {}).items():
+        if entry is not None and abs(float(key) - length) <= 1e-9:
+            return {**entry, "_scope": f"measured at the scene's length {length * 1e3:g} mm"}
+    lengths = sorted(float(k) for k in (measured.get("by_length") or {}))
+    scope = (f"the worst over the measured lengths {', '.join(f'{v * 1e3:g}' for v in lengths)} mm "
+             f"(not at {length * 1e3:g} mm)" if lengths else "the design's measured cases")
+    return {**measured, "_scope": scope}
 
 
 def _pct(x) -> str:

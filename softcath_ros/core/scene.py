@@ -5,6 +5,7 @@ gravity, the pressure range, the accuracy and the rate required:
 
     name: free_bending_live
     design: implemented_5mm            # shipped design name or path (relative to the scene file)
+    length: 0.040                      # m, optional: the actuated length, if not the design file's
     device: null                       # or {diameter: m, bending_stiffness: N m^2}
     loads: {tip_force: null, contact: null}   # tip_force: [fx, fy, fz] N; contact: {plane_z: m}
     gravity: false
@@ -64,7 +65,7 @@ class Scene:
         return tuple(need)
 
 
-_KEYS = {"name", "description", "design", "device", "loads", "gravity", "pressure_range", "required_accuracy",
+_KEYS = {"name", "description", "design", "length", "device", "loads", "gravity", "pressure_range", "required_accuracy",
          "required_rate"}
 
 
@@ -98,6 +99,8 @@ def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
         design = load_design(ref)
     except SoftcathError as exc:
         raise SceneError("design", raw["design"], str(exc)) from None
+    if raw.get("length") is not None:  # e.g. the 17 mm blocking-force sample of a 40 mm design
+        design = design.with_length(_number(raw["length"], "length", positive=True))
     dev = raw.get("device")
     if dev is not None:
         if not isinstance(dev, dict) or set(dev) != {"diameter", "bending_stiffness"}:
