@@ -143,19 +143,25 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
                     result, error = None, exc
                 finish(key, result, error)
         else:
-            futures = {executor.submit(solve_case, specs[idx[0]]): key for key, idx in todo.items()}
+            futures: dict = {}
+            finished: set = set()
             try:
+                for key, idx in todo.items():
+                    futures[executor.submit(solve_case, specs[idx[0]])] = key
                 for fut in as_completed(futures):
                     exc = fut.exception()
                     finish(futures[fut], None if exc else fut.result(), exc)
+                    finished.add(fut)
             except KeyboardInterrupt:
                 for fut in futures:
                     fut.cancel()
+                for fut in futures:   # keep what finished before the interrupt was seen
+                    if fut not in finished and fut.done() and not fut.cancelled() and fut.exception() is None:
+                        finish(futures[fut], fut.result(), None)
                 raise
     except KeyboardInterrupt:
-        done = stats.cached + stats.solved
-        msg = (f"interrupted: {done} of {stats.cases} cases done and cached; "
-               "run the same command again to resume")
+        msg = (f"interrupted: {stats.solved} case(s) solved and cached in this run, {len(todo) - stats.solved} "
+               "still to solve; run the same command again to resume")
         (bar.write if bar is not None else print)(msg, file=sys.stderr)
         if own is not None:
             own.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,218 @@
+"""Design studies (issue 7): variants, cached cases, executors, trends, CLI.
+
+Coarse section meshes (D/12) and few cases keep this file fast; the full studies run in
+benchmarks/study_speed.py and their outputs are committed under docs/studies/."""
+from __future__ import annotations
+
+import math
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.studies import channel_shift, device_stiffness, miniaturise, sensitivity
+from softcath_ros.core.studies.cases import CaseSpec
+from softcath_ros.core.studies.context import StudyContext
+from softcath_ros.core.studies.runner import CaseCache, RunStats, run_cases
+from softcath_ros.core.studies.variation import (area_ratio, make_variant, min_wall_of, scale_design_dict,
+                                                 stacked_layout)
+
+COARSE = {"mesh_size": 5e-3 / 12}
+
+
+@pytest.fixture
+def ctx(tmp_path):
+    return StudyContext(options=dict(COARSE), workers=1, cache=CaseCache(tmp_path / "cache"), progress=False)
+
+
+def _specs(design, ctx, pressures_bar=(0.05, 0.10, 0.15)):
+    return [ctx.spec(design, [p * 1e5]) for p in pressures_bar]
+
+
+# ------------------------------------------------------------------ variants
+def test_stacked_layout_reproduces_the_implemented_section(implemented_design):
+    d = implemented_design
+    lay = stacked_layout(d.outer_diameter, d.lumen.diameter, 0.6e-3, 0.6e-3, 0.6e-3)
+    assert lay["channels"][0]["diameter"] == pytest.approx(d.channels[0].diameter)
+    assert lay["channels"][0]["center"][1] == pytest.approx(d.channels[0].center[1])
+    assert lay["lumen"]["center"][1] == pytest.approx(d.lumen.center[1])
+    assert min_wall_of(d) == pytest.approx(0.6e-3)
+
+
+def test_infeasible_variant_is_reported_with_the_design_error(implemented_design):
+    def too_far_out(data):
+        data["channels"][0]["center"] = [0.0, 1.55e-3]   # outer wall 0.1 mm
+
+    v = make_variant(implemented_design, "out", "shift", 0.5e-3, too_far_out)
+    assert not v.feasible and v.design is None
+    assert "channels[0].center" in v.reason and "thinner than the minimum" in v.reason
+    ok = make_variant(implemented_design, "in", "shift", -0.1e-3,
+                      lambda data: data["channels"][0].__setitem__("center", [0.0, 0.95e-3]))
+    assert ok.feasible and ok.design.channels[0].center[1] == pytest.approx(0.95e-3)
+
+
+def test_infeasible_rows_are_kept_not_solved(implemented_design, ctx):
+    variants = channel_shift.variants(implemented_design)
+    rows = ctx.evaluate(variants[:2], "test")          # -0.5 mm (infeasible), -0.4 mm
+    assert rows[0]["status"].startswith("infeasible:") and rows[0]["radius_of_curvature_mm"] is None
+    assert rows[1]["converged"] and rows[1]["radius_of_curvature_mm"] > 0
+    assert ctx.stats.solved == 1
+
+
+def test_scaling_keeps_the_area_ratio_and_scales_the_walls(implemented_design):
+    from softcath_ros.core.design import design_from_dict
+
+    data = implemented_design.to_dict()
+    scale_design_dict(data, 0.4)
+    data["min_wall_thickness"] = 0.2e-3
+    small = design_from_dict(data)
+    assert area_ratio(small) == pytest.approx(area_ratio(implemented_design))
+    assert min_wall_of(small) == pytest.approx(0.24e-3)   # actuator.md: 0.6 mm walls -> 0.24 mm at 2 mm
+
+
+def test_sensitivity_variants_cover_the_published_parameters(implemented_design):
+    vs = sensitivity.variants(implemented_design)
+    groups = {v.parameter for v in vs}
+    assert groups == {"reinforcement pitch", "thread diameter", "thread shape", "fibre diameter",
+                      "fibre placement", "material set"}
+    for g in groups:   # exactly one baseline per group, and it is the design itself
+        base = [v for v in vs if v.parameter == g and v.baseline]
+        assert len(base) == 1 and base[0].design.content_hash() == implemented_design.content_hash()
+    none = next(v for v in vs if v.label == "none")
+    assert none.design.limiting_fibre is None
+    top = next(v for v in vs if v.label == "top")
+    assert top.design.limiting_fibre.center[1] > 0
+
+
+# ------------------------------------------------------------------ cases, cache, executors
+def test_second_run_is_served_from_the_cache(implemented_design, ctx):
+    specs = _specs(implemented_design, ctx)
+    first = run_cases(specs, workers=1, cache=ctx.cache, progress=False, stats=(s1 := RunStats()))
+    second = run_cases(specs, workers=1, cache=ctx.cache, progress=False, stats=(s2 := RunStats()))
+    assert s1.solved == 3 and s2.solved == 0 and s2.cached == 3
+    assert [r["results"][0]["radius_of_curvature_m"] for r in first] == \
+           [r["results"][0]["radius_of_curvature_m"] for r in second]
+    rc = [r["results"][0]["radius_of_curvature_m"] for r in first]
+    assert rc[0] > rc[1] > rc[2]   # more pressure, tighter bend
+
+
+def test_cache_key_changes_with_what_changes_the_answer(implemented_design, ctx):
+    a = ctx.spec(implemented_design)
+    assert a.key() == ctx.spec(implemented_design).key()
+    assert a.key() != CaseSpec(a.design, a.rung, a.pressures, {"mesh_size": 4e-4}).key()
+    assert a.key() != ctx.spec(implemented_design, [0.1e5]).key()
+    assert a.key() != CaseSpec(a.design, "closed_form", a.pressures, {}).key()
+
+
+class InterruptingExecutor:
+    """Runs cases synchronously and simulates Ctrl-C on the n-th submission."""
+
+    def __init__(self, interrupt_at: int):
+        self.n, self.at = 0, interrupt_at
+
+    def submit(self, fn, *args):
+        self.n += 1
+        if self.n == self.at:
+            raise KeyboardInterrupt
+        f = Future()
+        f.set_result(fn(*args))
+        return f
+
+
+def test_interrupted_study_resumes_from_the_cache(implemented_design, ctx):
+    specs = _specs(implemented_design, ctx)
+    with pytest.raises(KeyboardInterrupt):
+        run_cases(specs, executor=InterruptingExecutor(3), cache=ctx.cache, progress=False)
+    stats = RunStats()
+    run_cases(specs, workers=1, cache=ctx.cache, progress=False, stats=stats)
+    assert stats.cached == 2 and stats.solved == 1
+
+
+def test_any_concurrent_futures_executor_gives_the_same_answers(implemented_design, ctx, tmp_path):
+    specs = _specs(implemented_design, ctx)
+    serial = run_cases(specs, workers=1, cache=False, progress=False)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        threaded = run_cases(specs, executor=pool, cache=False, progress=False)
+    for a, b in zip(serial, threaded):
+        assert a["results"][0]["curvature_per_m"] == pytest.approx(b["results"][0]["curvature_per_m"], rel=1e-9)
+
+
+def test_a_case_that_raises_is_reported_not_fatal(implemented_design, ctx):
+    bad = CaseSpec(implemented_design.to_dict(), "no_such_rung", ((15000.0,),), {})
+    out = run_cases([bad, ctx.spec(implemented_design)], workers=1, cache=False, progress=False,
+                    stats=(stats := RunStats()))
+    assert not out[0]["results"][0]["converged"] and "case failed" in out[0]["results"][0]["message"]
+    assert out[1]["results"][0]["converged"] and stats.errors == 1
+
+
+def test_a_command_beyond_the_rungs_range_says_did_not_converge(implemented_design, ctx):
+    row = ctx.evaluate([make_variant(implemented_design, "base", "p", 0, lambda d: None)], "t")[0]
+    assert row["converged"]
+    ctx.pressure = 0.35e5   # past the lumen closing (~0.275 bar)
+    row = ctx.evaluate([make_variant(implemented_design, "base", "p", 0, lambda d: None)], "t")[0]
+    assert not row["converged"] and row["status"].startswith("did not converge")
+
+
+def test_dask_scheduler_needs_the_cluster_extra():
+    from softcath_ros.core.errors import SoftcathError
+    from softcath_ros.core.studies.runner import make_executor
+
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        with pytest.raises(SoftcathError, match="cluster"):
+            make_executor(scheduler="tcp://127.0.0.1:1")
+    else:
+        pytest.skip("dask installed: the missing-extra error cannot be shown")
+
+
+# ------------------------------------------------------------------ trends that could fail
+def test_channel_towards_the_outer_wall_bends_more(implemented_design, ctx):
+    vs = {round(v.value * 1e3, 2): v for v in channel_shift.variants(implemented_design)}
+    rows = ctx.evaluate([vs[-0.3], vs[0.0], vs[0.3]], "shift")
+    rc = [r["radius_of_curvature_mm"] for r in rows]
+    assert rc[0] > rc[1] > rc[2]
+
+
+def test_device_stiffness_raises_rc_linearly(implemented_design, ctx):
+    vs = [v for v in device_stiffness.variants(implemented_design) if v.value * 1e6 in (0.0, 1.0, 4.0)]
+    rows = ctx.evaluate(vs, "device")
+    ei = np.array([r["device_ei_n_mm2"] for r in rows])
+    rc = np.array([r["radius_of_curvature_mm"] for r in rows])
+    assert np.all(np.diff(rc) > 0)
+    fit = device_stiffness.linear_fit(ei, rc)
+    assert fit["r2"] > 0.999 and fit["intercept"] == pytest.approx(rc[0], rel=0.02)
+
+
+def test_smaller_actuator_bends_more_at_equal_pressure(implemented_design, ctx):
+    vs = miniaturise.variants(implemented_design, diameters_mm=(5.0, 2.0, 1.5))
+    rows = ctx.evaluate(vs, "mini")
+    assert rows[1]["radius_of_curvature_mm"] < rows[0]["radius_of_curvature_mm"]
+    # geometric similarity: R_C proportional to D
+    assert rows[1]["radius_of_curvature_mm"] / 2.0 == pytest.approx(rows[0]["radius_of_curvature_mm"] / 5.0, rel=0.02)
+    assert not rows[2]["feasible"] and "thinner than the minimum" in rows[2]["status"]   # 0.18 mm walls
+
+
+# ------------------------------------------------------------------ CLI
+def test_cli_study_writes_csv_png_and_markdown(tmp_path, monkeypatch, capsys):
+    from softcath_ros.cli import main
+
+    monkeypatch.setenv("SOFTCATH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "out"
+    rc = main(["study", "device-stiffness", "--design", "implemented_5mm", "--mesh-size", str(COARSE["mesh_size"]),
+               "--workers", "1", "--out", str(out), "--quiet", "--pressure", "0.1", "--unit", "bar"])
+    assert rc == 0
+    for ext in ("csv", "png", "md"):
+        assert (out / f"device-stiffness_implemented_5mm.{ext}").stat().st_size > 100
+    md = (out / "device-stiffness_implemented_5mm.md").read_text()
+    assert "rung: `section`" in md and "max relative R_C error" in md and "0.1 bar" in md
+    assert "holds" in capsys.readouterr().out
+
+
+def test_cli_study_rejects_bad_input(capsys):
+    from softcath_ros.cli import main
+
+    assert main(["study", "sensitivity", "--design", "implemented_5mm", "--pressure", "2", "--unit", "bar"]) == 2
+    assert "--pressure" in capsys.readouterr().err
+    assert main(["study", "sensitivity", "--design", "implemented_5mm", "--max-stretch", "2"]) == 2
+    assert "no such option" in capsys.readouterr().err
