@@ -1,37 +1,69 @@
-"""Blocking force from a rung's free curvature (until a rod rung with contact exists).
+"""Blocking force: the scale's normal reaction on the tip, from the rod statics (core/rod).
 
-The blocking-force bench holds the tip of a cantilevered actuator on a scale. With a
-linear beam (Euler-Bernoulli, small deflection), the pressure acts as an end moment
-M that would bend the free actuator with curvature kappa = M / EI; a transverse tip
-force F that brings the tip deflection back to zero satisfies
-    M l^2 / (2 EI) = F l^3 / (3 EI)   =>   F = 3 M / (2 l) = 3 EI kappa / (2 l).
-EI is the transformed section's bending stiffness about the bending direction, and
-kappa the rung's own (possibly nonlinear) free curvature, so M = EI kappa is the
-equivalent end moment of that rung. This ignores large deflection and the change of
-stiffness under pressure; a rod rung with contact should replace it.
+The blocking-force bench holds the cantilevered actuator horizontally with a scale under its
+tip, touching it at p = 0 (the reading there is tared). The force is the reaction of a
+frictionless plane through the tip of the straight body, normal to the bending direction, on
+a clamped Kirchhoff rod (``core/rod/statics.py``); the tip may slide and rotate on the scale.
+What the sections carry:
+- the model is the ``rod`` rung: its own moment-curvature law (from the section rung by
+  default: M(kappa, p) of the section held at each curvature, so the stiffening and the wall
+  deformation under pressure are in it);
+- any other rung: the linear law M = EI (kappa - kappa_free) about that rung's free curvature,
+  with the transformed section's EI along the bending direction (device included). For small
+  deflection this is F = 3 EI kappa / (2 l), the end moment EI kappa balanced by the tip force.
+Gravity is not included: the bench tares the reading at p = 0.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..core.models.rod import RodModel
+from ..core.rod.law import LawRangeError, LinearLaw
+from ..core.rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..core.section_properties import transformed_section
+
+N_SEGMENTS = 40
+
+
+def bench_contact(length: float) -> PlanarLoads:
+    """The scale in the bending plane (a along the base axis, b along the bending direction)."""
+    return PlanarLoads(contact=PlaneContact(normal=(0.0, -1.0), point=(float(length), 0.0)))
 
 
 class BlockingForce:
-    """F(p) = 3 EI(n) |k(p)| / (2 l) for one model (``model.evaluate``) and sample length l (m)."""
+    """Blocking force (N) for one model and sample length l (m); NaN where the model cannot answer."""
 
     def __init__(self, model):
         self.model = model
         self.stiffness = transformed_section(model.design).bending_stiffness  # (2, 2) N m^2
 
     def from_curvature(self, curvature: np.ndarray, length: float) -> np.ndarray:
+        """From free curvatures (..., 2) 1/m, through the linear law about each of them."""
         k = np.atleast_2d(np.asarray(curvature, dtype=float))
-        mag = np.hypot(k[:, 0], k[:, 1])
-        n = np.divide(k, mag[:, None], out=np.zeros_like(k), where=mag[:, None] > 0)
-        ei = np.einsum("ni,ij,nj->n", n, self.stiffness, n)
-        out = 1.5 * ei * mag / float(length)
+        out = np.zeros(len(k))
+        for i, ki in enumerate(k):
+            mag = float(np.hypot(*ki))
+            if not np.isfinite(mag):
+                out[i] = np.nan
+                continue
+            if mag == 0:
+                continue
+            e = ki / mag
+            law = LinearLaw(float(e @ self.stiffness @ e), lambda p, mag=mag: mag, source="linear law")
+            out[i] = solve_rod(law.at(0.0), length, bench_contact(length), N_SEGMENTS).contact_force
         return out if np.ndim(curvature) > 1 else out[0]
 
     def __call__(self, pressures, length: float) -> np.ndarray:
-        state = self.model.evaluate(pressures)
-        return self.from_curvature(state.curvature, length)
+        if not isinstance(self.model, RodModel):
+            return self.from_curvature(self.model.evaluate(pressures).curvature, length)
+        p = np.asarray(pressures, dtype=float)
+        batch = np.atleast_2d(p)
+        out = np.full(len(batch), np.nan)
+        for i, pi in enumerate(batch[:, 0]):
+            try:
+                sol = self.model.solve(pi, length=length, loads=bench_contact(length))
+            except LawRangeError:
+                continue
+            if sol.converged:
+                out[i] = sol.contact_force
+        return out if p.ndim > 1 else out[0]

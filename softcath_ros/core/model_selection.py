@@ -53,7 +53,7 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
         if lo < v_lo or hi > v_hi:
             rejected[name] = (f"valid over {v_lo:g}..{v_hi:g} Pa only, the scene needs {lo:g}..{hi:g} Pa")
             continue
-        err = measured["error_rc_rel_max"]
+        err = error_over(measured, hi)
         if err is None or err > scene.required_accuracy:
             rejected[name] = (f"measured R_C error {_pct(err)} exceeds the required {_pct(scene.required_accuracy)}")
             continue
@@ -75,6 +75,23 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
               f"measured R_C error {_pct(err)} (against {'/'.join(ref) if isinstance(ref, list) else ref}; "
               f"{measured['_scope']}) meets {_pct(scene.required_accuracy)} at {scene.required_rate:g} Hz")
     return Selection(rung=name, reason=reason, rejected=rejected)
+
+
+def error_over(measured: dict, high: float):
+    """The measured R_C error that applies to pressures up to ``high`` (Pa): the worst at the measured
+    pressures up to it and, unless ``high`` is one of them, at the next one above (which brackets the
+    range); the overall maximum
+    when the envelope has no errors per pressure or a point in that set was not measured."""
+    by_p = measured.get("error_rc_rel_by_pressure_pa")
+    if not by_p:
+        return measured["error_rc_rel_max"]
+    points = sorted((float(p), e) for p, e in by_p)
+    use = [pt for pt in points if pt[0] <= high]
+    if not use or use[-1][0] < high:   # the scene goes past the last measured pressure below its top
+        use += [pt for pt in points if pt[0] > high][:1]
+    if any(e is None for _, e in use):
+        return measured["error_rc_rel_max"]
+    return max(e for _, e in use)
 
 
 def measured_envelope(rung: dict, scene: Scene) -> dict | None:
@@ -109,6 +126,8 @@ def make_auto_model(design, scene: Scene | None = None, envelope: dict | None = 
         raise ModelError(f"model auto: scene '{scene.name}' is for design '{scene.design.name}', "
                          f"not '{design.name}'")
     selection = select_model(scene, envelope)
+    if scene.loads.any:   # only a rung that models loads qualifies, and it needs to know them
+        options = {**options, "loads": scene.loads}
     model = make_model(selection.rung, scene.design, **options)
     model.selection = selection
     return model

@@ -7,11 +7,19 @@ gravity, the pressure range, the accuracy and the rate required:
     design: implemented_5mm            # shipped design name or path (relative to the scene file)
     length: 0.040                      # m, optional: the actuated length, if not the design file's
     device: null                       # or {diameter: m, bending_stiffness: N m^2}
-    loads: {tip_force: null, contact: null}   # tip_force: [fx, fy, fz] N; contact: {plane_z: m}
-    gravity: false
+    loads: {tip_force: null, contact: null}   # tip_force: [fx, fy, fz] N; contact: see below
+    gravity: false                     # or [gx, gy, gz] m/s^2 in softcath_base (e.g. [0, -9.81, 0])
     pressure_range: [0.0, 20000.0]     # Pa, per channel
     required_accuracy: 0.05            # largest acceptable relative error in R_C against the reference
     required_rate: 1000.0              # Hz, commands the model must answer per second
+
+Contact is a plane the tip presses on (frictionless; the tip may slide and rotate on it):
+
+    contact: {kind: tip_plane, normal: [nx, ny, nz], point: [x, y, z] | rest_tip}
+
+``normal`` points from the surface to the side the actuator is on (softcath_base); ``point`` is a
+point on the surface (m), or ``rest_tip``: the surface touches the tip of the straight,
+unpressurised body (the blocking-force bench's scale, tared at p = 0).
 
 ``features`` lists what a model must model for the scene (free bending always; device
 stiffness, tip load, contact, gravity when present); model selection (core/model_selection.py)
@@ -25,6 +33,7 @@ from pathlib import Path
 
 from .design import Design, Device, load_design
 from .errors import SoftcathError
+from .rod.loads import REST_TIP, Loads, TipPlaneContact
 from .yaml_io import load_yaml
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "config" / "scenes"
@@ -43,9 +52,9 @@ class SceneError(SoftcathError):
 class Scene:
     name: str
     design: Design                       # with the scene's device, if it names one
-    tip_force: tuple[float, float, float] | None
-    contact_plane_z: float | None        # m, a plane normal to the base axis the tip presses on
-    gravity: bool
+    tip_force: tuple[float, float, float] | None   # N, softcath_base
+    contact: TipPlaneContact | None                # a plane the tip presses on
+    gravity: tuple[float, float, float] | None     # m/s^2, softcath_base
     pressure_range: tuple[float, float]  # Pa
     required_accuracy: float             # relative R_C error
     required_rate: float                 # Hz
@@ -58,15 +67,19 @@ class Scene:
             need.append("device_stiffness")
         if self.tip_force is not None:
             need.append("tip_load")
-        if self.contact_plane_z is not None:
+        if self.contact is not None:
             need.append("contact")
-        if self.gravity:
+        if self.gravity is not None:
             need.append("gravity")
         return tuple(need)
 
+    @property
+    def loads(self) -> Loads:
+        return Loads(tip_force=self.tip_force, gravity=self.gravity, contact=self.contact)
 
-_KEYS = {"name", "description", "design", "length", "device", "loads", "gravity", "pressure_range", "required_accuracy",
-         "required_rate"}
+
+_KEYS = {"name", "description", "design", "length", "device", "loads", "gravity", "pressure_range",
+         "required_accuracy", "required_rate"}
 
 
 def _number(value, field: str, positive: bool = False) -> float:
@@ -122,15 +135,15 @@ def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
         if not isinstance(tip, list) or len(tip) != 3:
             raise SceneError("loads.tip_force", tip, "must be null or [fx, fy, fz] in N")
         tip = tuple(_number(v, "loads.tip_force") for v in tip)
-    contact = loads.get("contact")
-    plane = None
-    if contact is not None:
-        if not isinstance(contact, dict) or set(contact) != {"plane_z"}:
-            raise SceneError("loads.contact", contact, "must be null or {plane_z: m}")
-        plane = _number(contact["plane_z"], "loads.contact.plane_z", positive=True)
+    contact = _contact(loads.get("contact"))
     gravity = raw.get("gravity", False)
-    if not isinstance(gravity, bool):
-        raise SceneError("gravity", gravity, "must be true or false")
+    if gravity is False or gravity is None:
+        gravity = None
+    elif isinstance(gravity, list) and len(gravity) == 3:
+        gravity = tuple(_number(v, "gravity") for v in gravity)
+    else:
+        raise SceneError("gravity", gravity, "must be false or the acceleration [gx, gy, gz] in m/s^2 "
+                         "(softcath_base, e.g. [0, -9.81, 0])")
     pr = raw["pressure_range"]
     if not isinstance(pr, list) or len(pr) != 2:
         raise SceneError("pressure_range", pr, "must be [low, high] in Pa")
@@ -142,9 +155,32 @@ def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
     acc = _number(raw["required_accuracy"], "required_accuracy", positive=True)
     rate = _number(raw["required_rate"], "required_rate", positive=True)
     desc = raw.get("description", "")
-    return Scene(name=name, design=design, tip_force=tip, contact_plane_z=plane, gravity=gravity,
+    return Scene(name=name, design=design, tip_force=tip, contact=contact, gravity=gravity,
                  pressure_range=(lo, hi), required_accuracy=acc, required_rate=rate,
                  description=desc if isinstance(desc, str) else "")
+
+
+def _vector(value, field: str) -> tuple[float, float, float]:
+    if not isinstance(value, list) or len(value) != 3:
+        raise SceneError(field, value, "must be [x, y, z] (softcath_base)")
+    return tuple(_number(v, field) for v in value)
+
+
+def _contact(raw) -> TipPlaneContact | None:
+    if raw is None:
+        return None
+    form = "null or {kind: tip_plane, normal: [nx, ny, nz], point: [x, y, z] m | rest_tip}"
+    if not isinstance(raw, dict) or set(raw) - {"kind", "normal", "point"} or "normal" not in raw:
+        raise SceneError("loads.contact", raw, f"must be {form}")
+    if raw.get("kind", "tip_plane") != "tip_plane":
+        raise SceneError("loads.contact.kind", raw["kind"], "only 'tip_plane' (the tip on a plane) is modelled")
+    normal = _vector(raw["normal"], "loads.contact.normal")
+    if math.hypot(*normal) == 0:
+        raise SceneError("loads.contact.normal", raw["normal"], "must not be zero")
+    point = raw.get("point", REST_TIP)
+    if point != REST_TIP:
+        point = _vector(point, "loads.contact.point")
+    return TipPlaneContact(normal=tuple(v / math.hypot(*normal) for v in normal), point=point)
 
 
 def load_scene(name_or_path: str | Path) -> Scene:

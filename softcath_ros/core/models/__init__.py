@@ -13,6 +13,7 @@ RUNGS: dict[str, str] = {
     "section": "softcath_ros.core.models.section:SectionModel",
     "fe3d": "softcath_ros.core.models.fe3d:Fe3dModel",
     "surrogate": "softcath_ros.core.models.surrogate:SurrogateModel",
+    "rod": "softcath_ros.core.models.rod:RodModel",
 }
 
 

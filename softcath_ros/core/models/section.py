@@ -283,6 +283,47 @@ class SectionModel(BendModel):
         lam, kr = self.problem.frame_state(x)
         return kr / self.design.outer_radius, lam, self.problem.channel_areas(x) * self.design.outer_radius ** 2
 
+    # ------------------------------------------------------------------ moment-curvature law
+    def bending_direction(self, pressure_direction) -> np.ndarray:
+        """Unit vector the section bends towards when its channels are pressurised in proportion to
+        ``pressure_direction``: away from their pressure-weighted centre."""
+        w = np.asarray(pressure_direction, dtype=float)
+        c = sum(wi * np.asarray(ch.center) for wi, ch in zip(w, self.design.channels))
+        if np.hypot(*c) == 0:
+            raise ModelError("model 'section': these channels pressurised together do not bend the section "
+                             "(their pressure-weighted centre is on the axis); give a bending direction")
+        return -c / np.hypot(*c)
+
+    def moment_curvature(self, pressures, curvatures, direction=None, pressure_direction=None,
+                         progress: bool = False):
+        """The moment (N m) the section carries when held at a curvature (``section_fe/moment.py``).
+
+        ``curvatures`` (1/m, ascending, containing 0) are rotation rates per unit reference length
+        (kappa = |k| lambda, so kappa l is the tip angle) along the unit ``direction`` (default: the
+        bending direction of ``pressure_direction``); ``pressures`` (Pa, ascending from 0) are
+        magnitudes along ``pressure_direction`` (default: all channels equally; one channel: [1]).
+        Returns a ``MomentTable``: NaN where the held section could not be solved (``messages``
+        say where and why). The free state of the rung is where the moment is zero."""
+        from tqdm import tqdm
+
+        from ..section_fe.moment import HeldSection, moment_table
+
+        pdir = np.ones(self.n_channels) if pressure_direction is None else np.asarray(pressure_direction, float)
+        if pdir.shape != (self.n_channels,) or np.any(pdir < 0) or not np.any(pdir > 0):
+            raise ModelError(f"model 'section': pressure_direction {pressure_direction!r} must be "
+                             f"{self.n_channels} non-negative weight(s), not all zero")
+        e = self.bending_direction(pdir) if direction is None else direction
+        s = self.settings
+        held = HeldSection(self.problem, e, tol=s.tol, max_newton=max(s.max_newton, 12),
+                           min_hole_gap=s.min_hole_gap)
+        control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
+                              adaptive=s.adaptive, domain_step=s.contact_resolution)
+        bar = tqdm(total=len(pressures), desc="section M(kappa, p)", unit="p", disable=not progress)
+        try:
+            return moment_table(held, curvatures, pressures, pdir, control, on_point=bar.update)
+        finally:
+            bar.close()
+
     # ------------------------------------------------------------------ disk cache
     def _cache_path(self, pressures) -> Path:
         return self.cache_dir / f"section_{self.cache_key(pressures)}.npz"

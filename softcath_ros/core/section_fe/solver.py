@@ -53,7 +53,10 @@ class LinearSolver:
 
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
-           max_iterations: int = 12, linear: LinearSolver | None = None) -> Correction:
+           max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None) -> Correction:
+    """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
+    ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
+    ``project(x) -> x`` onto the constraint."""
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
     n = problem.n
@@ -62,10 +65,14 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         E, g, K, aux = problem.assemble(x, pressures)
         if not np.isfinite(E):
             return Correction(x, False, it, "inverted element or negative axial stretch in the predictor")
+        if constraint is not None:
+            g, K = constraint.reduce(x, g, K)
         try:
             dz = linear.solve(K, -g)
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
+        if constraint is not None:
+            dz = constraint.expand(x, dz)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
         if not np.all(np.isfinite(dx)):
             return Correction(x, False, it, "singular tangent")
@@ -73,7 +80,7 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         # stay admissible (no inverted element, positive axial stretch everywhere).
         alpha = 1.0
         for _ in range(12):
-            trial = x + alpha * dx
+            trial = x + alpha * dx if constraint is None else constraint.project(x + alpha * dx)
             if np.isfinite(problem.energy(trial, pressures)):
                 break
             alpha *= 0.5

@@ -1,0 +1,165 @@
+"""Rod rung: Kirchhoff statics of the actuator with a moment-curvature law from a higher rung.
+
+The body is a planar, unshearable rod clamped at the base (``core/rod/statics.py``); its sections
+carry M(kappa, p) + EI_device kappa, with M the law of the ``source`` rung:
+- ``source="section"`` (default): the section rung held at prescribed curvatures
+  (``section_fe/moment.py``), tabulated once per design and cached (``core/rod/section_law.py``);
+  the stretch lambda(kappa, p) at zero axial force lengthens the segments.
+- any other rung name: the linear law M = EI (kappa - kappa_free(p)) with that rung's free
+  curvature and the closed form's transformed-section EI (exact for ``closed_form``).
+Loads (``core/rod/loads.py``, softcath_base frame): a dead tip force, gravity on the silicone's
+weight (rho A g per reference length; the device's and the fluid's weight are not included), and
+frictionless tip contact with a plane. The rod is planar: loads and the plane's normal must lie
+in the bending plane (the base axis and the bending direction e); one-channel designs only.
+
+``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length) along e,
+axial_stretch = deformed arc length / length, and extras: ``backbone`` (N, n+1, 3) joint
+positions, ``tip_position`` (N, 3), ``tip_orientation_xyzw`` (N, 4), ``contact_force`` (N,) N,
+``tip_angle`` (N,) rad. A command outside the law's table is answered with converged=False and
+the reason.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..design import Design
+from ..errors import ModelError
+from ..rod.law import LawRangeError, LinearLaw
+from ..rod.loads import REST_TIP, Loads, TipPlaneContact
+from ..rod.section_law import LawGrid, section_law
+from ..rod.statics import PlanarLoads, PlaneContact, solve_rod
+from ..section_properties import transformed_section
+from .base import BendModel, BendState
+
+_PLANE_TOL = 1e-9
+
+
+class RodModel(BendModel):
+    name = "rod"
+
+    def __init__(self, design: Design, source: str = "section", loads: Loads | None = None,
+                 tip_force=None, gravity=None, contact: TipPlaneContact | None = None, n_segments: int = 40,
+                 grid: LawGrid | None = None, cache: bool = True, progress: bool = False, **source_options):
+        """``loads`` or the separate ``tip_force`` (N), ``gravity`` (m/s^2), ``contact``; ``grid`` and
+        ``source_options`` (e.g. ``mesh_size``) set how the section law is tabulated."""
+        super().__init__(design)
+        if design.n_channels != 1:
+            raise ModelError(f"model 'rod': design '{design.name}' has {design.n_channels} channels; the rod "
+                             "rung models one-channel designs (a planar law in the bending plane)")
+        if loads is not None and (tip_force is not None or gravity is not None or contact is not None):
+            raise ModelError("model 'rod': give either loads= or tip_force/gravity/contact, not both")
+        self.loads = loads if loads is not None else Loads(
+            tip_force=None if tip_force is None else tuple(float(v) for v in tip_force),
+            gravity=None if gravity is None else tuple(float(v) for v in gravity), contact=contact)
+        if n_segments < 4:
+            raise ModelError(f"model 'rod': n_segments {n_segments} must be at least 4")
+        self.n_segments = int(n_segments)
+        body = replace(design, device=None)
+        section = transformed_section(body)
+        ch = np.asarray(design.channels[0].center) - section.neutral_axis
+        if np.hypot(*ch) == 0:
+            raise ModelError(f"model 'rod': the channel of '{design.name}' is on the neutral axis: no bending plane")
+        self.direction = -ch / np.hypot(*ch)          # e: the channel side lengthens, the body bends away
+        self.device_stiffness = 0.0 if design.device is None else design.device.bending_stiffness
+        self.source = source
+        if source == "section":
+            self.law = section_law(design, grid or LawGrid(), cache=cache, progress=progress, **source_options)
+        else:
+            from . import make_model
+
+            free_model = make_model(source, body, **source_options)
+            ei = float(self.direction @ section.bending_stiffness @ self.direction)
+
+            def free_curvature(p):
+                st = free_model.evaluate(np.array([p]))
+                if not bool(st.converged):
+                    raise LawRangeError(f"rod law from '{source}': {st.message}")
+                return float(np.asarray(st.curvature) @ self.direction * st.axial_stretch)
+
+            self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
+        self.weight_per_length = design.material.density * section.silicone_area
+        self.planar = self._planar_loads(self.loads)
+
+    # ------------------------------------------------------------------ loads in the bending plane
+    def _in_plane(self, v, what: str) -> tuple[float, float]:
+        v = np.asarray(v, dtype=float)
+        if v.shape != (3,) or not np.isfinite(v).all():
+            raise ModelError(f"model 'rod': {what} {v.tolist()} must be 3 finite numbers (softcath_base)")
+        e = self.direction
+        off = v[0] * -e[1] + v[1] * e[0]              # component along z x e: out of the bending plane
+        if abs(off) > _PLANE_TOL * max(1.0, float(np.linalg.norm(v))):
+            raise ModelError(f"model 'rod': {what} {v.tolist()} has a component {off:.3g} out of the bending "
+                             f"plane (spanned by z and e = [{e[0]:.3g}, {e[1]:.3g}, 0]); the rod is planar")
+        return float(v[2]), float(v[0] * e[0] + v[1] * e[1])
+
+    def _planar_loads(self, loads: Loads) -> PlanarLoads:
+        tip = (0.0, 0.0) if loads.tip_force is None else self._in_plane(loads.tip_force, "tip force")
+        g = (0.0, 0.0) if loads.gravity is None else self._in_plane(loads.gravity, "gravity")
+        weight = (g[0] * self.weight_per_length, g[1] * self.weight_per_length)
+        contact = None
+        if loads.contact is not None:
+            n = self._in_plane(loads.contact.normal, "contact normal")
+            norm = math.hypot(*n)
+            if norm == 0:
+                raise ModelError("model 'rod': the contact normal must not be zero")
+            if loads.contact.point == REST_TIP:
+                point = (self.design.length, 0.0)
+            else:
+                point = self._project(loads.contact.point)
+            contact = PlaneContact(normal=(n[0] / norm, n[1] / norm), point=point)
+        return PlanarLoads(tip_force=tip, weight_per_length=weight, contact=contact)
+
+    def _project(self, point) -> tuple[float, float]:
+        p = np.asarray(point, dtype=float)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise ModelError(f"model 'rod': contact point {point!r} must be [x, y, z] in m or '{REST_TIP}'")
+        e = self.direction
+        return float(p[2]), float(p[0] * e[0] + p[1] * e[1])
+
+    # ------------------------------------------------------------------ evaluation
+    def solve(self, pressure: float, length: float | None = None, loads: PlanarLoads | None = None):
+        """The rod solution (``RodSolution``) at one pressure (Pa); raises LawRangeError outside the law."""
+        length = self.design.length if length is None else float(length)
+        sl = self.law.at(float(pressure), extra_stiffness=self.device_stiffness)
+        return solve_rod(sl, length, self.planar if loads is None else loads, self.n_segments)
+
+    def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
+        n = len(pressures)
+        e = self.direction
+        curvature = np.full((n, 2), np.nan)
+        stretch = np.full(n, np.nan)
+        converged = np.zeros(n, dtype=bool)
+        backbone = np.full((n, self.n_segments + 1, 3), np.nan)
+        tip_q = np.full((n, 4), np.nan)
+        force = np.full(n, np.nan)
+        angle = np.full(n, np.nan)
+        messages = []
+        for i, p in enumerate(pressures[:, 0]):
+            try:
+                sol = self.solve(p)
+            except LawRangeError as exc:
+                messages.append(f"rod model: command p = {p:.6g} Pa: {exc}")
+                continue
+            if not sol.converged:
+                messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message}")
+                continue
+            th = sol.theta[-1]
+            curvature[i] = e * th / sol.arc_length
+            stretch[i] = sol.arc_length / self.design.length
+            converged[i] = True
+            a, b = sol.positions[:, 0], sol.positions[:, 1]
+            backbone[i] = np.column_stack([b * e[0], b * e[1], a])
+            # rotation by theta about z x e = (-e_y, e_x, 0)
+            tip_q[i] = [-e[1] * math.sin(th / 2), e[0] * math.sin(th / 2), 0.0, math.cos(th / 2)]
+            force[i] = sol.contact_force
+            angle[i] = th
+        return BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
+                         message="; ".join(messages),
+                         extras={"backbone": backbone, "tip_position": backbone[:, -1], "tip_orientation_xyzw": tip_q,
+                                 "contact_force": force, "tip_angle": angle, "law": self.law.source})
+
+
+__all__ = ["RodModel"]

@@ -1,0 +1,1 @@
+"""Rod statics with a moment-curvature law (the `rod` rung): laws, loads, the planar solver."""

@@ -1,0 +1,161 @@
+"""Moment-curvature laws M(kappa, p) for the rod: tabulated from the section rung, or linear.
+
+kappa is the rotation rate of the cross-sections per unit reference length along the bending
+direction e (so kappa l is the tip angle of a uniformly bent body), p the pressure magnitude
+(Pa) along the law's pressure direction. ``law.at(p)`` gives a ``LawSlice``: M(kappa), its
+slope, the stretch lambda(kappa) at zero axial force, and the kappa range it is valid on.
+Outside the pressures or curvatures a law was built on it raises ``LawRangeError``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from ..errors import ModelError
+from ..units import PA_PER_BAR
+
+
+class LawRangeError(ModelError):
+    """A pressure or curvature outside the range a moment-curvature law was built on."""
+
+
+@dataclass
+class LawSlice:
+    """M(kappa) = law moment + extra_stiffness kappa at one pressure, on [kappa_lo, kappa_hi]."""
+
+    pressure: float
+    kappa_lo: float
+    kappa_hi: float
+    _moment: object            # callable kappa -> M (N m), with .derivative() for splines
+    _slope: object
+    _stretch: object
+    source: str
+    _linear_root: float | None = None   # free curvature of a linear law
+
+    def moment(self, kappa):
+        return self._moment(kappa)
+
+    def slope(self, kappa):
+        return self._slope(kappa)
+
+    def stretch(self, kappa):
+        return self._stretch(kappa)
+
+    def stretch_slope(self, kappa):
+        s = getattr(self._stretch, "derivative", None)
+        return s()(kappa) if s is not None else np.zeros_like(np.asarray(kappa, dtype=float))
+
+    def check(self, kappa) -> None:
+        k = np.asarray(kappa, dtype=float)
+        lo, hi = float(k.min()), float(k.max())
+        if lo < self.kappa_lo - 1e-9 or hi > self.kappa_hi + 1e-9:
+            raise LawRangeError(
+                f"{self.source}: curvatures {lo:.4g}..{hi:.4g} 1/m at p = {self.pressure / PA_PER_BAR:.4f} bar "
+                f"leave the moment-curvature table, valid there for {self.kappa_lo:.4g}..{self.kappa_hi:.4g} 1/m "
+                "(the held section does not converge beyond: the lumen closes or Newton fails)")
+
+    def free_curvature(self) -> float | None:
+        """The curvature with zero moment (the free body), None if it is outside the range."""
+        roots = getattr(self._moment, "roots", None)
+        if roots is not None:
+            r = [float(x) for x in roots(extrapolate=False) if self.kappa_lo <= x <= self.kappa_hi]
+            return min(r, key=abs) if r else None
+        return self._linear_root
+
+
+class LinearLaw:
+    """M = EI (kappa - kappa_free(p)): a body of constant stiffness EI whose pressure acts as the end
+    moment EI kappa_free(p) (the closed form exactly; any rung's free curvature to first order)."""
+
+    def __init__(self, stiffness: float, free_curvature, pressure_range=(0.0, math.inf),
+                 source: str = "linear law"):
+        self.stiffness = float(stiffness)
+        self._free = free_curvature
+        self.pressure_range = tuple(float(v) for v in pressure_range)
+        self.source = source
+
+    def at(self, pressure: float, extra_stiffness: float = 0.0) -> LawSlice:
+        lo, hi = self.pressure_range
+        if not lo <= pressure <= hi:
+            raise LawRangeError(f"{self.source}: p = {pressure / PA_PER_BAR:.4f} bar is outside "
+                                f"{lo / PA_PER_BAR:.4f}..{hi / PA_PER_BAR:.4f} bar")
+        ei, kf = self.stiffness, float(self._free(pressure))
+        total = ei + extra_stiffness
+        return LawSlice(pressure, -math.inf, math.inf,
+                        lambda k: ei * (np.asarray(k) - kf) + extra_stiffness * np.asarray(k),
+                        lambda k: np.full_like(np.asarray(k, dtype=float), total),
+                        lambda k: np.ones_like(np.asarray(k, dtype=float)), self.source,
+                        _linear_root=ei * kf / total if total > 0 else None)
+
+
+class TabulatedLaw:
+    """M(kappa, p) from a ``MomentTable`` (section rung): local cubic interpolation in p (4 grid
+    pressures, linear where a neighbour is missing), a cubic spline in kappa over the curvatures
+    valid at that pressure. No extrapolation: outside the table it refuses."""
+
+    def __init__(self, table, source: str = "section law"):
+        self.table = table
+        self.source = source
+        ks, ps, M = table.curvatures, table.pressures, table.moment
+        i0 = int(np.flatnonzero(ks == 0)[0])
+        ok = np.isfinite(M[i0])
+        # the law ends where the held-straight section stops or fewer than 4 curvatures remain
+        n_valid = np.array([self._block(np.isfinite(M[:, j]), i0)[1] - self._block(np.isfinite(M[:, j]), i0)[0]
+                            for j in range(len(ps))])
+        good = ok & (n_valid >= 4)
+        last = int(np.argmin(good)) - 1 if not good.all() else len(ps) - 1
+        if last < 1:
+            raise ModelError(f"{source}: the table has fewer than two usable pressures")
+        self._i0 = i0
+        self._last = last
+        self.pressure_range = (float(ps[0]), float(ps[last]))
+
+    @staticmethod
+    def _block(valid: np.ndarray, i0: int) -> tuple[int, int]:
+        """The contiguous run of True around index i0: [lo, hi)."""
+        if not valid[i0]:
+            return i0, i0
+        lo = i0
+        while lo > 0 and valid[lo - 1]:
+            lo -= 1
+        hi = i0 + 1
+        while hi < len(valid) and valid[hi]:
+            hi += 1
+        return lo, hi
+
+    def _interp_p(self, values: np.ndarray, p: float) -> np.ndarray:
+        """values (K, P) -> (K,) at pressure p: cubic Lagrange on 4 neighbours, else linear."""
+        ps = self.table.pressures[:self._last + 1]
+        j = int(np.clip(np.searchsorted(ps, p, side="right") - 1, 0, len(ps) - 2))
+        t = (p - ps[j]) / (ps[j + 1] - ps[j])
+        lin = (1 - t) * values[:, j] + t * values[:, j + 1]
+        if t == 0.0:
+            return values[:, j].copy()
+        lo, hi = j - 1, j + 2
+        if lo < 0 or hi >= len(ps):
+            return lin
+        x = ps[lo:hi + 1]
+        w = np.array([np.prod([(p - x[m]) / (x[n] - x[m]) for m in range(4) if m != n]) for n in range(4)])
+        cub = values[:, lo:hi + 1] @ w
+        return np.where(np.isfinite(cub), cub, lin)
+
+    def at(self, pressure: float, extra_stiffness: float = 0.0) -> LawSlice:
+        lo_p, hi_p = self.pressure_range
+        if not lo_p <= pressure <= hi_p:
+            raise LawRangeError(
+                f"{self.source}: p = {pressure / PA_PER_BAR:.4f} bar is outside the moment-curvature table "
+                f"({lo_p / PA_PER_BAR:.4f}..{hi_p / PA_PER_BAR:.4f} bar; beyond it the held section does not "
+                "converge)")
+        m = self._interp_p(self.table.moment, pressure)
+        lam = self._interp_p(self.table.stretch, pressure)
+        a, b = self._block(np.isfinite(m) & np.isfinite(lam), self._i0)
+        if b - a < 4:
+            raise LawRangeError(f"{self.source}: at p = {pressure / PA_PER_BAR:.4f} bar fewer than 4 curvatures "
+                                "of the table are valid")
+        ks = self.table.curvatures[a:b]
+        spline = CubicSpline(ks, m[a:b] + extra_stiffness * ks, extrapolate=True)
+        stretch = CubicSpline(ks, lam[a:b], extrapolate=True)
+        return LawSlice(pressure, float(ks[0]), float(ks[-1]), spline, spline.derivative(), stretch, self.source)
