@@ -1,0 +1,127 @@
+"""Rod rung: the section's moment-curvature law, the rod statics with tip force, gravity and tip
+contact, and its refusals. Coarse section mesh (D/8) and a small table keep this fast; the
+production numbers (D/20) are in README "Model rung: rod" and benchmarks/blocking_force.py."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.errors import ModelError
+from softcath_ros.core.models import make_model
+from softcath_ros.core.rod.law import LawRangeError
+from softcath_ros.core.rod.loads import TipPlaneContact
+from softcath_ros.core.rod.section_law import LawGrid
+from softcath_ros.core.section_fe.moment import HeldSection
+from softcath_ros.core.section_properties import transformed_section
+
+COARSE = dict(mesh_size=0.005 / 8)
+GRID = LawGrid(kappa_min=-60.0, kappa_max=80.0, kappa_step=10.0, pressure_max=15000.0, pressure_step=2500.0)
+L = 0.017
+
+
+@pytest.fixture(scope="module")
+def design():
+    from softcath_ros.core.design import load_design
+
+    return load_design("implemented_5mm").with_length(L)
+
+
+@pytest.fixture(scope="module")
+def free_rod(design):
+    return make_model("rod", design, grid=GRID, cache=False, **COARSE)
+
+
+def _rod(design, base, **loads):
+    """A rod with loads sharing ``base``'s law (the table is built once per module)."""
+    rod = make_model("rod", design, source="closed_form", **loads)
+    rod.law = base.law
+    return rod
+
+
+def test_held_section_carries_no_moment_at_its_free_state_and_EI_kappa_at_rest(design):
+    sec = make_model("section", design, **COARSE)
+    held = HeldSection(sec.problem, (0.0, -1.0))
+    for p in (5000.0, 12500.0):
+        st = sec.evaluate(np.array([p]))
+        kappa = float(-st.curvature[1] * st.axial_stretch)      # rotation rate per reference length
+        corr = held.solve(sec._states[(p,)], kappa, np.array([p]))
+        assert corr.converged
+        m = held.result(corr.state, np.array([p])).moment
+        assert abs(m) < 1e-6 * 9e-6 * kappa                     # vs EI kappa: zero to solver tolerance
+    # without the hoop rings the section at rest is the closed form's transformed section
+    bare = dataclasses.replace(design, reinforcement=None)
+    sec0 = make_model("section", bare, **COARSE)
+    held0 = HeldSection(sec0.problem, (0.0, -1.0))
+    x0 = sec0.problem.consistent_pressures(sec0.problem.initial_state())
+    corr = held0.solve(x0, 1.0, np.zeros(1))
+    ei = transformed_section(bare).bending_stiffness[1, 1]
+    assert held0.result(corr.state, np.zeros(1)).moment == pytest.approx(ei * 1.0, rel=0.02)
+
+
+def test_unloaded_rod_is_its_source_rung(design, free_rod):
+    sec = make_model("section", design, **COARSE)
+    p = np.array([[2500.0], [7500.0], [12500.0]])
+    a, b = free_rod.evaluate(p), sec.evaluate(p)
+    assert a.converged.all()
+    np.testing.assert_allclose(a.curvature, b.curvature, rtol=2e-3, atol=1e-6)
+    np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
+    # the backbone is the source's arc: tip angle = |k| * arc length, and it bends to -y
+    assert a.extras["tip_angle"][2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
+    assert a.extras["tip_position"][2, 1] < 0 and np.all(a.extras["contact_force"] == 0)
+
+
+def test_small_tip_force_matches_linear_beam_theory(design, free_rod):
+    ei = float(free_rod.law.at(0.0).slope(0.0))                 # the law's stiffness at rest
+    f = 2e-4                                                      # N, along +y: bends away from -y
+    rod = _rod(design, free_rod, tip_force=[0.0, f, 0.0])
+    st = rod.evaluate(np.array([0.0]))
+    assert st.converged
+    assert st.extras["tip_position"][0, 1] == pytest.approx(f * L**3 / (3 * ei), rel=0.01)
+
+
+def test_blocking_force_is_positive_and_grows_with_pressure(design, free_rod):
+    rod = _rod(design, free_rod, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
+    st = rod.evaluate(np.array([[0.0], [5000.0], [10000.0], [15000.0]]))
+    force = st.extras["contact_force"]
+    assert st.converged.all() and force[0] == 0.0
+    assert np.all(np.diff(force) > 0)
+    # the tip stays on the scale, the body nearly straight
+    assert abs(st.extras["tip_position"][3, 1]) < 1e-9
+
+
+def test_no_contact_force_when_the_tip_moves_away(design, free_rod):
+    away = _rod(design, free_rod, contact=TipPlaneContact(normal=(0.0, -1.0, 0.0)))
+    st = away.evaluate(np.array([10000.0]))
+    free = free_rod.evaluate(np.array([10000.0]))
+    assert st.converged and st.extras["contact_force"][0] == 0.0
+    np.testing.assert_allclose(st.curvature, free.curvature)
+
+
+def test_gravity_sags_the_right_way(design, free_rod):
+    ei = float(free_rod.law.at(0.0).slope(0.0))
+    for g in (-9.81, 9.81):
+        rod = _rod(design, free_rod, gravity=[0.0, g, 0.0])
+        st = rod.evaluate(np.array([0.0]))
+        q = design.material.density * transformed_section(design).silicone_area * abs(g)
+        sag = st.extras["tip_position"][0, 1]
+        assert np.sign(sag) == np.sign(g)
+        assert abs(sag) == pytest.approx(q * L**4 / (8 * ei), rel=0.01)
+
+
+def test_refusals_are_clear(design, free_rod):
+    st = free_rod.evaluate(np.array([20000.0]))
+    assert not st.converged and "outside the moment-curvature table" in st.message
+    with pytest.raises(LawRangeError, match="outside the moment-curvature table"):
+        free_rod.law.at(20000.0)
+    with pytest.raises(LawRangeError, match="leave the moment-curvature table"):
+        free_rod.law.at(5000.0).check(np.array([500.0]))
+    # a tip force too large for the table: refused, not extrapolated
+    big = _rod(design, free_rod, tip_force=[0.0, -0.5, 0.0])
+    st = big.evaluate(np.array([0.0]))
+    assert not st.converged and "leave the moment-curvature table" in st.message
+    with pytest.raises(ModelError, match="out of the bending plane"):
+        make_model("rod", design, source="closed_form", tip_force=[1e-3, 0.0, 0.0])
+    from softcath_ros.core.design import load_design
+
+    with pytest.raises(ModelError, match="one-channel designs"):
+        make_model("rod", load_design("three_channel_5mm"), source="closed_form")
