@@ -32,7 +32,7 @@ from ..units import PA_PER_BAR
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .runner import run_cases
-from .variation import apply_stacked, area_ratio, make_variant, min_wall_of, stacked_layout
+from .variation import apply_stacked, area_ratio, make_variant, min_wall_of, stacked_layout, tidy
 
 COUNTS = (3, 4)
 DEFAULT_MAX_STRETCH = 2.0
@@ -59,8 +59,8 @@ def layout_ring(base: Design, count: int, walls: tuple[float, float]):
     def edit(d):
         if r_c <= 0:
             raise DesignError("channels", None, "no room for the channels between the lumen and outer walls")
-        d["channels"] = [{"diameter": 2 * r_c, "center": [rho * math.cos(first + 2 * math.pi * i / count),
-                                                          rho * math.sin(first + 2 * math.pi * i / count)]}
+        d["channels"] = [{"diameter": tidy(2 * r_c), "center": [tidy(rho * math.cos(first + 2 * math.pi * i / count)),
+                                                                tidy(rho * math.sin(first + 2 * math.pi * i / count))]}
                          for i in range(count)]
         d["lumen"] = {"diameter": base.lumen.diameter, "center": [0.0, 0.0]}
     return edit
@@ -208,9 +208,14 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
         walls_at_min = all(abs(optimum[f"wall_{i}_mm"] - design.min_wall_thickness * 1e3) < 0.02
                            for i in range(1 if s_opt.count > 1 else 3))
         findings.append(
-            "published: the optimised design has one channel of maximal area with walls at a fabricable minimum -> "
-            + ("the optimum sits on the minimum walls (the area ratio is maximal)" if walls_at_min else
+            ("published: the optimised 1-DOF design has one channel of maximal area with walls at a fabricable minimum"
+             if s_opt.count == 1 else "published: the 2-DOF design has three channels at 120 degrees, each as large "
+             "as the minimum walls allow") + " -> "
+            + ("the optimum sits on the minimum walls (the area ratio is maximal): holds" if walls_at_min else
                "the optimum keeps some walls above the minimum (the strain or convergence limit binds)"))
+        if base_rc and abs(base_rc / optimum["radius_of_curvature_mm"] - 1) < 0.005:
+            findings.append(f"{design.name} is already this family's optimum: the design file written repeats its "
+                            "geometry under the new name")
         if len(found) > 1:
             findings.append("count: " + ", ".join(f"{s.count} channels R_C {b['radius_of_curvature_mm']:.2f} mm"
                                                   for s, b in found)

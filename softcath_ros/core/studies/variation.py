@@ -76,9 +76,14 @@ def stacked_layout(outer_diameter: float, lumen_diameter: float, outer_wall: flo
     if d_c <= 0:
         raise DesignError("channels[0].diameter", d_c,
                           f"no room for the channel: {outer_diameter * 1e3:.2f} mm body minus lumen and walls")
-    return {"channels": [{"diameter": d_c, "center": [0.0, big_r - outer_wall - 0.5 * d_c]}],
-            "lumen": {"diameter": lumen_diameter, "center": [0.0, -big_r + bottom_wall + 0.5 * lumen_diameter]},
-            "fibre_center": [0.0, -big_r + 0.5 * bottom_wall]}
+    return {"channels": [{"diameter": tidy(d_c), "center": [0.0, tidy(big_r - outer_wall - 0.5 * d_c)]}],
+            "lumen": {"diameter": lumen_diameter, "center": [0.0, tidy(-big_r + bottom_wall + 0.5 * lumen_diameter)]},
+            "fibre_center": [0.0, tidy(-big_r + 0.5 * bottom_wall)]}
+
+
+def tidy(x: float) -> float:
+    """Round a length to 1e-12 m: far below any tolerance, keeps written design files readable."""
+    return round(x, 12) + 0.0
 
 
 def apply_stacked(data: dict, layout: dict) -> None:
