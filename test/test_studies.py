@@ -153,17 +153,25 @@ def test_a_command_beyond_the_rungs_range_says_did_not_converge(implemented_desi
     assert not row["converged"] and row["status"].startswith("did not converge")
 
 
-def test_dask_scheduler_needs_the_cluster_extra():
+def test_dask_scheduler_needs_the_cluster_extra(monkeypatch):
+    import sys
+
     from softcath_ros.core.errors import SoftcathError
     from softcath_ros.core.studies.runner import make_executor
 
-    try:
-        import dask.distributed  # noqa: F401
-    except ImportError:
-        with pytest.raises(SoftcathError, match="cluster"):
-            make_executor(scheduler="tcp://127.0.0.1:1")
-    else:
-        pytest.skip("dask installed: the missing-extra error cannot be shown")
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)   # as if the extra were not installed
+    with pytest.raises(SoftcathError, match=r"softcath_ros\[cluster\]"):
+        make_executor(scheduler="tcp://127.0.0.1:1")
+
+
+def test_dask_client_executor_runs_the_cases_unchanged(implemented_design, ctx):
+    distributed = pytest.importorskip("dask.distributed")
+    specs = _specs(implemented_design, ctx, (0.05, 0.15))
+    serial = run_cases(specs, workers=1, cache=False, progress=False)
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=2, dashboard_address=None) as client:
+        remote = run_cases(specs, executor=client.get_executor(), cache=False, progress=False)
+    for a, b in zip(serial, remote):
+        assert a["results"][0]["curvature_per_m"] == pytest.approx(b["results"][0]["curvature_per_m"], rel=1e-9)
 
 
 # ------------------------------------------------------------------ trends that could fail
