@@ -81,7 +81,8 @@ CASES = [
 CAPABILITIES = {"closed_form": ["free_bending", "device_stiffness"],
                 "section": ["free_bending", "device_stiffness"],
                 "surrogate": ["free_bending", "device_stiffness"],
-                "fe3d": ["free_bending", "device_stiffness"]}
+                "fe3d": ["free_bending", "device_stiffness"],
+                "rod": ["free_bending", "device_stiffness", "tip_load", "contact", "gravity"]}
 CAPABILITIES_SEEN: dict[str, list] = {}
 FE3D = ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0, "threads": 1}, True)
 # (label, rung, options, is a solver: timed as a cold sweep)
@@ -137,15 +138,17 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool) 
         n_ok = ok.index(False) if not all(ok) else len(ok)
         boundary = float(case.magnitudes_pa[n_ok - 1]) if n_ok else 0.0
         beyond = not all(ok)
+        first_failure = next((p.reason for p in preds if not p.converged), "")
     else:
         mags = np.linspace(0.0, design.max_pressure, 41)
         st = make_model(rung, design, **opts).evaluate(np.outer(mags, case.direction))
         n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
         boundary, beyond = float(mags[max(n_ok - 1, 0)]), n_ok < len(mags)
+        first_failure = st.message.split("; ")[0] if beyond else ""
     out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
            # a rung may say what it models (scene features); else the table above
            "capabilities": list(getattr(model, "capabilities", None) or CAPABILITIES.get(rung, ["free_bending"])),
-           "fails_beyond": beyond, "loadavg_1min": [load0, os.getloadavg()[0]],
+           "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
            "predictions": [p.to_json() for p in preds]}
     path.write_text(json.dumps(out))
     return out
@@ -179,6 +182,8 @@ def run_case(case: Case, args) -> tuple[list[dict], str]:
             continue
         print(f"  {label:28s} {time.perf_counter() - t0:8.1f} s wall (load {load0:.1f} -> {os.getloadavg()[0]:.1f})",
               flush=True)
+        if results[label].get("first_failure"):
+            print(f"    boundary {results[label]['boundary_pa'] / PA_PER_BAR:.4f} bar: {results[label]['first_failure']}")
     ref_label = FE3D[0]
     if ref_label not in results or sum(p["converged"] for p in results[ref_label]["predictions"]) < 3:
         ref_label = SECTION_REFERENCE
@@ -270,6 +275,12 @@ def _envelope(rs: list[dict]) -> dict | None:
         "cost_s_per_eval": max(float(r["s_per_eval"]) for r in rs),
         "valid_pressure_pa": [0.0, min(float(r["boundary_pa"]) for r in rs)],
         "measured_pressures_pa": sorted({float(r["pressure_pa"]) for r in inside}),
+        # per measured pressure the worst R_C error over the cases there: selection judges a scene by
+        # the pressures it needs, not by errors near the rung's limit it never reaches
+        "error_rc_rel_by_pressure_pa": [
+            [p, 0.0 if is_ref else max((r["rc_rel_error"] for r in inside if r["pressure_pa"] == p
+                                        and r["rc_rel_error"] is not None), default=None)]
+            for p in sorted({float(r["pressure_pa"]) for r in inside})],
         "cases": list(dict.fromkeys(r["case"] for r in rs))}
 
 

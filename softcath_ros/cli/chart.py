@@ -154,7 +154,7 @@ def draw(rows: list[dict], path: str) -> str:
             a3.scatter([rs[0]["boundary_pa"] / PA_PER_BAR], [y], color=f"C{j % 10}",
                        marker="x" if rs[0]["fails_beyond"] else ">", label=case if i == 0 or s == settings[0] else None)
     a3.set_yticks(range(len(settings)), settings, fontsize=7)
-    a3.set_xlabel("last pressure reached on a ramp [bar]\n(x: fails beyond it; >: reached the design's max_pressure)")
+    a3.set_xlabel("last pressure reached on a ramp [bar]\n(x: fails beyond it; >: reached the end of its ramp, max_pressure; fe3d: the case's top)")
     a3.set_title("failure boundary per case", fontsize=9)
     handles, labels = a3.get_legend_handles_labels()
     uniq = dict(zip(labels, handles))
