@@ -131,9 +131,9 @@ class TabulatedLaw:
         ps = self.table.pressures[:self._last + 1]
         j = int(np.clip(np.searchsorted(ps, p, side="right") - 1, 0, len(ps) - 2))
         t = (p - ps[j]) / (ps[j + 1] - ps[j])
+        if t < 1e-9 or t > 1 - 1e-9:     # on a grid pressure: its own column (its own kappa range)
+            return values[:, j + int(round(t))].copy()
         lin = (1 - t) * values[:, j] + t * values[:, j + 1]
-        if t == 0.0:
-            return values[:, j].copy()
         lo, hi = j - 1, j + 2
         if lo < 0 or hi >= len(ps):
             return lin

@@ -25,7 +25,7 @@ class LawGrid:
 
     kappa_min: float = -150.0
     kappa_max: float = 300.0
-    kappa_step: float = 10.0
+    kappa_step: float = 5.0
     pressure_max: float = 45000.0
     pressure_step: float = 2500.0
 
