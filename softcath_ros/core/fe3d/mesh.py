@@ -6,7 +6,8 @@ Layers are split at z = L - cap so the channels end in a silicone cap.
 
 Regions of the 2D section: ``silicone``, ``fibre`` (strain-limiting thread), ``channel{i}``,
 ``lumen``. In 3D the channel regions become silicone above L - cap (the cap), the lumen
-becomes the ``device`` region when the design has a device, else stays empty.
+becomes the ``device`` region when the design has a device, the ``fill`` region when a
+soft lumen fill is asked for (a contact proxy, see solver.py), else stays empty.
 Boundaries: ``base`` (z = 0, fixed), ``tip``, ``outer`` (reinforcement), ``sym`` (x = 0
 when the half model is used), ``channel{i}`` (walls and the cap's inner face, normals
 pointing into the silicone's outside, i.e. into the channel), ``lumen``.
@@ -139,8 +140,10 @@ def z_levels(design: Design, settings: MeshSettings) -> tuple[np.ndarray, int]:
     return z, n_open
 
 
-def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None) -> PrismMesh:
-    """The 3D prism mesh (netgen Mesh with named regions and boundaries)."""
+def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None,
+               lumen_fill: bool = False) -> PrismMesh:
+    """The 3D prism mesh (netgen Mesh with named regions and boundaries). ``lumen_fill``:
+    mesh the (empty) lumen as a ``fill`` region."""
     import netgen.meshing as nm
 
     if half is None:
@@ -158,7 +161,8 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None)
         return pnums[k * n_pts + i]
 
     has_device = design.device is not None
-    domains = ["silicone", "fibre"] + (["device"] if has_device else [])
+    fill = lumen_fill and not has_device and design.lumen is not None
+    domains = ["silicone", "fibre"] + (["device"] if has_device else []) + (["fill"] if fill else [])
     dom_index = {name: i + 1 for i, name in enumerate(domains)}
     for name, idx in dom_index.items():
         m.SetMaterial(idx, name)
@@ -170,7 +174,7 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None)
         if reg.startswith("channel"):
             return "silicone" if layer >= n_open else None
         if reg == "lumen":
-            return "device" if has_device else None
+            return "device" if has_device else ("fill" if fill else None)
         return None
 
     n_tri = len(sec.triangles)

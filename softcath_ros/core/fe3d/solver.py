@@ -4,6 +4,7 @@ Unknowns: P2 displacement u and an element-wise constant pressure q (perturbed
 Lagrangian, statically condensed). Total potential, stationary at equilibrium:
 
     Pi(u, q) = int W_iso(F) + q (J - 1) - q^2 / (2 K) dX        (body, fibre, device)
+             + int W_fill(F) dX                                   (optional soft lumen fill)
              + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement, outer surface)
              - s sum_i d_i V_i(u)                                 (follower pressure on channel i)
 
@@ -12,6 +13,13 @@ channel volume, is a surface integral over the channel's walls and cap:
 V = int x_z n_z da = int x_z (cof F N)_z dA (the base, z = 0, and the symmetry plane,
 n_z = 0, add nothing), so -p V is exactly the potential of a follower pressure.
 All energies are differentiated by NGSolve (``Variation``).
+
+The optional lumen fill is a contact proxy: without self-contact the empty lumen of a
+strongly bent body collapses until its elements invert. The fill is a compressible
+neo-Hookean solid, W = mu/2 (I1 - 3 - 2 ln J) + lambda/2 (ln J)^2, whose energy grows
+without bound as its volume goes to zero, so the lumen walls cannot pass through each other.
+Its shear modulus is a small fraction of the silicone's so that it barely stiffens bending
+before the walls come close (measured: benchmarks/fe3d_sensitivity.py, variant lumen_fill).
 
 Because q is element-wise constant, its optimum for a given u is the element mean of
 K (J - 1); after each Newton update q is reset to it, so Pi becomes the condensed,
@@ -62,12 +70,17 @@ class Fe3dProblem:
     """Everything NGSolve needs for one design and mesh; holds the current state."""
 
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
-                 newton: NewtonSettings = NewtonSettings(), half: bool | None = None):
+                 newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
+                 lumen_fill: float | None = None, formulation: str = "mixed"):
+        """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
+        silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
+        "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison)."""
         ng = _ng()
         ng.SetNumThreads(newton.threads)
         self.design = design
+        self.formulation = formulation
         self.newton_settings = newton
-        self.prism: PrismMesh = build_mesh(design, mesh_settings, half)
+        self.prism: PrismMesh = build_mesh(design, mesh_settings, half, lumen_fill=bool(lumen_fill))
         self.half = self.prism.half
         self.mirror = 2.0 if self.half else 1.0
         mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
@@ -85,6 +98,10 @@ class Fe3dProblem:
         energy = self._body_energy(F, qq, mats)
         self.a = a = ng.BilinearForm(fes, symmetric=True, condense=True)
         a += ng.Variation(energy.Compile() * ng.dx)
+        self.has_fill = "fill" in mesh.GetMaterials()
+        if self.has_fill:
+            mu = 2.0 * design.material.c1 * float(lumen_fill)
+            a += ng.Variation(self._fill_energy(F, mu).Compile() * ng.dx(definedon=mesh.Materials("fill")))
         r = design.reinforcement
         if r is not None:
             a += ng.Variation(self._hoop_energy(u, r.hoop_stiffness_per_length) * ng.ds("outer"))
@@ -145,8 +162,20 @@ class Fe3dProblem:
         c2 = mesh.MaterialCF({k: m[1] for k, m in mats.items()}, default=0.0)
         c3 = mesh.MaterialCF({k: m[2] for k, m in mats.items()}, default=0.0)
         bulk = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=1.0)
+        # 0 in the fill (its own energy handles volume), where q then stays 0
+        mixed = mesh.MaterialCF({k: 1.0 for k in mats}, default=0.0)
         d1 = i1_bar - 3.0
-        return c1 * d1 + c2 * d1 * d1 + c3 * d1 * d1 * d1 + q * (J - 1.0) - q * q / (2.0 * bulk)
+        iso = c1 * d1 + c2 * d1 * d1 + c3 * d1 * d1 * d1
+        if self.formulation == "displacement":   # q decouples (stays 0); volume penalised directly
+            return iso + mixed * 0.5 * bulk * (J - 1.0) ** 2 - q * q / 2.0
+        return iso + mixed * q * (J - 1.0) - q * q / (2.0 * bulk)
+
+    @staticmethod
+    def _fill_energy(F, mu: float):
+        """Compressible neo-Hookean (Poisson ratio 0.25: lambda = mu); a barrier as J -> 0."""
+        ng = _ng()
+        log_j = ng.log(ng.Det(F))
+        return 0.5 * mu * (ng.Trace(F.trans * F) - 3.0 - 2.0 * log_j) + 0.5 * mu * log_j * log_j
 
     def _hoop_energy(self, u, stiffness_per_length):
         """Homogenised rings: a membrane on the outer surface that resists only hoop stretch."""
@@ -179,6 +208,8 @@ class Fe3dProblem:
 
     def _update_pressure_field(self) -> None:
         """Element-wise optimum of q for the current u (L2 projection onto constants)."""
+        if self.formulation == "displacement":
+            return
         self.q.Set(self.bulk_cf * (self.J - 1.0))
 
     def channel_volumes(self) -> np.ndarray:
@@ -190,6 +221,27 @@ class Fe3dProblem:
         ng = _ng()
         bad = ng.Integrate(ng.IfPos(0.02 - self.J, 1.0, 0.0) * ng.dx(bonus_intorder=2), self.mesh)
         return bad == 0.0
+
+    def worst_element(self) -> str:
+        """Where the current state is most compressed: the element with the lowest mean det F,
+        its region, centre (mm) and the nearest surface (which hole's wall, or the outside), so
+        a failure says what collapsed."""
+        ng = _ng()
+        mean_j = ng.GridFunction(ng.L2(self.mesh, order=0))
+        mean_j.Set(self.J)
+        values = mean_j.vec.FV().NumPy()
+        i = int(np.argmin(values))
+        el = self.mesh[ng.ElementId(ng.VOL, i)]
+        centre = np.mean([self.mesh[v].point for v in el.vertices], axis=0)
+        d = self.design
+        surfaces = {f"channel{k} wall": (c.center, c.radius) for k, c in enumerate(d.channels)}
+        if d.lumen is not None:
+            surfaces["lumen wall"] = (d.lumen.center, d.lumen.radius)
+        surfaces["outer surface"] = ((0.0, 0.0), d.outer_radius)
+        near = min(surfaces, key=lambda n: abs(math.hypot(centre[0] - surfaces[n][0][0],
+                                                          centre[1] - surfaces[n][0][1]) - surfaces[n][1]))
+        return (f"most compressed: {el.mat} element at x = {centre[0] * 1e3:.2f}, y = {centre[1] * 1e3:.2f}, "
+                f"z = {centre[2] * 1e3:.1f} mm, next to the {near}, mean det F {values[i]:.3f}")
 
     def energy(self) -> float:
         return self.a.Energy(self.gf.vec)
@@ -231,7 +283,8 @@ class Fe3dProblem:
         st = self.newton_settings
         with ng.TaskManager():
             if not self.min_jacobian_ok():
-                raise NewtonFailure("the predictor inverted an element (det F <= 0)", 0)
+                raise NewtonFailure("the predictor inverted an element (det F <= 0; "
+                                    f"{self.worst_element()})", 0)
             if st.line_search:
                 self._update_pressure_field()
                 e0 = self.energy()
@@ -263,8 +316,9 @@ class Fe3dProblem:
                         break
                     alpha *= 0.5
                     if alpha < st.min_step:
+                        where = "" if st.line_search and self.min_jacobian_ok() else f"; {self.worst_element()}"
                         raise NewtonFailure("line search failed: every step length raises the energy or "
-                                            "inverts an element (det F <= 0)", it)
+                                            f"inverts an element (det F <= 0{where})", it)
                 if st.line_search:
                     e0 = e
                 self.iterations_total += 1

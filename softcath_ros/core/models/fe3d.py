@@ -34,10 +34,16 @@ class Fe3dModel(BendModel):
 
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
-                 cache: bool = True, progress: bool = False, threads: int = 2):
+                 cache: bool = True, progress: bool = False, threads: int = 2,
+                 lumen_fill: float | None = None, formulation: str = "mixed"):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
         ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
-        load stepping). ``progress`` shows a tqdm bar per ramp."""
+        load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
+        lumen with a soft solid of this fraction of the silicone's shear modulus (a self-contact
+        proxy that lets short bodies pass the lumen's collapse; core/fe3d/solver.py).
+        ``formulation``: "mixed" (P2 displacement + element-wise pressure, the default) or
+        "displacement" (P2 displacement only, which locks for nearly incompressible silicone;
+        kept to measure how much a standard element would stiffen the body)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -53,13 +59,23 @@ class Fe3dModel(BendModel):
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
         self.half = can_use_half_model(design) if half is None else half
+        if lumen_fill is not None and not (0.0 < float(lumen_fill) < 1.0):
+            raise ModelError(f"fe3d: lumen_fill = {lumen_fill!r} must be a fraction of the silicone's shear "
+                             "modulus in (0, 1), or None for an empty lumen")
+        self.lumen_fill = None if lumen_fill is None else float(lumen_fill)
+        if formulation not in ("mixed", "displacement"):
+            raise ModelError(f"fe3d: formulation = {formulation!r} must be 'mixed' or 'displacement'")
+        self.formulation = formulation
         self.use_cache = cache
         self.progress = progress
         self._problem = None
         self.last_ramps = []
         self.cache_key = key_of(CODE_VERSION, design.content_hash(), asdict(self.mesh_settings),
                                 asdict(self.newton_settings), asdict(self.step_control),
-                                tangent_predictor, self.half)
+                                tangent_predictor, self.half,
+                                # options added later enter the key only when set, so old entries stay valid
+                                *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
+                                *([] if formulation == "mixed" else [{"formulation": formulation}]))
 
     # ------------------------------------------------------------------ plumbing
     @property
@@ -67,7 +83,8 @@ class Fe3dModel(BendModel):
         if self._problem is None:
             from ..fe3d.solver import Fe3dProblem
 
-            self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half)
+            self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half,
+                                        lumen_fill=self.lumen_fill, formulation=self.formulation)
         return self._problem
 
     def _cache_path(self):
