@@ -195,6 +195,8 @@ def main() -> int:
         executor.spin_once(timeout_sec=0.05)
     # CPU window ends with the last command sent plus the time to answer it.
     wall = time.monotonic() - window["wall0"]
+    # more than one publisher: another node on this ROS_DOMAIN_ID answered too (its poses spoil the count)
+    publishers = {"tip": tip_sub.get_publisher_count(), "backbone": bb_sub.get_publisher_count()}
     node_cpu = node_proc.cpu_times()
     probe_cpu = me.cpu_times()
     node.destroy_node()
@@ -244,6 +246,7 @@ def main() -> int:
         "node_latency": stats(node_lat), "e2e_latency": stats(e2e_lat),
         "node_cpu_cores": busy(window["node_cpu0"], node_cpu) / wall,
         "probe_cpu_cores": busy(window["probe_cpu0"], probe_cpu) / wall,
+        "publishers": publishers,
         "model": args.model, "design": args.design, "top_pressure_pa": top_pressure(model),
         "node_diagnostics": diagnostics_summary(diagnostics),
     }

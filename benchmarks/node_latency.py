@@ -137,6 +137,8 @@ def median_row(name: str, runs: list[dict]) -> dict:
         "e2e_p99_ms": med(lambda r: r["e2e_latency"]["p99_ms"]),
         "lost_tip_max": max(r["lost_tip"] for r in runs),
         "lost_backbone_max": max(r["lost_backbone_total"] for r in runs),
+        # > 1: another publisher shared the domain during a run (its poses spoil lost/latency there)
+        "pose_publishers_max": max(max(r.get("publishers", {}).values(), default=0) for r in runs),
         "send_rate_hz": med(lambda r: r["achieved_send_rate_hz"]),
         "node_cpu_cores": med(lambda r: r["node_cpu_cores"]),
         "probe_cpu_cores": med(lambda r: r["probe_cpu_cores"]),
