@@ -85,7 +85,7 @@ def run(args) -> int:
             executor.shutdown(wait=True, cancel_futures=True)
     elapsed = time.perf_counter() - t0
     result.meta.update(wall_time_s=elapsed, cases=ctx.stats.__dict__, executor=where)
-    files = write_study(result, ctx, args.out)
+    files = write_study(result, ctx, args.out, length=design.length)
     if args.json:
         print(json.dumps({"study": result.name, "design": result.design, "rung": ctx.rung, "files": files,
                           "findings": result.findings, "meta": {k: v for k, v in result.meta.items()

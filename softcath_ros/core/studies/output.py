@@ -12,7 +12,17 @@ from ..units import PA_PER_BAR
 from .context import StudyContext, StudyResult
 
 
-def rung_accuracy(rung: str, design_name: str, options: dict) -> dict:
+def _at_pressure(entry: dict, pressure: float | None):
+    """The entry's R_C error at the measured pressure nearest ``pressure`` (None if not recorded)."""
+    table = entry.get("error_rc_rel_by_pressure_pa") or []
+    if pressure is None or not table:
+        return None
+    p, err = min(table, key=lambda pe: abs(pe[0] - pressure))
+    return p, err
+
+
+def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | None = None,
+                  length: float | None = None) -> dict:
     """The rung's measured R_C error from config/ladder_envelope.yaml (benchmarks/ladder_chart.py).
 
     Errors are measured on shipped designs only; a study's variants inherit the baseline's
@@ -32,15 +42,28 @@ def rung_accuracy(rung: str, design_name: str, options: dict) -> dict:
         return {"rung": rung, "error_rc_rel_max": None, "note": "no design measured"}
     m = designs[measured_on]
     lo, hi = m["valid_pressure_pa"]
-    note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {env.get('reference')} on {measured_on} "
+    ref = m.get("reference") or env.get("reference")
+    ref = " + ".join(ref) if isinstance(ref, list) else ref
+    note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {ref} on {measured_on} "
             f"over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar (ladder chart setting '{entry.get('setting')}')")
+    out = {}
+    at = _at_pressure(m, pressure)
+    if at is not None:
+        out["error_rc_rel_at_pressure"] = at[1]
+        note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}"
+        by_length = m.get("by_length") or {}
+        key = next((k for k in by_length if length is not None and abs(float(k) - length) < 1e-9), None)
+        at_l = _at_pressure(by_length[key], pressure) if key is not None else None
+        if at_l is not None:
+            out["error_rc_rel_at_pressure_and_length"] = at_l[1]
+            note += f" over all measured lengths, {at_l[1]:.1%} at the design's {length * 1e3:g} mm"
     if options:
         note += f"; this study ran it with options {options}"
     if measured_on != design_name:
         note += f"; '{design_name}' itself is not in the chart"
     note += "; varied designs are not in the chart, so this is an indication for them"
     return {"rung": rung, "setting": entry.get("setting"), "measured_on": measured_on,
-            "error_rc_rel_max": m["error_rc_rel_max"], "reference": env.get("reference"), "note": note}
+            "error_rc_rel_max": m["error_rc_rel_max"], "reference": ref, **out, "note": note}
 
 
 def _fmt(v) -> str:
@@ -72,8 +95,10 @@ def markdown(result: StudyResult, ctx: StudyContext, accuracy: dict, files: dict
     return "\n".join(lines)
 
 
-def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, stem: str | None = None) -> dict:
-    """Write the four files; returns {"csv": path, "png": ..., "md": ..., "json": ...}."""
+def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, stem: str | None = None,
+                length: float | None = None) -> dict:
+    """Write the four files; returns {"csv": path, "png": ..., "md": ..., "json": ...}. ``length``
+    (m, the baseline design's) picks the ladder chart's error at that length where it has one."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stem = stem or f"{result.name}_{result.design}"
@@ -85,7 +110,7 @@ def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, ste
         for r in result.rows:
             w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
     result.plot(files["png"])
-    accuracy = rung_accuracy(ctx.rung, result.design, ctx.options)
+    accuracy = rung_accuracy(ctx.rung, result.design, ctx.options, ctx.pressure, length)
     for name, text in result.extra_files.items():
         files[name] = str(out / name)
         Path(files[name]).write_text(text)
