@@ -310,12 +310,22 @@ def test_bad_requests_raise(three):
 # ---------------------------------------------------------------------------- every registered rung
 
 
+# Rungs that model one channel only and say so when given more (the rod: a planar law).
+SINGLE_CHANNEL_RUNGS = {"rod"}
+
+
 def test_three_channel_design_loads_on_every_rung(three):
-    """Every rung of the ladder accepts the design (construction validates it against the rung)."""
+    """Every rung of the ladder accepts the design (construction validates it against the rung),
+    except the single-channel ones, which refuse it with a message naming the channels."""
+    from softcath_ros.core.errors import ModelError
     from softcath_ros.core.models import available_models
 
     for name in available_models():
-        assert make_model(name, three).n_channels == 3
+        if name in SINGLE_CHANNEL_RUNGS:
+            with pytest.raises(ModelError, match="3 channels"):
+                make_model(name, three)
+        else:
+            assert make_model(name, three).n_channels == 3
 
 
 @pytest.mark.slow
