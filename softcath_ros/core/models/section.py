@@ -57,6 +57,17 @@ class SectionSettings:
     local_radius: float = 5000.0        # Pa: a command this close to a solved one starts from it
     pressure_load: str = "follower"     # "follower": on the deformed channel walls and the end caps;
                                         # "end_cap": only the end caps' axial force (the closed form's load)
+    lumen_fill: float | None = None     # fill the empty lumen with a soft compressible solid whose shear
+                                        # modulus is this fraction of the silicone's (a self-contact proxy);
+                                        # None: empty lumen, which stops the ramp when its walls touch
+
+    def key(self) -> dict:
+        """The settings as they enter cache keys; an unset lumen_fill is left out, so results of
+        the empty-lumen rung keep the keys they had before the option existed."""
+        out = asdict(self)
+        if out["lumen_fill"] is None:
+            del out["lumen_fill"]
+        return out
 
     def resolved_mesh_size(self, design: Design) -> float:
         return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
@@ -76,15 +87,24 @@ class SectionModel(BendModel):
         except TypeError as exc:
             raise ModelError(f"model 'section': {exc}; settings: {list(SectionSettings.__annotations__)}") from None
         h = self.settings.resolved_mesh_size(design)
+        fill = self.settings.lumen_fill
+        if fill is not None:
+            if isinstance(fill, bool) or not 0.0 < float(fill) < 1.0:
+                raise ModelError(f"model 'section': lumen_fill = {fill!r} must be a fraction of the silicone's "
+                                 "shear modulus in (0, 1), or None for an empty lumen")
+            if design.lumen is None:
+                raise ModelError(f"model 'section': lumen_fill = {fill!r} but design '{design.name}' has no lumen")
         holes = [Circle(c.center, c.radius) for c in design.channels]
         if design.lumen is not None:
             holes.append(Circle(design.lumen.center, design.lumen.radius))
-        self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h)
+        self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h,
+                                 filled=() if fill is None else (len(holes) - 1,))
         if self.settings.pressure_load not in ("follower", "end_cap"):
             raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
                              "'follower' or 'end_cap'")
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
-                                      end_cap_only=self.settings.pressure_load == "end_cap")
+                                      end_cap_only=self.settings.pressure_load == "end_cap",
+                                      lumen_fill=None if fill is None else float(fill))
         self.linear = LinearSolver()
         self.progress = progress
         if cache is True:
@@ -102,7 +122,7 @@ class SectionModel(BendModel):
 
     # ------------------------------------------------------------------ identity
     def cache_key(self, pressures: np.ndarray) -> str:
-        blob = json.dumps({"design": self.design.content_hash(), "settings": asdict(self.settings),
+        blob = json.dumps({"design": self.design.content_hash(), "settings": self.settings.key(),
                            "version": SOLVER_VERSION, "mesh_nodes": self.mesh.n_nodes}, sort_keys=True)
         h = hashlib.sha256(blob.encode())
         h.update(np.ascontiguousarray(pressures, dtype=float).tobytes())
@@ -218,12 +238,14 @@ class SectionModel(BendModel):
                 gaps = self.problem.hole_gaps(previous)
                 i = int(np.argmin(gaps))
                 corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
-                if gaps[i] < 2 * self.settings.min_hole_gap:
+                if self.problem.fill is not None:
+                    corr.message += f", lumen fill min det F {self.problem.fill_min_jacobian(previous):.3g}"
+                if gaps[i] < 2 * self.settings.min_hole_gap and not self.problem.filled_holes[i]:
                     # the walls are about to touch: the same validity limit as contact itself
                     corr.outside_domain = True
                     corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"
             else:
-                gaps = self.problem.hole_gaps(corr.state)
+                gaps = self.problem.open_hole_gaps(corr.state)
                 if gaps.min() < self.settings.min_hole_gap:
                     name = hole_names[int(np.argmin(gaps))]
                     corr.converged = False

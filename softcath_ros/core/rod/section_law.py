@@ -45,7 +45,7 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache: bool = True, p
 
     body = replace(design, device=None, length=1.0)
     model = SectionModel(body, **section_settings)
-    key = key_of(body.content_hash(), asdict(model.settings), asdict(grid), LAW_VERSION, model.mesh.n_nodes)
+    key = key_of(body.content_hash(), model.settings.key(), asdict(grid), LAW_VERSION, model.mesh.n_nodes)
     path = cache_dir("rod_law") / f"section_law_{key}.npz" if cache else None
     table = _load(path) if path is not None else None
     if table is None:

@@ -6,8 +6,11 @@ a few rounds of Laplacian smoothing, Delaunay, and the triangles whose centroid 
 in a hole or outside the disk dropped. Midside nodes of edges on a circle are put on
 the circle (isoparametric geometry), so holes are round to O(h^3).
 
-The P1 triangulation is checked: its area must equal the area of the boundary polygons
-exactly, which holds only if every boundary chord is an edge of the mesh.
+Holes listed in ``filled`` are meshed too, as a second region (``regions`` 1, the silicone
+0) that conforms to the hole's circle: its wall nodes are shared by both regions.
+
+The P1 triangulation is checked: each region's area must equal the area of its boundary
+polygons exactly, which holds only if every boundary chord is an edge of the mesh.
 """
 from __future__ import annotations
 
@@ -34,6 +37,13 @@ class SectionMesh:
     hole_edges: list[np.ndarray] = field(default_factory=list)  # per hole, (b, 3) counter-clockwise about the hole
     h: float = 0.0
     symmetric: bool = False      # exactly mirror-symmetric about x = 0
+    regions: np.ndarray | None = None  # (e,) 0 silicone, 1 a filled hole's interior; None: all silicone
+    filled: tuple[int, ...] = ()       # indices (into the holes) of the holes meshed as the fill region
+
+    @property
+    def silicone(self) -> np.ndarray:
+        """(e,) True for silicone elements."""
+        return np.ones(len(self.triangles), bool) if self.regions is None else self.regions == 0
 
     @property
     def n_nodes(self) -> int:
@@ -51,6 +61,23 @@ def _signed_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.nd
     d = outer.radius - np.hypot(p[:, 0] - outer.center[0], p[:, 1] - outer.center[1])
     for c in holes:
         d = np.minimum(d, np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) - c.radius)
+    return d
+
+
+def _region(p: np.ndarray, outer: Circle, holes: list[Circle], filled: tuple[int, ...]) -> np.ndarray:
+    """Per point: 0 in the silicone, 1 inside a filled hole, -1 outside the meshed domain."""
+    out = np.where(_signed_distance(p, outer, holes) > 0, 0, -1)
+    for i in filled:
+        c = holes[i]
+        out[np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) < c.radius] = 1
+    return out
+
+
+def _wall_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
+    """Unsigned distance to the nearest circle (outer boundary or a hole's wall)."""
+    d = np.abs(outer.radius - np.hypot(p[:, 0] - outer.center[0], p[:, 1] - outer.center[1]))
+    for c in holes:
+        d = np.minimum(d, np.abs(np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) - c.radius))
     return d
 
 
@@ -74,13 +101,18 @@ def _axis_circle_points(c: Circle, h: float) -> np.ndarray:
     return pts
 
 
-def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8) -> SectionMesh:
-    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m).
+def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8,
+                 filled: tuple[int, ...] = ()) -> SectionMesh:
+    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m); the holes whose
+    indices are in ``filled`` are meshed as well, as region 1 (``SectionMesh.regions``).
 
     A geometry symmetric about x = 0 gets an exactly mirror-symmetric mesh, so a symmetric
     design under symmetric load gives an exactly symmetric answer (no sideways bending)."""
     if h <= 0 or h > outer.radius:
         raise ModelError(f"section mesh size h = {h} m must lie in (0, outer radius {outer.radius} m]")
+    filled = tuple(sorted(set(int(i) for i in filled)))
+    if any(not 0 <= i < len(holes) for i in filled):
+        raise ModelError(f"section mesher: filled holes {filled} must index the {len(holes)} holes")
     tol = 1e-9 * outer.radius
     partners = [_mirror_partner(c, holes, tol) for c in holes]
     symmetric = abs(outer.center[0]) < tol and all(p is not None for p in partners)
@@ -96,11 +128,15 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
                 q = _circle_points(holes[j], h)
                 q[:, 0] = -q[:, 0]
                 boundary.append(np.concatenate([q[:1], q[:0:-1]]))
-        # points on the symmetry axis inside the silicone (its ends are circle points)
+        # points on the symmetry axis inside the silicone and the filled holes (the ends of
+        # each stretch are circle points)
         cuts = sorted([(c.center[1] - c.radius, c.center[1] + c.radius) for c in holes if abs(c.center[0]) < tol])
         edges = [outer.center[1] - outer.radius] + [v for cut in cuts for v in cut] + [outer.center[1] + outer.radius]
+        stretches = list(zip(edges[0::2], edges[1::2]))
+        stretches += [(holes[i].center[1] - holes[i].radius, holes[i].center[1] + holes[i].radius)
+                      for i in filled if abs(holes[i].center[0]) < tol]
         axis = []
-        for a, b in zip(edges[0::2], edges[1::2]):
+        for a, b in stretches:
             m = max(1, int(round((b - a) / h)))
             axis += [(0.0, a + (b - a) * t / m) for t in range(1, m)]
         boundary_pts = boundary + [np.array(axis).reshape(-1, 2)]
@@ -117,15 +153,16 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         xs = np.concatenate([-half[::-1], half[1:] if half[0] == 0 else half])
         pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
     interior = np.concatenate(pts)
-    keep = _signed_distance(interior, outer, holes) > 0.7 * h
+    keep = (_region(interior, outer, holes, filled) >= 0) & (_wall_distance(interior, outer, holes) > 0.7 * h)
     if symmetric:
         keep &= np.abs(interior[:, 0]) > 0.7 * h
     interior = interior[keep]
     points = np.concatenate(boundary_pts + [interior])
     mirror = _mirror_map(points, tol) if symmetric else None
 
+    region0 = _region(points, outer, holes, filled)
     for _ in range(smoothing_rounds + 1):
-        tri = _triangulate(points, outer, holes, mirror)
+        tri = _triangulate(points, outer, holes, mirror, filled)
         if _ == smoothing_rounds:
             break
         # Laplacian smoothing of interior nodes (boundary fixed), kept inside the domain.
@@ -142,11 +179,16 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         new[movable] = acc[movable] / cnt[movable, None]
         if mirror is not None:  # keep the points exactly mirror-symmetric
             new = 0.5 * (new + new[mirror] * np.array([-1.0, 1.0]))
-        ok = _signed_distance(new, outer, holes) > 0.5 * h
+        # a node stays in its own region (silicone or fill), away from every wall
+        ok = (_region(new, outer, holes, filled) == region0) & (_wall_distance(new, outer, holes) > 0.5 * h)
         points = np.where((movable & ok)[:, None], new, points)
-    _check_conforming(points, tri, boundary)
+    regions = _region(points[tri].mean(axis=1), outer, holes, filled)
+    _check_conforming(points, tri, boundary, regions, filled)
     mesh = _to_p2(points, tri, boundary, [outer] + list(holes), h)
     mesh.symmetric = symmetric
+    if filled:
+        mesh.regions = regions
+        mesh.filled = filled
     return mesh
 
 
@@ -159,10 +201,11 @@ def _mirror_map(points: np.ndarray, tol: float) -> np.ndarray:
     return idx
 
 
-def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], mirror=None) -> np.ndarray:
+def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], mirror=None,
+                 filled: tuple[int, ...] = ()) -> np.ndarray:
     tri = Delaunay(points).simplices
     centroids = points[tri].mean(axis=1)
-    tri = tri[_signed_distance(centroids, outer, holes) > 0]
+    tri = tri[_region(centroids, outer, holes, filled) >= 0]
     if mirror is not None:
         # the right half and its mirror image (Delaunay may pick either diagonal of the
         # lattice's cocircular quadrilaterals, so the full triangulation need not be symmetric)
@@ -180,14 +223,17 @@ def _polygon_area(p: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
-def _check_conforming(points, tri, boundary) -> None:
+def _check_conforming(points, tri, boundary, regions, filled) -> None:
     p = points[tri]
-    area = 0.5 * np.sum((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                        - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
-    expected = _polygon_area(boundary[0]) - sum(_polygon_area(b) for b in boundary[1:])
-    if abs(area - expected) > 1e-9 * expected:
-        raise ModelError(f"section mesher produced a non-conforming mesh (area {area:.6e} vs {expected:.6e} m^2); "
-                         "try another mesh size")
+    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    holes = [_polygon_area(b) for b in boundary[1:]]   # boundary: outer, holes in order (+ axis points)
+    for name, got, expected in (
+            ("silicone", area[regions == 0].sum(), _polygon_area(boundary[0]) - sum(holes)),
+            ("fill", area[regions == 1].sum(), sum(holes[i] for i in filled))):
+        if abs(got - expected) > 1e-9 * max(expected, _polygon_area(boundary[0])):
+            raise ModelError(f"section mesher produced a non-conforming mesh ({name} area {got:.6e} vs "
+                             f"{expected:.6e} m^2); try another mesh size")
 
 
 def _to_p2(points, tri, boundary, circles, h) -> SectionMesh:

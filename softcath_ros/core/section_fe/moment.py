@@ -102,7 +102,7 @@ class HeldSection:
         corr = newton(p, self.set_curvature(x0, kappa0), np.asarray(pressures, dtype=float) / p.c_ref,
                       tol=self.tol, max_iterations=self.max_newton, linear=self.linear, constraint=self)
         if corr.converged:
-            gaps = p.hole_gaps(corr.state)
+            gaps = p.open_hole_gaps(corr.state)     # a filled lumen resists closing: not a stop
             if gaps.min() < self.min_hole_gap:
                 corr.converged, corr.outside_domain = False, True
                 corr.message = (f"the walls of a hole touch (gap {gaps.min():.1%} of its diameter); "

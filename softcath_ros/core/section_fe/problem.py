@@ -21,10 +21,24 @@ Potential per unit reference length (all terms SI, J/m):
                                                            fibre under uniaxial stretch
        + oint 1/2 k_h (ds/dS - 1)^2 dS                      hoop rings on the outer boundary
        + 1/2 EI_dev |k|^2                                   device in the lumen
+       + int_fill W_fill(F) dA                              optional soft lumen fill
        - sum_i p_i lambda int_{channel_i, deformed} (1 - k . x) dA
 The last term is the channel volume per unit length: its variation gives the follower
 pressure on the walls, the axial end force p A and its moment p A lambda (lever arm).
 Volumes use Green's theorem on the quadratic hole boundary.
+
+The optional lumen fill is a self-contact proxy (as in the fe3d rung): without contact the
+empty lumen of a strongly bent section collapses until its walls pass through each other.
+The lumen is meshed as its own region of a compressible neo-Hookean solid,
+W_fill = mu/2 (I1 - 3 - 2 ln J) + lambda/2 (ln J)^2 with lambda = mu (Poisson 0.25), with
+the same out-of-plane kinematics as the silicone (it bends and stretches with the section);
+W_fill grows without bound as J -> 0, and J <= 1e-4 at any of its sample points counts as
+inverted. Its elements are integrated with the 7-point rule on the vertices, midsides and
+centroid (degree 3), not the 6 interior points: det F of a P2 element is quadratic, fixed by
+its values at the six nodes, so sampling the barrier there keeps the squeezed corner elements
+at the lumen's shoulders from folding between interior points (with the 6-point rule they do,
+from 0.225 bar at D/20). It is compressible, so it has no element pressure: its p_e slots stay
+zero (K = 0 there).
 
 The volumetric part is solved in mixed form: the element pressures p_e (P0) are unknowns,
 statically condensed in each Newton step and updated linearly. At a solution p_e = K
@@ -51,9 +65,14 @@ _QP = np.array([[_A, _A], [1 - 2 * _A, _A], [_A, 1 - 2 * _A], [_B, _B], [1 - 2 *
 _QW = 0.5 * np.array([0.223381589678011] * 3 + [0.109951743655322] * 3)
 # 3-point Gauss on [-1, 1] for boundary edges (exact for the degree-5 volume integrands).
 _GT = np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
+# 7-point, degree-3 rule on the vertices, midsides and centroid (the lumen fill's rule, see above).
+_QP_FILL = np.array([[0, 0], [1, 0], [0, 1], [0.5, 0], [0.5, 0.5], [0, 0.5], [1 / 3, 1 / 3]])
+_QW_FILL = np.array([3.0] * 3 + [8.0] * 3 + [27.0]) / 120.0
 _GW = np.array([5 / 9, 8 / 9, 5 / 9])
 
 N_GLOBAL = 3  # lambda, kx R, ky R
+# Smallest admissible det F in the lumen fill (it is meant to be squeezed; fe3d uses the same).
+FILL_MIN_JACOBIAN = 1e-4
 
 
 def _p2_shape(xi, eta):
@@ -73,6 +92,39 @@ def _edge_shape(t):
             np.stack([t - 0.5, -2 * t, t + 0.5], -1))
 
 
+def _quadrature(X, tri, points, weights):
+    """Shape values (q,6), physical gradients (e,q,6,2), weights dA (e,q), reference positions
+    (e,q,2) and the constant rows of da/d(dofs) (e,q,5,15) of a rule on the elements ``tri``."""
+    N, dN = _p2_shape(points[:, 0], points[:, 1])       # (q,6), (q,6,2)
+    xe = X[tri]                                        # (e,6,2)
+    Jac = np.einsum("eai,qaj->eqij", xe, dN)           # dX/dxi
+    detJ = Jac[..., 0, 0] * Jac[..., 1, 1] - Jac[..., 0, 1] * Jac[..., 1, 0]
+    if np.any(detJ <= 0):
+        raise ValueError("inverted reference element")
+    invJ = np.stack([np.stack([Jac[..., 1, 1], -Jac[..., 0, 1]], -1),
+                     np.stack([-Jac[..., 1, 0], Jac[..., 0, 0]], -1)], -2) / detJ[..., None, None]
+    dNdX = np.einsum("qaj,eqji->eqai", dN, invJ)       # (e,q,6,2)
+    D0 = np.zeros((len(tri), len(weights), 5, 15))
+    D0[..., 0, 0:12:2] = dNdX[..., 0]
+    D0[..., 1, 0:12:2] = dNdX[..., 1]
+    D0[..., 2, 1:12:2] = dNdX[..., 0]
+    D0[..., 3, 1:12:2] = dNdX[..., 1]
+    return N, dNdX, detJ * weights, np.einsum("qa,eai->eqi", N, xe), D0
+
+
+def _jacobian_derivs(a, det2, f33):
+    """dJ/da (..., 5) and d2J/da2 (..., 5, 5) for a = (F11, F12, F21, F22, F33), J = det2 f33."""
+    Ja = np.stack([a[..., 3] * f33, -a[..., 2] * f33, -a[..., 1] * f33, a[..., 0] * f33, det2], -1)
+    Jaa = np.zeros(a.shape + (5,))
+    Jaa[..., 0, 3] = Jaa[..., 3, 0] = f33
+    Jaa[..., 1, 2] = Jaa[..., 2, 1] = -f33
+    Jaa[..., 0, 4] = Jaa[..., 4, 0] = a[..., 3]
+    Jaa[..., 3, 4] = Jaa[..., 4, 3] = a[..., 0]
+    Jaa[..., 1, 4] = Jaa[..., 4, 1] = -a[..., 2]
+    Jaa[..., 2, 4] = Jaa[..., 4, 2] = -a[..., 1]
+    return Ja, Jaa
+
+
 @dataclass
 class Loads:
     pressures: np.ndarray  # (C,) non-dimensional p / c1
@@ -82,7 +134,9 @@ class SectionProblem:
     """Discrete potential for one design and mesh; ``x`` = [u (2n, in units of R), lambda, kx R, ky R]."""
 
     def __init__(self, design: Design, mesh: SectionMesh, hoop_tension_only: bool = False,
-                 end_cap_only: bool = False):
+                 end_cap_only: bool = False, lumen_fill: float | None = None):
+        """``lumen_fill``: the fill's shear modulus as a fraction of the silicone's (2 c1); the
+        mesh must then have a fill region (``mesh_section(..., filled=...)``), and vice versa."""
         self.design = design
         # end_cap_only: the pressure acts only through the end caps (axial force p A at the
         # reference channel centre), as the closed form assumes; no load on the channel walls.
@@ -95,6 +149,14 @@ class SectionProblem:
         mat = design.material
         self.yeoh = np.array([mat.c1, mat.c2, mat.c3]) / c_ref
         self.bulk = mat.bulk_modulus / c_ref
+        silicone = mesh.silicone
+        has_fill = not silicone.all()
+        if has_fill != (lumen_fill is not None):
+            raise ValueError("section problem: lumen_fill must be given exactly when the mesh has a fill region")
+        self.fill = None if not has_fill else np.flatnonzero(~silicone)   # fill element indices
+        self.fill_mu = 0.0 if lumen_fill is None else 2.0 * float(lumen_fill) * mat.c1 / c_ref
+        self.bulk_e = np.where(silicone, self.bulk, 0.0)       # no volumetric term in the fill
+        self.filled_holes = np.isin(np.arange(len(mesh.hole_edges)), mesh.filled)
         X = mesh.nodes / R
         self.X = X
         nn = len(X)
@@ -106,31 +168,18 @@ class SectionProblem:
         ne = len(tri)
 
         # --- element quadrature: shape values, physical gradients, weights
-        N, dN = _p2_shape(_QP[:, 0], _QP[:, 1])          # (q,6), (q,6,2)
-        xe = X[tri]                                        # (e,6,2)
-        Jac = np.einsum("eai,qaj->eqij", xe, dN)           # dX/dxi
-        detJ = Jac[..., 0, 0] * Jac[..., 1, 1] - Jac[..., 0, 1] * Jac[..., 1, 0]
-        if np.any(detJ <= 0):
-            raise ValueError("inverted reference element")
-        invJ = np.stack([np.stack([Jac[..., 1, 1], -Jac[..., 0, 1]], -1),
-                         np.stack([-Jac[..., 1, 0], Jac[..., 0, 0]], -1)], -2) / detJ[..., None, None]
-        self.dNdX = np.einsum("qaj,eqji->eqai", dN, invJ)  # (e,q,6,2)
-        self.N = N
-        self.dA = detJ * _QW                               # (e,q)
+        self.N, self.dNdX, self.dA, self.Xq, self._D0 = _quadrature(X, tri, _QP, _QW)
         self.area_e = self.dA.sum(1)
-        self.Xq = np.einsum("qa,eai->eqi", N, xe)          # reference qp positions
+        # the silicone's energy density is integrated over the silicone only (the fill has its own rule)
+        self.dA_silicone = self.dA * silicone[:, None]
+        if self.fill is not None:
+            self._fill_quad = _quadrature(X, tri[self.fill], _QP_FILL, _QW_FILL)
         # element dofs: 12 displacement + 3 global
         dofs = np.empty((ne, 12 + N_GLOBAL), dtype=np.int64)
         dofs[:, 0:12:2] = 2 * tri
         dofs[:, 1:12:2] = 2 * tri + 1
         dofs[:, 12:] = self.i_glob
         self.elem_dofs = dofs
-        D0 = np.zeros((ne, len(_QW), 5, 15))
-        D0[..., 0, 0:12:2] = self.dNdX[..., 0]
-        D0[..., 1, 0:12:2] = self.dNdX[..., 1]
-        D0[..., 2, 1:12:2] = self.dNdX[..., 0]
-        D0[..., 3, 1:12:2] = self.dNdX[..., 1]
-        self._D0 = D0
 
         # --- strain-limiting fibre as a point fibre inside its element
         self.fibre = None
@@ -159,7 +208,7 @@ class SectionProblem:
         # keeps the tangent symmetric positive definite at stable states, so LDL^T needs no pivoting). Results
         # are reported in the frame where the silicone's mean displacement and mean rotation vanish
         # (``frame_state``), which does not depend on the choice of A and B.
-        w = np.einsum("eq,qa->ea", self.dA, N)             # int N_a dA per element node
+        w = np.einsum("eq,qa->ea", self.dA_silicone, self.N)   # int N_a dA per node, silicone only
         self._w_node = np.bincount(tri.ravel(), weights=w.ravel(), minlength=nn)
         area = self._w_node.sum()
         self._centroid = self._w_node @ X / area
@@ -179,7 +228,7 @@ class SectionProblem:
         v0, v1, v2 = p[:, 0], p[:, 1], p[:, 2]
         m = np.stack([v1 - v0, v2 - v0], -1)               # (e,2,2)
         xi = np.linalg.solve(m, (point - v0)[..., None])[..., 0]
-        inside = (xi[:, 0] >= -1e-12) & (xi[:, 1] >= -1e-12) & (xi.sum(1) <= 1 + 1e-12)
+        inside = (xi[:, 0] >= -1e-12) & (xi[:, 1] >= -1e-12) & (xi.sum(1) <= 1 + 1e-12) & self.mesh.silicone
         if not inside.any():
             raise ValueError("fibre centre is not inside the meshed silicone")
         e = int(np.flatnonzero(inside)[0])
@@ -248,14 +297,56 @@ class SectionProblem:
         return x
 
     # ------------------------------------------------------------------ kinematics
-    def _element_kinematics(self, x):
+    def _element_kinematics(self, x, fill: bool = False):
+        """In-plane F (e,q,2,2), F33 (e,q), deformed points (e,q,2) and the globals; ``fill``:
+        at the fill's sample points on the fill elements instead of the silicone rule on all."""
         u = x[:self.n_u].reshape(-1, 2)
         lam, kx, ky = x[self.n_u:self.n]
-        ue = u[self.mesh.triangles]                                  # (e,6,2)
-        F2 = np.eye(2) + np.einsum("eai,eqaj->eqij", ue, self.dNdX)  # (e,q,2,2)
-        xq = self.Xq + np.einsum("qa,eai->eqi", self.N, ue)
+        if fill:
+            N, dNdX, _, Xq, _ = self._fill_quad
+            ue = u[self.mesh.triangles[self.fill]]
+        else:
+            N, dNdX, Xq = self.N, self.dNdX, self.Xq
+            ue = u[self.mesh.triangles]                              # (e,6,2)
+        F2 = np.eye(2) + np.einsum("eai,eqaj->eqij", ue, dNdX)       # (e,q,2,2)
+        xq = Xq + np.einsum("qa,eai->eqi", N, ue)
         f33 = lam * (1 - kx * xq[..., 0] - ky * xq[..., 1])
         return F2, f33, xq, (lam, kx, ky)
+
+    def _fill_energy(self, x, order: int):
+        """The lumen fill's energy (inf if a sample point is squeezed below FILL_MIN_JACOBIAN);
+        with order 2 also its element gradients (f,15) and Hessians (f,15,15)."""
+        F2, f33, xq, (lam, kx, ky) = self._element_kinematics(x, fill=True)
+        det2 = F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]
+        J = det2 * f33
+        if np.any(J <= FILL_MIN_JACOBIAN) or np.any(f33 <= 0):
+            return (np.inf, None, None) if order else np.inf
+        N, _, dA, _, D0 = self._fill_quad
+        a = np.stack([F2[..., 0, 0], F2[..., 0, 1], F2[..., 1, 0], F2[..., 1, 1], f33], -1)
+        I1 = np.einsum("eqk,eqk->eq", a, a)
+        if order == 0:
+            return float(np.sum(dA * self._fill_density(I1, J)))
+        Ja, Jaa = _jacobian_derivs(a, det2, f33)
+        W, Wa, Waa = self._fill_density(I1, J, a, Ja, Jaa)
+        D = self._f33_rows(D0, N, xq, lam, kx, ky)
+        Pa = dA[..., None] * Wa
+        g = np.einsum("eqk,eqkl->el", Pa, D)
+        nf, nq = J.shape
+        H = np.matmul(D.reshape(nf, nq * 5, 15).transpose(0, 2, 1),
+                      np.matmul(dA[..., None, None] * Waa, D).reshape(nf, nq * 5, 15))
+        self._add_f33_hessian(H, Pa[..., 4], N, xq, lam, kx, ky)
+        return float(np.sum(dA * W)), g, H
+
+    @staticmethod
+    def _f33_rows(D0, N, xq, lam, kx, ky):
+        """da/d(local dofs) (e,q,5,15): the constant in-plane rows D0 plus the row of F33 = lam (1 - k.x)."""
+        D = D0.copy()
+        D[..., 4, 0:12:2] = -lam * kx * N
+        D[..., 4, 1:12:2] = -lam * ky * N
+        D[..., 4, 12] = 1 - kx * xq[..., 0] - ky * xq[..., 1]
+        D[..., 4, 13] = -lam * xq[..., 0]
+        D[..., 4, 14] = -lam * xq[..., 1]
+        return D
 
     # ------------------------------------------------------------------ energy only (line search)
     def energy(self, x, pressures) -> float:
@@ -268,9 +359,11 @@ class SectionProblem:
         I1 = np.einsum("eqij,eqij->eq", F2, F2) + f33**2
         d = J ** (-2.0 / 3.0) * I1 - 3.0
         c1, c2, c3 = self.yeoh
-        E = np.sum(self.dA * (c1 * d + c2 * d**2 + c3 * d**3))
+        E = np.sum(self.dA_silicone * (c1 * d + c2 * d**2 + c3 * d**3))
+        if self.fill is not None:
+            E += self._fill_energy(x, order=0)
         theta = np.sum(self.dA * J, 1) / self.area_e
-        E += np.sum(self.area_e * 0.5 * self.bulk * (theta - 1) ** 2)
+        E += np.sum(self.area_e * 0.5 * self.bulk_e * (theta - 1) ** 2)
         E += self._fibre(x, g, order=0)
         E += self._hoop(x, order=0)
         E += 0.5 * self.device_ei * (g[1] ** 2 + g[2] ** 2)
@@ -288,6 +381,35 @@ class SectionProblem:
             A, Sx, Sy = self._green(self.X[edges] + u[edges], order=0)
             out.append(lam * (A.sum() - kx * Sx.sum() - ky * Sy.sum()))
         return np.array(out)
+
+    def _fill_density(self, I1, J, a=None, Ja=None, Jaa=None):
+        """Compressible neo-Hookean fill, lambda = mu: W, and with ``a`` (the five entries of F)
+        also dW/da and d2W/da2 (J's derivatives Ja, Jaa given)."""
+        mu = lam = self.fill_mu
+        lnj = np.log(J)
+        W = 0.5 * mu * (I1 - 3.0) - mu * lnj + 0.5 * lam * lnj**2
+        if a is None:
+            return W
+        g = Ja / J[..., None]                                    # d ln J / da
+        s = lam * lnj - mu
+        Wa = mu * a + s[..., None] * g
+        gg = g[..., :, None] * g[..., None, :]
+        Waa = (mu * np.eye(5) + s[..., None, None] * (Jaa / J[..., None, None] - gg)
+               + lam * gg)
+        return W, Wa, Waa
+
+    def fill_min_jacobian(self, x) -> float:
+        """The smallest det F in the lumen fill (inf without a fill): how squeezed the lumen is."""
+        if self.fill is None:
+            return np.inf
+        F2, f33, _, _ = self._element_kinematics(x, fill=True)
+        det2 = F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]
+        return float(np.min(det2 * f33))
+
+    def open_hole_gaps(self, x) -> np.ndarray:
+        """``hole_gaps`` with the filled holes at inf: their fill resists closing, so they are no
+        reason to stop (their collapse shows up as an inverted fill element instead)."""
+        return np.where(self.filled_holes, np.inf, self.hole_gaps(x))
 
     def hole_gaps(self, x) -> np.ndarray:
         """Per hole (channels, then lumen): the smallest distance between its deformed wall points
@@ -322,26 +444,19 @@ class SectionProblem:
         det2 = F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]
         if np.any(det2 <= 0) or np.any(f33 <= 0):
             return np.inf, None, None, None
+        fill_part = None
+        if self.fill is not None:
+            fill_part = self._fill_energy(x, order=2)
+            if not np.isfinite(fill_part[0]):
+                return np.inf, None, None, None
         ne, nq = det2.shape
         a = np.stack([F2[..., 0, 0], F2[..., 0, 1], F2[..., 1, 0], F2[..., 1, 1], f33], -1)  # (e,q,5)
         # D = da/d(local dofs): (e,q,5,15); rows 0-3 (in-plane F) are constant
-        D = self._D0.copy()
-        D[..., 4, 0:12:2] = -lam * kx * self.N
-        D[..., 4, 1:12:2] = -lam * ky * self.N
-        D[..., 4, 12] = 1 - kx * xq[..., 0] - ky * xq[..., 1]
-        D[..., 4, 13] = -lam * xq[..., 0]
-        D[..., 4, 14] = -lam * xq[..., 1]
+        D = self._f33_rows(self._D0, self.N, xq, lam, kx, ky)
 
         # isochoric Yeoh
         J = det2 * f33
-        Ja = np.stack([a[..., 3] * f33, -a[..., 2] * f33, -a[..., 1] * f33, a[..., 0] * f33, det2], -1)
-        Jaa = np.zeros((ne, nq, 5, 5))
-        Jaa[..., 0, 3] = Jaa[..., 3, 0] = f33
-        Jaa[..., 1, 2] = Jaa[..., 2, 1] = -f33
-        Jaa[..., 0, 4] = Jaa[..., 4, 0] = a[..., 3]
-        Jaa[..., 3, 4] = Jaa[..., 4, 3] = a[..., 0]
-        Jaa[..., 1, 4] = Jaa[..., 4, 1] = -a[..., 2]
-        Jaa[..., 2, 4] = Jaa[..., 4, 2] = -a[..., 1]
+        Ja, Jaa = _jacobian_derivs(a, det2, f33)
         I1 = np.einsum("eqk,eqk->eq", a, a)
         j23 = J ** (-2.0 / 3.0)
         j53 = j23 / J
@@ -358,24 +473,28 @@ class SectionProblem:
         W2 = 2 * c2 + 6 * c3 * dd
         Wa = W1[..., None] * Iba
         Waa = W1[..., None, None] * Ibaa + W2[..., None, None] * Iba[..., :, None] * Iba[..., None, :]
-        E = np.sum(self.dA * W)
-        # volumetric (mean dilatation): U(theta_e) = K/2 (theta-1)^2, theta_e = mean J
+        E = np.sum(self.dA_silicone * W)
+        # volumetric (mean dilatation): U(theta_e) = K/2 (theta-1)^2, theta_e = mean J (K = 0 in the fill)
         theta = np.sum(self.dA * J, 1) / self.area_e
-        Up = self.bulk * (theta - 1)
+        Up = self.bulk_e * (theta - 1)
         p_e = x[self.n:]
-        E += np.sum(self.area_e * 0.5 * self.bulk * (theta - 1) ** 2)
+        E += np.sum(self.area_e * 0.5 * self.bulk_e * (theta - 1) ** 2)
         # gradient of the condensed potential: dPi/da = Wa + K (theta - 1) Ja
         Ga = self.dA[..., None] * Ja
         G_e = np.einsum("eqk,eqkl->el", Ga, D)                                          # A_e dtheta
-        Pw = self.dA[..., None] * Wa
+        Pw = self.dA_silicone[..., None] * Wa
         g_e = np.einsum("eqk,eqkl->el", Pw, D) + Up[:, None] * G_e
         # tangent with the independent element pressure p_e in the geometric terms
         Pa = Pw + p_e[:, None, None] * Ga
-        Maa = self.dA[..., None, None] * (Waa + p_e[:, None, None, None] * Jaa)
+        Maa = self.dA_silicone[..., None, None] * (Waa + p_e[:, None, None, None] * Jaa)   # p_e = 0 in the fill
         Dr = D.reshape(ne, nq * 5, 15)
         H_e = np.matmul(Dr.transpose(0, 2, 1), np.matmul(Maa, D).reshape(ne, nq * 5, 15))
         self._add_f33_hessian(H_e, Pa[..., 4], self.N, xq, lam, kx, ky)
-        H_e += (self.bulk / self.area_e)[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
+        H_e += (self.bulk_e / self.area_e)[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
+        if fill_part is not None:
+            E += fill_part[0]
+            g_e[self.fill] += fill_part[1]
+            H_e[self.fill] += fill_part[2]
 
         # fibre: a point inside one element, so it adds to that element's block
         if self.fibre is not None:
@@ -417,7 +536,7 @@ class SectionProblem:
         data[self._pinned_diag] = 1.0
         grad[self.pinned] = 0.0
         K = sp.csr_matrix((data, self._csr_indices, self._csr_indptr), shape=self._csr_shape)
-        aux = (Up - p_e, (self.bulk / self.area_e)[:, None] * G_e)
+        aux = (Up - p_e, (self.bulk_e / self.area_e)[:, None] * G_e)
         return float(E), grad, K, aux
 
     def pressure_update(self, dx, aux) -> np.ndarray:
@@ -430,7 +549,7 @@ class SectionProblem:
         F2, f33, _, _ = self._element_kinematics(x)
         J = (F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]) * f33
         out = x.copy()
-        out[self.n:] = self.bulk * (np.sum(self.dA * J, 1) / self.area_e - 1)
+        out[self.n:] = self.bulk_e * (np.sum(self.dA * J, 1) / self.area_e - 1)
         return out
 
     @staticmethod
