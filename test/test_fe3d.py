@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import subprocess
 import sys
 
@@ -19,6 +20,7 @@ from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
+from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 
 COARSE = MeshSettings(section_h=1.0e-3, wall_h=0.7e-3, layer_h=4.5e-3, cap_layers=1)
@@ -109,6 +111,29 @@ def test_fixed_large_steps_fail_and_report_the_last_converged_pressure(short_des
     assert not state.converged[0]
     assert "did not converge at p = 0.3000 bar" in state.message
     assert "last converged p = 0.0000 bar" in state.message
+    # an inverted element is located, so the report says what collapsed
+    if "inverts an element" in state.message:
+        assert re.search(r"most compressed: \w+ element at x = .* next to the (channel0 wall|lumen wall|outer "
+                         r"surface), mean det F", state.message), state.message
+
+
+def test_lumen_fill_is_a_soft_contact_proxy(short_design):
+    """The soft lumen fill (self-contact proxy) barely changes bending while the lumen is open
+    (< 1% in R_C at 0.10 bar), and a fraction outside (0, 1) is refused."""
+    p = np.array([[10000.0]])
+    empty = Fe3dModel(short_design, mesh=COARSE, cache=False).evaluate(p)
+    filled = Fe3dModel(short_design, mesh=COARSE, cache=False, lumen_fill=0.01)
+    assert "fill" in filled.problem.mesh.GetMaterials()
+    state = filled.evaluate(p)
+    assert state.converged[0], state.message
+    rc_empty = empty.extras["radius_l_over_theta_m"][0]
+    rc_filled = state.extras["radius_l_over_theta_m"][0]
+    assert rc_filled == pytest.approx(rc_empty, rel=0.01)
+    assert rc_filled != rc_empty   # the fill is really in the model
+    with pytest.raises(ModelError, match="lumen_fill"):
+        Fe3dModel(short_design, mesh=COARSE, lumen_fill=1.5)
+    with pytest.raises(ModelError, match="formulation"):
+        Fe3dModel(short_design, mesh=COARSE, formulation="reduced")
 
 
 def test_results_are_cached_by_design_mesh_and_settings(short_design):

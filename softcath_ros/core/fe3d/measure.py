@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 
-def _kabsch(ref: np.ndarray, cur: np.ndarray) -> np.ndarray:
+def best_fit_rotation(ref: np.ndarray, cur: np.ndarray) -> np.ndarray:
     """Rotation R minimising sum |R (ref - mean) - (cur - mean)|^2."""
     a = ref - ref.mean(axis=0)
     b = cur - cur.mean(axis=0)
@@ -76,7 +76,7 @@ def measure(problem) -> dict:
     tip_cur = tip_ref + _evaluate(problem, tip_ref)
     if problem.half:
         tip_ref, tip_cur = _mirror(tip_ref), _mirror(tip_cur)
-    rot = _kabsch(tip_ref, tip_cur)
+    rot = best_fit_rotation(tip_ref, tip_cur)
     tip = np.array([0.0, 0.0, length]) + _evaluate(problem, np.array([[0.0, 0.0, length]]))[0]
     theta, direction = bending_from_tip(rot, tip)
     # --- arc length through the deformed tip of the body axis
