@@ -192,3 +192,17 @@ def test_bending_angle_beyond_half_circle_from_tip():
         assert got_theta == pytest.approx(theta, abs=1e-9)
         if deg > 0:
             np.testing.assert_allclose(got_u, u, atol=1e-9)
+
+
+def test_three_channel_design_with_a_central_lumen_bends_away_from_its_channel():
+    """The 3-channel design's lumen is on the body axis, so the tip is carried by the tip face's
+    rigid fit (there is no material at the axis to sample). One channel at +y bends to -y."""
+    from softcath_ros.core.design import load_design
+
+    design = load_design("three_channel_5mm").with_length(0.010)
+    state = Fe3dModel(design, mesh=COARSE, cache=False).evaluate(np.array([10000.0, 0.0, 0.0]))
+    assert state.converged, state.message
+    kx, ky = state.curvature
+    assert ky < 0 and abs(math.degrees(math.atan2(kx, -ky))) < 2.0
+    tip = np.asarray(state.extras["tip_position_m"])
+    assert tip[1] < 0 and 0.009 < tip[2] < 0.0105

@@ -59,6 +59,15 @@ def bending_from_tip(rot: np.ndarray, tip: np.ndarray) -> tuple[float, np.ndarra
     return phi, u
 
 
+def _axis_in_solid(problem) -> bool:
+    """Whether the body axis at the tip is in material (not in an empty lumen). Channels are
+    closed by the cap there; a lumen with a device or a fill is solid."""
+    lumen = problem.design.lumen
+    if lumen is None or problem.design.device is not None or getattr(problem, "has_fill", False):
+        return True
+    return math.hypot(*lumen.center) > lumen.radius
+
+
 def measure(problem) -> dict:
     """Bending angle (rad), bending direction (unit (2,)), arc length (m), tip position (m),
     channel volumes (m^3) and mid-channel areas (m^2) of the current state."""
@@ -77,7 +86,11 @@ def measure(problem) -> dict:
     if problem.half:
         tip_ref, tip_cur = _mirror(tip_ref), _mirror(tip_cur)
     rot = best_fit_rotation(tip_ref, tip_cur)
-    tip = np.array([0.0, 0.0, length]) + _evaluate(problem, np.array([[0.0, 0.0, length]]))[0]
+    axis_tip = np.array([0.0, 0.0, length])
+    if _axis_in_solid(problem):
+        tip = axis_tip + _evaluate(problem, axis_tip[None, :])[0]
+    else:   # the axis runs through an empty lumen (e.g. a central one): carry it with the tip face's fit
+        tip = tip_cur.mean(axis=0) + rot @ (axis_tip - tip_ref.mean(axis=0))
     theta, direction = bending_from_tip(rot, tip)
     # --- arc length through the deformed tip of the body axis
     if theta > 1e-9:
