@@ -204,5 +204,5 @@ def test_three_channel_design_with_a_central_lumen_bends_away_from_its_channel()
     assert state.converged, state.message
     kx, ky = state.curvature
     assert ky < 0 and abs(math.degrees(math.atan2(kx, -ky))) < 2.0
-    tip = np.asarray(state.extras["tip_position_m"])
+    tip = np.asarray(state.extras["tip_position_m"][0])   # extras stay per command
     assert tip[1] < 0 and 0.009 < tip[2] < 0.0105
