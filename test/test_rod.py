@@ -125,3 +125,42 @@ def test_refusals_are_clear(design, free_rod):
 
     with pytest.raises(ModelError, match="one-channel designs"):
         make_model("rod", load_design("three_channel_5mm"), source="closed_form")
+
+
+# --------------------------------------------------------------------------- the lumen fill (self-contact proxy)
+
+FILL_GRID = LawGrid(kappa_min=-150.0, kappa_max=80.0, kappa_step=10.0, pressure_max=35000.0, pressure_step=2500.0)
+
+
+@pytest.fixture(scope="module")
+def filled_rod(design):
+    return make_model("rod", design, grid=FILL_GRID, cache=False, lumen_fill=0.02, **COARSE)
+
+
+def test_fill_carries_the_law_past_the_closing_lumen_and_keeps_the_small_pressure_law(design, free_rod, filled_rod):
+    # the held-straight empty section stops before 0.35 bar (the lumen closes; D/20: 0.306 bar)
+    empty = make_model("rod", design, grid=FILL_GRID, cache=False, **COARSE)
+    assert empty.law.pressure_range[1] < 35000.0
+    assert filled_rod.law.pressure_range[1] == 35000.0
+    assert "lumen fill 0.02" in filled_rod.law.source
+    # below 0.15 bar the fill changes the law's moment by < 1 % (D/20: +0.2 % in the blocking force)
+    for p in (5000.0, 12500.0):
+        m0, m1 = free_rod.law.at(p).moment(-20.0), filled_rod.law.at(p).moment(-20.0)
+        assert m1 == pytest.approx(m0, rel=0.01)
+    # the straight body's blocking moment keeps growing with pressure
+    assert filled_rod.law.at(35000.0).moment(0.0) < filled_rod.law.at(20000.0).moment(0.0) < 0
+
+
+def test_blocking_capacity_at_035_bar_with_fill_is_positive_and_above_02_bar(design, filled_rod):
+    rod = _rod(design, filled_rod, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
+    st = rod.evaluate(np.array([[20000.0], [35000.0]]))
+    f02 = st.extras["contact_force"][0]
+    assert st.converged[0] and f02 > 0
+    # at 0.35 bar the blocked base would need more moment than the bent-back section carries (its
+    # moment saturates and falls: the section flattens), so the rod refuses instead of answering
+    # (the base leaves the table, or the rod's Newton finds no state within it) ...
+    assert not st.converged[1] and np.isnan(st.extras["contact_force"][1]) and "p = 35000 Pa" in st.message
+    # ... and the capacity at the base, |M_lim| / l, is what the law says the bench could read at most
+    m_lim, k_lim = filled_rod.law.at(35000.0).limit_moment()
+    assert m_lim < 0 and k_lim <= 0
+    assert abs(m_lim) / L > f02 > 0          # D/20: 54 mN at 0.35 bar vs 30.7 mN at 0.2 bar

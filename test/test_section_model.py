@@ -257,3 +257,111 @@ def test_device_in_the_lumen_stiffens_about_linearly(design_dict):
     # measured: +15 % per 1e-6 N m^2, increments equal within a few %
     assert radii[0] < radii[1] < radii[2]
     assert (radii[2] - radii[1]) == pytest.approx(radii[1] - radii[0], rel=0.05)
+
+
+# --------------------------------------------------------------------------- lumen fill (self-contact proxy)
+
+def test_lumen_fill_off_keeps_the_cache_keys(implemented_design):
+    from dataclasses import asdict
+
+    from softcath_ros.core.models.section import SOLVER_VERSION, SectionSettings
+
+    # the empty-lumen rung's results keep the keys they had before the option existed
+    model = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8)
+    before = {k: v for k, v in asdict(model.settings).items() if k != "lumen_fill"}
+    assert model.settings.key() == before
+    blob = json.dumps({"design": implemented_design.content_hash(), "settings": before,
+                       "version": SOLVER_VERSION, "mesh_nodes": model.mesh.n_nodes}, sort_keys=True)
+    import hashlib
+
+    h = hashlib.sha256(blob.encode())
+    h.update(np.zeros((1, 1)).tobytes())
+    assert model.cache_key(np.zeros((1, 1))) == h.hexdigest()[:20]
+    filled = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8,
+                        lumen_fill=0.01)
+    assert filled.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))
+    assert SectionSettings(lumen_fill=0.02).key()["lumen_fill"] == 0.02
+
+
+def test_lumen_fill_mesh_conforms_and_its_derivatives_are_exact(implemented_design):
+    d = implemented_design
+    model = make_model("section", d, mesh_size=d.outer_diameter / 12, lumen_fill=0.3)
+    problem, mesh = model.problem, model.mesh
+    empty = _mesh_for(d, d.outer_diameter / 12)
+    # the silicone part is the empty-lumen mesh's domain; the fill is the lumen, sharing its wall nodes
+    area = problem.area_e * d.outer_radius**2
+    silicone = math.pi * (d.outer_radius**2 - sum(c.radius**2 for c in d.channels) - d.lumen.radius**2)
+    assert area[mesh.silicone].sum() == pytest.approx(silicone, rel=1e-4)
+    assert area[~mesh.silicone].sum() == pytest.approx(math.pi * d.lumen.radius**2, rel=1e-4)
+    assert mesh.symmetric and len(mesh.triangles) > len(empty.triangles)
+    wall = np.unique(mesh.hole_edges[-1])
+    assert np.isin(wall, mesh.triangles[mesh.silicone]).all() and np.isin(wall, mesh.triangles[~mesh.silicone]).all()
+    # gradient and Hessian against finite differences on the fill's nodes and the globals
+    rng = np.random.default_rng(2)
+    x = problem.initial_state()
+    x[:problem.n_u] += 0.003 * rng.standard_normal(problem.n_u)
+    x[problem.pinned] = 0.0
+    x[problem.n_u:problem.n] = [1.05, 0.3, -0.2]
+    x = problem.consistent_pressures(x)
+    p = np.array([1.5])
+    _, g, K, _ = problem.assemble(x, p)
+    H = K.toarray()
+    free = np.setdiff1d(np.arange(problem.n), problem.pinned)
+    inner = np.setdiff1d(np.unique(mesh.triangles[~mesh.silicone]), wall)
+    idx = [2 * inner[0], 2 * inner[1] + 1, 2 * wall[0], 2 * wall[3] + 1] + list(range(problem.n_u, problem.n))
+    eps = 1e-6
+    for i in idx:
+        xp, xm = x.copy(), x.copy()
+        xp[i] += eps
+        xm[i] -= eps
+        assert g[i] == pytest.approx((problem.energy(xp, p) - problem.energy(xm, p)) / (2 * eps), rel=1e-6, abs=1e-6)
+        col = (problem.assemble(problem.consistent_pressures(xp), p)[1]
+               - problem.assemble(problem.consistent_pressures(xm), p)[1]) / (2 * eps)
+        np.testing.assert_allclose(H[free, i], col[free], rtol=0, atol=1e-9 * np.abs(H).max())
+    # the fill has no element pressure; a fill element squeezed flat is inadmissible
+    assert np.all(x[problem.n:][~mesh.silicone] == 0.0)
+    flat = problem.initial_state()
+    n0 = mesh.triangles[problem.fill[0], :3]
+    flat[2 * n0[0]:2 * n0[0] + 2] = problem.X[n0[1]] - problem.X[n0[0]]   # corner 0 onto corner 1
+    assert problem.energy(flat, p) == np.inf and problem.assemble(flat, p)[0] == np.inf
+
+
+def test_lumen_fill_barely_changes_bending_while_the_lumen_is_open(implemented_design):
+    d = implemented_design
+    ps = np.array([[0.05 * BAR], [0.15 * BAR]])
+    empty = make_model("section", d, mesh_size=d.outer_diameter / 12).evaluate(ps)
+    filled = make_model("section", d, mesh_size=d.outer_diameter / 12, lumen_fill=0.01).evaluate(ps)
+    assert empty.converged.all() and filled.converged.all()
+    r0 = [_radius(k, s) for k, s in zip(empty.curvature, empty.axial_stretch)]
+    r1 = [_radius(k, s) for k, s in zip(filled.curvature, filled.axial_stretch)]
+    # measured at D/20: +0.0 % at 0.05 bar, +0.24 % at 0.15 bar, +0.49 % at 0.20 bar (fill 0.01)
+    for a, b in zip(r0, r1):
+        assert abs(b / a - 1) < 0.01
+
+
+def test_lumen_fill_carries_the_ramp_past_the_empty_lumen_closing(implemented_design):
+    d = implemented_design
+    ps = np.array([[0.30 * BAR], [0.35 * BAR]])
+    empty = make_model("section", d, mesh_size=d.outer_diameter / 12).evaluate(ps)
+    assert not empty.converged.any() and "lumen" in empty.message       # stops near 0.28 bar
+    model = make_model("section", d, mesh_size=d.outer_diameter / 12, lumen_fill=0.02)
+    filled = model.evaluate(ps)
+    assert filled.converged.all(), filled.message
+    r = [_radius(k, s) for k, s in zip(filled.curvature, filled.axial_stretch)]
+    assert r[1] < r[0] < 6e-3                    # measured D/20: 5.01 and 3.57 mm
+    # the lumen is nearly closed (no empty-lumen rung could report this state) and the fill holds it
+    x = model._states[(0.35 * BAR,)]
+    assert model.problem.hole_gaps(x)[-1] < 2 * model.settings.min_hole_gap
+    assert 1e-4 < model.problem.fill_min_jacobian(x) < 0.2
+
+
+def test_lumen_fill_needs_a_lumen_and_a_fraction(design_dict):
+    from softcath_ros.core.errors import ModelError
+
+    d = design_from_dict(design_dict)
+    for bad in (0.0, 1.0, -0.1, True):
+        with pytest.raises(ModelError, match="lumen_fill"):
+            make_model("section", d, lumen_fill=bad)
+    design_dict["lumen"] = None
+    with pytest.raises(ModelError, match="has no lumen"):
+        make_model("section", design_from_dict(design_dict), lumen_fill=0.01)

@@ -57,6 +57,19 @@ class LawSlice:
                 f"leave the moment-curvature table, valid there for {self.kappa_lo:.4g}..{self.kappa_hi:.4g} 1/m "
                 "(the held section does not converge beyond: the lumen closes or Newton fails)")
 
+    def limit_moment(self, n: int = 401) -> tuple[float, float]:
+        """(M, kappa) with the largest |M| the section carries bent back (kappa in [kappa_lo, 0]).
+
+        Bent back against the pressure (a blocked base), the section flattens and its moment
+        saturates and then falls (section rung: at kappa ~ -50..-100 1/m); a rod whose base needs
+        more than this moment kinks there, which the law cannot follow (it refuses beyond its table).
+        So |M| / (tip lever arm) caps the blocking force the law can carry."""
+        lo = max(self.kappa_lo, -1e6)
+        k = np.linspace(lo, min(0.0, self.kappa_hi), n)
+        m = np.asarray(self.moment(k), dtype=float)
+        i = int(np.argmax(np.abs(m)))
+        return float(m[i]), float(k[i])
+
     def free_curvature(self) -> float | None:
         """The curvature with zero moment (the free body), None if it is outside the range."""
         roots = getattr(self._moment, "roots", None)

@@ -40,7 +40,11 @@ class LawGrid:
 
 def section_law(design: Design, grid: LawGrid = LawGrid(), cache: bool = True, progress: bool = False,
                 **section_settings) -> TabulatedLaw:
-    """``TabulatedLaw`` of the bare section (no device) of a one-channel ``design``."""
+    """``TabulatedLaw`` of the bare section (no device) of a one-channel ``design``.
+
+    ``section_settings`` are ``SectionSettings`` fields, e.g. ``lumen_fill=0.02``: a body bent back
+    against its pressure (a blocked tip) closes the empty lumen at 0.225-0.3 bar; the fill (a
+    self-contact proxy) carries the table to 0.45 bar (README "Model rung: rod")."""
     from ..models.section import SectionModel
 
     body = replace(design, device=None, length=1.0)
@@ -53,6 +57,8 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache: bool = True, p
         if path is not None:
             _save(path, table)
     mesh = f"section D/{design.outer_diameter / model.mesh.h:.0f}"
+    if model.settings.lumen_fill is not None:
+        mesh += f", lumen fill {model.settings.lumen_fill:g}"
     return TabulatedLaw(table, source=f"rod law from {mesh}")
 
 
