@@ -4,7 +4,7 @@ Each variant changes one thing the published description leaves open or that our
 simplifies (actuator.md), never the material constants of the silicone:
 
 * where the strain-limiting fibre sits ("just below the lumen": touching it, or mid-wall as
-  in the design file), or no fibre;
+  in the design file), how stiff it is, or no fibre;
 * the cap thickness (not measured; 1 mm assumed);
 * the reinforcement: none, or its hoop stiffness halved / x10 (bounds on how much the
   ring model can matter: discrete rings constrain less than the homogenised membrane);
@@ -70,6 +70,11 @@ VARIANTS = {
     "fibre_touching_lumen": ("fibre centre y = -2.05 mm: touching the lumen (\"just below\")",
                              _fibre_at(-2.05e-3), {}),
     "fibre_none": ("no strain-limiting fibre", lambda d: dataclasses.replace(d, limiting_fibre=None), {}),
+    "fibre_c1_x0.1": ("fibre 10x softer (c1 = 0.79 MPa): is it its stiffness or its presence that counts",
+                      lambda d: dataclasses.replace(d, limiting_fibre=dataclasses.replace(
+                          d.limiting_fibre, material=dataclasses.replace(d.limiting_fibre.material,
+                                                                         c1=d.limiting_fibre.material.c1 * 0.1))),
+                      {}),
     "cap_0.5mm": ("cap 0.5 mm", lambda d: dataclasses.replace(d, cap_thickness=0.5e-3), {}),
     "cap_2mm": ("cap 2 mm", lambda d: dataclasses.replace(d, cap_thickness=2.0e-3), {}),
     "rings_none": ("no reinforcement", lambda d: dataclasses.replace(d, reinforcement=None), {}),
@@ -118,13 +123,13 @@ def main(argv=None) -> int:
     unknown = set(names) - set(VARIANTS)
     if unknown:
         ap.error(f"unknown variant(s) {sorted(unknown)}; known: {', '.join(VARIANTS)}")
-    rows = [r for r in _load_rows() if r["variant"] not in names]
     messages = {}
     try:
         for name in names:
             print(f"--- {name}: {VARIANTS[name][0]}", flush=True)
             out = run_variant(name, args.length, args.threads)
-            rows.extend(out["rows"])
+            # merge into what is on disk now (another run may have added variants meanwhile)
+            rows = [r for r in _load_rows() if r["variant"] != name] + out["rows"]
             messages[name] = out["message"]
             _write(rows, messages, args)   # after each variant: a long study keeps what finished
     except KeyboardInterrupt:
