@@ -365,3 +365,20 @@ def test_lumen_fill_needs_a_lumen_and_a_fraction(design_dict):
     design_dict["lumen"] = None
     with pytest.raises(ModelError, match="has no lumen"):
         make_model("section", design_from_dict(design_dict), lumen_fill=0.01)
+
+
+def test_mesher_keeps_mirror_symmetry_with_round_off_in_the_geometry():
+    """Centres and diameters computed by a study carry round-off (1e-19 m, a radius of
+    1.3000000000000008e-3): the mesh must still come out exactly mirror-symmetric instead of
+    failing with an internal error (the circle's point count used to round up by one)."""
+    from softcath_ros.core.section_fe.mesh import Circle, mesh_section
+
+    holes = [Circle((0.0, 0.0008999999999999998), 0.0013000000000000008),
+             Circle((0.0, -0.0017000000000000006), 0.0005)]
+    mesh = mesh_section(Circle((0.0, 0.0), 0.003), holes, 0.006 / 20)
+    assert mesh.symmetric
+    mirrored = mesh.nodes * np.array([-1.0, 1.0])
+    from scipy.spatial import cKDTree
+
+    distance, _ = cKDTree(mesh.nodes).query(mirrored)
+    assert distance.max() < 1e-12

@@ -50,8 +50,9 @@ class SectionMesh:
         return len(self.nodes)
 
 
-def _circle_points(c: Circle, h: float, min_points: int = 16) -> np.ndarray:
-    n = max(min_points, int(math.ceil(2 * math.pi * c.radius / h)))
+def _circle_points(c: Circle, h: float, min_points: int = 16, count: int | None = None) -> np.ndarray:
+    """Counter-clockwise points on the circle, spacing about ``h``, or exactly ``count`` of them."""
+    n = count if count is not None else max(min_points, int(math.ceil(2 * math.pi * c.radius / h)))
     t = 2 * math.pi * np.arange(n) / n
     return np.column_stack([c.center[0] + c.radius * np.cos(t), c.center[1] + c.radius * np.sin(t)])
 
@@ -93,7 +94,8 @@ def _mirror_partner(c: Circle, holes: list[Circle], tol: float) -> int | None:
 def _axis_circle_points(c: Circle, h: float) -> np.ndarray:
     """Counter-clockwise points on a circle centred on x = 0, exactly mirror-symmetric."""
     n = 4 * max(4, int(math.ceil(2 * math.pi * c.radius / h / 4)))
-    pts = _circle_points(Circle((0.0, c.center[1]), c.radius), 2 * math.pi * c.radius / n, min_points=n)
+    # exactly n (a multiple of 4): recomputing n from the spacing can round up to n + 1
+    pts = _circle_points(Circle((0.0, c.center[1]), c.radius), h, count=n)
     k = np.arange(n // 4 + 1, 3 * n // 4)
     pts[k, 0] = -pts[n // 2 - k, 0]
     pts[k, 1] = pts[n // 2 - k, 1]
@@ -153,9 +155,14 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         xs = np.concatenate([-half[::-1], half[1:] if half[0] == 0 else half])
         pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
     interior = np.concatenate(pts)
-    keep = (_region(interior, outer, holes, filled) >= 0) & (_wall_distance(interior, outer, holes) > 0.7 * h)
+    def lattice_keep(p):
+        return (_region(p, outer, holes, filled) >= 0) & (_wall_distance(p, outer, holes) > 0.7 * h)
+
+    keep = lattice_keep(interior)
     if symmetric:
-        keep &= np.abs(interior[:, 0]) > 0.7 * h
+        # decided for a point and its mirror image together: round-off in a centre given as
+        # 1e-19 instead of 0 must not keep one and drop the other
+        keep &= lattice_keep(interior * np.array([-1.0, 1.0])) & (np.abs(interior[:, 0]) > 0.7 * h)
     interior = interior[keep]
     points = np.concatenate(boundary_pts + [interior])
     mirror = _mirror_map(points, tol) if symmetric else None
@@ -181,6 +188,8 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
             new = 0.5 * (new + new[mirror] * np.array([-1.0, 1.0]))
         # a node stays in its own region (silicone or fill), away from every wall
         ok = (_region(new, outer, holes, filled) == region0) & (_wall_distance(new, outer, holes) > 0.5 * h)
+        if mirror is not None:
+            ok &= ok[mirror]
         points = np.where((movable & ok)[:, None], new, points)
     regions = _region(points[tri].mean(axis=1), outer, holes, filled)
     _check_conforming(points, tri, boundary, regions, filled)
