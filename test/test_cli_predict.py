@@ -3,6 +3,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from softcath_ros.core.design import load_design
@@ -56,3 +57,19 @@ def test_every_subcommand_has_help():
     for name in SUBCOMMANDS:
         r = softcath(name, "--help")
         assert r.returncode == 0 and "usage" in r.stdout
+
+
+def test_predict_reports_the_rods_own_tip_and_contact_force():
+    """A rung that solves its backbone under loads (the rod at the blocking bench) reports its own
+    tip (held on the scale, y = 0), not a constant-curvature arc, and the contact force."""
+    from softcath_ros.core.models import make_model
+    from softcath_ros.core.prediction import predict
+    from softcath_ros.core.scene import load_scene
+
+    bench = load_scene("blocking_force_bench")
+    rod = make_model("rod", bench.design, loads=bench.loads, mesh_size=0.005 / 12)
+    (r,) = predict(rod, np.array([[10000.0]]))
+    assert r.converged and abs(r.tip_position_m[1]) < 1e-9 and r.contact_force_n > 0.005
+    assert "contact_force_n" in r.to_json()
+    free = predict(make_model("closed_form", bench.design), np.array([[10000.0]]))[0]
+    assert free.tip_position_m[1] < -1e-4 and "contact_force_n" not in free.to_json()

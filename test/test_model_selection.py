@@ -1,5 +1,6 @@
 """Scenes and `model: auto`: validation that names field and value, and the selection rule
 (cheapest rung that models the scene, is valid over its pressures, meets accuracy and rate)."""
+import re
 import subprocess
 import sys
 
@@ -122,11 +123,23 @@ def test_picks_rod_for_the_blocking_bench_once_measured(monkeypatch):
     assert select_model(scene(), env).rung == "surrogate"
 
 
-def test_predict_cli_auto_says_what_it_picked():
+def test_predict_cli_auto_says_what_it_picked(tmp_path):
+    """The shipped blocking scene goes to the rod (the only rung with contact); the same scene to
+    0.35 bar, beyond the rod's measured range, is refused with every rung's reason."""
+    import yaml
+
+    from softcath_ros.core.scene import SCENES_DIR
+
+    if "rod" in load_envelope()["rungs"]:
+        assert select_model(load_scene("blocking_force_bench"), load_envelope()).rung == "rod"
+    raw = yaml.safe_load((SCENES_DIR / "blocking_force_bench.yaml").read_text())
+    raw["pressure_range"] = [0.0, 35000.0]
+    (tmp_path / "bench_035.yaml").write_text(yaml.safe_dump(raw))
     r = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
-                        "--model", "auto", "--scene", "blocking_force_bench", "--pressure", "0.1", "--unit", "bar"],
-                       capture_output=True, text=True, timeout=60)
+                        "--model", "auto", "--scene", str(tmp_path / "bench_035.yaml"), "--pressure", "0.1",
+                        "--unit", "bar"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no rung qualifies" in r.stderr and "contact" in r.stderr
+    assert re.search(r"rod: valid over 0..\d+ Pa only", r.stderr) or "rod" not in load_envelope()["rungs"]
 
 
 def test_selection_uses_the_envelope_measured_at_the_scenes_length():

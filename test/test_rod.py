@@ -67,7 +67,7 @@ def test_unloaded_rod_is_its_source_rung(design, free_rod):
     np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
     # the backbone is the source's arc: tip angle = |k| * arc length, and it bends to -y
     assert a.extras["tip_angle"][2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
-    assert a.extras["tip_position"][2, 1] < 0 and np.all(a.extras["contact_force"] == 0)
+    assert a.extras["tip_position"][2, 1] < 0 and "contact_force" not in a.extras   # nothing to touch
 
 
 def test_small_tip_force_matches_linear_beam_theory(design, free_rod):

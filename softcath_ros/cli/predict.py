@@ -50,12 +50,12 @@ def run(args) -> int:
     results = predict(model, pressures, args.length)
     if args.json:
         json.dump({"model": model.name, "design": design.name,
-                   "length_m": args.length if args.length is not None else design.length,
+                   "length_m": args.length if args.length is not None else model.design.length,
                    "results": [r.to_json() for r in results]}, sys.stdout, indent=2)
         print()
     else:
         print(f"model {model.name}, design {design.name}, length "
-              f"{(args.length or design.length) * 1e3:.1f} mm")
+              f"{(args.length or model.design.length) * 1e3:.1f} mm")
         print(f"{'pressure [bar]':>18} {'R_C [mm]':>10} {'angle [deg]':>12} {'tip x,y,z [mm]':>28}")
         for r in results:
             ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in r.pressures_pa)
@@ -63,8 +63,9 @@ def run(args) -> int:
                 print(f"{ps:>18}  did not converge: {r.reason}")
                 continue
             tip = ",".join(f"{v * 1e3:.2f}" for v in r.tip_position_m)
+            force = "" if r.contact_force_n is None else f"   contact force {r.contact_force_n * 1e3:.2f} mN"
             print(f"{ps:>18} {format_mm(r.radius_of_curvature_m):>10} "
-                  f"{math.degrees(r.bending_angle_rad):12.2f} {tip:>28}")
+                  f"{math.degrees(r.bending_angle_rad):12.2f} {tip:>28}{force}")
     if over:
         print(f"warning: some pressures exceed the design's max_pressure {design.max_pressure:g} Pa",
               file=sys.stderr)

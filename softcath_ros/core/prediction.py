@@ -23,6 +23,7 @@ class Prediction:
     converged: bool
     solve_time_s: float
     reason: str = ""
+    contact_force_n: float | None = None   # the tip's contact reaction, for rungs that model contact
 
     def to_json(self) -> dict:
         d = dict(self.__dict__)
@@ -30,19 +31,32 @@ class Prediction:
             d.pop("reason")
         else:  # never print numbers from a solve that failed
             for key in ("curvature_per_m", "axial_stretch", "radius_of_curvature_m", "bending_angle_rad",
-                        "tip_position_m", "tip_orientation_xyzw"):
+                        "tip_position_m", "tip_orientation_xyzw", "contact_force_n"):
                 d[key] = None
+        if d["contact_force_n"] is None:   # only rungs that model contact report it
+            d.pop("contact_force_n")
         return d
 
 
+
 def predict(model: BendModel, pressures: np.ndarray, length: float | None = None) -> list[Prediction]:
-    """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m)."""
+    """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m).
+
+    The tip pose is the constant-curvature arc's, unless the rung solves the backbone itself
+    (the rod under loads: its extras carry the tip pose, which no single arc reproduces)."""
+    own_length = length is None
     length = model.design.length if length is None else length
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
     elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)
     arc = length * state.axial_stretch
     pos, quat = tip_pose(state.curvature, arc)
+    angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
+    if own_length and "tip_position" in state.extras:
+        pos = np.asarray(state.extras["tip_position"], dtype=float)
+        quat = np.asarray(state.extras["tip_orientation_xyzw"], dtype=float)
+        angle = np.asarray(state.extras["tip_angle"], dtype=float)
+    contact = state.extras.get("contact_force")
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]
@@ -52,12 +66,13 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             curvature_per_m=[float(v) for v in k],
             axial_stretch=float(state.axial_stretch[i]),
             radius_of_curvature_m=(1.0 / kappa) if kappa > 0 else None,
-            bending_angle_rad=kappa * float(arc[i]),
+            bending_angle_rad=float(angle[i]),
             tip_position_m=[float(v) for v in pos[i]],
             tip_orientation_xyzw=[float(v) for v in quat[i]],
             converged=bool(state.converged[i]),
             solve_time_s=elapsed,
-            reason="" if state.converged[i] else (state.message or "did not converge")))
+            reason="" if state.converged[i] else (state.message or "did not converge"),
+            contact_force_n=None if contact is None else float(np.asarray(contact)[i])))
     return out
 
 

@@ -156,10 +156,12 @@ class RodModel(BendModel):
             tip_q[i] = [-e[1] * math.sin(th / 2), e[0] * math.sin(th / 2), 0.0, math.cos(th / 2)]
             force[i] = sol.contact_force
             angle[i] = th
+        extras = {"backbone": backbone, "tip_position": backbone[:, -1], "tip_orientation_xyzw": tip_q,
+                  "tip_angle": angle, "law": self.law.source}
+        if self.loads.contact is not None:   # a contact force only where there is something to touch
+            extras["contact_force"] = force
         return BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
-                         message="; ".join(messages),
-                         extras={"backbone": backbone, "tip_position": backbone[:, -1], "tip_orientation_xyzw": tip_q,
-                                 "contact_force": force, "tip_angle": angle, "law": self.law.source})
+                         message="; ".join(messages), extras=extras)
 
 
 __all__ = ["RodModel"]
