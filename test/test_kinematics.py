@@ -117,3 +117,17 @@ def test_scalar_tip_pose_matches_vectorised():
         spos, sq = tip_pose_single(k[0], k[1], L)
         np.testing.assert_allclose(spos, pos, rtol=1e-13, atol=1e-18)
         np.testing.assert_allclose(sq, q, rtol=1e-13, atol=1e-18)
+
+
+def test_planar_backbone_poses_reproduce_an_arc():
+    """Resampling a solved backbone (as the rod gives) returns the arc's own poses for an arc."""
+    from softcath_ros.core.kinematics import backbone_poses, planar_backbone_poses
+
+    k = np.array([0.0, -40.0])
+    dense, _ = backbone_poses(k, 0.03, 2001)
+    pos, quat = planar_backbone_poses(dense, 11)
+    ref_pos, ref_quat = backbone_poses(k, 0.03, 11)
+    np.testing.assert_allclose(pos, ref_pos, atol=1e-8)
+    np.testing.assert_allclose(quat, ref_quat, atol=1e-5)
+    straight, q0 = planar_backbone_poses(np.column_stack([np.zeros(5), np.zeros(5), np.linspace(0, 0.02, 5)]), 3)
+    np.testing.assert_allclose(q0, [[0, 0, 0, 1]] * 3, atol=1e-12)

@@ -127,3 +127,27 @@ def tip_pose_single(kx: float, ky: float, arc_length: float):
     sg = s * 0.5 * sinc_half
     return ((kx * s2f2, ky * s2f2, s * _sinc_scalar(theta)),
             (-ky * sg, kx * sg, 0.0, math.cos(half)))
+
+
+def planar_backbone_poses(points, n_points: int):
+    """Poses at ``n_points`` equally spaced (by arc length) along a solved planar backbone.
+
+    ``points`` (M, 3) m, from the base (0, 0, 0) along z, bending in a vertical plane (the rod
+    under loads, whose shape is no single arc). Orientation: the rotation that takes z to the
+    local tangent about the axis normal to that plane, as for an arc (module docstring).
+    """
+    pts = np.asarray(points, dtype=float)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    at = np.linspace(0.0, s[-1], n_points)
+    pos = np.column_stack([np.interp(at, s, pts[:, j]) for j in range(3)])
+    tangent = np.gradient(pts, s, axis=0, edge_order=2)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    lateral = tangent[:, :2]
+    # the bending plane's in-plane direction e (unit, xy): where the backbone leans most
+    lean = pts[np.argmax(np.hypot(pts[:, 0], pts[:, 1])), :2]
+    norm = np.hypot(*lean)
+    e = lean / norm if norm > 0 else np.array([0.0, -1.0])
+    phi = np.interp(at, s, np.arctan2(lateral @ e, tangent[:, 2]))
+    quats = np.column_stack([-e[1] * np.sin(phi / 2), e[0] * np.sin(phi / 2), np.zeros_like(phi), np.cos(phi / 2)])
+    return pos, quats

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kinematics import tip_pose
+from .kinematics import backbone_poses, planar_backbone_poses, tip_pose
 from .models.base import BendModel
 
 
@@ -74,6 +74,18 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             reason="" if state.converged[i] else (state.message or "did not converge"),
             contact_force_n=None if contact is None else float(np.asarray(contact)[i])))
     return out
+
+
+def state_backbone(state, length: float, n_points: int, index: int = 0):
+    """Backbone poses (n_points, 3), (n_points, 4) of one command of ``state``: the rung's own
+    solved backbone when it has one (the rod under loads), else the constant-curvature arc of
+    arc length ``length`` x stretch."""
+    solved = state.extras.get("backbone")
+    if solved is not None:
+        return planar_backbone_poses(np.asarray(solved)[index], n_points)
+    k = np.asarray(state.curvature).reshape(-1, 2)[index]
+    stretch = float(np.asarray(state.axial_stretch).reshape(-1)[index])
+    return backbone_poses(k, length * stretch, n_points)
 
 
 def format_mm(value_m: float | None) -> str:

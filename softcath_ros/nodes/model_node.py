@@ -28,6 +28,7 @@ from ..core.answer_load import AnswerLoad
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
+from ..core.prediction import state_backbone
 from ..core.models import make_model
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
@@ -178,6 +179,7 @@ class ModelNode(Node):
                                    throttle_duration_sec=WARN_THROTTLE_S)
         if self._fast is not None:
             curvature, stretch = self._fast(check.pressures)
+            positions, quats = backbone_poses(curvature, self.length * stretch, self.n_points)
         else:
             try:
                 state = self.model.evaluate(check.pressures)
@@ -185,8 +187,7 @@ class ModelNode(Node):
                 return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
             if not bool(state.converged):
                 return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
-            curvature, stretch = state.curvature, float(state.axial_stretch)
-        positions, quats = backbone_poses(curvature, self.length * stretch, self.n_points)
+            positions, quats = state_backbone(state, self.length, self.n_points)
         if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
             return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
         c.accepted += 1
