@@ -140,16 +140,49 @@ def z_levels(design: Design, settings: MeshSettings) -> tuple[np.ndarray, int]:
     return z, n_open
 
 
+def ring_bands(design: Design) -> list[tuple[float, float]]:
+    """(z0, z1) of each discrete reinforcement ring on the outer surface: threads of width
+    ``thread_diameter`` centred at (j + 1/2) pitch along the whole body, cap included."""
+    r = design.reinforcement
+    n = int(math.floor(design.length / r.pitch + 1e-9))
+    half = 0.5 * r.thread_diameter
+    return [((j + 0.5) * r.pitch - half, (j + 0.5) * r.pitch + half) for j in range(n)]
+
+
+def z_levels_with_rings(design: Design, settings: MeshSettings) -> tuple[np.ndarray, int]:
+    """Layer boundaries that resolve every ring band (one layer across a band, the gaps split to
+    at most ``layer_h``), plus the cap's start: many more layers than the membrane needs."""
+    l_open = design.length - design.cap_thickness
+    cuts = {0.0, l_open, design.length}
+    for z0, z1 in ring_bands(design):
+        cuts.update((z0, z1))
+    cuts = np.array(sorted(c for c in cuts if 0.0 <= c <= design.length))
+    z = [cuts[0]]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if b - a < 1e-9:
+            continue
+        k = max(1, math.ceil((b - a) / settings.layer_h - 1e-9))
+        z.extend(np.linspace(a, b, k + 1)[1:])
+    z = np.array(z)
+    return z, int(np.argmin(np.abs(z - l_open)))
+
+
 def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None,
-               lumen_fill: bool = False) -> PrismMesh:
+               lumen_fill: bool = False, rings: bool = False) -> PrismMesh:
     """The 3D prism mesh (netgen Mesh with named regions and boundaries). ``lumen_fill``:
-    mesh the (empty) lumen as a ``fill`` region."""
+    mesh the (empty) lumen as a ``fill`` region. ``rings``: resolve the reinforcement's
+    discrete rings along z; the outer faces under a ring are the boundary ``ring``."""
     import netgen.meshing as nm
 
     if half is None:
         half = can_use_half_model(design)
     sec = mesh_section(design, settings, half)
-    z, n_open = z_levels(design, settings)
+    rings = rings and design.reinforcement is not None
+    z, n_open = z_levels_with_rings(design, settings) if rings else z_levels(design, settings)
+    z_mid = 0.5 * (z[:-1] + z[1:])
+    under_ring = np.zeros(len(z_mid), dtype=bool)
+    for z0, z1 in (ring_bands(design) if rings else []):
+        under_ring |= (z_mid > z0) & (z_mid < z1)
     n_pts, n_lev = len(sec.points), len(z)
     m = nm.Mesh(dim=3)
     pnums = []
@@ -220,7 +253,7 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None,
                 if half and abs(pts[a][0]) < 1e-12 and abs(pts[b][0]) < 1e-12:
                     name = "sym"
                 elif abs(math.hypot(*mid) - outer_r) < 0.05 * outer_r:
-                    name = "outer"
+                    name = "ring" if under_ring[k] else "outer"
                 else:  # a half hole cut by the symmetry plane has no other free edges
                     name = "sym"
             # Quad a_k b_k b_k+1 a_k+1 oriented with its normal pointing out of the solid.

@@ -71,16 +71,20 @@ class Fe3dProblem:
 
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
-                 lumen_fill: float | None = None, formulation: str = "mixed"):
+                 lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane"):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
         silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
-        "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison)."""
+        "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
+        ``reinforcement``: "membrane" (homogenised hoop layer, stiffness E A / pitch on the whole
+        outer surface) or "rings" (discrete rings: E A / thread width on the bands under the
+        threads only, the mesh resolving each band)."""
         ng = _ng()
         ng.SetNumThreads(newton.threads)
         self.design = design
         self.formulation = formulation
         self.newton_settings = newton
-        self.prism: PrismMesh = build_mesh(design, mesh_settings, half, lumen_fill=bool(lumen_fill))
+        self.prism: PrismMesh = build_mesh(design, mesh_settings, half, lumen_fill=bool(lumen_fill),
+                                           rings=reinforcement == "rings")
         self.half = self.prism.half
         self.mirror = 2.0 if self.half else 1.0
         mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
@@ -103,7 +107,10 @@ class Fe3dProblem:
             mu = 2.0 * design.material.c1 * float(lumen_fill)
             a += ng.Variation(self._fill_energy(F, mu).Compile() * ng.dx(definedon=mesh.Materials("fill")))
         r = design.reinforcement
-        if r is not None:
+        if r is not None and reinforcement == "rings":
+            a += ng.Variation(self._hoop_energy(u, r.youngs_modulus * r.thread_area / r.thread_diameter)
+                              * ng.ds("ring"))
+        elif r is not None:
             a += ng.Variation(self._hoop_energy(u, r.hoop_stiffness_per_length) * ng.ds("outer"))
         self.volume_forms = []
         for i, _ in enumerate(design.channels):

@@ -35,7 +35,8 @@ class Fe3dModel(BendModel):
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache: bool = True, progress: bool = False, threads: int = 2,
-                 lumen_fill: float | None = None, formulation: str = "mixed"):
+                 lumen_fill: float | None = None, formulation: str = "mixed",
+                 reinforcement: str = "membrane"):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
         ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
         load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
@@ -43,7 +44,9 @@ class Fe3dModel(BendModel):
         proxy that lets short bodies pass the lumen's collapse; core/fe3d/solver.py).
         ``formulation``: "mixed" (P2 displacement + element-wise pressure, the default) or
         "displacement" (P2 displacement only, which locks for nearly incompressible silicone;
-        kept to measure how much a standard element would stiffen the body)."""
+        kept to measure how much a standard element would stiffen the body).
+        ``reinforcement``: "membrane" (homogenised hoop layer, the default) or "rings" (each
+        ring resolved by the mesh along z: many more layers, for the comparison)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -66,6 +69,9 @@ class Fe3dModel(BendModel):
         if formulation not in ("mixed", "displacement"):
             raise ModelError(f"fe3d: formulation = {formulation!r} must be 'mixed' or 'displacement'")
         self.formulation = formulation
+        if reinforcement not in ("membrane", "rings"):
+            raise ModelError(f"fe3d: reinforcement = {reinforcement!r} must be 'membrane' or 'rings'")
+        self.reinforcement = reinforcement
         self.use_cache = cache
         self.progress = progress
         self._problem = None
@@ -75,7 +81,8 @@ class Fe3dModel(BendModel):
                                 tangent_predictor, self.half,
                                 # options added later enter the key only when set, so old entries stay valid
                                 *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
-                                *([] if formulation == "mixed" else [{"formulation": formulation}]))
+                                *([] if formulation == "mixed" else [{"formulation": formulation}]),
+                                *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]))
 
     # ------------------------------------------------------------------ plumbing
     @property
@@ -84,7 +91,8 @@ class Fe3dModel(BendModel):
             from ..fe3d.solver import Fe3dProblem
 
             self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half,
-                                        lumen_fill=self.lumen_fill, formulation=self.formulation)
+                                        lumen_fill=self.lumen_fill, formulation=self.formulation,
+                                        reinforcement=self.reinforcement)
         return self._problem
 
     def _cache_path(self):
