@@ -206,3 +206,19 @@ def test_three_channel_design_with_a_central_lumen_bends_away_from_its_channel()
     assert ky < 0 and abs(math.degrees(math.atan2(kx, -ky))) < 2.0
     tip = np.asarray(state.extras["tip_position_m"][0])   # extras stay per command
     assert tip[1] < 0 and 0.009 < tip[2] < 0.0105
+
+
+def test_discrete_rings_are_resolved_bands_on_the_outer_surface(short_design):
+    """reinforcement='rings': one band per ring (floor(L / pitch) of them), each thread_diameter
+    wide, on the outer surface; the membrane option keeps one 'outer' surface; bad names refused."""
+    import ngsolve as ng
+
+    rings = Fe3dModel(short_design, mesh=COARSE, cache=False, reinforcement="rings").problem
+    r = short_design.reinforcement
+    n = int(short_design.length / r.pitch + 1e-9)
+    band_area = ng.Integrate(ng.CF(1.0), rings.mesh, definedon=rings.mesh.Boundaries("ring")) * rings.mirror
+    assert band_area == pytest.approx(n * r.thread_diameter * math.pi * short_design.outer_diameter, rel=0.01)
+    membrane = Fe3dModel(short_design, mesh=COARSE, cache=False).problem
+    assert "ring" not in membrane.mesh.GetBoundaries()
+    with pytest.raises(ModelError, match="reinforcement"):
+        Fe3dModel(short_design, mesh=COARSE, reinforcement="helix")
