@@ -182,7 +182,11 @@ def plot() -> str:
         for v in variants:
             r = next((r for r in rows if r["variant"] == v and r["pressure_bar"] == p), None)
             vals.append(100 * r["error_vs_published"] if r and r["error_vs_published"] is not None else np.nan)
-        ax.bar(np.arange(len(variants)) + (j - 0.5) * width, vals, width, label=f"{p:.2f} bar")
+        x = np.arange(len(variants)) + (j - 0.5) * width
+        ax.bar(x, vals, width, label=f"{p:.2f} bar")
+        for xi, v in zip(x, vals):   # a variant that stopped before this pressure says so
+            if np.isnan(v):
+                ax.text(xi, 0.5, "did not converge", rotation=90, ha="center", va="bottom", fontsize=6)
     ax.axhspan(-5, 5, color="g", alpha=0.12, label="target +-5%")
     ax.axhline(0, color="k", lw=0.8)
     ax.set_xticks(np.arange(len(variants)), variants, rotation=30, ha="right", fontsize=8)
