@@ -56,12 +56,28 @@ def main(argv=None) -> int:
 
     sec = problem.prism.section
     pts3 = np.column_stack([sec.points, np.full(len(sec.points), z)])
-    u = np.asarray(problem.u(problem.mesh(pts3[:, 0], pts3[:, 1], pts3[:, 2]))).reshape(-1, 3)
-    jac = np.asarray(problem.J(problem.mesh(pts3[:, 0], pts3[:, 1], pts3[:, 2]))).ravel()
+    # Sample a hair inside a solid triangle next to each point (boundary points can fall outside
+    # the mesh by round-off) and a hair below the layer boundary (above it for the base).
+    solid_tri = [t for t, r in zip(sec.triangles, sec.region) if r in ("silicone", "fibre")]
+    inward = np.zeros_like(sec.points)
+    for tri in solid_tri:
+        inward[tri] = sec.points[tri].mean(axis=0) - sec.points[tri]
+    probe = pts3.copy()
+    probe[:, :2] += 1e-3 * inward
+    probe[:, 2] += -1e-9 if z > 0 else 1e-9
+    used = np.any(inward != 0.0, axis=1)
+    u = np.zeros_like(pts3)
+    jac = np.ones(len(pts3))
+    u[used] = np.asarray(problem.u(problem.mesh(*probe[used].T))).reshape(-1, 3)
+    jac[used] = np.asarray(problem.J(problem.mesh(*probe[used].T))).ravel()
     deformed = pts3 + u
-    # The layer's section in its own (rotated) frame: undo its best-fit rigid rotation.
-    rot = best_fit_rotation(pts3, deformed)
-    local = (deformed - deformed.mean(axis=0)) @ rot + pts3.mean(axis=0)
+    # The layer's section in its own (rotated) frame: undo the best-fit rigid rotation of the
+    # whole section (the half model mirrored first, so the fit has no spurious twist).
+    flip = np.array([-1.0, 1.0, 1.0])
+    ref_all = np.vstack([pts3, pts3 * flip]) if problem.half else pts3
+    def_all = np.vstack([deformed, deformed * flip]) if problem.half else deformed
+    rot = best_fit_rotation(ref_all, def_all)
+    local = (deformed - def_all.mean(axis=0)) @ rot + ref_all.mean(axis=0)
     rows = [{"x_mm": float(p[0] * 1e3), "y_mm": float(p[1] * 1e3), "ux_mm": float(d[0] * 1e3),
              "uy_mm": float(d[1] * 1e3), "uz_mm": float(d[2] * 1e3), "det_F": float(j)}
             for p, d, j in zip(sec.points, u, jac)]
