@@ -5,7 +5,7 @@ Lagrangian, statically condensed). Total potential, stationary at equilibrium:
 
     Pi(u, q) = int W_iso(F) + q (J - 1) - q^2 / (2 K) dX        (body, fibre, device)
              + int W_fill(F) dX                                   (optional soft lumen fill)
-             + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement, outer surface)
+             + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement: outer surface, or ring bands)
              - s sum_i d_i V_i(u)                                 (follower pressure on channel i)
 
 with s the load factor and d_i the pressure per unit s of channel i. V_i, the enclosed
@@ -244,8 +244,8 @@ class Fe3dProblem:
         mean_j.Set(self.J - self._jacobian_floor())   # lowest margin over the region's floor
         values = mean_j.vec.FV().NumPy()
         i = int(np.argmin(values))
-        floor = 1e-4 if self.has_fill and self.mesh[ng.ElementId(ng.VOL, i)].mat == "fill" else 0.02
         el = self.mesh[ng.ElementId(ng.VOL, i)]
+        floor = 1e-4 if el.mat == "fill" else 0.02
         centre = np.mean([self.mesh[v].point for v in el.vertices], axis=0)
         d = self.design
         surfaces = {f"channel{k} wall": (c.center, c.radius) for k, c in enumerate(d.channels)}
