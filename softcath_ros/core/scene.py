@@ -132,18 +132,12 @@ def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
         raise SceneError("loads", loads, "must be a mapping with tip_force and/or contact")
     tip = loads.get("tip_force")
     if tip is not None:
-        if not isinstance(tip, list) or len(tip) != 3:
-            raise SceneError("loads.tip_force", tip, "must be null or [fx, fy, fz] in N")
-        tip = tuple(_number(v, "loads.tip_force") for v in tip)
+        tip = _vector(tip, "loads.tip_force", "must be null or [fx, fy, fz] in N")
     contact = _contact(loads.get("contact"))
     gravity = raw.get("gravity", False)
-    if gravity is False or gravity is None:
-        gravity = None
-    elif isinstance(gravity, list) and len(gravity) == 3:
-        gravity = tuple(_number(v, "gravity") for v in gravity)
-    else:
-        raise SceneError("gravity", gravity, "must be false or the acceleration [gx, gy, gz] in m/s^2 "
-                         "(softcath_base, e.g. [0, -9.81, 0])")
+    gravity = None if gravity is False or gravity is None else _vector(
+        gravity, "gravity", "must be false or the acceleration [gx, gy, gz] in m/s^2 (softcath_base, "
+        "e.g. [0, -9.81, 0])")
     pr = raw["pressure_range"]
     if not isinstance(pr, list) or len(pr) != 2:
         raise SceneError("pressure_range", pr, "must be [low, high] in Pa")
@@ -160,9 +154,10 @@ def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
                  description=desc if isinstance(desc, str) else "")
 
 
-def _vector(value, field: str) -> tuple[float, float, float]:
+def _vector(value, field: str, form: str = "must be [x, y, z] (softcath_base)") -> tuple[float, float, float]:
+    """Three numbers; ``form`` is the error's reason when ``value`` is not a list of three."""
     if not isinstance(value, list) or len(value) != 3:
-        raise SceneError(field, value, "must be [x, y, z] (softcath_base)")
+        raise SceneError(field, value, form)
     return tuple(_number(v, field) for v in value)
 
 
