@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import RESULTS, write_results  # noqa: E402
+from results_io import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import best_fit_rotation  # noqa: E402
@@ -115,10 +115,7 @@ def draw(name, sec, deformed, jac, z, reached, message) -> str:
         ax.set_ylabel("y [mm]")
     fig.colorbar(pc, ax=axes, label="det F", shrink=0.8)
     fig.suptitle(f"fe3d section at z = {z * 1e3:.1f} mm: {message[:110]}", fontsize=7)
-    out = RESULTS / f"{name}.png"
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return str(out)
+    return save_figure(fig, name, dpi=110)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import RESULTS, write_results  # noqa: E402
+from results_io import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
@@ -87,10 +87,7 @@ def plot(name: str, rows: list[dict], length: float) -> str:
     ax.set_title(f"fe3d, {length * 1e3:.0f} mm body: rings vs membrane", fontsize=9)
     ax.legend()
     fig.tight_layout()
-    out = RESULTS / f"{name}.png"
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return str(out)
+    return save_figure(fig, name)
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import RESULTS, write_results  # noqa: E402
+from results_io import RESULTS, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
@@ -129,7 +129,7 @@ def main(argv=None) -> int:
             print(f"--- {name}: {VARIANTS[name][0]}", flush=True)
             out = run_variant(name, args.length, args.threads)
             # merge into what is on disk now (another run may have added variants meanwhile)
-            rows = [r for r in _load_rows() if r["variant"] != name] + out["rows"]
+            rows = [r for r in _load_doc()["results"] if r["variant"] != name] + out["rows"]
             messages[name] = out["message"]
             _write(rows, messages, args)   # after each variant: a long study keeps what finished
     except KeyboardInterrupt:
@@ -142,17 +142,17 @@ def _write(rows: list[dict], messages: dict, args) -> None:
     _add_deltas(rows)
     order = {n: i for i, n in enumerate(VARIANTS)}
     rows.sort(key=lambda r: (order.get(r["variant"], 99), r["pressure_bar"]))
-    previous = json.loads((RESULTS / f"{NAME}.json").read_text())["meta"].get("messages", {}) \
-        if (RESULTS / f"{NAME}.json").is_file() else {}
+    previous = _load_doc()["meta"].get("messages", {})
     meta = {"design": "implemented_5mm", "length_m": args.length, "mesh_size": 1.0, "threads": args.threads,
             "published_radius_mm": PUBLISHED_MM, "messages": {**previous, **messages},
             "note": "wall_s is the variant's whole ramp on a shared 2-core machine (see load_average)"}
     write_results(NAME, meta, rows)
 
 
-def _load_rows() -> list[dict]:
+def _load_doc() -> dict:
+    """The committed results (meta and rows), empty before the first run."""
     path = RESULTS / f"{NAME}.json"
-    return json.loads(path.read_text())["results"] if path.is_file() else []
+    return json.loads(path.read_text()) if path.is_file() else {"meta": {}, "results": []}
 
 
 def _add_deltas(rows: list[dict]) -> None:
@@ -172,7 +172,7 @@ def plot() -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    doc = json.loads((RESULTS / f"{NAME}.json").read_text())
+    doc = _load_doc()
     rows = doc["results"]
     variants = list(dict.fromkeys(r["variant"] for r in rows))
     fig, ax = plt.subplots(figsize=(9, 4.5))
@@ -195,10 +195,7 @@ def plot() -> str:
     ax.set_title(f"fe3d sensitivity, 40 mm, default mesh (load avg {doc['meta']['load_average'][0]:.1f})",
                  fontsize=9)
     fig.tight_layout()
-    out = RESULTS / f"{NAME}.png"
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return str(out)
+    return save_figure(fig, NAME)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import write_results  # noqa: E402
+from results_io import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
@@ -127,10 +127,7 @@ def plot(name: str) -> str:
     fig.suptitle(f"{name}: L = {meta['length_m'] * 1e3:.0f} mm, {meta['ndof']} DOF, {meta['total_s']:.0f} s "
                  f"(load avg {meta['load_average'][0]:.1f}); {status}", fontsize=9)
     fig.tight_layout()
-    out = RESULTS / f"{name}.png"
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return str(out)
+    return save_figure(fig, name)
 
 
 if __name__ == "__main__":

@@ -30,3 +30,13 @@ def write_results(name: str, meta: dict, rows: list[dict]) -> Path:
         w.writeheader()
         w.writerows(rows)
     return RESULTS / name
+
+
+def save_figure(fig, name: str, dpi: int = 100) -> str:
+    """The chart as benchmarks/results/<name>.png (the figure is closed); returns the path."""
+    import matplotlib.pyplot as plt
+
+    out = RESULTS / f"{name}.png"
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
+    return str(out)
