@@ -38,7 +38,6 @@ class Prediction:
         return d
 
 
-
 def predict(model: BendModel, pressures: np.ndarray, length: float | None = None) -> list[Prediction]:
     """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m).
 
@@ -49,13 +48,14 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
     elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)
-    arc = length * state.axial_stretch
-    pos, quat = tip_pose(state.curvature, arc)
-    angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     if own_length and "tip_position" in state.extras:
         pos = np.asarray(state.extras["tip_position"], dtype=float)
         quat = np.asarray(state.extras["tip_orientation_xyzw"], dtype=float)
         angle = np.asarray(state.extras["tip_angle"], dtype=float)
+    else:
+        arc = length * state.axial_stretch
+        pos, quat = tip_pose(state.curvature, arc)
+        angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.extras.get("contact_force")
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
