@@ -62,3 +62,14 @@ class BendModel:
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+def lumen_fill_fraction(value, rung: str) -> float | None:
+    """A rung's ``lumen_fill`` option checked: None (empty lumen) or the fill's shear modulus as a
+    fraction in (0, 1) of the silicone's. ``rung`` prefixes the error ("model 'section'", "fe3d")."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not 0.0 < float(value) < 1.0:
+        raise ModelError(f"{rung}: lumen_fill = {value!r} must be a fraction of the silicone's shear modulus "
+                         "in (0, 1), or None for an empty lumen")
+    return float(value)

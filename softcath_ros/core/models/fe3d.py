@@ -24,7 +24,7 @@ import numpy as np
 from ..cache import cache_dir, key_of
 from ..design import Design
 from ..errors import ModelError
-from .base import BendModel, BendState
+from .base import BendModel, BendState, lumen_fill_fraction
 
 CODE_VERSION = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
 
@@ -62,10 +62,7 @@ class Fe3dModel(BendModel):
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
         self.half = can_use_half_model(design) if half is None else half
-        if lumen_fill is not None and not (0.0 < float(lumen_fill) < 1.0):
-            raise ModelError(f"fe3d: lumen_fill = {lumen_fill!r} must be a fraction of the silicone's shear "
-                             "modulus in (0, 1), or None for an empty lumen")
-        self.lumen_fill = None if lumen_fill is None else float(lumen_fill)
+        self.lumen_fill = lumen_fill_fraction(lumen_fill, "fe3d")
         if formulation not in ("mixed", "displacement"):
             raise ModelError(f"fe3d: formulation = {formulation!r} must be 'mixed' or 'displacement'")
         self.formulation = formulation

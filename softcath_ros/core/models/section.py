@@ -32,7 +32,7 @@ from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
 from ..section_fe.solver import LinearSolver, newton
-from .base import BendModel, BendState
+from .base import BendModel, BendState, lumen_fill_fraction
 from ..units import PA_PER_BAR
 
 # Bump when the discretisation or the solver changes what a cached result would be.
@@ -87,11 +87,8 @@ class SectionModel(BendModel):
         except TypeError as exc:
             raise ModelError(f"model 'section': {exc}; settings: {list(SectionSettings.__annotations__)}") from None
         h = self.settings.resolved_mesh_size(design)
-        fill = self.settings.lumen_fill
+        fill = lumen_fill_fraction(self.settings.lumen_fill, "model 'section'")
         if fill is not None:
-            if isinstance(fill, bool) or not 0.0 < float(fill) < 1.0:
-                raise ModelError(f"model 'section': lumen_fill = {fill!r} must be a fraction of the silicone's "
-                                 "shear modulus in (0, 1), or None for an empty lumen")
             if design.lumen is None:
                 raise ModelError(f"model 'section': lumen_fill = {fill!r} but design '{design.name}' has no lumen")
         holes = [Circle(c.center, c.radius) for c in design.channels]
@@ -104,7 +101,7 @@ class SectionModel(BendModel):
                              "'follower' or 'end_cap'")
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
                                       end_cap_only=self.settings.pressure_load == "end_cap",
-                                      lumen_fill=None if fill is None else float(fill))
+                                      lumen_fill=fill)
         self.linear = LinearSolver()
         self.progress = progress
         if cache is True:
