@@ -116,8 +116,8 @@ class TabulatedLaw:
         i0 = int(np.flatnonzero(ks == 0)[0])
         ok = np.isfinite(M[i0])
         # the law ends where the held-straight section stops or fewer than 4 curvatures remain
-        n_valid = np.array([self._block(np.isfinite(M[:, j]), i0)[1] - self._block(np.isfinite(M[:, j]), i0)[0]
-                            for j in range(len(ps))])
+        blocks = [self._block(np.isfinite(M[:, j]), i0) for j in range(len(ps))]
+        n_valid = np.array([hi - lo for lo, hi in blocks])
         good = ok & (n_valid >= 4)
         last = int(np.argmin(good)) - 1 if not good.all() else len(ps) - 1
         if last < 1:
