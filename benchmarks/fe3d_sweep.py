@@ -27,6 +27,7 @@ from results_io import save_figure, write_results  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 PUBLISHED_40MM = {15000.0: 31.13e-3, 20000.0: 16.86e-3}   # actuator.md: R_C of the published FE
 
@@ -49,10 +50,10 @@ def main(argv=None) -> int:
         return 0
 
     design = load_design(args.design).with_length(args.length)
-    checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * 1e5
+    checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * PA_PER_BAR
     control = None
     if args.fixed_steps is not None:
-        control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * 1e5)
+        control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
     model = Fe3dModel(design, mesh_size=args.mesh_size, step_control=control, cache=False, progress=True,
                       tangent_predictor=args.fixed_steps is None, threads=args.threads)
     t0 = time.perf_counter()
@@ -68,7 +69,7 @@ def main(argv=None) -> int:
         rc = ex["radius_l_over_theta_m"] if ok else None
         pub = PUBLISHED_40MM.get(float(p)) if abs(args.length - 0.040) < 1e-9 else None
         rows.append({
-            "pressure_bar": float(p) / 1e5, "converged": ok,
+            "pressure_bar": float(p) / PA_PER_BAR, "converged": ok,
             "bending_angle_deg": float(np.degrees(ex["bending_angle_rad"])) if ok else None,
             "radius_l_over_theta_mm": (rc * 1e3 if rc is not None and np.isfinite(rc) else None),
             "published_radius_mm": pub * 1e3 if pub else None,

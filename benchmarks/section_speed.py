@@ -22,8 +22,8 @@ import numpy as np
 from results_io import RESULTS, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
+from softcath_ros.core.units import PA_PER_BAR
 
-BAR = 1e5
 PUBLISHED_RC_MM = {0.15: 31.13, 0.20: 16.86}   # 3D FE, 40 mm (actuator.md)
 
 
@@ -44,8 +44,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     design = load_design(args.design)
-    sweep = np.linspace(0.0, 0.35 * BAR, 15)[:, None]
-    converged_only = np.linspace(0.0, 0.275 * BAR, 12)[:, None]
+    sweep = np.linspace(0.0, 0.35 * PA_PER_BAR, 15)[:, None]
+    converged_only = np.linspace(0.0, 0.275 * PA_PER_BAR, 12)[:, None]
     rows = []
     curves = {}
     cases = [("0-0.35 bar, 15 commands", sweep, design.outer_diameter / 20),
@@ -71,7 +71,7 @@ def main() -> None:
         except ImportError:
             rss = float("nan")
         ok = state.converged
-        first_fail = float(ps[~ok][0, 0] / BAR) if (~ok).any() else None
+        first_fail = float(ps[~ok][0, 0] / PA_PER_BAR) if (~ok).any() else None
         last = next((x for x in state.extras["last_converged"] if x), None)
         rows.append({"case": case, "mesh_size_mm": h * 1e3, "mesh_nodes": model.mesh.n_nodes,
                      "commands": len(ps), "converged": int(ok.sum()),
@@ -81,19 +81,19 @@ def main() -> None:
                      "newton_iterations": int(state.extras["newton_iterations"].sum()),
                      "peak_traced_MB": peak / 2**20, "process_rss_MB": rss,
                      "first_failed_bar": first_fail,
-                     "last_converged_bar": None if last is None else last["pressure"][0] / BAR,
+                     "last_converged_bar": None if last is None else last["pressure"][0] / PA_PER_BAR,
                      "repeats": repeats})
         r = rows[-1]
         print(f"{case:42s} {r['mesh_nodes']:5d} nodes: sweep {r['median_sweep_s']:.2f} s "
               f"(min {r['min_sweep_s']:.2f}, CPU {r['median_sweep_cpu_s']:.2f}), setup {r['median_setup_s']:.2f} s, "
               f"{r['converged']}/{len(ps)} converged, peak {r['peak_traced_MB']:.1f} MB traced")
-        curves[case] = {"pressure_bar": (ps[:, 0] / BAR).tolist(),
+        curves[case] = {"pressure_bar": (ps[:, 0] / PA_PER_BAR).tolist(),
                         "radius_of_curvature_mm": [1e3 / (float(np.hypot(*k)) * lam) if c and np.hypot(*k) > 0 else None
                                                    for k, lam, c in zip(state.curvature, state.axial_stretch, ok)]}
         if (~ok).any():
             print(f"    {state.message.split(';')[0]}")
     closed = make_model("closed_form", design).evaluate(sweep)
-    curves["closed_form"] = {"pressure_bar": (sweep[:, 0] / BAR).tolist(),
+    curves["closed_form"] = {"pressure_bar": (sweep[:, 0] / PA_PER_BAR).tolist(),
                              "radius_of_curvature_mm": [1e3 / (float(np.hypot(*k)) * lam) if np.hypot(*k) > 0 else None
                                                         for k, lam in zip(closed.curvature, closed.axial_stretch)]}
     meta = {"design": args.design, "target_sweep_s": 2.0, "curves": curves,

@@ -16,11 +16,7 @@ import numpy as np
 from ..continuation import Correction, StepControl, ramp
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
-from ..units import PA_PER_BAR
-
-
-def describe_pressure(t: float) -> str:
-    return f"p = {t / PA_PER_BAR:.4f} bar"
+from ..units import PA_PER_BAR, describe_pressure
 
 
 def default_step_control(adaptive: bool = True, step: float = 1000.0) -> StepControl:

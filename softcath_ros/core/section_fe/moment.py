@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..continuation import Correction, StepControl, ramp
+from ..units import describe_pressure
 from .problem import SectionProblem
 from .solver import LinearSolver, newton
 
@@ -156,7 +157,7 @@ def moment_table(held: HeldSection, curvatures, pressures, pressure_direction, c
     i0 = int(np.flatnonzero(ks == 0)[0])
     rest = prob.consistent_pressures(prob.initial_state())
     straight = ramp(lambda guess, t, prev: held.solve(guess, 0.0, t * pdir), rest, ps[1:], control,
-                    describe=lambda t: f"p = {t / 1e5:.4f} bar")
+                    describe=describe_pressure)
     if not straight.converged:
         messages.append(f"held straight: {straight.message}")
     states = [rest] + [pt.state for pt in straight.points]
@@ -179,7 +180,7 @@ def moment_table(held: HeldSection, curvatures, pressures, pressure_direction, c
                 r = held.result(pt.state, pv)
                 moment[i, j], stretch[i, j] = r.moment, r.stretch
             if not res.converged:
-                messages.append(f"p = {ps[j] / 1e5:.4f} bar: {res.message}")
+                messages.append(f"{describe_pressure(ps[j])}: {res.message}")
         if on_point is not None:
             on_point()
     return MomentTable(curvatures=ks, pressures=ps, moment=moment, stretch=stretch, messages=messages,
