@@ -298,6 +298,18 @@ class SectionModel(BendModel):
         while len(self._states) > self._max_states:
             self._states.popitem(last=False)
 
+    def max_principal_stretch(self, pressures) -> float | None:
+        """Largest principal stretch anywhere in the silicone at a command this model has solved
+        (None if it has not): the strain measure a design's burst margin is judged by. F is block
+        diagonal (in-plane 2x2, axial F33), so the principal stretches are the 2x2 block's
+        singular values and F33."""
+        x = self._states.get(tuple(float(v) for v in pressures))
+        if x is None:
+            return None
+        F2, f33, _, _ = self.problem._element_kinematics(x)
+        in_plane = np.linalg.svd(F2, compute_uv=False)   # (e, q, 2)
+        return float(max(in_plane.max(), np.abs(f33).max()))
+
     def _outputs(self, x):
         lam, kr = self.problem.frame_state(x)
         return kr / self.design.outer_radius, lam, self.problem.channel_areas(x) * self.design.outer_radius ** 2

@@ -91,19 +91,7 @@ def _split_messages(message: str, n_failed: int) -> list[str]:
 
 
 def max_principal_stretch(model, pressures) -> float | None:
-    """Largest principal stretch anywhere in the silicone at a converged command (section rung).
-
-    Read from the rung's converged state for that command (kept by the model for
-    continuation); the deformation gradient is block diagonal (in-plane 2x2, axial F33), so
-    the principal stretches are the singular values of the 2x2 block and F33. None for rungs
-    that do not resolve the section's strain field."""
-    states = getattr(model, "_states", None)
-    problem = getattr(model, "problem", None)
-    if states is None or problem is None:
-        return None
-    x = states.get(tuple(float(v) for v in pressures))
-    if x is None:
-        return None
-    F2, f33, _, _ = problem._element_kinematics(x)
-    in_plane = np.linalg.svd(F2, compute_uv=False)   # (e, q, 2)
-    return float(max(in_plane.max(), np.abs(f33).max()))
+    """Largest principal stretch in the silicone at a converged command, from rungs that resolve
+    the section's strain field (``SectionModel.max_principal_stretch``); None for the others."""
+    of = getattr(model, "max_principal_stretch", None)
+    return None if of is None else of(pressures)
