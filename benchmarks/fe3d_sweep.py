@@ -6,7 +6,8 @@
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
 
 Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending angle,
-R_C = L/theta, curvature, stretch, channel volume/area, Newton iterations, wall time; the
+R_C = L/theta (and the section rung's at the same pressure with its relative difference:
+section vs 3D), curvature, stretch, channel volume/area, Newton iterations, wall time; the
 meta block holds the total time, peak RSS, DOF count, convergence and the failure message.
 Ctrl-C stops the sweep and writes what converged. Times are wall clock on a shared machine.
 """
@@ -26,6 +27,7 @@ from results_io import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
+from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -62,6 +64,11 @@ def main(argv=None) -> int:
     state, ramp = model.sweep(checkpoints[:, None])
     total = time.perf_counter() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    # the section rung at the same pressures, as the same R_C = L / theta (= 1 / (|k| lambda)):
+    # the section-vs-3D comparison of issue 3 (after the fe3d timing and memory were read)
+    section = make_model("section", design).evaluate(checkpoints[:, None])
+    section_rc = [1.0 / (float(np.hypot(*k)) * lam) if ok and np.hypot(*k) > 0 else None
+                  for k, lam, ok in zip(section.curvature, section.axial_stretch, section.converged)]
     rows = []
     for i, p in enumerate(checkpoints):
         ok = bool(state.converged[i])
@@ -74,6 +81,8 @@ def main(argv=None) -> int:
             "radius_l_over_theta_mm": (rc * 1e3 if rc is not None and np.isfinite(rc) else None),
             "published_radius_mm": pub * 1e3 if pub else None,
             "error_vs_published": ((rc - pub) / pub if (pub and rc) else None),
+            "section_radius_l_over_theta_mm": section_rc[i] * 1e3 if section_rc[i] else None,
+            "section_vs_fe3d": ((section_rc[i] - rc) / rc if (section_rc[i] and rc and np.isfinite(rc)) else None),
             "curvature_y_per_m": float(state.curvature[i, 1]) if ok else None,
             "axial_stretch": float(state.axial_stretch[i]) if ok else None,
             "channel_volume_mm3": (ex["channel_volume_m3"][0] * 1e9 if ok and ex["channel_volume_m3"] else None),
