@@ -34,7 +34,7 @@ TARGET_US = 100.0
 
 
 class EvaluateOnly(BendModel):
-    """A rung seen only through ``evaluate``: hides ``curvature_per_pa`` so the allocator takes
+    """A rung seen only through ``evaluate``: declares no linear gain, so the allocator takes
     its generic Newton path (what every non-linear rung gets)."""
 
     def __init__(self, model: BendModel):

@@ -53,7 +53,7 @@ def main(argv=None) -> int:
         print(f"{model_name}: {out[model_name][1]} DOF, {out[model_name][2]:.0f} s {state.message}", flush=True)
     rows = []
     for i, p in enumerate(pressures):
-        rc = {k: (v[0].extras["radius_l_over_theta_m"][i] if v[0].converged[i] else None) for k, v in out.items()}
+        rc = {k: (float(v[0].radius_l_over_theta[i]) if v[0].converged[i] else None) for k, v in out.items()}
         rows.append({"pressure_bar": float(p),
                      "membrane_radius_mm": rc["membrane"] * 1e3 if rc["membrane"] else None,
                      "rings_radius_mm": rc["rings"] * 1e3 if rc["rings"] else None,

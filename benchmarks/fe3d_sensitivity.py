@@ -99,10 +99,10 @@ def run_variant(name: str, length: float, threads: int) -> dict:
     rows = []
     for i, p in enumerate(PRESSURES_BAR):
         ok = bool(state.converged[i])
-        rc = state.extras["radius_l_over_theta_m"][i] if ok else None
+        rc = float(state.radius_l_over_theta[i]) if ok else None
         rows.append({"variant": name, "change": what, "pressure_bar": p, "converged": ok,
                      "radius_l_over_theta_mm": rc * 1e3 if rc else None,
-                     "bending_angle_deg": float(np.degrees(state.extras["bending_angle_rad"][i])) if ok else None,
+                     "bending_angle_deg": float(np.degrees(state.tip.angle[i])) if ok else None,
                      "wall_s": elapsed})
     if not bool(np.all(state.converged)):
         print(f"{name}: {state.message}")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import resource
 import sys
 import time
@@ -72,12 +73,13 @@ def main(argv=None) -> int:
     rows = []
     for i, p in enumerate(checkpoints):
         ok = bool(state.converged[i])
-        ex = {k: v[i] for k, v in state.extras.items()}
-        rc = ex["radius_l_over_theta_m"] if ok else None
+        diag = state.diagnostics
+        rc = float(state.radius_l_over_theta[i]) if ok else None
+        volume, area = float(diag.channel_volume[i, 0]), float(diag.channel_area[i, 0])   # NaN at p = 0
         pub = PUBLISHED_40MM.get(float(p)) if abs(args.length - 0.040) < 1e-9 else None
         rows.append({
             "pressure_bar": float(p) / PA_PER_BAR, "converged": ok,
-            "bending_angle_deg": float(np.degrees(ex["bending_angle_rad"])) if ok else None,
+            "bending_angle_deg": float(np.degrees(state.tip.angle[i])) if ok else None,
             "radius_l_over_theta_mm": (rc * 1e3 if rc is not None and np.isfinite(rc) else None),
             "published_radius_mm": pub * 1e3 if pub else None,
             "error_vs_published": ((rc - pub) / pub if (pub and rc) else None),
@@ -85,10 +87,10 @@ def main(argv=None) -> int:
             "section_vs_fe3d": ((section_rc[i] - rc) / rc if (section_rc[i] and rc and np.isfinite(rc)) else None),
             "curvature_y_per_m": float(state.curvature[i, 1]) if ok else None,
             "axial_stretch": float(state.axial_stretch[i]) if ok else None,
-            "channel_volume_mm3": (ex["channel_volume_m3"][0] * 1e9 if ok and ex["channel_volume_m3"] else None),
-            "channel_area_mm2": (ex["channel_area_m2"][0] * 1e6 if ok and ex["channel_area_m2"] else None),
-            "newton_iterations": ex["newton_iterations"] if ok else None,
-            "time_s": ex["time_s"] if ok else None})
+            "channel_volume_mm3": volume * 1e9 if ok and math.isfinite(volume) else None,
+            "channel_area_mm2": area * 1e6 if ok and math.isfinite(area) else None,
+            "newton_iterations": int(diag.newton_iterations[i]) if ok else None,
+            "time_s": float(diag.time_s[i]) if ok else None})
     meta = {"design": design.name, "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
             "mesh_size": args.mesh_size, "ndof": ndof, "half_model": model.half,
             "step_control": "fixed" if args.fixed_steps else "adaptive",

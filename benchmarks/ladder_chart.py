@@ -45,7 +45,7 @@ from results_io import RESULTS, machine_meta, write_results  # noqa: E402
 from softcath_ros.core.cache import cache_dir, key_of  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
-from softcath_ros.core.models import RUNGS, make_model  # noqa: E402
+from softcath_ros.core.models import RUNGS, make_model, rung_info  # noqa: E402
 from softcath_ros.core.prediction import predict  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -77,13 +77,6 @@ CASES = [
     Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), THREE_CH),
     Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), THREE_CH),
 ]
-# What each rung models (scene features, core/scene.py). The surrogate inherits its source's.
-CAPABILITIES = {"closed_form": ["free_bending", "device_stiffness"],
-                "section": ["free_bending", "device_stiffness"],
-                "surrogate": ["free_bending", "device_stiffness"],
-                "fe3d": ["free_bending", "device_stiffness"],
-                "rod": ["free_bending", "device_stiffness", "tip_load", "contact", "gravity"]}
-CAPABILITIES_SEEN: dict[str, list] = {}
 FE3D = ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0, "threads": 1}, True)
 # (label, rung, options, is a solver: timed as a cold sweep)
 SETTINGS = [
@@ -118,7 +111,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool) 
     sweep = time.perf_counter() - t0
     if rung == "fe3d":
         # minutes per sweep: its own cache is kept, and the cost is the ramp's recorded wall time
-        times = [t for t in model.evaluate(pressures).extras["time_s"] if t is not None]
+        times = [float(t) for t in model.evaluate(pressures).diagnostics.time_s if np.isfinite(t)]
         total = max(times) if times == sorted(times) else sum(times)
         per_eval = (total or sweep) / len(pressures)
     elif solver:
@@ -146,8 +139,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool) 
         boundary, beyond = float(mags[max(n_ok - 1, 0)]), n_ok < len(mags)
         first_failure = st.message.split("; ")[0] if beyond else ""
     out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
-           # a rung may say what it models (scene features); else the table above
-           "capabilities": list(getattr(model, "capabilities", None) or CAPABILITIES.get(rung, ["free_bending"])),
+           "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
            "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
            "predictions": [p.to_json() for p in preds]}
     path.write_text(json.dumps(out))
@@ -198,7 +190,6 @@ def run_case(case: Case, args) -> tuple[list[dict], str]:
                          "s_per_eval": res["s_per_eval"], "converged": p["converged"], "reference": ref_label,
                          "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
                          "rc_m": p["radius_of_curvature_m"], **errors(p, r)})
-        CAPABILITIES_SEEN[res["rung"]] = res.get("capabilities") or CAPABILITIES.get(res["rung"], ["free_bending"])
     return rows, ref_label
 
 
@@ -303,7 +294,7 @@ def write_envelope(rows: list[dict]) -> None:
                 entry["by_length"] = {f"{L:g}": _envelope([r for r in d_rows if r["length_m"] == L])
                                       for L in lengths}
             designs[design] = entry
-        rungs[rung] = {"setting": label, "capabilities": CAPABILITIES_SEEN.get(rung, CAPABILITIES.get(rung, ["free_bending"])),
+        rungs[rung] = {"setting": label, "capabilities": list(rung_info(rung).models),
                        "designs": designs}
     refs = sorted({r["reference"] for r in rows})
     doc = {"reference": " / ".join(refs), "measured": machine_meta()["date"],

@@ -72,13 +72,13 @@ def main() -> None:
             rss = float("nan")
         ok = state.converged
         first_fail = float(ps[~ok][0, 0] / PA_PER_BAR) if (~ok).any() else None
-        last = next((x for x in state.extras["last_converged"] if x), None)
+        last = next((x for x in state.last_converged if x), None)
         rows.append({"case": case, "mesh_size_mm": h * 1e3, "mesh_nodes": model.mesh.n_nodes,
                      "commands": len(ps), "converged": int(ok.sum()),
                      "median_sweep_s": statistics.median(sweeps), "min_sweep_s": min(sweeps),
                      "max_sweep_s": max(sweeps), "median_sweep_cpu_s": statistics.median(cpus),
                      "median_setup_s": statistics.median(setups),
-                     "newton_iterations": int(state.extras["newton_iterations"].sum()),
+                     "newton_iterations": int(state.diagnostics.newton_iterations.sum()),
                      "peak_traced_MB": peak / 2**20, "process_rss_MB": rss,
                      "first_failed_bar": first_fail,
                      "last_converged_bar": None if last is None else last["pressure"][0] / PA_PER_BAR,

@@ -59,12 +59,12 @@ def test_bends_away_from_the_channel_and_inflates(short_design):
     # channel at +y lengthens the +y side: the backbone bends towards -y, more with pressure
     assert k[1, 1] < 0 and k[2, 1] < 1.5 * k[1, 1]
     assert abs(k[2, 0]) < 1e-6 * abs(k[2, 1])
-    vol = state.extras["channel_volume_m3"]
+    vol = state.diagnostics.channel_volume
     assert vol[2][0] > vol[1][0] > short_design.channels[0].area * (short_design.length - short_design.cap_thickness)
-    assert state.extras["channel_area_m2"][2][0] > short_design.channels[0].area
-    angle = state.extras["bending_angle_rad"][2]
-    assert state.extras["radius_l_over_theta_m"][2] == pytest.approx(short_design.length / angle)
-    assert state.extras["newton_iterations"][2] >= 1
+    assert state.diagnostics.channel_area[2][0] > short_design.channels[0].area
+    angle = state.tip.angle[2]
+    assert state.radius_l_over_theta[2] == pytest.approx(short_design.length / angle)
+    assert state.diagnostics.newton_iterations[2] >= 1
 
 
 def test_half_model_matches_full_model(short_design):
@@ -89,7 +89,7 @@ def test_rings_stop_the_channel_ballooning(short_design):
                          cache=False).evaluate(p)
     assert base.converged.all() and no_rings.converged.all()
     # without rings the channel balloons: much more volume
-    assert no_rings.extras["channel_volume_m3"][0][0] > 1.05 * base.extras["channel_volume_m3"][0][0]
+    assert no_rings.diagnostics.channel_volume[0][0] > 1.05 * base.diagnostics.channel_volume[0][0]
 
 
 def test_non_convergence_is_reported_not_hidden(short_design):
@@ -126,8 +126,8 @@ def test_lumen_fill_is_a_soft_contact_proxy(short_design):
     assert "fill" in filled.problem.mesh.GetMaterials()
     state = filled.evaluate(p)
     assert state.converged[0], state.message
-    rc_empty = empty.extras["radius_l_over_theta_m"][0]
-    rc_filled = state.extras["radius_l_over_theta_m"][0]
+    rc_empty = empty.radius_l_over_theta[0]
+    rc_filled = state.radius_l_over_theta[0]
     assert rc_filled == pytest.approx(rc_empty, rel=0.01)
     assert rc_filled != rc_empty   # the fill is really in the model
     with pytest.raises(ModelError, match="lumen_fill"):
@@ -204,7 +204,7 @@ def test_three_channel_design_with_a_central_lumen_bends_away_from_its_channel()
     assert state.converged, state.message
     kx, ky = state.curvature
     assert ky < 0 and abs(math.degrees(math.atan2(kx, -ky))) < 2.0
-    tip = np.asarray(state.extras["tip_position_m"][0])   # extras stay per command
+    tip = np.asarray(state.tip.position)   # one command: no leading axis
     assert tip[1] < 0 and 0.009 < tip[2] < 0.0105
 
 

@@ -66,8 +66,8 @@ def test_unloaded_rod_is_its_source_rung(design, free_rod):
     np.testing.assert_allclose(a.curvature, b.curvature, rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
     # the backbone is the source's arc: tip angle = |k| * arc length, and it bends to -y
-    assert a.extras["tip_angle"][2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
-    assert a.extras["tip_position"][2, 1] < 0 and "contact_force" not in a.extras   # nothing to touch
+    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
+    assert a.tip.position[2, 1] < 0 and a.contact_force is None   # nothing to touch
 
 
 def test_small_tip_force_matches_linear_beam_theory(design, free_rod):
@@ -76,24 +76,24 @@ def test_small_tip_force_matches_linear_beam_theory(design, free_rod):
     rod = _rod(design, free_rod, tip_force=[0.0, f, 0.0])
     st = rod.evaluate(np.array([0.0]))
     assert st.converged
-    assert st.extras["tip_position"][0, 1] == pytest.approx(f * L**3 / (3 * ei), rel=0.01)
+    assert st.tip.position[1] == pytest.approx(f * L**3 / (3 * ei), rel=0.01)
 
 
 def test_blocking_force_is_positive_and_grows_with_pressure(design, free_rod):
     rod = _rod(design, free_rod, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
     st = rod.evaluate(np.array([[0.0], [5000.0], [10000.0], [15000.0]]))
-    force = st.extras["contact_force"]
+    force = st.contact_force
     assert st.converged.all() and force[0] == 0.0
     assert np.all(np.diff(force) > 0)
     # the tip stays on the scale, the body nearly straight
-    assert abs(st.extras["tip_position"][3, 1]) < 1e-9
+    assert abs(st.tip.position[3, 1]) < 1e-9
 
 
 def test_no_contact_force_when_the_tip_moves_away(design, free_rod):
     away = _rod(design, free_rod, contact=TipPlaneContact(normal=(0.0, -1.0, 0.0)))
     st = away.evaluate(np.array([10000.0]))
     free = free_rod.evaluate(np.array([10000.0]))
-    assert st.converged and st.extras["contact_force"][0] == 0.0
+    assert st.converged and st.contact_force == 0.0
     np.testing.assert_allclose(st.curvature, free.curvature)
 
 
@@ -103,7 +103,7 @@ def test_gravity_sags_the_right_way(design, free_rod):
         rod = _rod(design, free_rod, gravity=[0.0, g, 0.0])
         st = rod.evaluate(np.array([0.0]))
         q = design.material.density * transformed_section(design).silicone_area * abs(g)
-        sag = st.extras["tip_position"][0, 1]
+        sag = st.tip.position[1]
         assert np.sign(sag) == np.sign(g)
         assert abs(sag) == pytest.approx(q * L**4 / (8 * ei), rel=0.01)
 
@@ -154,12 +154,12 @@ def test_fill_carries_the_law_past_the_closing_lumen_and_keeps_the_small_pressur
 def test_blocking_capacity_at_035_bar_with_fill_is_positive_and_above_02_bar(design, filled_rod):
     rod = _rod(design, filled_rod, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
     st = rod.evaluate(np.array([[20000.0], [35000.0]]))
-    f02 = st.extras["contact_force"][0]
+    f02 = st.contact_force[0]
     assert st.converged[0] and f02 > 0
     # at 0.35 bar the blocked base would need more moment than the bent-back section carries (its
     # moment saturates and falls: the section flattens), so the rod refuses instead of answering
     # (the base leaves the table, or the rod's Newton finds no state within it) ...
-    assert not st.converged[1] and np.isnan(st.extras["contact_force"][1]) and "p = 35000 Pa" in st.message
+    assert not st.converged[1] and np.isnan(st.contact_force[1]) and "p = 35000 Pa" in st.message
     # ... and the capacity at the base, |M_lim| / l, is what the law says the bench could read at most
     m_lim, k_lim = filled_rod.law.at(35000.0).limit_moment()
     assert m_lim < 0 and k_lim <= 0

@@ -180,7 +180,7 @@ def test_sweep_reports_the_lumen_closing_instead_of_numbers(implemented_design):
     # it stops where the lumen closes (walls touching, or Newton failing just before)
     assert "did not converge at p = " in state.message and "lumen" in state.message
     assert ps[~ok][0, 0] > 0.25 * BAR
-    last = state.extras["last_converged"][-1]
+    last = state.last_converged[-1]
     assert ps[ok][-1, 0] <= last["pressure"][0] < ps[~ok][0, 0]
     # curvature grows monotonically along the converged part of the sweep
     assert np.all(np.diff(-state.curvature[ok, 1]) > 0)
@@ -191,7 +191,7 @@ def test_plain_load_stepping_without_step_control_fails_loudly(implemented_desig
     state = model.evaluate([0.25 * BAR])
     assert not state.converged and np.isnan(state.curvature).all()
     assert "did not converge at p = 0.2500 bar" in state.message
-    assert state.extras["last_converged"][0]["pressure"] == [0.0]
+    assert state.last_converged["pressure"] == [0.0]
     # with step control the same command is reached
     assert make_model("section", implemented_design).evaluate([0.25 * BAR]).converged
 
@@ -205,7 +205,7 @@ def test_batch_is_path_independent_and_cached(implemented_design, tmp_path):
     # a new model instance with the same design, mesh and settings reads the result back
     again = make_model("section", implemented_design, cache=tmp_path).evaluate(
         np.array([[0.05 * BAR], [0.10 * BAR], [0.15 * BAR]]))
-    assert again.extras.get("cached") is True
+    assert again.diagnostics.cached is True
     np.testing.assert_array_equal(again.curvature, sweep.curvature)
     # other settings, other key
     other = make_model("section", implemented_design, cache=tmp_path, mesh_size=0.4e-3)

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.models.rod import RodModel
 from ..core.rod.law import LawRangeError, LinearLaw
 from ..core.rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..core.section_properties import transformed_section
@@ -54,7 +53,7 @@ class BlockingForce:
         return out if np.ndim(curvature) > 1 else out[0]
 
     def __call__(self, pressures, length: float) -> np.ndarray:
-        if not isinstance(self.model, RodModel):
+        if not self.model.info.solves_backbone:   # free curvature through the linear law
             return self.from_curvature(self.model.evaluate(pressures).curvature, length)
         p = np.asarray(pressures, dtype=float)
         batch = np.atleast_2d(p)

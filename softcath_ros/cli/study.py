@@ -3,7 +3,6 @@
 --scheduler, and are cached per case so an interrupted study resumes where it stopped."""
 from __future__ import annotations
 
-import inspect
 import json
 import sys
 import time
@@ -44,6 +43,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..core.design import load_design
     from ..core.models import RUNGS, make_model
+    from ..core.options import option_names
     from ..core.studies import study_module
     from ..core.studies.context import DEFAULT_PRESSURE, StudyContext
     from ..core.studies.output import write_study
@@ -63,7 +63,7 @@ def run(args) -> int:
         options["mesh_size"] = args.mesh_size
     module = study_module(args.name)
     extra = {}
-    accepted = inspect.signature(module.run).parameters
+    accepted = option_names(module.OPTIONS)   # what the study declares its run() takes
     for flag, key in (("min_wall", "min_wall"), ("max_stretch", "max_stretch")):
         value = getattr(args, flag)
         if value is not None:

@@ -8,7 +8,6 @@ numbers; the sweep exits 1 if any did not.
 from __future__ import annotations
 
 import csv
-import inspect
 import json
 import math
 import sys
@@ -41,20 +40,14 @@ def register(sub) -> None:
 
 
 def _model_options(name: str, progress: bool, cache: bool) -> dict:
-    """Options the rung understands among progress/cache (rungs differ)."""
-    from importlib import import_module
+    """Options the rung declares among progress/cache (rungs differ)."""
+    from ..core.models import rung_info
 
-    from ..core.models import RUNGS
-
-    module, cls = RUNGS[name].split(":")
-    try:
-        params = inspect.signature(getattr(import_module(module), cls).__init__).parameters
-    except ImportError:
-        return {}
+    info = rung_info(name)
     opts = {}
-    if "progress" in params:
+    if info.accepts("progress"):
         opts["progress"] = progress
-    if "cache" in params:
+    if info.accepts("cache"):
         opts["cache"] = cache
     return opts
 

@@ -137,13 +137,11 @@ class Allocator:
         self.max_iterations = max_iterations
         self.fd_step = fd_step * self.max_pressure  # Pa, finite-difference step for the Jacobian
 
-        g = getattr(model, "curvature_per_pa", None)
-        self.linear = g is not None and np.shape(g) == (2, self.n_channels)
-        stretch = getattr(model, "stretch_per_pa", None)
-        self._stretch_per_pa = (None if stretch is None or np.shape(stretch) != (self.n_channels,)
-                                else [float(v) for v in stretch])
+        # a rung linear in pressure declares it (closed form): its gain inverts exactly
+        self.linear = model.info.linear_gain
+        self._stretch_per_pa = [float(v) for v in model.stretch_per_pa] if self.linear else None
         if self.linear:
-            self._g = [[float(v) for v in row] for row in np.asarray(g)]
+            self._g = [[float(v) for v in row] for row in np.asarray(model.curvature_per_pa)]
 
         # Each channel alone at max_pressure: its bending direction and its reach.
         single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)

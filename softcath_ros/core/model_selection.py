@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import ModelError
+from .models import make_model, register_chooser
 from .scene import Scene
 from .yaml_io import load_yaml
 
@@ -118,8 +119,6 @@ def _pct(x) -> str:
 def make_auto_model(design, scene: Scene | None = None, envelope: dict | None = None, **options):
     """``make_model("auto", design, scene=...)``: the selected rung for the scene's design (the scene's
     device included). The returned model carries the ``selection`` (what was picked and why)."""
-    from .models import make_model
-
     if scene is None:
         raise ModelError("model auto needs a scene (CLI: --scene FILE; model_node: parameter 'scene')")
     if scene.design.name != design.name:
@@ -131,3 +130,6 @@ def make_auto_model(design, scene: Scene | None = None, envelope: dict | None = 
     model = make_model(selection.rung, scene.design, **options)
     model.selection = selection
     return model
+
+
+register_chooser("auto", make_auto_model)

@@ -42,21 +42,21 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m).
 
     The tip pose is the constant-curvature arc's, unless the rung solves the backbone itself
-    (the rod under loads: its extras carry the tip pose, which no single arc reproduces)."""
+    (``info.solves_backbone``: the rod under loads, whose tip pose no single arc reproduces)."""
     own_length = length is None
     length = model.design.length if length is None else length
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
     elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)
-    if own_length and "tip_position" in state.extras:
-        pos = np.asarray(state.extras["tip_position"], dtype=float)
-        quat = np.asarray(state.extras["tip_orientation_xyzw"], dtype=float)
-        angle = np.asarray(state.extras["tip_angle"], dtype=float)
+    if own_length and model.info.solves_backbone:
+        pos = np.asarray(state.tip.position, dtype=float)
+        quat = np.asarray(state.tip.orientation_xyzw, dtype=float)
+        angle = np.asarray(state.tip.angle, dtype=float)
     else:
         arc = length * state.axial_stretch
         pos, quat = tip_pose(state.curvature, arc)
         angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
-    contact = state.extras.get("contact_force")
+    contact = state.contact_force
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]
@@ -80,9 +80,9 @@ def state_backbone(state, length: float, n_points: int, index: int = 0):
     """Backbone poses (n_points, 3), (n_points, 4) of one command of ``state``: the rung's own
     solved backbone when it has one (the rod under loads), else the constant-curvature arc of
     arc length ``length`` x stretch."""
-    solved = state.extras.get("backbone")
-    if solved is not None:
-        return planar_backbone_poses(np.asarray(solved)[index], n_points)
+    if state.backbone is not None:
+        solved = np.asarray(state.backbone)
+        return planar_backbone_poses(solved.reshape(-1, *solved.shape[-2:])[index], n_points)
     k = np.asarray(state.curvature).reshape(-1, 2)[index]
     stretch = float(np.asarray(state.axial_stretch).reshape(-1)[index])
     return backbone_poses(k, length * stretch, n_points)

@@ -135,7 +135,7 @@ class ModelNode(Node):
         t0 = time.perf_counter()
         model = make_model(model_name, self.design)
         took = time.perf_counter() - t0
-        if getattr(model, "built_now", False):
+        if model.built_now:
             self.get_logger().warning(
                 f"model {model_name}: its table for design {self.design.name} was not in the cache and was built "
                 f"at start-up in {took:.1f} s (now cached at {model.path}); max R_C error against its source: "

@@ -1,11 +1,18 @@
-"""The model ladder: every rung behind one interface (``BendModel``), chosen by name."""
+"""The model ladder: every rung behind one interface (``BendModel``), chosen by name.
+
+Each rung class declares what it can do (``RungInfo``: scene features, linear gain, solved
+backbone, options); ``rung_info`` reads that without building a rung or loading a heavy engine.
+Names that choose a rung instead of naming one ("auto") are registered from above by the module
+that chooses (core/model_selection.py registers "auto"), so this registry imports no selection.
+"""
 from __future__ import annotations
 
 import importlib
+from typing import Callable
 
 from ..design import Design
 from ..errors import ModelError
-from .base import BendModel, BendState
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 # name -> "module:Class"; imported lazily so heavy engines (NGSolve) load only when used.
 RUNGS: dict[str, str] = {
@@ -16,18 +23,23 @@ RUNGS: dict[str, str] = {
     "rod": "softcath_ros.core.models.rod:RodModel",
 }
 
+# name -> make(design, **options): names that pick a rung (registered by the module that picks).
+CHOOSERS: dict[str, Callable[..., BendModel]] = {}
+
+
+def register_chooser(name: str, make: Callable[..., BendModel]) -> None:
+    """Let ``make_model(name, ...)`` call ``make``; for rung choosers such as "auto"."""
+    if name in RUNGS:
+        raise ValueError(f"'{name}' is a rung; a chooser needs another name")
+    CHOOSERS[name] = make
+
 
 def available_models() -> list[str]:
     return sorted(RUNGS)
 
 
-def make_model(name: str, design: Design, **options) -> BendModel:
-    """Instantiate the rung ``name`` for ``design``; unknown names list the known ones.
-    ``"auto"`` picks a rung for ``scene=`` (core/model_selection.py)."""
-    if name == "auto":
-        from ..model_selection import make_auto_model
-
-        return make_auto_model(design, **options)
+def rung_class(name: str) -> type[BendModel]:
+    """The class of rung ``name`` (its module imported; engines such as NGSolve load only when built)."""
     if name not in RUNGS:
         raise ModelError(f"unknown model '{name}'; available: {', '.join(available_models())}")
     module_name, cls_name = RUNGS[name].split(":")
@@ -35,7 +47,21 @@ def make_model(name: str, design: Design, **options) -> BendModel:
         module = importlib.import_module(module_name)
     except ImportError as exc:
         raise ModelError(f"model '{name}' needs an optional dependency that is not installed: {exc}") from None
-    return getattr(module, cls_name)(design, **options)
+    return getattr(module, cls_name)
 
 
-__all__ = ["BendModel", "BendState", "RUNGS", "available_models", "make_model"]
+def rung_info(name: str) -> RungInfo:
+    """What rung ``name`` declares it can do, without building it."""
+    return rung_class(name).info
+
+
+def make_model(name: str, design: Design, **options) -> BendModel:
+    """Instantiate the rung ``name`` for ``design``; unknown names list the known ones.
+    ``"auto"`` picks a rung for ``scene=`` (registered by core/model_selection.py)."""
+    if name in CHOOSERS:
+        return CHOOSERS[name](design, **options)
+    return rung_class(name)(design, **options)
+
+
+__all__ = ["BendModel", "BendState", "CHOOSERS", "RUNGS", "RungInfo", "SolverDiagnostics",
+           "TipPose", "available_models", "make_model", "register_chooser", "rung_class", "rung_info"]

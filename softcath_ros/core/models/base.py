@@ -5,32 +5,129 @@ k = (kx, ky) in 1/m and the axial stretch of the backbone. Convention: the
 backbone bends *towards* the direction k/|k| in the xy-plane of ``softcath_base``
 with curvature |k| (so a channel at +y, which lengthens the +y side, gives k
 pointing to -y).
+
+Each rung class declares what it can do in ``info`` (a ``RungInfo``): the scene features it
+models, whether it has a linear gain or solves its own backbone, and the options its
+constructor takes. Callers read that declaration (or the registry's ``rung_info``), never probe.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from ..design import Design
 from ..errors import ModelError
+from ..options import Option, option_names
+from ..scene import FEATURES   # what a rung can model: the scene's features (the envelope's capabilities)
+
+
+@dataclass(frozen=True)
+class RungInfo:
+    """What a rung can do, declared on its class (no instance, no heavy import needed)."""
+
+    summary: str                                  # one line: what the rung is
+    models: tuple[str, ...] = ("free_bending",)   # scene features it models (FEATURES)
+    linear_gain: bool = False        # linear in pressure: ``curvature_per_pa`` (2, C) and ``stretch_per_pa`` (C,)
+    solves_backbone: bool = False    # its own backbone and tip pose (BendState.backbone, .tip) replace the arc's,
+                                     # and it answers ``solve(pressure, length, loads)`` (planar loads)
+    options: tuple[Option, ...] = ()
+    more_options: str = ""           # where options not listed go (e.g. "passed to the source rung"); "" = refused
+    needs: str = ""                  # optional dependency ("fe" extra), "" = none
+
+    def __post_init__(self):
+        unknown = [f for f in self.models if f not in FEATURES]
+        if unknown:
+            raise ValueError(f"RungInfo.models: unknown feature(s) {unknown}; known: {FEATURES}")
+
+    def accepts(self, name: str) -> bool:
+        return bool(self.more_options) or any(o.name == name for o in self.options)
+
+    def check_options(self, rung: str, options: dict) -> None:
+        """ModelError naming the first option the rung does not take (and the ones it does)."""
+        if self.more_options:
+            return
+        for name in options:
+            if name not in option_names(self.options):
+                known = ", ".join(option_names(self.options)) or "none"
+                raise ModelError(f"model '{rung}' has no option '{name}'; its options: {known}")
+
+
+def options_of(settings_cls, descriptions: dict[str, str]) -> tuple[Option, ...]:
+    """Rung options from a settings dataclass's fields (kind from the annotation) and their descriptions."""
+    kinds = {"bool": "bool", "int": "int", "float": "float", "str": "str", "dict": "mapping"}
+    out = []
+    for f in fields(settings_cls):
+        ann = str(f.type).replace(" | None", "")
+        out.append(Option(f.name, kinds.get(ann, "object"), descriptions[f.name]))
+    return tuple(out)
+
+
+@dataclass
+class TipPose:
+    """The tip of a solved body in softcath_base (leading axis N as the BendState's)."""
+
+    position: np.ndarray                      # (..., 3) m
+    angle: np.ndarray                         # (...) rad, bending angle at the tip
+    orientation_xyzw: np.ndarray | None = None   # (..., 4); None when the rung measures only the position
+
+
+@dataclass
+class SolverDiagnostics:
+    """How an iterative rung reached its answer (leading axis N as the BendState's; None: not reported)."""
+
+    newton_iterations: np.ndarray | None = None   # (...) int
+    channel_area: np.ndarray | None = None        # (..., C) m^2: section rung's cross-section, fe3d's mid-length
+    channel_volume: np.ndarray | None = None      # (..., C) m^3 (fe3d)
+    time_s: np.ndarray | None = None              # (...) wall time of the solve at each command (fe3d)
+    mesh_nodes: int | None = None
+    mesh_size: float | None = None                # m
+    cached: bool = False                          # the whole batch came from the disk cache
+    law: str = ""                                 # rod: where its moment-curvature law comes from
 
 
 @dataclass
 class BendState:
-    """Result of a model evaluation. Batched: leading axis N, or no axis for one command."""
+    """Result of a model evaluation. Batched: leading axis N, or no axis for one command.
+
+    The optional fields are None unless the rung produces them (``RungInfo`` says which)."""
 
     curvature: np.ndarray       # (..., 2) 1/m
     axial_stretch: np.ndarray   # (...) dimensionless, 1 = unstretched
     converged: np.ndarray       # (...) bool
     message: str = ""           # why a solve did not converge (empty when all did)
-    extras: dict = field(default_factory=dict)  # rung-specific outputs (channel area, iterations, ...)
+    tip: TipPose | None = None                  # the solved body's tip (rod; fe3d: position and angle)
+    backbone: np.ndarray | None = None          # (..., n+1, 3) m: joint positions of a solved backbone (rod)
+    contact_force: np.ndarray | None = None     # (...) N: the tip's contact reaction (rod with contact)
+    radius_l_over_theta: np.ndarray | None = None   # (...) m: R_C = L / theta, inf when straight (fe3d)
+    last_converged: list | None = None          # per command: for a failed one, the last state reached on its
+                                                # ramp {"pressure", "curvature", "axial_stretch"} (section)
+    diagnostics: SolverDiagnostics | None = None
+
+    def command(self, i: int) -> "BendState":
+        """The state of command ``i`` of a batch, with the leading axis removed from every field."""
+        def at(v):
+            return None if v is None else v[i]
+
+        tip = None if self.tip is None else TipPose(self.tip.position[i], self.tip.angle[i],
+                                                    at(self.tip.orientation_xyzw))
+        diag = None
+        if self.diagnostics is not None:
+            d = self.diagnostics
+            diag = replace(d, newton_iterations=at(d.newton_iterations), channel_area=at(d.channel_area),
+                           channel_volume=at(d.channel_volume), time_s=at(d.time_s))
+        return replace(self, curvature=self.curvature[i], axial_stretch=self.axial_stretch[i],
+                       converged=self.converged[i], tip=tip, backbone=at(self.backbone),
+                       contact_force=at(self.contact_force), radius_l_over_theta=at(self.radius_l_over_theta),
+                       last_converged=at(self.last_converged), diagnostics=diag)
 
 
 class BendModel:
-    """Base class: subclasses set ``name`` and implement ``_evaluate_batch``."""
+    """Base class: subclasses set ``name`` and ``info`` and implement ``_evaluate_batch``."""
 
     name = "abstract"
+    info = RungInfo(summary="abstract rung")
+    built_now = False   # True when the constructor built a table the cache did not hold (surrogate)
 
     def __init__(self, design: Design):
         self.design = design
@@ -54,14 +151,15 @@ class BendModel:
             raise ModelError(f"model '{self.name}' for design '{self.design.name}' expects "
                              f"{self.n_channels} channel pressure(s) per command, got shape {p.shape}")
         state = self._evaluate_batch(batch)
-        if single:
-            state.curvature = state.curvature[0]
-            state.axial_stretch = state.axial_stretch[0]
-            state.converged = state.converged[0]
-        return state
+        return state.command(0) if single else state
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def max_principal_stretch(self, pressures) -> float | None:
+        """Largest principal stretch in the silicone at a solved command (Pa), for rungs that resolve
+        the section's strain field; None for the others."""
+        return None
 
 
 def lumen_fill_fraction(value, rung: str) -> float | None:

@@ -15,11 +15,13 @@ import numpy as np
 
 from ..design import Design
 from ..section_properties import transformed_section
-from .base import BendModel, BendState
+from .base import BendModel, BendState, RungInfo
 
 
 class ClosedFormModel(BendModel):
     name = "closed_form"
+    info = RungInfo(summary="Euler-Bernoulli beam over the transformed section: linear in pressure",
+                    models=("free_bending", "device_stiffness"), linear_gain=True)
 
     def __init__(self, design: Design):
         super().__init__(design)

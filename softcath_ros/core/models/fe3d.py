@@ -9,9 +9,10 @@ and step settings. A pressure the ramp cannot reach comes back ``converged = Fal
 "did not converge at p = ..." in ``message``; its numbers are NaN, never a guess.
 
 Outputs: curvature vector (1/m) and axial stretch of the arc fitted to the tip (see
-core/fe3d/measure.py); ``extras`` per command: bending_angle_rad, radius_l_over_theta_m
-(R_C = L / theta, the published definition), tip_position_m, channel_volume_m3,
-channel_area_m2 (mid-length), newton_iterations, time_s.
+core/fe3d/measure.py); per command (NaN where a command failed): ``tip`` (the solved body's
+tip position and bending angle), ``radius_l_over_theta`` (R_C = L / theta, the published
+definition) and ``diagnostics`` (channel_volume, channel_area at mid-length, newton_iterations,
+time_s; channel volume and area NaN at zero pressure, which is not solved).
 """
 from __future__ import annotations
 
@@ -24,13 +25,30 @@ import numpy as np
 from ..cache import cache_dir, key_of
 from ..design import Design
 from ..errors import ModelError
-from .base import BendModel, BendState, lumen_fill_fraction
+from ..options import Option
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
 
 CODE_VERSION = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
 
 
 class Fe3dModel(BendModel):
     name = "fe3d"
+    info = RungInfo(
+        summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
+        models=("free_bending", "device_stiffness"), needs="fe",
+        options=(Option("mesh_size", "float", "scales the default mesh (0.5 = twice as fine)"),
+                 Option("mesh", "object", "an explicit MeshSettings"),
+                 Option("newton", "object", "NewtonSettings"),
+                 Option("step_control", "object", "a continuation StepControl"),
+                 Option("tangent_predictor", "bool", "predict each step along the tangent"),
+                 Option("half", "bool", "half model by symmetry (default: when the design allows)"),
+                 Option("cache", "bool", "keep results in the project cache"),
+                 Option("progress", "bool", "a progress bar per ramp"),
+                 Option("threads", "int", "solver threads"),
+                 Option("lumen_fill", "float", "fill the lumen with a soft solid of this fraction of the "
+                                                   "silicone's shear modulus"),
+                 Option("formulation", "str", "'mixed' (default) or 'displacement'"),
+                 Option("reinforcement", "str", "'membrane' (default) or 'rings'")))
 
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
@@ -211,15 +229,14 @@ def _entry(design: Design, pt) -> dict | None:
             "newton_iterations": int(pt.iterations), "time_s": float(pt.wall_time)}
 
 
-_EXTRAS = ("bending_angle_rad", "radius_l_over_theta_m", "tip_position_m", "channel_volume_m3",
-           "channel_area_m2", "newton_iterations", "time_s")
-
-
 def _bend_state(results: dict, n: int, c: int, message: str) -> BendState:
     curvature = np.full((n, 2), np.nan)
     stretch = np.full(n, np.nan)
     converged = np.zeros(n, dtype=bool)
-    extras = {k: [None] * n for k in _EXTRAS}
+    angle, rc, time_s = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    tip = np.full((n, 3), np.nan)
+    volume, area = np.full((n, c), np.nan), np.full((n, c), np.nan)
+    iterations = np.zeros(n, dtype=int)
     for i in range(n):
         r = results.get(i)
         if r is None:
@@ -227,7 +244,11 @@ def _bend_state(results: dict, n: int, c: int, message: str) -> BendState:
         curvature[i] = r["curvature"]
         stretch[i] = r["axial_stretch"]
         converged[i] = True
-        for k in _EXTRAS:
-            extras[k][i] = r[k]
-    return BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
-                     message=message, extras=extras)
+        angle[i], rc[i], tip[i] = r["bending_angle_rad"], r["radius_l_over_theta_m"], r["tip_position_m"]
+        if r["channel_volume_m3"] is not None:
+            volume[i], area[i] = r["channel_volume_m3"], r["channel_area_m2"]
+        iterations[i], time_s[i] = r["newton_iterations"], r["time_s"]
+    return BendState(curvature=curvature, axial_stretch=stretch, converged=converged, message=message,
+                     tip=TipPose(position=tip, angle=angle), radius_l_over_theta=rc,
+                     diagnostics=SolverDiagnostics(newton_iterations=iterations, channel_area=area,
+                                                   channel_volume=volume, time_s=time_s))

@@ -13,9 +13,9 @@ frictionless tip contact with a plane. The rod is planar: loads and the plane's 
 in the bending plane (the base axis and the bending direction e); one-channel designs only.
 
 ``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length) along e,
-axial_stretch = deformed arc length / length, and extras: ``backbone`` (N, n+1, 3) joint
-positions, ``tip_position`` (N, 3), ``tip_orientation_xyzw`` (N, 4), ``contact_force`` (N,) N,
-``tip_angle`` (N,) rad. A command outside the law's table is answered with converged=False and
+axial_stretch = deformed arc length / length, ``backbone`` (N, n+1, 3) joint positions, ``tip``
+(position (N, 3), orientation_xyzw (N, 4), angle (N,) rad) and, when there is a contact plane,
+``contact_force`` (N,) N. A command outside the law's table is answered with converged=False and
 the reason.
 """
 from __future__ import annotations
@@ -32,13 +32,27 @@ from ..rod.loads import REST_TIP, Loads, TipPlaneContact
 from ..rod.section_law import LawGrid, section_law
 from ..rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..section_properties import transformed_section
-from .base import BendModel, BendState
+from ..options import Option
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 _PLANE_TOL = 1e-9
 
 
 class RodModel(BendModel):
     name = "rod"
+    info = RungInfo(
+        summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
+        models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
+        options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
+                 Option("loads", "object", "a Loads (tip force, gravity, contact); or the three below"),
+                 Option("tip_force", "object", "[fx, fy, fz] N in softcath_base"),
+                 Option("gravity", "object", "[gx, gy, gz] m/s^2 in softcath_base"),
+                 Option("contact", "object", "a TipPlaneContact"),
+                 Option("n_segments", "int", "rod segments (at least 4)"),
+                 Option("grid", "object", "LawGrid: where the section law is tabulated"),
+                 Option("cache", "bool", "keep the section law in the project cache"),
+                 Option("progress", "bool", "progress bars while tabulating")),
+        more_options="passed to the source rung (e.g. mesh_size)")
 
     def __init__(self, design: Design, source: str = "section", loads: Loads | None = None,
                  tip_force=None, gravity=None, contact: TipPlaneContact | None = None, n_segments: int = 40,
@@ -156,12 +170,12 @@ class RodModel(BendModel):
             tip_q[i] = [-e[1] * math.sin(th / 2), e[0] * math.sin(th / 2), 0.0, math.cos(th / 2)]
             force[i] = sol.contact_force
             angle[i] = th
-        extras = {"backbone": backbone, "tip_position": backbone[:, -1], "tip_orientation_xyzw": tip_q,
-                  "tip_angle": angle, "law": self.law.source}
-        if self.loads.contact is not None:   # a contact force only where there is something to touch
-            extras["contact_force"] = force
         return BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
-                         message="; ".join(messages), extras=extras)
+                         message="; ".join(messages), backbone=backbone,
+                         tip=TipPose(position=backbone[:, -1], angle=angle, orientation_xyzw=tip_q),
+                         # a contact force only where there is something to touch
+                         contact_force=force if self.loads.contact is not None else None,
+                         diagnostics=SolverDiagnostics(law=self.law.source))
 
 
 __all__ = ["RodModel"]

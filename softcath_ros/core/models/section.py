@@ -12,7 +12,7 @@ one diameter), so it is the limit of a long actuator; R_C does not depend on the
 
 A command that cannot be reached (Newton fails even with small steps, an element inverts)
 is returned with ``converged=False``, NaN numbers and a message "did not converge at
-p = ..." that names the last converged pressure; ``extras['last_converged']`` holds that
+p = ..." that names the last converged pressure; ``BendState.last_converged`` holds that
 state's pressure and curvature.
 """
 from __future__ import annotations
@@ -32,7 +32,8 @@ from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
 from ..section_fe.solver import LinearSolver, newton
-from .base import BendModel, BendState, lumen_fill_fraction
+from ..options import Option
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
 
 # Bump when the discretisation or the solver changes what a cached result would be.
@@ -75,6 +76,24 @@ class SectionSettings:
 
 class SectionModel(BendModel):
     name = "section"
+    info = RungInfo(
+        summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
+        models=("free_bending", "device_stiffness"),
+        options=(Option("cache", "object", "False, True (the project cache) or a directory for whole batches"),
+                 Option("progress", "bool", "a progress bar per batch")) + options_of(SectionSettings, {
+            "mesh_size": "element size in m (default: outer diameter / 20)",
+            "tol": "Newton step tolerance (non-dimensional)",
+            "max_newton": "Newton iterations per step",
+            "initial_step": "first continuation step, Pa",
+            "max_step": "largest continuation step, Pa",
+            "min_step": "smallest continuation step, Pa",
+            "adaptive": "False: fixed steps of initial_step, no cutting",
+            "hoop_tension_only": "rings carry tension only",
+            "min_hole_gap": "stop when opposite walls of a hole come closer (fraction of its diameter)",
+            "contact_resolution": "how finely the wall-contact pressure is located, Pa",
+            "local_radius": "a command this close (Pa) to a solved one starts from it",
+            "pressure_load": "'follower' (deformed walls and end caps) or 'end_cap' (the closed form's load)",
+            "lumen_fill": "fill the lumen with a soft solid of this fraction of the silicone's shear modulus"}))
 
     def __init__(self, design: Design, cache: bool | str | Path = False, progress: bool = False,
                  **settings):
@@ -170,10 +189,9 @@ class SectionModel(BendModel):
             if bar is not None:
                 bar.close()
         state = BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
-                          message="; ".join(messages),
-                          extras={"channel_area": area, "newton_iterations": iterations,
-                                  "last_converged": last_converged,
-                                  "mesh_nodes": self.mesh.n_nodes, "mesh_size": self.mesh.h})
+                          message="; ".join(messages), last_converged=last_converged,
+                          diagnostics=SolverDiagnostics(newton_iterations=iterations, channel_area=area,
+                                                        mesh_nodes=self.mesh.n_nodes, mesh_size=self.mesh.h))
         if self.cache_dir is not None:
             self._save_cached(pressures, state)
         return state
@@ -300,7 +318,7 @@ class SectionModel(BendModel):
 
     def max_principal_stretch(self, pressures) -> float | None:
         """Largest principal stretch anywhere in the silicone at a command this model has solved
-        (None if it has not): the strain measure a design's burst margin is judged by. F is block
+        (None if it has not; overrides BendModel's None): the strain measure a design's burst margin is judged by. F is block
         diagonal (in-plane 2x2, axial F33), so the principal stretches are the 2x2 block's
         singular values and F33."""
         x = self._states.get(tuple(float(v) for v in pressures))
@@ -367,10 +385,10 @@ class SectionModel(BendModel):
             z = np.load(path, allow_pickle=False)
             last = json.loads(str(z["last_converged"]))
             return BendState(curvature=z["curvature"], axial_stretch=z["axial_stretch"],
-                             converged=z["converged"], message=str(z["message"]),
-                             extras={"channel_area": z["channel_area"], "newton_iterations": z["newton_iterations"],
-                                     "last_converged": last, "mesh_nodes": self.mesh.n_nodes,
-                                     "mesh_size": self.mesh.h, "cached": True})
+                             converged=z["converged"], message=str(z["message"]), last_converged=last,
+                             diagnostics=SolverDiagnostics(newton_iterations=z["newton_iterations"],
+                                                           channel_area=z["channel_area"], mesh_nodes=self.mesh.n_nodes,
+                                                           mesh_size=self.mesh.h, cached=True))
         except (OSError, ValueError, KeyError):
             return None  # a damaged cache entry is recomputed
 
@@ -380,8 +398,9 @@ class SectionModel(BendModel):
         tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
         np.savez(tmp, curvature=state.curvature, axial_stretch=state.axial_stretch,
                  converged=state.converged, message=np.array(state.message),
-                 channel_area=state.extras["channel_area"], newton_iterations=state.extras["newton_iterations"],
-                 last_converged=np.array(json.dumps(state.extras["last_converged"])))
+                 channel_area=state.diagnostics.channel_area,
+                 newton_iterations=state.diagnostics.newton_iterations,
+                 last_converged=np.array(json.dumps(state.last_converged)))
         os.replace(tmp, path)
 
 

@@ -43,7 +43,8 @@ import numpy as np
 
 from ..design import Design
 from ..errors import ModelError
-from .base import BendModel, BendState
+from ..options import Option
+from .base import BendModel, BendState, RungInfo, options_of
 from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
@@ -101,6 +102,22 @@ def _direction_error_deg(k_model: np.ndarray, k_ref: np.ndarray) -> np.ndarray:
 
 class SurrogateModel(BendModel):
     name = "surrogate"
+    info = RungInfo(
+        summary="tables built offline from a higher rung (default section) for one design",
+        models=("free_bending", "device_stiffness"),
+        options=options_of(SurrogateSettings, {
+            "source": "the rung the table is built from (default section)",
+            "source_options": "that rung's options (mesh_size, ...): part of the table's key",
+            "grid_points": "source evaluations per pressure axis",
+            "fine_points": "3 channels: resampled points per axis (bilinear read-out)",
+            "held_out": "source evaluations used only to measure the error",
+            "common_points": "equal-pressure commands for the common-mode stretch",
+            "common_checks": "commands with all three pressures > 0 that bound the common-mode error",
+            "common_tolerance": "relative R_C error above which such commands are refused",
+            "pairs": "3 channels: 'each' tabulates all three pairs, 'rotated' pair 0-1 only"}) + (
+            Option("cache", "object", "True (the project cache), a directory, or False (build every time)"),
+            Option("progress", "bool", "progress bars while building"),
+            Option("rebuild", "bool", "build the table even if the cache holds it")))
 
     def __init__(self, design: Design, source: str = "section", source_options: dict | None = None,
                  cache: bool | str | Path = True, progress: bool = False, rebuild: bool = False,
@@ -226,7 +243,7 @@ class SurrogateModel(BendModel):
         failure = ""
         if n_ok < len(grid):
             failure = st.message.split("; ")[0]  # the later ones repeat the first failure
-            last = st.extras.get("last_converged", [None] * len(grid))[n_ok]
+            last = (st.last_converged or [None] * len(grid))[n_ok]
             if last is not None and last["pressure"][0] > p[-1] + 1.0:
                 p = np.append(p, last["pressure"][0])
                 y = np.vstack([y, [*last["curvature"], last["axial_stretch"]]])
@@ -453,16 +470,14 @@ class SurrogateModel(BendModel):
                 msg += f" and {len(bad) - 1} more command(s)"
         else:
             msg = ""
-        return BendState(curvature=k, axial_stretch=lam, converged=ok, message=msg,
-                         extras={"error_bound": self.meta.get("error_bound")})
+        return BendState(curvature=k, axial_stretch=lam, converged=ok, message=msg)
 
     def _one_command(self, p: float) -> BendState:
         j = min(max(bisect_right(self._breaks, p) - 1, 0), len(self._breaks) - 2)
         x = p - self._breaks[j]
         c = self._coeffs[:, j]                      # (4, 3): highest power first
         y = ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
-        return BendState(curvature=y[None, :2], axial_stretch=y[None, 2], converged=np.ones(1, dtype=bool),
-                         extras={"error_bound": self.meta.get("error_bound")})
+        return BendState(curvature=y[None, :2], axial_stretch=y[None, 2], converged=np.ones(1, dtype=bool))
 
     def _three(self, p: np.ndarray, inside: np.ndarray):
         m = p.min(1)

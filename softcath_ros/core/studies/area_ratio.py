@@ -22,6 +22,7 @@ import numpy as np
 from ..channel_layout import max_channel_layout
 from ..design import DEFAULT_MIN_WALL, Design
 from ..errors import DesignError
+from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .variation import apply_stacked, area_ratio, make_variant, min_wall_of, stacked_layout
@@ -91,6 +92,10 @@ def collapse(rows: list[dict], key: str) -> dict:
             if s > worst:
                 worst, where = s, ri
     return {"r2": r2, "slope": float(coef[0]), "worst_bin_spread": worst, "bin": where}
+
+
+# options run() takes beyond the design and the context (softcath study validates flags against them)
+OPTIONS = (Option("min_wall", "float", "fabrication minimum wall in m"),)
 
 
 def run(design: Design, ctx: StudyContext, min_wall: float = DEFAULT_MIN_WALL) -> StudyResult:

@@ -93,5 +93,4 @@ def _split_messages(message: str, n_failed: int) -> list[str]:
 def max_principal_stretch(model, pressures) -> float | None:
     """Largest principal stretch in the silicone at a converged command, from rungs that resolve
     the section's strain field (``SectionModel.max_principal_stretch``); None for the others."""
-    of = getattr(model, "max_principal_stretch", None)
-    return None if of is None else of(pressures)
+    return model.max_principal_stretch(pressures)

@@ -12,6 +12,7 @@ import math
 from dataclasses import replace
 
 from ..design import DEFAULT_MIN_WALL, Design
+from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .variation import make_variant, min_wall_of
@@ -51,6 +52,10 @@ FLAT = 0.005
 def monotonic_decreasing(values: list[float], flat: float = FLAT) -> bool:
     """Every step outwards lowers R_C or leaves it within ``flat`` (relative)."""
     return all(b < a * (1 + flat) for a, b in zip(values, values[1:]))
+
+
+# options run() takes beyond the design and the context (softcath study validates flags against them)
+OPTIONS = (Option("min_wall", "float", "fabrication minimum wall in m"),)
 
 
 def run(design: Design, ctx: StudyContext, min_wall: float = DEFAULT_MIN_WALL) -> StudyResult:

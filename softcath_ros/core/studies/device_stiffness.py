@@ -42,6 +42,10 @@ def linear_fit(ei: np.ndarray, rc: np.ndarray) -> dict:
             "max_rel_residual": float(np.max(np.abs(rc - pred) / rc))}
 
 
+# options run() takes beyond the design and the context: none
+OPTIONS = ()
+
+
 def run(design: Design, ctx: StudyContext) -> StudyResult:
     rows = ctx.evaluate(variants(design), "device-stiffness")
     ok = [r for r in rows if r["radius_of_curvature_mm"] is not None]

@@ -10,6 +10,7 @@ diameters whose walls fall below it are listed as infeasible.
 from __future__ import annotations
 
 from ..design import DEFAULT_MIN_WALL, Design
+from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .variation import area_ratio, make_variant, min_wall_of, scale_design_dict
@@ -32,6 +33,10 @@ def variants(base: Design, min_wall: float = DEFAULT_MIN_WALL, diameters_mm=DIAM
                                 info={"outer_diameter_mm": dm, "scale": s, "implied_wall_mm": wall0 * s * 1e3,
                                       "area_ratio": area_ratio(base)}))
     return out
+
+
+# options run() takes beyond the design and the context (softcath study validates flags against them)
+OPTIONS = (Option("min_wall", "float", "fabrication minimum wall in m"),)
 
 
 def run(design: Design, ctx: StudyContext, min_wall: float = DEFAULT_MIN_WALL) -> StudyResult:

@@ -29,6 +29,7 @@ import yaml
 from ..design import Design, load_design
 from ..errors import DesignError
 from ..units import PA_PER_BAR
+from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .runner import run_cases
@@ -157,6 +158,11 @@ def design_file_text(design: Design, description: str) -> str:
     data["description"] = description
     return "# Written by `softcath study optimise` (core/studies/optimise.py). SI units: metres, pascals.\n" + \
         yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110)
+
+
+# options run() takes beyond the design and the context (softcath study validates flags against them)
+OPTIONS = (Option("max_stretch", "float", "largest principal stretch allowed in the silicone"),
+           Option("counts", "object", "channel counts to optimise over"))
 
 
 def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRETCH,

@@ -78,6 +78,10 @@ def spread(rows: list[dict]) -> float | None:
     return (max(rc) - min(rc)) / base[0]
 
 
+# options run() takes beyond the design and the context: none
+OPTIONS = ()
+
+
 def run(design: Design, ctx: StudyContext) -> StudyResult:
     rows = ctx.evaluate(variants(design), "sensitivity")
     groups: dict[str, list[dict]] = {}
