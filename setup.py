@@ -13,12 +13,14 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks"]),
+    # Shipped data (designs, scenes, protocols, node parameters, the ladder envelope, surrogate
+    # tables) live in the package and are found by softcath_ros.resources from any install; the
+    # node parameter files are also copied to share/ for `--params-file` in a ROS workspace.
+    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
-        ("share/" + package_name + "/config/designs", glob("config/designs/*.yaml")),
-        ("share/" + package_name + "/config/protocols", glob("config/protocols/*.yaml")),
+        ("share/" + package_name + "/config", glob(package_name + "/config/*.yaml")),
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -42,14 +44,16 @@ setup(
             "ros-diagnostic-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
         ],
-        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6"],
+        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",
+                 # test_install.py builds a wheel and a colcon-style install offline (no build isolation)
+                 "setuptools>=68", "wheel>=0.40"],
         "bench": ["psutil>=5.9"],
         # 3D finite-element rung (fe3d): NGSolve with the netgen mesher, imported lazily.
         "fe": ["ngsolve>=6.2.2404"],
         # `softcath study --scheduler ADDR`: run study cases on an existing Dask cluster (imported lazily).
         "cluster": ["dask[distributed]>=2023.1"],
     },
-    zip_safe=True,
+    zip_safe=False,  # the shipped data are read as files
     maintainer="softcath_ros developers",
     maintainer_email="softcath@example.org",
     description="Model, steering and bench nodes for a steerable soft fluidic catheter.",

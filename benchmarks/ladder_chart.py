@@ -21,7 +21,7 @@ direction up to the design's max_pressure (fe3d: the case's own ramp only, it is
 
 Results are cached per rung and case (.cache/ladder/, keyed by the design's content hash, rung,
 settings and pressures), so re-running only redraws. Writes benchmarks/results/ladder_chart.
-{csv,json} and config/ladder_envelope.yaml (what model selection reads); draw with `softcath chart`.
+{csv,json} and softcath_ros/config/ladder_envelope.yaml (what model selection reads); draw with `softcath chart`.
 
     .venv/bin/python benchmarks/ladder_chart.py [--no-fe3d] [--refresh [RUNG ...]] [--cases NAME ...]
 """
@@ -50,7 +50,7 @@ from softcath_ros.core.prediction import predict  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-ENVELOPE = ROOT / "config" / "ladder_envelope.yaml"
+ENVELOPE = ROOT / "softcath_ros" / "config" / "ladder_envelope.yaml"
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-DESIGNS = REPO / "config" / "designs"
+DESIGNS = REPO / "softcath_ros" / "config" / "designs"
 
 # Parallel test runs must not see each other's nodes (see scripts/test.sh).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

@@ -22,7 +22,7 @@ from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel, BendState
 from softcath_ros.core.yaml_io import load_yaml
 
-DESIGNS = __import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "designs"
+DESIGNS = __import__("pathlib").Path(__file__).resolve().parents[1] / "softcath_ros" / "config" / "designs"
 
 DIRECTION_TOL_DEG = 0.5
 MAGNITUDE_RTOL = 0.01

@@ -11,6 +11,7 @@ from bench_sim_helpers import run_offline, write_recording
 from softcath_ros.bench.analysis import hysteresis, rows_from_events, summarise
 from softcath_ros.bench.blocking import BlockingForce
 from softcath_ros.bench.calibration import calibrate, scaled_design
+from softcath_ros.resources import find
 from softcath_ros.bench.protocol import (ProtocolError, ProtocolRunner, expand_steps, load_protocol,
                                          protocol_from_dict)
 from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
@@ -38,7 +39,7 @@ def test_default_protocol_expands_to_the_reference_staircase(implemented_design)
     ({"drive": "direction"}, "directions_deg"),
 ])
 def test_protocol_errors_name_the_field(patch, field):
-    data = yaml.safe_load(open("config/protocols/default.yaml"))
+    data = yaml.safe_load(open(find("protocol", "default")))
     data.update(patch)
     with pytest.raises(ProtocolError, match=re.escape(f"'{field}'")):
         protocol_from_dict(data)

@@ -171,7 +171,7 @@ def test_clamp_policy_clamps_out_of_range_but_rejects_non_finite(start_node):
 
 
 def test_params_file_is_loaded(start_node):
-    node = start_node("--params-file", str(REPO / "config" / "model_node.yaml"), "-p", "backbone_points:=5")
+    node = start_node("--params-file", str(REPO / "softcath_ros" / "config" / "model_node.yaml"), "-p", "backbone_points:=5")
     pt = node.client.send([10000.0])
     assert pt is not None and len(pt.backbone_m) == 5
     code, err = node.stop(signal.SIGINT)

@@ -9,7 +9,8 @@ import pytest
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.model_selection import load_envelope, select_model
 from softcath_ros.core.models import make_model
-from softcath_ros.core.scene import SCENES_DIR, SceneError, load_scene, scene_from_dict
+from softcath_ros.core.scene import SceneError, load_scene, scene_from_dict
+from softcath_ros.resources import find, shipped_names
 
 ENV = {"reference": "fe3d mesh 1.0", "rungs": {
     "closed_form": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
@@ -31,7 +32,7 @@ def scene(**over):
 
 
 def test_shipped_scenes_load():
-    names = sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
+    names = shipped_names("scene")
     assert {"free_bending_live", "device_in_lumen", "blocking_force_bench", "design_study_accurate"} <= set(names)
     assert load_scene("device_in_lumen").features == ("free_bending", "device_stiffness")
     assert "contact" in load_scene("blocking_force_bench").features
@@ -128,11 +129,10 @@ def test_predict_cli_auto_says_what_it_picked(tmp_path):
     0.35 bar, beyond the rod's measured range, is refused with every rung's reason."""
     import yaml
 
-    from softcath_ros.core.scene import SCENES_DIR
 
     if "rod" in load_envelope()["rungs"]:
         assert select_model(load_scene("blocking_force_bench"), load_envelope()).rung == "rod"
-    raw = yaml.safe_load((SCENES_DIR / "blocking_force_bench.yaml").read_text())
+    raw = yaml.safe_load(find("scene", "blocking_force_bench").read_text())
     raw["pressure_range"] = [0.0, 35000.0]
     (tmp_path / "bench_035.yaml").write_text(yaml.safe_dump(raw))
     r = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",

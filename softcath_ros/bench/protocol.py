@@ -1,4 +1,4 @@
-"""Test protocols (config/protocols/*.yaml) and the engine that steps through them.
+"""Test protocols (shipped in softcath_ros/config/protocols/) and the engine that steps through them.
 
 A protocol is a pressure staircase (0 -> max -> 0 by default), repeated over trials,
 on one or more benches (angle, blocking force), each with its mounted samples
@@ -96,24 +96,14 @@ class Step:
 
 # --------------------------------------------------------------------------- loading
 
-def protocols_dir() -> Path | None:
-    from ..core.design import designs_dir
-
-    d = designs_dir()
-    cands = [] if d is None else [d.parent / "protocols"]
-    cands.append(Path(__file__).resolve().parents[2] / "config" / "protocols")
-    return next((c for c in cands if c.is_dir()), None)
-
-
 def load_protocol(name_or_path) -> Protocol:
-    p = Path(name_or_path)
-    if not p.is_file():
-        d = protocols_dir()
-        cand = [] if d is None else [d / p.name, d / f"{p.name}.yaml"]
-        p = next((c for c in cand if c.is_file()), None)
-        if p is None:
-            known = sorted(x.stem for x in d.glob("*.yaml")) if d else []
-            raise ProtocolError("protocol", str(name_or_path), f"no such file or shipped protocol; shipped: {known}")
+    """A protocol file, or the name of a shipped protocol."""
+    from ..resources import ResourceNotFound, find
+
+    try:
+        p = find("protocol", name_or_path)
+    except ResourceNotFound as exc:
+        raise ProtocolError("protocol", str(name_or_path), f"no such file or shipped protocol; shipped: {exc.known}") from None
     try:
         data = load_yaml(p.read_text())
     except yaml.YAMLError as exc:

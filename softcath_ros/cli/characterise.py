@@ -30,7 +30,7 @@ from ..core.errors import SoftcathError
 def register(sub) -> None:
     p = sub.add_parser("characterise", help="run the bench characterisation on the simulated rig "
                        "(nodes as separate processes) and write recording + report")
-    p.add_argument("--protocol", default="default", help="protocol name in config/protocols/ or a path")
+    p.add_argument("--protocol", default="default", help="shipped protocol name or a path")
     p.add_argument("--design", default=None, help="design (default: the protocol's)")
     p.add_argument("--sim-model", default="closed_form", help="rung that plays the rig's truth")
     p.add_argument("--model", nargs="+", default=["closed_form"], help="rung(s) overlaid in the report")

@@ -149,37 +149,14 @@ _OPTIONAL = {"lumen": None, "limiting_fibre": None, "reinforcement": None, "devi
              "cap_thickness": 1.0e-3, "min_wall_thickness": DEFAULT_MIN_WALL, "description": ""}
 
 
-def designs_dir() -> Path | None:
-    """Directory of the designs shipped with the package (ROS share dir, venv share dir or source tree)."""
-    candidates = []
-    try:  # a sourced ROS workspace
-        from ament_index_python.packages import get_package_share_directory
-
-        candidates.append(Path(get_package_share_directory("softcath_ros")) / "config" / "designs")
-    except Exception:  # noqa: BLE001 - ament index absent or package not in it
-        pass
-    import sys
-
-    candidates.append(Path(sys.prefix) / "share" / "softcath_ros" / "config" / "designs")
-    candidates.append(Path(__file__).resolve().parents[2] / "config" / "designs")
-    for c in candidates:
-        if c.is_dir():
-            return c
-    return None
-
-
 def resolve_design_path(name_or_path: str | Path) -> Path:
     """A path as given if it exists, else a shipped design by name (with or without .yaml)."""
-    p = Path(name_or_path)
-    if p.is_file():
-        return p
-    d = designs_dir()
-    if d is not None:
-        for cand in (d / p.name, d / f"{p.name}.yaml"):
-            if cand.is_file():
-                return cand
-    known = sorted(x.stem for x in d.glob("*.yaml")) if d else []
-    raise DesignError("design", str(name_or_path), f"no such file or shipped design; shipped: {known}")
+    from ..resources import ResourceNotFound, find
+
+    try:
+        return find("design", name_or_path)
+    except ResourceNotFound as exc:
+        raise DesignError("design", str(name_or_path), f"no such file or shipped design; shipped: {exc.known}") from None
 
 
 def load_design(name_or_path: str | Path) -> Design:

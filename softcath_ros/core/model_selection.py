@@ -1,6 +1,6 @@
 """`model: auto`: the cheapest rung that models everything in a scene, is valid over its pressure
-range, and meets its accuracy and rate, judged from the measured envelope (config/ladder_envelope.yaml,
-written by benchmarks/ladder_chart.py). It says what it picked and why, or why nothing qualifies.
+range, and meets its accuracy and rate, judged from the measured envelope (the shipped
+ladder_envelope.yaml, written by `softcath envelope`). It says what it picked and why, or why nothing qualifies.
 """
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from .models import make_model, register_chooser
 from .scene import Scene
 from .yaml_io import load_yaml
 
-ENVELOPE_PATH = Path(__file__).resolve().parents[2] / "config" / "ladder_envelope.yaml"
 
 
 @dataclass
@@ -24,7 +23,9 @@ class Selection:
 
 def load_envelope(path: str | Path | None = None) -> dict:
     """The measured envelope: {"reference": ..., "rungs": {name: {capabilities, designs: {design: {...}}}}}."""
-    p = Path(path) if path is not None else ENVELOPE_PATH
+    from ..resources import envelope_path
+
+    p = Path(path) if path is not None else envelope_path()
     if not p.is_file():
         raise ModelError(f"no ladder envelope at {p}: run benchmarks/ladder_chart.py to measure the rungs")
     data = load_yaml(p.read_text())

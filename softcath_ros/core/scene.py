@@ -36,7 +36,6 @@ from .errors import SoftcathError
 from .rod.loads import REST_TIP, Loads, TipPlaneContact
 from .yaml_io import load_yaml
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "config" / "scenes"
 FEATURES = ("free_bending", "device_stiffness", "tip_load", "contact", "gravity")
 
 
@@ -179,14 +178,14 @@ def _contact(raw) -> TipPlaneContact | None:
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
-    """A scene file, or the name of one in config/scenes/."""
-    path = Path(name_or_path)
-    if not path.is_file():
-        shipped = SCENES_DIR / f"{name_or_path}.yaml"
-        if not shipped.is_file():
-            raise SceneError("<file>", str(name_or_path), "no such file or shipped scene "
-                             f"(shipped: {', '.join(sorted(p.stem for p in SCENES_DIR.glob('*.yaml')))})")
-        path = shipped
+    """A scene file, or the name of a shipped scene."""
+    from ..resources import ResourceNotFound, find
+
+    try:
+        path = find("scene", name_or_path)
+    except ResourceNotFound as exc:
+        raise SceneError("<file>", str(name_or_path),
+                         f"no such file or shipped scene (shipped: {', '.join(exc.known)})") from None
     try:
         raw = load_yaml(path.read_text())
     except Exception as exc:  # noqa: BLE001 - a YAML syntax error is reported as the scene's fault

@@ -23,7 +23,7 @@ def _at_pressure(entry: dict, pressure: float | None):
 
 def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | None = None,
                   length: float | None = None) -> dict:
-    """The rung's measured R_C error from config/ladder_envelope.yaml (benchmarks/ladder_chart.py).
+    """The rung's measured R_C error from the shipped ladder envelope (model_selection.load_envelope).
 
     Errors are measured on shipped designs only; a study's variants inherit the baseline's
     figure as an indication, which the report says."""

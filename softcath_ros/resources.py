@@ -1,0 +1,73 @@
+"""The one finder for data shipped with the package: designs, scenes, protocols, node parameter
+files, the ladder envelope and surrogate tables.
+
+The data live inside the Python package (``softcath_ros/config/``), so the same lookup works from
+a source checkout, a pip install and a colcon install (which also copies the node parameter files
+to ``share/softcath_ros/config`` for ``--params-file``). No ROS import.
+"""
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from .core.errors import SoftcathError
+
+# kind -> folder under softcath_ros/config ("" = the folder itself)
+KINDS = {
+    "design": "designs",
+    "scene": "scenes",
+    "protocol": "protocols",
+    "params": "",
+    "surrogate_table": "surrogate_tables",
+}
+SUFFIX = {"surrogate_table": ".npz"}
+ENVELOPE_NAME = "ladder_envelope.yaml"
+
+
+class ResourceNotFound(SoftcathError):
+    """Neither a file nor the name of a shipped resource of that kind."""
+
+    def __init__(self, kind: str, name: str, known: list[str]):
+        self.kind, self.name, self.known = kind, name, known
+        super().__init__(f"{kind} '{name}': no such file or shipped {kind}; shipped: {', '.join(known) or 'none'}")
+
+
+def config_dir() -> Path:
+    """The package's data folder (a real directory: the package is installed unzipped)."""
+    return Path(str(resources.files("softcath_ros") / "config"))
+
+
+def shipped_dir(kind: str) -> Path:
+    if kind not in KINDS:
+        raise ValueError(f"unknown resource kind '{kind}'; known: {', '.join(KINDS)}")
+    return config_dir() / KINDS[kind] if KINDS[kind] else config_dir()
+
+
+def shipped_names(kind: str) -> list[str]:
+    """Names of the shipped resources of ``kind`` (file stems), sorted."""
+    folder = shipped_dir(kind)
+    suffix = SUFFIX.get(kind, ".yaml")
+    names = sorted(p.stem for p in folder.glob(f"*{suffix}")) if folder.is_dir() else []
+    return [n for n in names if n != Path(ENVELOPE_NAME).stem] if kind == "params" else names
+
+
+def find(kind: str, name_or_path: str | Path) -> Path:
+    """A user's file as given when it exists, else the shipped resource of that name (with or
+    without its suffix); ``ResourceNotFound`` (one line, listing the shipped names) otherwise."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    folder = shipped_dir(kind)
+    suffix = SUFFIX.get(kind, ".yaml")
+    for cand in (folder / p.name, folder / f"{p.name}{suffix}"):
+        if p.name and cand.is_file():
+            return cand
+    raise ResourceNotFound(kind, str(name_or_path), shipped_names(kind))
+
+
+def envelope_path() -> Path:
+    """The shipped ladder envelope (written by ``softcath envelope``) that model selection reads."""
+    return config_dir() / ENVELOPE_NAME
+
+
+__all__ = ["KINDS", "ResourceNotFound", "config_dir", "envelope_path", "find", "shipped_dir", "shipped_names"]

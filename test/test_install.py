@@ -1,0 +1,93 @@
+"""Shipped data are found the same way from a source checkout, a pip (wheel) install and a
+colcon-style install (setup.py install into a prefix, as colcon's ament_python build does)."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+# Run in a fresh interpreter whose softcath_ros comes from the install under test (PYTHONPATH is
+# searched before the development install); prints the package folder and what the finder found.
+PROBE = """
+import json, sys
+import softcath_ros
+from softcath_ros.resources import envelope_path, find, shipped_names
+from softcath_ros.core.design import load_design
+from softcath_ros.core.scene import load_scene
+from softcath_ros.core.model_selection import select_model
+from softcath_ros.bench.protocol import load_protocol
+scene = load_scene("free_bending_live")
+print(json.dumps({
+    "package": softcath_ros.__file__,
+    "design": load_design("implemented_5mm").name,
+    "protocol": load_protocol("quick").name,
+    "envelope": str(envelope_path()), "envelope_exists": envelope_path().is_file(),
+    "params": str(find("params", "model_node")),
+    "designs": shipped_names("design"), "scenes": shipped_names("scene"),
+    "auto": select_model(scene).rung,
+}))
+"""
+
+
+def _probe(site: Path, cwd: Path) -> dict:
+    import json
+
+    env = dict(os.environ, PYTHONPATH=str(site))
+    out = subprocess.run([sys.executable, "-c", PROBE], cwd=cwd, env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _check(found: dict, root: Path) -> None:
+    assert Path(found["package"]).resolve().is_relative_to(root.resolve()), found["package"]
+    assert Path(found["envelope"]).resolve().is_relative_to(root.resolve())
+    assert found["design"] == "implemented_5mm" and found["protocol"] == "quick" and found["envelope_exists"]
+    assert {"implemented_5mm", "three_channel_5mm"} <= set(found["designs"])
+    assert "free_bending_live" in found["scenes"]
+    assert found["auto"]  # model: auto picked a rung from the shipped envelope and scene
+
+
+def test_source_checkout(tmp_path):
+    found = _probe(REPO, tmp_path)
+    _check(found, REPO)
+
+
+@pytest.mark.slow
+def test_pip_wheel_install(tmp_path):
+    wheels, site = tmp_path / "wheels", tmp_path / "site"
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                            "-w", str(wheels), str(REPO)], capture_output=True, text=True, timeout=300)
+    assert build.returncode == 0, build.stderr[-2000:]
+    wheel = next(wheels.glob("softcath_ros-*.whl"))
+    inst = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site),
+                           str(wheel)], capture_output=True, text=True, timeout=300)
+    assert inst.returncode == 0, inst.stderr[-2000:]
+    _check(_probe(site, tmp_path), site)
+
+
+@pytest.mark.slow
+def test_colcon_style_install(tmp_path):
+    """What `colcon build` runs for an ament_python package: setup.py build + install into a prefix."""
+    src = tmp_path / "src"
+    subprocess.run(["git", "-C", str(REPO), "ls-files", "-z"], check=True, capture_output=True)
+    files = subprocess.run(["git", "-C", str(REPO), "ls-files"], check=True, capture_output=True,
+                           text=True).stdout.split()
+    for f in files:  # a clean copy of the tracked tree, so no build output lands in the checkout
+        if (REPO / f).is_file():
+            (src / f).parent.mkdir(parents=True, exist_ok=True)
+            (src / f).write_bytes((REPO / f).read_bytes())
+    prefix = tmp_path / "install"
+    cmd = [sys.executable, "setup.py", "-q", "build", "--build-base", str(tmp_path / "build"), "install",
+           "--prefix", str(prefix), "--single-version-externally-managed", "--record", str(tmp_path / "record")]
+    out = subprocess.run(cmd, cwd=src, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    site = next(prefix.glob("lib/python3*/site-packages"))
+    share = prefix / "share" / "softcath_ros"
+    assert (share / "package.xml").is_file() and (share / "config" / "model_node.yaml").is_file()
+    assert (prefix / "share/ament_index/resource_index/packages/softcath_ros").is_file()
+    assert (prefix / "lib" / "softcath_ros" / "model_node").is_file()  # `ros2 run softcath_ros model_node`
+    _check(_probe(site, tmp_path), site)
