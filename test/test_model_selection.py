@@ -179,3 +179,34 @@ def test_selection_judges_the_error_over_the_scenes_pressures():
     assert select_model(scene(pressure_range=[0.0, 20000.0]), env).rung == "surrogate"
     with pytest.raises(ModelError, match="surrogate: measured R_C error 11.00% exceeds"):
         select_model(scene(pressure_range=[0.0, 22000.0]), env)       # brackets 0.25 bar: 11% > 5%
+
+
+@pytest.mark.slow
+def test_envelope_command_writes_what_selection_reads(tmp_path, monkeypatch):
+    """`softcath envelope` on one case and three settings (the section rung's default D/20, its reference D/40):
+    the file has the shipped envelope's layout and drives selection by measured error and cost."""
+    from softcath_ros.cli import main as softcath
+
+    monkeypatch.setenv("SOFTCATH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "envelope.yaml"
+    code = softcath(["envelope", "--out", str(out), "--results", str(tmp_path / "rows"), "--no-fe3d",
+                     "--cases", "1ch 40mm", "--settings", "closed_form", "section D/20", "section D/40"])
+    assert code == 0 and (tmp_path / "rows.csv").is_file()
+    env = load_envelope(out)
+    shipped = load_envelope()
+    assert set(env) == set(shipped)
+    section = env["rungs"]["section"]["designs"]["implemented_5mm"]
+    assert set(section) <= set(shipped["rungs"]["section"]["designs"]["implemented_5mm"])
+    closed = env["rungs"]["closed_form"]["designs"]["implemented_5mm"]
+    assert closed["error_rc_rel_max"] > 1.0 > 0.05 > section["error_rc_rel_max"]
+    assert closed["cost_s_per_eval"] < section["cost_s_per_eval"]
+    assert select_model(scene(required_accuracy=0.05, required_rate=1.0), env).rung == "section"
+    assert select_model(scene(required_accuracy=5.0, required_rate=1.0), env).rung == "closed_form"
+
+
+def test_envelope_command_refuses_unknown_cases_in_one_line(capsys):
+    from softcath_ros.cli import main as softcath
+
+    assert softcath(["envelope", "--cases", "2ch 10mm"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown" in err and "1ch 40mm" in err and len(err.splitlines()) == 1

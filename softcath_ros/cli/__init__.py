@@ -20,6 +20,7 @@ SUBCOMMANDS = [
     "allocate",
     "sweep",
     "chart",
+    "envelope",
     "study",
 ]
 

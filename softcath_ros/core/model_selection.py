@@ -27,7 +27,7 @@ def load_envelope(path: str | Path | None = None) -> dict:
 
     p = Path(path) if path is not None else envelope_path()
     if not p.is_file():
-        raise ModelError(f"no ladder envelope at {p}: run benchmarks/ladder_chart.py to measure the rungs")
+        raise ModelError(f"no ladder envelope at {p}: measure the rungs with `softcath envelope --out FILE`")
     data = load_yaml(p.read_text())
     if not isinstance(data, dict) or not isinstance(data.get("rungs"), dict):
         raise ModelError(f"ladder envelope {p}: expected a mapping with 'rungs'")

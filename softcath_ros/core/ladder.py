@@ -1,0 +1,271 @@
+"""The model ladder measured: every rung on the same cases against a reference rung, and the
+envelope that model selection (``model: auto``) reads.
+
+Cases (``CASES``), pressures inside the rungs' ranges (the section rung and the 1-channel
+surrogate end at 0.275 bar on the implemented design):
+- family ``length``: the 1-channel design (implemented_5mm) at 40 mm, 20 mm and 17 mm (the
+  blocking-force sample), 0.05..0.25 bar. Reference: fe3d at its default mesh (mesh_size 1.0,
+  half model, threads=1) where it converges at >= 3 of the pressures, else section D/40.
+- family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel,
+  by two channels at equal pressure and by a non-symmetric pair (2:1), 0.1..0.3 bar. fe3d
+  needs a full model there (> 15 min per direction), so the reference is the section rung's
+  finest mesh (D/40) unless fe3d is asked for on those cases.
+
+Settings (``SETTINGS``): closed_form, surrogate (its table of section D/20), section at D/12,
+D/20 and D/40, rod and fe3d. Per case and pressure each records the relative error in
+R_C = 1/|k| against the reference, the tip position error (mm) and the bending-direction error
+(degrees); per case its time per evaluation (single commands for the table rungs; a cold sweep
+divided by its commands for the solvers) and its failure boundary (the last pressure reached on
+a ramp along the case's direction up to the design's max_pressure; fe3d: the case's own ramp).
+Results are cached per rung and case, so re-running only redraws.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import statistics
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .cache import cache_dir, key_of
+from .design import load_design
+from .errors import ModelError
+from .models import RUNGS, make_model, rung_info
+from .prediction import predict
+from .units import PA_PER_BAR
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    family: str               # "length" (1 channel, lengths) or "direction" (3 channels, directions)
+    design: str
+    length: float             # m
+    direction: tuple          # channel pressures per unit of the largest (the case's ray)
+    magnitudes_pa: tuple      # the largest channel pressure at each point
+
+    @property
+    def pressures(self) -> np.ndarray:
+        return np.outer(self.magnitudes_pa, self.direction)
+
+
+ONE_CH = (5000.0, 10000.0, 15000.0, 20000.0, 25000.0)
+THREE_CH = (10000.0, 20000.0, 30000.0)
+CASES = [
+    Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), ONE_CH),
+    Case("1ch 20mm", "length", "implemented_5mm", 0.020, (1.0,), ONE_CH),
+    Case("1ch 17mm", "length", "implemented_5mm", 0.017, (1.0,), ONE_CH),
+    Case("3ch one channel", "direction", "three_channel_5mm", 0.040, (1.0, 0.0, 0.0), THREE_CH),
+    Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), THREE_CH),
+    Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), THREE_CH),
+]
+FE3D = ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0, "threads": 1}, True)
+# (label, rung, options, is a solver: timed as a cold sweep)
+SETTINGS = [
+    ("closed_form", "closed_form", {}, False),
+    ("surrogate (of section D/20)", "surrogate", {}, False),
+    ("section D/12", "section", {"mesh_size": 0.005 / 12}, True),
+    ("section D/20", "section", {}, True),
+    ("section D/40", "section", {"mesh_size": 0.005 / 40}, True),
+    ("rod", "rod", {}, True),
+    FE3D,
+]
+# the setting of each rung a scene runs (its default), recorded in the envelope
+DEFAULT_SETTING = {"closed_form": "closed_form", "surrogate": "surrogate (of section D/20)",
+                   "section": "section D/20", "rod": "rod", "fe3d": FE3D[0]}
+SECTION_REFERENCE = "section D/40"
+
+
+def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
+    """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
+    design = load_design(case.design).with_length(case.length)
+    pressures = case.pressures
+    path = cache_dir("ladder") / f"{rung}_{key_of(design.content_hash(), rung, options, pressures.tolist())}.json"
+    if path.is_file() and not refresh:
+        return json.loads(path.read_text())
+    opts = dict(options)
+    if rung == "section":
+        opts["cache"] = False   # cold: the time is the solver's
+    load0 = os.getloadavg()[0]
+    model = make_model(rung, design, **opts)
+    t0 = time.perf_counter()
+    preds = predict(model, pressures)
+    sweep = time.perf_counter() - t0
+    if rung == "fe3d":
+        # minutes per sweep: its own cache is kept, and the cost is the ramp's recorded wall time
+        times = [float(t) for t in model.evaluate(pressures).diagnostics.time_s if np.isfinite(t)]
+        total = max(times) if times == sorted(times) else sum(times)
+        per_eval = (total or sweep) / len(pressures)
+    elif solver:
+        per_eval = sweep / len(pressures)
+    else:
+        one = pressures[len(pressures) // 2]
+        times = []
+        for _ in range(7):
+            t = time.perf_counter()
+            for _ in range(2000):
+                model.evaluate(one)
+            times.append((time.perf_counter() - t) / 2000)
+        per_eval = statistics.median(times)
+    # failure boundary: a ramp along the case's direction to max_pressure (fe3d: the case ramp only)
+    if rung == "fe3d":
+        ok = [p.converged for p in preds]
+        n_ok = ok.index(False) if not all(ok) else len(ok)
+        boundary = float(case.magnitudes_pa[n_ok - 1]) if n_ok else 0.0
+        beyond = not all(ok)
+        first_failure = next((p.reason for p in preds if not p.converged), "")
+    else:
+        mags = np.linspace(0.0, design.max_pressure, 41)
+        st = make_model(rung, design, **opts).evaluate(np.outer(mags, case.direction))
+        n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
+        boundary, beyond = float(mags[max(n_ok - 1, 0)]), n_ok < len(mags)
+        first_failure = st.message.split("; ")[0] if beyond else ""
+    out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
+           "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
+           "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
+           "predictions": [p.to_json() for p in preds]}
+    path.write_text(json.dumps(out))
+    return out
+
+
+def errors(p: dict, r: dict) -> dict:
+    """R_C relative error, tip position error (mm), bending-direction error (degrees) of p against r."""
+    if not (p["converged"] and r["converged"]):
+        return {"rc_rel_error": None, "tip_error_mm": None, "direction_error_deg": None}
+    kp, kr = p["curvature_per_m"], r["curvature_per_m"]
+    d = math.atan2(kp[1], kp[0]) - math.atan2(kr[1], kr[0])
+    return {"rc_rel_error": abs(p["radius_of_curvature_m"] / r["radius_of_curvature_m"] - 1.0),
+            "tip_error_mm": 1e3 * float(np.linalg.norm(np.subtract(p["tip_position_m"], r["tip_position_m"]))),
+            "direction_error_deg": abs(math.degrees((d + math.pi) % (2 * math.pi) - math.pi))}
+
+
+def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channel: bool = False,
+             refresh: tuple = (), say=print) -> tuple[list[dict], str]:
+    """Rows (one per setting and pressure) for one case, and its reference label. ``refresh``:
+    rungs whose cached results are recomputed ("all": every rung)."""
+    results = {}
+    for label, rung, options, solver in settings:
+        if rung not in RUNGS:
+            say(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
+            continue
+        if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel)):
+            continue
+        t0, load0 = time.perf_counter(), os.getloadavg()[0]
+        try:
+            results[label] = run_rung(case, rung, options, solver, rung in refresh or "all" in refresh)
+        except ModelError as exc:
+            say(f"  {label}: not available ({exc})")
+            continue
+        say(f"  {label:28s} {time.perf_counter() - t0:8.1f} s wall (load {load0:.1f} -> {os.getloadavg()[0]:.1f})",
+              flush=True)
+        if results[label].get("first_failure"):
+            say(f"    boundary {results[label]['boundary_pa'] / PA_PER_BAR:.4f} bar: {results[label]['first_failure']}")
+    if not results:
+        raise ModelError(f"case {case.name}: no rung answered")
+    ref_label = FE3D[0]
+    if ref_label not in results or sum(p["converged"] for p in results[ref_label]["predictions"]) < 3:
+        ref_label = SECTION_REFERENCE
+    if ref_label not in results:
+        raise ModelError(f"case {case.name}: the reference ({FE3D[0]} or {SECTION_REFERENCE}) was not run")
+    ref = results[ref_label]["predictions"]
+    rows = []
+    for label, res in results.items():
+        for p, r in zip(res["predictions"], ref):
+            rows.append({"case": case.name, "family": case.family, "design": case.design, "length_m": case.length,
+                         "direction": " ".join(f"{v:g}" for v in case.direction),
+                         "setting": label, "rung": res["rung"], "pressure_pa": max(p["pressures_pa"]),
+                         "pressures_pa": " ".join(f"{v:g}" for v in p["pressures_pa"]),
+                         "s_per_eval": res["s_per_eval"], "converged": p["converged"], "reference": ref_label,
+                         "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
+                         "rc_m": p["radius_of_curvature_m"], **errors(p, r)})
+    return rows, ref_label
+
+
+def report(rows: list[dict], say=print) -> None:
+    def worst(vals):
+        vals = [v for v in vals if v is not None]
+        return max(vals) if vals else float("nan")
+
+    for case in dict.fromkeys(r["case"] for r in rows):
+        rs = [r for r in rows if r["case"] == case]
+        say(f"{case} (reference {rs[0]['reference']}):")
+        for label in dict.fromkeys(r["setting"] for r in rs):
+            s = [r for r in rs if r["setting"] == label]
+            say(f"  {label:28s} {s[0]['s_per_eval'] * 1e6:14.2f} us/eval  R_C error max "
+                  f"{worst(r['rc_rel_error'] for r in s):8.2%}  tip {worst(r['tip_error_mm'] for r in s):6.2f} mm  "
+                  f"direction {worst(r['direction_error_deg'] for r in s):6.2f} deg  "
+                  f"boundary {s[0]['boundary_pa'] / PA_PER_BAR:.3f} bar")
+
+
+def _envelope(rs: list[dict]) -> dict | None:
+    """One rung's measured envelope over rows of one setting (one or more cases)."""
+    if not rs:
+        return None
+    is_ref = all(r["setting"] == r["reference"] for r in rs)
+    inside = [r for r in rs if r["pressure_pa"] <= r["boundary_pa"]]
+
+    def worst(key):
+        vals = [r[key] for r in inside if r[key] is not None]
+        return (0.0 if is_ref else max(vals)) if vals or is_ref else None
+
+    return {
+        # the reference has no error against itself: taken as 0, so a scene asking for more accuracy
+        # than any rung has gets the reference
+        "error_rc_rel_max": worst("rc_rel_error"),
+        "error_tip_mm_max": worst("tip_error_mm"),
+        "error_direction_deg_max": worst("direction_error_deg"),
+        "reference": sorted({r["reference"] for r in rs}),
+        "cost_s_per_eval": max(float(r["s_per_eval"]) for r in rs),
+        "valid_pressure_pa": [0.0, min(float(r["boundary_pa"]) for r in rs)],
+        "measured_pressures_pa": sorted({float(r["pressure_pa"]) for r in inside}),
+        # per measured pressure the worst R_C error over the cases there: selection judges a scene by
+        # the pressures it needs, not by errors near the rung's limit it never reaches
+        "error_rc_rel_by_pressure_pa": [
+            [p, 0.0 if is_ref else max((r["rc_rel_error"] for r in inside if r["pressure_pa"] == p
+                                        and r["rc_rel_error"] is not None), default=None)]
+            for p in sorted({float(r["pressure_pa"]) for r in inside})],
+        "cases": list(dict.fromkeys(r["case"] for r in rs))}
+
+
+def envelope_document(rows: list[dict], measured: str) -> dict:
+    """Per rung (its default setting) and design: the worst over that design's cases, and per
+    measured length its own envelope (``by_length``, keyed by the length in m) for selection."""
+    rungs = {}
+    for rung, label in DEFAULT_SETTING.items():
+        rs = [r for r in rows if r["setting"] == label]
+        if not rs:
+            continue
+        designs = {}
+        for design in dict.fromkeys(r["design"] for r in rs):
+            d_rows = [r for r in rs if r["design"] == design]
+            entry = _envelope(d_rows)
+            lengths = list(dict.fromkeys(r["length_m"] for r in d_rows))
+            if len(lengths) > 1:
+                entry["by_length"] = {f"{L:g}": _envelope([r for r in d_rows if r["length_m"] == L])
+                                      for L in lengths}
+            designs[design] = entry
+        rungs[rung] = {"setting": label, "capabilities": list(rung_info(rung).models),
+                       "designs": designs}
+    refs = sorted({r["reference"] for r in rows})
+    return {"reference": " / ".join(refs), "measured": measured,
+           "loadavg": list(os.getloadavg()),
+           "note": "written by `softcath envelope`; read by core/model_selection.py (model: auto). "
+                   "Errors are relative R_C errors (and tip mm, direction degrees) against each case's reference "
+                   "over the measured pressures inside each rung's valid range; per design the worst over its cases, "
+                   "per length (by_length) that length's cases. Costs are seconds per evaluation on a shared "
+                   "2-core machine.",
+           "rungs": rungs}
+
+
+def write_envelope(rows: list[dict], path: Path) -> None:
+    """The envelope of ``rows`` as YAML at ``path`` (atomically: model selection may be reading it)."""
+    import yaml
+
+    doc = envelope_document(rows, time.strftime("%Y-%m-%d %H:%M:%S"))
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(yaml.safe_dump(doc, sort_keys=False))
+    os.replace(tmp, path)
