@@ -13,19 +13,18 @@ design's limit (at start-up), never raised, and it is enforced again on every me
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, Vector3Stamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
+from .. import topics
 from ..core.allocation import Allocator
 from ..core.errors import SoftcathError
 from ..core.command_shaping import CommandWatchdog, RateLimiter, check_frame, check_vector
@@ -33,44 +32,42 @@ from ..core.design import load_design
 from ..core.models import make_model
 from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters
+from .parameters import declare
 from .qos import RELIABILITIES, stream_qos
 from .runtime import EXECUTORS, run_node
 
-NODE_NAME = "softcath_allocation"
+NODE_NAME = topics.ALLOCATION_NODE
 RCLError = _rclpy.RCLError
 
 
 class AllocationNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        p = self._declare
+        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
         model_name = p("model", "closed_form", "model rung used for the inverse")
-        self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s")
-        self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped")
-        self.frame_id = p("frame_id", "softcath_base", "frame commands must be expressed in")
-        publish_rate = p("publish_rate", 200.0, "pressure_cmd publishing rate, Hz")
+        self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",
+                          minimum=1.0, maximum=1e9)
+        self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped",
+                         minimum=1e-3, maximum=3600.0)
+        self.frame_id = p("frame_id", topics.FRAME_ID, "frame commands must be expressed in")
+        publish_rate = p("publish_rate", 200.0, "pressure_cmd publishing rate, Hz", minimum=0.1, maximum=10000.0)
         self.max_request_curvature = p("max_request_curvature", 1000.0,
-                                       "bend_cmd above this |k| (1/m) is a fault and rejected (below it saturates)")
-        hysteresis = p("hysteresis_deg", 0.2, "angular hysteresis of the active channel pair, degrees")
-        diag_period = p("diagnostics_period", 1.0, "period of /diagnostics, s")
-        depth = int(p("qos_depth", 100, "keep-last depth of the command subscriptions and pressure publisher"))
-        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}")
-        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)} (at start-up)")
-        self.realtime_priority = int(p("realtime_priority", 0, "SCHED_FIFO priority 1-99 for the node's threads, "
-                                                               "0 = normal scheduling"))
-        for name, value, allowed in (("executor", self.executor_name, EXECUTORS),
-                                     ("reliability", reliability, RELIABILITIES)):
-            if value not in allowed:
-                raise ValueError(f"parameter {name} = {value!r}: not one of {allowed}")
-        if not 0 <= self.realtime_priority <= 99:
-            raise ValueError(f"parameter realtime_priority = {self.realtime_priority}: must be 0..99")
-        if not diag_period > 0:
-            raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
+                                       "bend_cmd above this |k| (1/m) is a fault and rejected (below it saturates)",
+                                       minimum=0.0)
+        hysteresis = p("hysteresis_deg", 0.2, "angular hysteresis of the active channel pair, degrees",
+                       minimum=0.0, maximum=30.0)
+        diag_period = p("diagnostics_period", 1.0, "period of /diagnostics, s", minimum=1e-3, maximum=3600.0)
+        depth = p("qos_depth", 100, "keep-last depth of the command subscriptions and pressure publisher",
+                  minimum=1, maximum=100000)
+        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}",
+                        choices=RELIABILITIES)
+        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
+        self.realtime_priority = p("realtime_priority", 0, "SCHED_FIFO priority 1-99 for the node's threads, "
+                                                           "0 = normal scheduling", minimum=0, maximum=99)
 
         design = load_design(design_name)
-        requested_max = self._declare("max_pressure", design.max_pressure,
-                                      "safety limit on every published pressure, Pa (read-only)", read_only=True)
+        requested_max = p("max_pressure", design.max_pressure, "safety limit on every published pressure, Pa")
         if not requested_max > 0:
             raise SoftcathError(f"max_pressure {requested_max} Pa must be positive")
         if requested_max > design.max_pressure:
@@ -82,9 +79,8 @@ class AllocationNode(Node):
         self.max_pressure = self.design.max_pressure
         self.allocator = Allocator(make_model(model_name, self.design), hysteresis_deg=hysteresis)
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
-                                  "tip_target farther than this from the base (m) is a fault and rejected")
-        if not (publish_rate > 0 and math.isfinite(publish_rate)):
-            raise SoftcathError(f"publish_rate {publish_rate} Hz must be positive")
+                                  "tip_target farther than this from the base (m) is a fault and rejected",
+                                  minimum=0.0)
 
         n = self.design.n_channels
         self.limiter = RateLimiter(n, self.max_rate)
@@ -98,32 +94,21 @@ class AllocationNode(Node):
         self._last_publish = time.monotonic()
 
         qos = stream_qos(depth, reliability)
-        self.pub = self.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
-        self.create_subscription(Vector3Stamped, "/softcath/bend_cmd", self._on_bend, qos)
-        self.create_subscription(PointStamped, "/softcath/tip_target", self._on_tip, qos)
+        self.pub = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, qos)
+        self.create_subscription(Vector3Stamped, topics.BEND_CMD, self._on_bend, qos)
+        self.create_subscription(PointStamped, topics.TIP_TARGET, self._on_tip, qos)
         self.period = 1.0 / publish_rate
         self.create_timer(self.period, self._tick)
         # Two statuses: the shared input counters (accepted/rejected, as every node reports them)
         # and this node's output state (watchdog, saturation), published on each change too.
         self._inputs_report = DiagnosticsReporter(self, self.counters, f"{NODE_NAME}: commands",
                                                   self.design.name, diag_period)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.create_timer(diag_period, self._publish_diagnostics)
         self.get_logger().info(
             f"design {self.design.name} ({n} channels), model {model_name}, max_pressure {self.max_pressure:g} Pa, "
             f"rate limit {self.max_rate:g} Pa/s, timeout {self.timeout:g} s, executor {self.executor_name}, "
             f"publishing at {publish_rate:g} Hz")
-
-    def _declare(self, name, default, description, read_only=False):
-        # Numbers accept an integer too (``-p max_pressure:=40000``), then count as float.
-        numeric = isinstance(default, float)
-        desc = ParameterDescriptor(description=description, read_only=read_only, dynamic_typing=numeric)
-        value = self.declare_parameter(name, default, desc).value
-        if numeric:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise SoftcathError(f"parameter {name} = {value!r}: must be a number")
-            return float(value)
-        return value
 
     # ------------------------------------------------------------------ inputs
 

@@ -19,11 +19,11 @@ import time
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
+from .. import topics
 from ..core.answer_load import AnswerLoad
 from ..core.design import load_design
 from ..core.errors import SoftcathError
@@ -33,10 +33,11 @@ from ..core.models import make_model
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
+from .parameters import declare
 from .qos import RELIABILITIES, stream_qos
 from .runtime import EXECUTORS, run_node
 
-FRAME_ID = "softcath_base"
+FRAME_ID = topics.FRAME_ID
 WARN_THROTTLE_S = 1.0
 # serialized: preallocated CDR bytes; reuse: preallocated message objects filled in place;
 # fresh: new message objects per command (the plain rclpy way).
@@ -46,37 +47,29 @@ PREPARATIONS = ("serialized", "reuse", "fresh")
 class ModelNode(Node):
     def __init__(self, **node_options):
         """``node_options`` go to rclpy's Node (e.g. ``context`` for in-process tests)."""
-        super().__init__("softcath_model", **node_options)
-        startup = "applied at start-up"
-        p = self._declare
+        super().__init__(topics.MODEL_NODE, **node_options)
+        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
         model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form, or auto (needs scene)")
         scene_name = p("scene", "", "scene YAML file or shipped scene name: with model auto, picks the rung")
-        n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip (>= 2)")
+        n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip",
+                     minimum=2, maximum=10000)
         # 1000 = 1 s at 1 kHz: a reliable keep-last writer overwrites samples a late reader has
         # not acknowledged yet, so a shallower history loses poses whenever the node lags.
-        depth = p("qos_depth", 1000, "keep-last depth of the command subscription and pose publishers")
-        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}")
+        depth = p("qos_depth", 1000, "keep-last depth of the command subscription and pose publishers",
+                  minimum=1, maximum=100000)
+        reliability = p("reliability", "reliable", f"QoS reliability: {' | '.join(RELIABILITIES)}",
+                        choices=RELIABILITIES)
         self.out_of_range = p("out_of_range", "reject",
-                              f"finite pressures outside [0, max_pressure]: {' | '.join(POLICIES)}")
-        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)} ({startup})")
+                              f"finite pressures outside [0, max_pressure]: {' | '.join(POLICIES)}", choices=POLICIES)
+        self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
         self.preparation = p("message_preparation", "serialized",
-                             f"how outputs are built: {' | '.join(PREPARATIONS)}")
+                             f"how outputs are built: {' | '.join(PREPARATIONS)}", choices=PREPARATIONS)
         self.realtime_priority = p("realtime_priority", 0,
-                                   "SCHED_FIFO priority 1-99 for all node threads, 0 = normal scheduling")
-        diag_period = p("diagnostics_period", 1.0, "seconds between /diagnostics reports")
-        for name, value, allowed in (("out_of_range", self.out_of_range, POLICIES),
-                                     ("executor", self.executor_name, EXECUTORS),
-                                     ("reliability", reliability, RELIABILITIES),
-                                     ("message_preparation", self.preparation, PREPARATIONS)):
-            if value not in allowed:
-                raise ValueError(f"parameter {name} = {value!r}: not one of {allowed}")
-        if n_points < 2:
-            raise ValueError(f"parameter backbone_points = {n_points}: needs at least 2 (base and tip)")
-        if not 0 <= self.realtime_priority <= 99:
-            raise ValueError(f"parameter realtime_priority = {self.realtime_priority}: must be 0..99")
-        if diag_period <= 0:
-            raise ValueError(f"parameter diagnostics_period = {diag_period}: must be positive")
+                                   "SCHED_FIFO priority 1-99 for all node threads, 0 = normal scheduling",
+                                   minimum=0, maximum=99)
+        diag_period = p("diagnostics_period", 1.0, "seconds between /diagnostics reports", minimum=1e-3,
+                        maximum=3600.0)
 
         self.design = load_design(design_name)
         if model_name == "auto":
@@ -93,8 +86,7 @@ class ModelNode(Node):
         self.n_points = int(n_points)
         # The safety limit comes from the design only: an override is ignored (and said so).
         self.max_pressure = self.design.max_pressure
-        self.declare_parameter("max_pressure", self.max_pressure, ParameterDescriptor(
-            description="Pa, from the design file; read-only", read_only=True), ignore_override=True)
+        declare(self, "max_pressure", self.max_pressure, "Pa, from the design file", ignore_override=True)
         if "max_pressure" in self._parameter_overrides:
             self.get_logger().warning(f"max_pressure override ignored: the limit is the design's "
                                    f"{self.max_pressure:g} Pa")
@@ -114,10 +106,10 @@ class ModelNode(Node):
             self.preparation = "reuse"
         self._tip_buf = PoseStampedBuffer(FRAME_ID)
         self._bb_buf = PoseArrayBuffer(FRAME_ID, self.n_points)
-        self._tip_pub = self.create_publisher(PoseStamped, "/softcath/tip_pose", qos)
-        self._backbone_pub = self.create_publisher(PoseArray, "/softcath/backbone", qos)
+        self._tip_pub = self.create_publisher(PoseStamped, topics.TIP_POSE, qos)
+        self._backbone_pub = self.create_publisher(PoseArray, topics.BACKBONE, qos)
         self._tip, self._backbone = self._new_messages()
-        self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self._on_command, qos)
+        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self._on_command, qos)
         # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
         self.answer_load = AnswerLoad(time.monotonic())
         self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
@@ -143,10 +135,6 @@ class ModelNode(Node):
         elif took > 1.0:
             self.get_logger().info(f"model {model_name}: ready in {took:.1f} s")
         return model
-
-    def _declare(self, name, default, description):
-        return self.declare_parameter(name, default, ParameterDescriptor(
-            description=description, read_only=True)).value
 
     def _new_messages(self):
         tip = PoseStamped()

@@ -56,12 +56,14 @@ def set_realtime_priority(priority: int) -> str:
     return ""
 
 
-def spin(executor, name: str) -> None:
-    """Run callbacks until the context shuts down (SIGINT/SIGTERM or rclpy.shutdown())."""
-    if name == "events":
+def spin(executor, name: str, finished: Callable[[], bool] | None = None) -> None:
+    """Run callbacks until the context shuts down (SIGINT/SIGTERM or rclpy.shutdown()) or, for a
+    node that ends by itself (a bench run), until ``finished()``."""
+    if name == "events" or finished is not None:
         context = executor.context
-        while context.ok():
-            executor.spin_once(timeout_sec=0.5)
+        done = finished or (lambda: False)
+        while context.ok() and not done():
+            executor.spin_once(timeout_sec=0.05 if finished is not None else 0.5)
     else:
         executor.spin()
 
@@ -70,7 +72,9 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     """Create the node with ``factory()``, spin it on ``node.executor_name``; return the exit code.
 
     ``startup_errors``: exception types that mean "cannot start with this configuration";
-    they are logged as one line and give exit code 2.
+    they are logged as one line and give exit code 2. A node that ends by itself has a
+    ``finished`` property (spinning stops when it is true) and a ``finish()`` method, called on
+    the way out whether it finished or was interrupted, that returns the exit code.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -78,6 +82,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
 
     rclpy.init(args=args)
     node = None
+    code = 0
     try:
         try:
             node = factory()
@@ -92,7 +97,8 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
             problem = set_realtime_priority(priority)
             if problem:
                 node.get_logger().warning(problem + "; running with normal scheduling")
-        spin(executor, name)
+        ends = hasattr(type(node), "finished")
+        spin(executor, name, (lambda: node.finished) if ends else None)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:
@@ -103,6 +109,8 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
             raise
     finally:
         if node is not None:
+            if hasattr(node, "finish"):
+                code = node.finish()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code

@@ -15,115 +15,109 @@ import time
 from dataclasses import asdict
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64, Float64MultiArray, String
 
-RIG_TOPIC = "/softcath/bench/rig"
+from .. import topics
+from ..bench.sim_rig import RigParams, SimulatedRig
+from ..core.design import load_design
+from ..core.errors import SoftcathError
+from ..core.models import make_model
+from .parameters import declare
+from .runtime import run_node
+
+# Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
+# would make the simulated readings meaningless.
+RIG_RANGES = {"regulator_time_constant": (1e-4, 10.0), "pressure_shift": (0.0, 0.99),
+              "friction_underread": (0.0, 0.99), "out_of_plane_tilt": (0.0, 1.5)}
 
 
-def main(argv=None) -> int:
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from std_msgs.msg import Float64, Float64MultiArray, String
+class SimBenchNode(Node):
+    executor_name = "single"   # rclpy's default executor: timers at rate_hz and two subscriptions
 
-    from ..bench.sim_rig import RigParams, SimulatedRig
-    from ..core.design import load_design
-    from ..core.errors import SoftcathError
-    from ..core.models import make_model
+    def __init__(self, **node_options):
+        super().__init__(topics.SIM_BENCH_NODE, **node_options)
+        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
+        design_name = p("design", "implemented_5mm", "design file or shipped design name")
+        model_name = p("model", "closed_form", "model rung that stands for the true actuator")
+        rate_hz = p("rate_hz", 100.0, "publishing rate of the readings, Hz", minimum=1.0, maximum=10000.0)
+        values = {}
+        for name, default in asdict(RigParams()).items():
+            lo, hi = RIG_RANGES.get(name, (0, None))
+            values[name] = p(name, default, f"simulated rig: {name} (bench/sim_rig.py RigParams)",
+                             minimum=lo, maximum=hi)
+        params = RigParams(**values)
+        design = load_design(design_name)
+        model = make_model(model_name, design)
+        self.rig = SimulatedRig(model, params)
+        self.rejected = 0
+        self.command = np.zeros(design.n_channels)
+        self.pub_p = self.create_publisher(Float64MultiArray, topics.PRESSURE_MEASURED, 10)
+        self.pub_a = self.create_publisher(Float64, topics.BENCH_ANGLE, 10)
+        self.pub_f = self.create_publisher(Float64, topics.BENCH_FORCE, 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_rig = self.create_publisher(String, topics.BENCH_RIG, latched)
+        self.pub_rig.publish(String(data=json.dumps({
+            "simulated": True, "node": self.get_name(), "design": design.name,
+            "design_hash": design.content_hash(), "model": model.name, "rig": asdict(params)})))
+        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 10)
+        self.create_subscription(String, topics.BENCH_STEP, self.on_step, 100)
+        self.dt = 1.0 / rate_hz
+        self.t_last = time.monotonic()
+        self.create_timer(self.dt, self.tick)
+        self.create_timer(1.0, self.diagnostics)
+        self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
+                               f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
 
-    class SimBenchNode(Node):
-        def __init__(self):
-            super().__init__("softcath_sim_bench")
-            d = RigParams()
-            self.declare_parameter("design", "implemented_5mm")
-            self.declare_parameter("model", "closed_form")
-            self.declare_parameter("rate_hz", 100.0)
-            for name, default in asdict(d).items():
-                self.declare_parameter(name, default)
-            params = RigParams(**{k: type(v)(self.get_parameter(k).value) for k, v in asdict(d).items()})
-            design = load_design(self.get_parameter("design").value)
-            model = make_model(self.get_parameter("model").value, design)
-            self.rig = SimulatedRig(model, params)
-            self.rejected = 0
-            self.command = np.zeros(design.n_channels)
-            self.pub_p = self.create_publisher(Float64MultiArray, "/softcath/pressure_measured", 10)
-            self.pub_a = self.create_publisher(Float64, "/softcath/bench/angle", 10)
-            self.pub_f = self.create_publisher(Float64, "/softcath/bench/force", 10)
-            self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
-            self.pub_rig = self.create_publisher(String, RIG_TOPIC, latched)
-            self.pub_rig.publish(String(data=json.dumps({
-                "simulated": True, "node": self.get_name(), "design": design.name,
-                "design_hash": design.content_hash(), "model": model.name, "rig": asdict(params)})))
-            self.create_subscription(Float64MultiArray, "/softcath/pressure_cmd", self.on_command, 10)
-            self.create_subscription(String, "/softcath/bench/step", self.on_step, 100)
-            self.dt = 1.0 / float(self.get_parameter("rate_hz").value)
-            self.t_last = time.monotonic()
-            self.create_timer(self.dt, self.tick)
-            self.create_timer(1.0, self.diagnostics)
-            self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
-                                   f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
+    def on_command(self, msg):
+        p = np.asarray(msg.data, dtype=float)
+        if p.shape != self.command.shape or not np.all(np.isfinite(p)):
+            self.rejected += 1
+            self.get_logger().warning(f"rejected pressure command {list(msg.data)} (need "
+                                   f"{self.command.size} finite values)", throttle_duration_sec=2.0)
+            return
+        self.command = p  # the regulator clamps to [0, max_pressure]
 
-        def on_command(self, msg):
-            p = np.asarray(msg.data, dtype=float)
-            if p.shape != self.command.shape or not np.all(np.isfinite(p)):
-                self.rejected += 1
-                self.get_logger().warning(f"rejected pressure command {list(msg.data)} (need "
-                                       f"{self.command.size} finite values)", throttle_duration_sec=2.0)
-                return
-            self.command = p  # the regulator clamps to [0, max_pressure]
-
-        def on_step(self, msg):
+    def on_step(self, msg):
+        try:
+            ev = json.loads(msg.data)
+        except ValueError:
+            return
+        if ev.get("event") == "step_start":
             try:
-                ev = json.loads(msg.data)
-            except ValueError:
-                return
-            if ev.get("event") == "step_start":
-                try:
-                    self.rig.mount(ev["bench"], float(ev["sample_length_m"]))
-                except (KeyError, ValueError) as exc:
-                    self.get_logger().warning(f"cannot mount sample from marker: {exc}")
+                self.rig.mount(ev["bench"], float(ev["sample_length_m"]))
+            except (KeyError, ValueError) as exc:
+                self.get_logger().warning(f"cannot mount sample from marker: {exc}")
 
-        def tick(self):
-            # The regulator advances by the time that really passed: on a loaded machine the
-            # timer fires late, and a fixed dt would slow the simulated rig down.
-            now = time.monotonic()
-            dt, self.t_last = min(now - self.t_last, 0.5), now
-            self.rig.advance(dt, self.command)
-            r = self.rig.read()
-            self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
-            self.pub_a.publish(Float64(data=r.angle))
-            self.pub_f.publish(Float64(data=r.force))
+    def tick(self):
+        # The regulator advances by the time that really passed: on a loaded machine the
+        # timer fires late, and a fixed dt would slow the simulated rig down.
+        now = time.monotonic()
+        dt, self.t_last = min(now - self.t_last, 0.5), now
+        self.rig.advance(dt, self.command)
+        r = self.rig.read()
+        self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
+        self.pub_a.publish(Float64(data=r.angle))
+        self.pub_f.publish(Float64(data=r.force))
 
-        def diagnostics(self):
-            st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == 0 else DiagnosticStatus.WARN,
-                                  name="softcath_sim_bench", hardware_id="simulated",
-                                  message="simulated rig running" + (f", {self.rejected} commands rejected"
-                                                                     if self.rejected else ""),
-                                  values=[KeyValue(key="rejected_commands", value=str(self.rejected)),
-                                          KeyValue(key="bench", value=self.rig.bench),
-                                          KeyValue(key="sample_length_m", value=f"{self.rig.length:g}")])
-            msg = DiagnosticArray(status=[st])
-            msg.header.stamp = self.get_clock().now().to_msg()
-            self.pub_diag.publish(msg)
+    def diagnostics(self):
+        st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == 0 else DiagnosticStatus.WARN,
+                              name=topics.SIM_BENCH_NODE, hardware_id="simulated",
+                              message="simulated rig running" + (f", {self.rejected} commands rejected"
+                                                                 if self.rejected else ""),
+                              values=[KeyValue(key="rejected_commands", value=str(self.rejected)),
+                                      KeyValue(key="bench", value=self.rig.bench),
+                                      KeyValue(key="sample_length_m", value=f"{self.rig.length:g}")])
+        msg = DiagnosticArray(status=[st])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
 
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    try:
-        node = SimBenchNode()
-    except (SoftcathError, ValueError) as exc:
-        print(f"sim_bench_node: error: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def main(args=None) -> int:
+    return run_node(SimBenchNode, args, startup_errors=(SoftcathError, ValueError))
 
 
 if __name__ == "__main__":
