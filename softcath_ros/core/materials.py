@@ -1,12 +1,14 @@
 """Hyperelastic materials: incompressible Yeoh of order 1 to 3 (neo-Hookean is Yeoh with c1 only).
 
-Strain energy W = c1 (I1-3) + c2 (I1-3)^2 + c3 (I1-3)^3, coefficients in Pa.
-Near-incompressibility is enforced in the FE rungs through ``bulk_modulus`` (Pa).
+Strain energy W = c1 (I1-3) + c2 (I1-3)^2 + c3 (I1-3)^3, coefficients in Pa; the density
+itself is ``energy.yeoh``, the one both FE rungs use. Near-incompressibility is enforced in the
+FE rungs through ``bulk_modulus`` (Pa).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from .energy import yeoh
 from .errors import DesignError
 
 # Published sets for Ecoflex 00-30 differ by about 2x in c1 (actuator.md); the
@@ -43,10 +45,9 @@ class YeohMaterial:
         """Initial Young's modulus of the incompressible solid, E = 3 mu = 6 c1, Pa."""
         return 6.0 * self.c1
 
-    def strain_energy(self, i1):
-        """W(I1) in J/m^3 for the first invariant I1 (isochoric part only)."""
-        d = i1 - 3.0
-        return self.c1 * d + self.c2 * d**2 + self.c3 * d**3
+    def strain_energy(self, i1_bar):
+        """W in J/m^3 at the isochoric first invariant ``i1_bar`` (``energy.yeoh`` with this set)."""
+        return yeoh(i1_bar, self.c1, self.c2, self.c3)
 
     def scaled(self, factor: float) -> "YeohMaterial":
         """The same material with every c_i multiplied by ``factor`` (used by calibration)."""

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..design import Design
+from ..energy import isochoric_i1, neo_hookean, yeoh
 from .mesh import MeshSettings, PrismMesh, build_mesh
 
 log = logging.getLogger(__name__)
@@ -164,15 +165,13 @@ class Fe3dProblem:
         mesh = self.mesh
         C = F.trans * F
         J = ng.Det(F)
-        i1_bar = J ** (-2.0 / 3.0) * ng.Trace(C)
         c1 = mesh.MaterialCF({k: m[0] for k, m in mats.items()}, default=0.0)
         c2 = mesh.MaterialCF({k: m[1] for k, m in mats.items()}, default=0.0)
         c3 = mesh.MaterialCF({k: m[2] for k, m in mats.items()}, default=0.0)
         bulk = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=1.0)
         # 0 in the fill (its own energy handles volume), where q then stays 0
         mixed = mesh.MaterialCF({k: 1.0 for k in mats}, default=0.0)
-        d1 = i1_bar - 3.0
-        iso = c1 * d1 + c2 * d1 * d1 + c3 * d1 * d1 * d1
+        iso = yeoh(isochoric_i1(ng.Trace(C), J), c1, c2, c3)
         if self.formulation == "displacement":   # q decouples (stays 0); volume penalised directly
             return iso + mixed * 0.5 * bulk * (J - 1.0) ** 2 - q * q / 2.0
         return iso + mixed * q * (J - 1.0) - q * q / (2.0 * bulk)
@@ -181,8 +180,7 @@ class Fe3dProblem:
     def _fill_energy(F, mu: float):
         """Compressible neo-Hookean (Poisson ratio 0.25: lambda = mu); a barrier as J -> 0."""
         ng = _ng()
-        log_j = ng.log(ng.Det(F))
-        return 0.5 * mu * (ng.Trace(F.trans * F) - 3.0 - 2.0 * log_j) + 0.5 * mu * log_j * log_j
+        return neo_hookean(ng.Trace(F.trans * F), ng.log(ng.Det(F)), mu, mu)
 
     def _hoop_energy(self, u, stiffness_per_length):
         """Homogenised rings: a membrane on the outer surface that resists only hoop stretch."""

@@ -1,0 +1,127 @@
+"""The section's deformation gradient at the sample points of an element rule, and its derivatives.
+
+Every section deforms in its own plane by x = X + u(X) (P2 displacement u), and the backbone
+is an arc of curvature k = (kx, ky) per unit deformed length with axial stretch lambda, so
+
+    F = [[dx/dX, dx/dY, 0], [dy/dX, dy/dY, 0], [0, 0, F33]],   F33 = lambda (1 - k . x).
+
+A term works with the five non-zero entries a = (F11, F12, F21, F22, F33) at each sample
+point; their derivatives with respect to an element's 15 local unknowns (12 displacements
+u_x, u_y of its six nodes interleaved, then lambda, kx R, ky R) are ``strain_rows``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .quadrature import map_rule
+
+N_GLOBAL = 3  # lambda, kx R, ky R
+
+
+class ElementRule:
+    """A quadrature rule on some elements, with what the kinematics needs at its points:
+    node indices (e,6), shape values N (q,6), physical gradients dNdX (e,q,6,2), weights dA
+    (e,q), reference positions Xq (e,q,2) and the constant in-plane rows D0 (e,q,5,15) of
+    da/d(local unknowns)."""
+
+    def __init__(self, X, triangles, points, weights):
+        self.triangles = triangles
+        self.N, self.dNdX, self.dA, self.Xq = map_rule(X, triangles, points, weights)
+        D0 = np.zeros((len(triangles), len(weights), 5, 15))
+        D0[..., 0, 0:12:2] = self.dNdX[..., 0]
+        D0[..., 1, 0:12:2] = self.dNdX[..., 1]
+        D0[..., 2, 1:12:2] = self.dNdX[..., 0]
+        D0[..., 3, 1:12:2] = self.dNdX[..., 1]
+        self.D0 = D0
+
+
+@dataclass
+class Kinematics:
+    """F at a rule's sample points: in-plane block F2 (e,q,2,2), F33 (e,q), deformed points
+    (e,q,2) and the globals (lambda, kx R, ky R)."""
+
+    F2: np.ndarray
+    f33: np.ndarray
+    xq: np.ndarray
+    globals: tuple
+
+    @property
+    def det2(self) -> np.ndarray:
+        F2 = self.F2
+        return F2[..., 0, 0] * F2[..., 1, 1] - F2[..., 0, 1] * F2[..., 1, 0]
+
+    def entries(self) -> np.ndarray:
+        """a = (F11, F12, F21, F22, F33) (e,q,5)."""
+        F2 = self.F2
+        return np.stack([F2[..., 0, 0], F2[..., 0, 1], F2[..., 1, 0], F2[..., 1, 1], self.f33], -1)
+
+
+def kinematics(rule: ElementRule, x, n_u: int) -> Kinematics:
+    """F at the sample points of ``rule`` for the state ``x`` = [u (n_u), lambda, kx R, ky R, ...]."""
+    u = x[:n_u].reshape(-1, 2)
+    lam, kx, ky = x[n_u:n_u + N_GLOBAL]
+    ue = u[rule.triangles]                                          # (e,6,2)
+    F2 = np.eye(2) + np.einsum("eai,eqaj->eqij", ue, rule.dNdX)     # (e,q,2,2)
+    xq = rule.Xq + np.einsum("qa,eai->eqi", rule.N, ue)
+    f33 = lam * (1 - kx * xq[..., 0] - ky * xq[..., 1])
+    return Kinematics(F2, f33, xq, (lam, kx, ky))
+
+
+def strain_rows(rule: ElementRule, kin: Kinematics) -> np.ndarray:
+    """da/d(local unknowns) (e,q,5,15): the constant in-plane rows plus the row of F33."""
+    lam, kx, ky = kin.globals
+    return f33_rows(rule.D0, rule.N, kin.xq, lam, kx, ky)
+
+
+def f33_rows(D0, N, xq, lam, kx, ky):
+    """D0 with the row of F33 = lam (1 - k.x) filled in (e,q,5,15)."""
+    D = D0.copy()
+    D[..., 4, 0:12:2] = -lam * kx * N
+    D[..., 4, 1:12:2] = -lam * ky * N
+    D[..., 4, 12] = 1 - kx * xq[..., 0] - ky * xq[..., 1]
+    D[..., 4, 13] = -lam * xq[..., 0]
+    D[..., 4, 14] = -lam * xq[..., 1]
+    return D
+
+
+def add_f33_hessian(H, s, N, xq, lam, kx, ky):
+    """H += sum_q s_q d2F33/d(local unknowns)^2 (F33 is bilinear in x and the globals).
+
+    H (e,15,15), s (e,q), N (q,6), xq (e,q,2)."""
+    sn = s @ N                                   # (e,6)
+    sx = np.sum(s * xq[..., 0], -1)
+    sy = np.sum(s * xq[..., 1], -1)
+    for (rows, col, val) in ((slice(0, 12, 2), 12, -kx * sn), (slice(1, 12, 2), 12, -ky * sn),
+                             (slice(0, 12, 2), 13, -lam * sn), (slice(1, 12, 2), 14, -lam * sn)):
+        H[:, rows, col] += val
+        H[:, col, rows] += val
+    H[:, 12, 13] -= sx
+    H[:, 13, 12] -= sx
+    H[:, 12, 14] -= sy
+    H[:, 14, 12] -= sy
+
+
+def jacobian_derivatives(a, det2, f33):
+    """dJ/da (..., 5) and d2J/da2 (..., 5, 5) for J = det F = det2 f33."""
+    Ja = np.stack([a[..., 3] * f33, -a[..., 2] * f33, -a[..., 1] * f33, a[..., 0] * f33, det2], -1)
+    Jaa = np.zeros(a.shape + (5,))
+    Jaa[..., 0, 3] = Jaa[..., 3, 0] = f33
+    Jaa[..., 1, 2] = Jaa[..., 2, 1] = -f33
+    Jaa[..., 0, 4] = Jaa[..., 4, 0] = a[..., 3]
+    Jaa[..., 3, 4] = Jaa[..., 4, 3] = a[..., 0]
+    Jaa[..., 1, 4] = Jaa[..., 4, 1] = -a[..., 2]
+    Jaa[..., 2, 4] = Jaa[..., 4, 2] = -a[..., 1]
+    return Ja, Jaa
+
+
+def block_dofs(nodes, i_glob) -> np.ndarray:
+    """Global unknown indices (b, 2m + 3) of blocks of m nodes each (``nodes`` (b, m): an element's
+    six or an edge's three): (u_x, u_y) of each node interleaved, then the globals."""
+    m = nodes.shape[1]
+    dofs = np.empty((len(nodes), 2 * m + N_GLOBAL), dtype=np.int64)
+    dofs[:, 0:2 * m:2] = 2 * nodes
+    dofs[:, 1:2 * m:2] = 2 * nodes + 1
+    dofs[:, 2 * m:] = i_glob
+    return dofs
