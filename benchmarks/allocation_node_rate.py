@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from results_io import RESULTS, write_results  # benchmarks/ is the script's directory
+from harness import RESULTS, write_results  # benchmarks/ is the script's directory
 
 
 SENDER = """

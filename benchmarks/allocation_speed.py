@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import time
 import numpy as np
 from tqdm import tqdm
 
@@ -28,7 +27,7 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel
 
-from results_io import RESULTS, write_results  # noqa: E402  (benchmarks/ is the script's directory)
+from harness import RESULTS, time_each, write_results  # noqa: E402  (benchmarks/ is the script's directory)
 
 TARGET_US = 100.0
 
@@ -47,14 +46,8 @@ class EvaluateOnly(BendModel):
 
 
 def time_calls(fn, requests, label) -> np.ndarray:
-    """Seconds of each call ``fn(request)``."""
-    out = np.empty(len(requests))
-    clock = time.perf_counter_ns
-    for i, r in enumerate(tqdm(requests, desc=label, leave=False, mininterval=0.5)):
-        t0 = clock()
-        fn(r)
-        out[i] = (clock() - t0) * 1e-9
-    return out
+    """Seconds of each call ``fn(request)``, with a progress bar."""
+    return time_each(fn, tqdm(requests, desc=label, leave=False, mininterval=0.5))
 
 
 def requests_for(allocator: Allocator, n: int, rng, saturated: bool) -> list[np.ndarray]:

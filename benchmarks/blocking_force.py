@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from results_io import RESULTS, write_results
+from harness import RESULTS, write_results
 from softcath_ros.bench.blocking import BlockingForce, bench_contact
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import save_figure, write_results  # noqa: E402
+from harness import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
@@ -118,7 +118,7 @@ def plot(name: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from results_io import RESULTS
+    from harness import RESULTS
 
     doc = json.loads((RESULTS / f"{name}.json").read_text())
     rows = [r for r in doc["results"] if r["converged"] and r["radius_l_over_theta_mm"]]

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import RESULTS  # noqa: E402
+from harness import RESULTS  # noqa: E402
 
 from softcath_ros.cli import main as softcath  # noqa: E402
 from softcath_ros.resources import envelope_path  # noqa: E402

@@ -11,25 +11,13 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 
 import numpy as np
-from results_io import RESULTS, write_results
+from harness import RESULTS, time_loops, write_results
 
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose, tip_pose_single
 from softcath_ros.core.models import make_model
-
-
-def per_call_seconds(fn, calls: int, repeats: int) -> list[float]:
-    """Seconds per call of ``fn`` for each of ``repeats`` timed loops of ``calls`` calls."""
-    out = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        out.append((time.perf_counter() - t0) / calls)
-    return out
 
 
 def main() -> None:
@@ -54,23 +42,23 @@ def main() -> None:
         print(f"{case:38s} batch {batch:>8d}: {med / batch * 1e6:9.3f} us/eval, "
               f"{batch / med:12.3e} eval/s")
 
-    record("evaluate (single, BendState)", 1, per_call_seconds(lambda: model.evaluate(p1), 20000, args.repeats))
+    record("evaluate (single, BendState)", 1, time_loops(lambda: model.evaluate(p1), args.repeats, 20000))
     if hasattr(model, "curvature_single"):
         record("curvature_single (fast path)", 1,
-               per_call_seconds(lambda: model.curvature_single(p1), 20000, args.repeats))
+               time_loops(lambda: model.curvature_single(p1), args.repeats, 20000))
     record("evaluate + tip_pose (single)", 1,
-           per_call_seconds(lambda: tip_pose(model.evaluate(p1).curvature, design.length), 5000, args.repeats))
+           time_loops(lambda: tip_pose(model.evaluate(p1).curvature, design.length), args.repeats, 5000))
     if hasattr(model, "curvature_single"):
         def fast_pose():
             k, stretch = model.curvature_single(p1)
             return tip_pose_single(k[0], k[1], design.length * stretch)
-        record("curvature_single + tip_pose_single", 1, per_call_seconds(fast_pose, 20000, args.repeats))
+        record("curvature_single + tip_pose_single", 1, time_loops(fast_pose, args.repeats, 20000))
     for n in (1_000, 100_000, 1_000_000):
         batch = rng.uniform(0, design.max_pressure, (n, design.n_channels))
         calls = max(1, 200_000 // n)
-        record("evaluate (batched)", n, per_call_seconds(lambda: model.evaluate(batch), calls, args.repeats))
-        record("evaluate + tip_pose (batched)", n, per_call_seconds(
-            lambda: tip_pose(model.evaluate(batch).curvature, design.length), calls, args.repeats))
+        record("evaluate (batched)", n, time_loops(lambda: model.evaluate(batch), args.repeats, calls))
+        record("evaluate + tip_pose (batched)", n, time_loops(
+            lambda: tip_pose(model.evaluate(batch).curvature, design.length), args.repeats, calls))
 
     stem = write_results("model_throughput", {"model": args.model, "design": args.design,
                                               "repeats": args.repeats}, rows)

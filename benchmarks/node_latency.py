@@ -21,7 +21,7 @@ timed and reported, not charged to the node's start-up in every run.
     .venv/bin/python benchmarks/node_latency.py --configs default,single --repeats 1 --duration 3
     .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default,rt --repeats 3
 
-Writes benchmarks/results/<name>.{csv,json,png} through results_io.write_results (name:
+Writes benchmarks/results/<name>.{csv,json,png} through harness.write_results (name:
 ``--name``, default node_latency, node_latency_<model> for another rung). Ctrl-C stops cleanly.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-from results_io import write_results  # noqa: E402
+from harness import write_results  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from results_io import RESULTS, write_results  # noqa: E402
+from harness import RESULTS, write_results  # noqa: E402
 
 PAYLOADS = [b"\x00\x01\x00\x00" + struct.pack("<d", float(i)) for i in range(1000)]
 CONFIGS = ("single_sync", "events_queue")

@@ -19,7 +19,7 @@ import tracemalloc
 
 import numpy as np
 
-from results_io import RESULTS, write_results
+from harness import RESULTS, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.units import PA_PER_BAR

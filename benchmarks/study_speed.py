@@ -20,7 +20,7 @@ import statistics
 import tempfile
 import time
 
-from results_io import write_results
+from harness import write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.studies import STUDIES, study_module
 from softcath_ros.core.studies.context import StudyContext

@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from model_throughput import per_call_seconds  # noqa: E402
-from results_io import RESULTS, write_results  # noqa: E402
+from harness import RESULTS, time_loops, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
@@ -51,7 +50,7 @@ def main() -> None:
             batch = commands(model, n, rng)
             cases.append(("batched", n, (lambda b=batch: model.evaluate(b)), max(1, 300_000 // n)))
         for case, n, fn, calls in cases:
-            med = statistics.median(per_call_seconds(fn, calls, args.repeats))
+            med = statistics.median(time_loops(fn, args.repeats, calls))
             answered = float(np.mean(fn().converged))
             rows.append({"design": name, "case": case, "batch_size": n, "median_s_per_call": med,
                          "evaluations_per_s": n / med, "us_per_evaluation": med / n * 1e6,
