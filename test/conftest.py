@@ -7,8 +7,24 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 DESIGNS = REPO / "softcath_ros" / "config" / "designs"
 
-# Parallel test runs must not see each other's nodes (see scripts/test.sh).
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+# Parallel test runs must not see each other's nodes: loopback only, and this run's in-process
+# nodes on a domain leased for the whole session (node processes lease their own: domains.py).
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+from softcath_ros.graph import lease_domain  # noqa: E402
+
+_SESSION_DOMAIN = lease_domain()
+os.environ["ROS_DOMAIN_ID"] = str(_SESSION_DOMAIN.domain)
+
+
+@pytest.fixture(autouse=True)
+def _release_private_domains():
+    """Leases a test took (domains.private_domain) end with the test."""
+    from domains import LEASES
+
+    taken = len(LEASES)
+    yield
+    while len(LEASES) > taken:
+        LEASES.pop().release()
 
 
 @pytest.fixture

@@ -1,8 +1,7 @@
 """allocation_node over DDS: the node runs as its own process (the installed executable);
 this test process is the operator (publishes bend_cmd / tip_target, listens to pressure_cmd
-and /diagnostics). Domain ids 221-229 belong to this file."""
+and /diagnostics). Each test leases its own private domain (test/domains.py)."""
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -18,16 +17,17 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PointStamped, Vector3Stamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
+from domains import private_domain  # noqa: E402
 from softcath_ros.core.allocation import Allocator  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
+from softcath_ros.graph import graph_env  # noqa: E402
 
 EXE = Path(sys.executable).parent / "allocation_node"
-DOMAINS = iter(range(221, 230))
 
 
 def start_node(exe, domain, *params):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = graph_env(domain)
     args = [str(exe), "--ros-args"]
     for p in params:
         args += ["-p", p]
@@ -110,7 +110,7 @@ class Operator:
 def wire(request):
     """(operator, node process) on a fresh domain; node parameters by indirect parametrisation."""
     params = getattr(request, "param", ())
-    domain = next(DOMAINS)
+    domain = private_domain()
     proc = start_node(EXE, domain, *params)
     op = Operator(domain)
     try:
@@ -260,7 +260,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
     from softcath_ros.core.kinematics import curvature_for_tip, tip_pose
 
     design = load_design("three_channel_5mm")
-    domain = next(DOMAINS)
+    domain = private_domain()
     alloc = start_node(EXE, domain, "command_timeout:=0.4", "max_pressure_rate:=1.0e6")
     model = start_node(EXE.parent / "model_node", domain, "design:=three_channel_5mm")
     op = Operator(domain)
@@ -298,7 +298,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_exit_on_signal(sig):
-    proc = start_node(EXE, next(DOMAINS))
+    proc = start_node(EXE, private_domain())
     try:
         deadline = time.monotonic() + 20
         out = ""
@@ -314,7 +314,7 @@ def test_clean_exit_on_signal(sig):
 
 
 def test_bad_parameter_exits_with_one_line():
-    proc = start_node(EXE, next(DOMAINS), "design:=no_such_design")
+    proc = start_node(EXE, private_domain(), "design:=no_such_design")
     try:
         out, _ = proc.communicate(timeout=30)
     finally:

@@ -1,11 +1,9 @@
 """model_node in its own process over DDS: poses, bad inputs, diagnostics, clean shutdown.
 
 Each test runs the node with ``sys.executable -m softcath_ros.nodes.model_node`` on its
-own ROS_DOMAIN_ID (range 210-229, used by this file only) on loopback, and talks to it
+own private ROS_DOMAIN_ID (test/domains.py) on loopback, and talks to it
 from this process through the reusable sweep client (softcath_ros.tools.pressure_sweep).
 """
-import itertools
-import os
 import signal
 import subprocess
 import sys
@@ -15,16 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from domains import private_domain, private_env
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import backbone_poses
 from softcath_ros.core.models import make_model
 from softcath_ros.core.prediction import predict
+from softcath_ros.graph import graph_env
 
 REPO = Path(__file__).resolve().parents[1]
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
 
-_domains = itertools.cycle(range(210, 230))
 DESIGN = load_design("implemented_5mm")
 MODEL = make_model("closed_form", DESIGN)
 
@@ -38,8 +37,8 @@ class Running:
     """A model_node process plus a client in this process on the same private domain."""
 
     def __init__(self, *ros_args: str):
-        self.domain = next(_domains)
-        env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        self.domain = private_domain()
+        env = graph_env(self.domain)
         self.proc = subprocess.Popen([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args],
                                      env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         from diagnostic_msgs.msg import DiagnosticArray
@@ -189,7 +188,7 @@ def test_signal_ends_node_cleanly(start_node, sig):
 
 
 def test_bad_configuration_exits_with_one_line_error():
-    env = dict(os.environ, ROS_DOMAIN_ID=str(next(_domains)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = private_env()
     proc = subprocess.run([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args",
                            "-p", "model:=no_such_rung"], env=env, capture_output=True, text=True, timeout=30)
     assert proc.returncode == 2
@@ -261,7 +260,7 @@ def test_non_converged_or_non_finite_model_result_publishes_nothing_and_is_count
             self.sent.append(msg)
 
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=next(_domains))
+    rclpy.init(context=context, domain_id=private_domain())
     node = ModelNode(context=context)
     try:
         for result, reason in (("diverged", "Newton diverged"), ("nan", "non-finite")):
@@ -297,7 +296,7 @@ def test_answer_load_reports_a_rung_too_slow_for_its_commands():
             return BendState(np.tile([0.0, -10.0], (n, 1)), np.ones(n), np.ones(n, bool))
 
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=next(_domains))
+    rclpy.init(context=context, domain_id=private_domain())
     node = ModelNode(context=context)
     try:
         cmd = Float64MultiArray(data=[10000.0])

@@ -1,0 +1,170 @@
+"""Start a graph of softcath nodes on a private DDS domain, and stop it cleanly.
+
+Used by `softcath characterise`, the node benchmarks and the tests, so that parallel runs on one
+machine never see each other's topics:
+
+- ``lease_domain()`` holds an exclusive lock (``fcntl.flock``) on one ROS_DOMAIN_ID in a range for
+  as long as the lease lives; every process that uses this module gets a different domain. With
+  ``probe_s`` it also listens on the domain and skips it when a foreign participant shows up
+  (a graph started by other means).
+- ``NodeGraph`` starts node executables with parameters on the leased domain (loopback only,
+  ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and stops them: SIGINT, then SIGKILL after a grace.
+
+No rclpy import at module level: only the optional probe needs it.
+"""
+from __future__ import annotations
+
+import fcntl
+import importlib.util
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .core.errors import SoftcathError
+
+DOMAIN_RANGE = (100, 230)   # ROS_DOMAIN_IDs leased here; 0-99 stay free for users' own graphs
+LOCK_DIR = Path(tempfile.gettempdir()) / "softcath_ros_domains"
+
+
+class DomainLease:
+    """One ROS_DOMAIN_ID held exclusively by this process until ``release()`` (or exit)."""
+
+    def __init__(self, domain: int, lock_file=None):
+        self.domain = domain
+        self._lock = lock_file
+
+    def release(self) -> None:
+        if self._lock is not None:
+            fcntl.flock(self._lock, fcntl.LOCK_UN)
+            self._lock.close()
+            self._lock = None
+
+    def __enter__(self) -> "DomainLease":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def _foreign_participants(domain: int, listen_s: float) -> list[str]:
+    """Node names another graph has on ``domain`` (loopback), seen within ``listen_s`` seconds."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        node = rclpy.create_node("softcath_domain_probe", context=context)
+        time.sleep(listen_s)
+        names = [n for n in node.get_node_names() if n != "softcath_domain_probe"]
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    return names
+
+
+def lease_domain(domain_range: tuple[int, int] = DOMAIN_RANGE, probe_s: float = 0.0) -> DomainLease:
+    """A domain no other process using this module holds (and, with ``probe_s`` > 0, where no
+    foreign node answers within that time). SoftcathError when every domain is taken."""
+    LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    lo, hi = domain_range
+    domains = list(range(lo, hi + 1))
+    start = random.randrange(len(domains))
+    for domain in domains[start:] + domains[:start]:
+        f = open(LOCK_DIR / f"{domain}.lock", "w")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue
+        if probe_s > 0 and _foreign_participants(domain, probe_s):
+            fcntl.flock(f, fcntl.LOCK_UN)
+            f.close()
+            continue
+        return DomainLease(domain, f)
+    raise SoftcathError(f"no free ROS_DOMAIN_ID in {lo}..{hi}: every one is leased or in use")
+
+
+def graph_env(domain: int, base: dict | None = None) -> dict:
+    """The environment of a node on ``domain``: loopback discovery, unbuffered output."""
+    env = dict(os.environ if base is None else base)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    return env
+
+
+def node_command(name: str) -> list[str]:
+    """The node's console script next to this Python, else ``python -m softcath_ros.nodes.NAME``."""
+    if importlib.util.find_spec(f"softcath_ros.nodes.{name}") is None:
+        raise SoftcathError(f"no node '{name}' in softcath_ros.nodes")
+    script = Path(sys.executable).parent / name
+    return [str(script)] if script.exists() else [sys.executable, "-m", f"softcath_ros.nodes.{name}"]
+
+
+def ros_args(params: dict | None = None, extra: list[str] | tuple = ()) -> list[str]:
+    """``--ros-args -p name:=value ...`` for ``params`` plus any further ROS arguments."""
+    out = ["--ros-args"]
+    for k, v in (params or {}).items():
+        out += ["-p", f"{k}:={v}"]
+    return out + list(extra)
+
+
+def stop_process(proc: subprocess.Popen, grace_s: float = 10.0, sig=signal.SIGINT) -> int:
+    """Signal ``proc`` (SIGINT: a node finalises and exits), kill it after ``grace_s``; its exit code."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+        try:
+            proc.wait(timeout=grace_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+class NodeGraph:
+    """Nodes as separate processes on one private domain; a context manager that stops them all.
+
+    ``domain``: an explicit ROS_DOMAIN_ID (not leased), or None to lease one (``probe_s`` as in
+    ``lease_domain``)."""
+
+    def __init__(self, domain: int | None = None, probe_s: float = 0.0, env: dict | None = None):
+        self.lease = None if domain is not None else lease_domain(probe_s=probe_s)
+        self.domain = domain if domain is not None else self.lease.domain
+        self.env = graph_env(self.domain, env)
+        self.processes: list[tuple[str, subprocess.Popen]] = []
+
+    def start(self, node: str, params: dict | None = None, extra_ros_args=(), stdout=subprocess.PIPE,
+              stderr=subprocess.STDOUT, **popen) -> subprocess.Popen:
+        """Start executable ``node`` (e.g. "model_node") with ``params``; output piped unless told."""
+        cmd = node_command(node) + ros_args(params, extra_ros_args)
+        proc = subprocess.Popen(cmd, env=self.env, stdout=stdout, stderr=stderr, text=True, **popen)
+        self.processes.append((node, proc))
+        return proc
+
+    def stop(self, grace_s: float = 10.0) -> dict[str, int]:
+        """Stop every node still running (SIGINT, then kill after ``grace_s``); exit codes by node."""
+        codes = {}
+        for name, proc in reversed(self.processes):
+            codes[name] = stop_process(proc, grace_s)
+        return codes
+
+    def __enter__(self) -> "NodeGraph":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.stop()
+            for _, proc in self.processes:
+                for stream in (proc.stdout, proc.stderr):
+                    if stream is not None:
+                        stream.close()
+        finally:
+            if self.lease is not None:
+                self.lease.release()
+
+
+__all__ = ["DOMAIN_RANGE", "DomainLease", "NodeGraph", "graph_env", "lease_domain", "node_command", "ros_args",
+           "stop_process"]
