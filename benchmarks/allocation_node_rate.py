@@ -6,14 +6,13 @@ is a fresh allocation) and records /softcath/pressure_cmd. Reports the received 
 the inter-arrival intervals (median, 99th percentile), how many commands the node
 counted (its /diagnostics), and the node's CPU share (psutil).
 
-    .venv/bin/python benchmarks/allocation_node_rate.py [--seconds 10] [--rate 1000] [--domain 231]
+    .venv/bin/python benchmarks/allocation_node_rate.py [--seconds 10] [--rate 1000]
 
 Writes benchmarks/results/allocation_node_rate.{json,csv,png}.
 """
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from harness import RESULTS, write_results  # benchmarks/ is the script's directory
+from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 
 SENDER = """
@@ -52,7 +52,6 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--rate", type=float, default=1000.0, help="command and publish rate, Hz")
-    ap.add_argument("--domain", type=int, default=231)
     args = ap.parse_args()
 
     import psutil
@@ -60,7 +59,9 @@ def main() -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64MultiArray
 
-    env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    lease = lease_domain()   # a private domain (softcath_ros.graph), held until exit
+    args.domain = lease.domain
+    env = graph_env(args.domain)
     exe = Path(sys.executable).parent / "allocation_node"
     node_proc = subprocess.Popen([str(exe), "--ros-args", "-p", f"publish_rate:={args.rate}",
                                   "-p", "max_pressure_rate:=1.0e7", "-p", "command_timeout:=0.5",

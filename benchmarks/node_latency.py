@@ -42,6 +42,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 from harness import write_results  # noqa: E402
+from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {
@@ -70,7 +71,7 @@ def node_command(params: dict) -> list[str]:
 
 
 def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = graph_env(domain)
     load = os.getloadavg()[0]
     node = subprocess.Popen(node_command(params), env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
@@ -203,7 +204,6 @@ def main() -> int:
     ap.add_argument("--design", default="implemented_5mm", help="model_node's design (parameter 'design')")
     ap.add_argument("--name", default=None, help="results stem under benchmarks/results/ "
                     "(default node_latency, or node_latency_<model> for another rung)")
-    ap.add_argument("--domain-base", type=int, default=180, help="ROS_DOMAIN_IDs used: base .. base+19")
     args = ap.parse_args()
     from tqdm import tqdm
 
@@ -220,9 +220,9 @@ def main() -> int:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for i, (rep, name) in enumerate(tqdm(schedule, desc="node latency runs", unit="run")):
-                domain = args.domain_base + (i % 20)
                 params = {"model": args.model, "design": args.design, **CONFIGS[name][1]}
-                runs[name].append(run_once(name, params, args, domain, Path(tmp)))
+                with lease_domain() as lease:   # a private domain per run (softcath_ros.graph)
+                    runs[name].append(run_once(name, params, args, lease.domain, Path(tmp)))
     except KeyboardInterrupt:
         print("interrupted: nothing written", file=sys.stderr)
         return 130

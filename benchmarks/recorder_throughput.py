@@ -43,6 +43,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import RESULTS, write_results  # noqa: E402
+from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 PAYLOADS = [b"\x00\x01\x00\x00" + struct.pack("<d", float(i)) for i in range(1000)]
 CONFIGS = ("single_sync", "events_queue")
@@ -152,7 +153,7 @@ RECORDER = textwrap.dedent("""
 def from_dds(n: int, rate: float, config: str, publishers: int, domain: int, nice: int = 0) -> dict:
     from mcap.reader import make_reader
 
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = graph_env(domain)
     load = os.getloadavg()[0]
     shares = [n // publishers + (1 if k < n % publishers else 0) for k in range(publishers)]
     with tempfile.TemporaryDirectory() as d:
@@ -216,7 +217,6 @@ def main() -> int:
     rates = args.rates or ([10000.0, 20000.0] if args.quick else [5000.0, 10000.0, 20000.0, 30000.0])
     rows = [writer_only(n_writer, args.repeats)]
     print(rows[-1], flush=True)
-    domain = 150
     try:
         from tqdm import tqdm
     except ImportError:  # progress is a nicety
@@ -226,8 +226,8 @@ def main() -> int:
     for config, rate in plan:
         runs = []
         for _ in range(args.repeats):
-            runs.append(from_dds(int(rate * seconds), rate, config, args.publishers, domain, args.nice))
-            domain = 150 + (domain - 149) % 20
+            with lease_domain() as lease:   # a private domain per run (softcath_ros.graph)
+                runs.append(from_dds(int(rate * seconds), rate, config, args.publishers, lease.domain, args.nice))
             if bar:
                 bar.update()
         rows.append(median_row(runs))
