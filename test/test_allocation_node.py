@@ -199,7 +199,8 @@ def test_watchdog_vents_after_timeout_and_resumes(wire, allocator):
     assert max(op.pressures[-1][1]) > 0
     assert op.spin(3.0, until=lambda: op.pressures[-1][1] == [0.0, 0.0, 0.0])
     vent_time = time.monotonic() - t_last
-    assert 0.3 <= vent_time < 1.0, vent_time  # not before the timeout, soon after it
+    # not before the timeout; soon after it (the bound leaves room for a loaded machine's scheduling)
+    assert 0.3 <= vent_time < 2.0, vent_time
     assert op.spin(2.0, until=lambda: op.last_diag("output").get("watchdog") == "vented")
     vented = op.diagnostics["output"]
     assert vented.level == DiagnosticStatus.WARN and "vented" in vented.message

@@ -312,7 +312,8 @@ def test_answer_load_reports_a_rung_too_slow_for_its_commands():
         slow = node._diagnostics._load_status()
         values = {kv.key: kv.value for kv in slow.values}
         assert slow.level == DiagnosticStatus.WARN and "falling behind" in slow.message, slow.message
-        assert values["behind"] == "true" and 20.0 <= float(values["mean_answer_ms"]) < 60.0
+        # at least the rung's 20 ms; a loaded machine only adds to it
+        assert values["behind"] == "true" and float(values["mean_answer_ms"]) >= 20.0
         assert node.counters.accepted == 525
     finally:
         node.destroy_node()

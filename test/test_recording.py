@@ -288,12 +288,15 @@ RECORDER_SCRIPT = textwrap.dedent("""
     w = BagWriter(sys.argv[1], flush_period_s=float(sys.argv[2]))
     w.add_topic("/x", "std_msgs/msg/Float64")
     print("ready", flush=True)
-    i = 0
+    i, flushed_at = 0, w._last_flush
     while True:
         t = time.time_ns()
         w.write("/x", b"\\x00\\x01\\x00\\x00" + struct.pack("<d", float(i)), log_time_ns=t)
         i += 1
         w.flush_if_due()
+        if w._last_flush != flushed_at:      # a periodic flush happened: the first i messages are on disk
+            flushed_at = w._last_flush
+            print(f"flushed {i}", flush=True)
         time.sleep(0.0005)
 """)
 
@@ -305,8 +308,7 @@ def test_sigkill_recorder_then_recover_keeps_all_but_the_last_second(tmp_path):
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"
-        time.sleep(3.2)
-        killed_at = time.time_ns()
+        flushes = [int(proc.stdout.readline().split()[1]) for _ in range(3)]   # three periodic flushes
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -319,5 +321,7 @@ def test_sigkill_recorder_then_recover_keeps_all_but_the_last_second(tmp_path):
     times = [t for _, t, _ in kept]
     values = [struct.unpack("<d", d[4:])[0] for _, _, d in kept]
     assert values == [float(i) for i in range(len(values))]  # a gap-free prefix
-    assert times[-1] >= killed_at - 1_000_000_000 - 200_000_000  # everything older than ~1 s survived
-    assert len(kept) > 1000
+    # Everything up to the last periodic flush the recorder reported survived (a logical clock: the
+    # flush count, not a wall-clock window, so a loaded machine cannot make it flaky).
+    assert len(kept) >= flushes[-1] > flushes[0] > 0
+    assert times == sorted(times)
