@@ -1,5 +1,7 @@
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -9,6 +11,15 @@ DESIGNS = REPO / "softcath_ros" / "config" / "designs"
 
 # Parallel test runs must not see each other's nodes (see scripts/test.sh).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+# Every run starts from an empty cache of its own (set here, at import, so the subprocesses the
+# tests start inherit it), so no test passes on results an earlier run left behind.
+RUN_CACHE = Path(tempfile.mkdtemp(prefix="softcath-test-cache-"))
+os.environ["SOFTCATH_CACHE"] = str(RUN_CACHE)
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(RUN_CACHE, ignore_errors=True)
 
 
 @pytest.fixture
@@ -27,4 +38,5 @@ def design_dict():
 
 
 def pytest_report_header(config):
-    return f"python {sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', 'unset')}"
+    return (f"python {sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', 'unset')}, "
+            f"cache {RUN_CACHE} (removed at the end)")
