@@ -113,7 +113,7 @@ def test_surrogate_table_damaged_is_rebuilt(tmp_path):
 
 def test_cache_options_of_the_rungs(tmp_path, monkeypatch):
     monkeypatch.setenv("SOFTCATH_CACHE", str(tmp_path / "env"))
-    assert store_for(False) is None and store_for(None) is None
+    assert store_for(False) is None and store_for(None) is None and store_for("") is None
     assert store_for(True).root == tmp_path / "env"
     assert store_for(tmp_path / "mine").root == tmp_path / "mine"
     assert store_for(str(tmp_path / "mine")).root == tmp_path / "mine"

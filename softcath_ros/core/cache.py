@@ -116,14 +116,12 @@ class CacheStore:
 
 def store_for(cache) -> CacheStore | None:
     """The store a ``cache=`` option names: True -> the project cache (``cache_root()``);
-    False or None -> no cache; a directory -> a store rooted there."""
+    False, None or "" -> no cache; a directory -> a store rooted there; a store as it is."""
     if cache is True:
         return CacheStore()
-    if cache is None or cache is False:
-        return None
     if isinstance(cache, CacheStore):
         return cache
-    return CacheStore(cache)
+    return CacheStore(cache) if cache else None
 
 
 def _safe(name: str) -> str:
