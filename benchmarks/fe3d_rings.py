@@ -9,7 +9,7 @@ per band, gaps split to ``--layer``):
     .venv/bin/python benchmarks/fe3d_rings.py                       # 8 mm, coarse section
     .venv/bin/python benchmarks/fe3d_rings.py --length 0.016 --to 0.20 --name fe3d_rings_16mm
 
-Writes benchmarks/results/<name>.{json,csv,png}; results are cached (.cache/fe3d).
+Writes benchmarks/results/<name>.{json,csv,png}; results are cached (the project cache, kind fe3d).
 """
 from __future__ import annotations
 

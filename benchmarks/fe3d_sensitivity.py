@@ -18,7 +18,7 @@ simplifies (actuator.md), never the material constants of the silicone:
     .venv/bin/python benchmarks/fe3d_sensitivity.py --plot-only
 
 Every run is 0 -> 0.20 bar at the default mesh through `Fe3dModel` (cached by a hash of the
-design and settings in .cache/fe3d, so an interrupted study resumes). Writes
+design and settings in the project cache, so an interrupted study resumes). Writes
 benchmarks/results/fe3d_sensitivity.{json,csv,png}.
 """
 from __future__ import annotations

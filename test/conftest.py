@@ -1,5 +1,7 @@
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,15 @@ def _release_private_domains():
     while len(LEASES) > taken:
         LEASES.pop().release()
 
+# Every run starts from an empty cache of its own (set here, at import, so the subprocesses the
+# tests start inherit it), so no test passes on results an earlier run left behind.
+RUN_CACHE = Path(tempfile.mkdtemp(prefix="softcath-test-cache-"))
+os.environ["SOFTCATH_CACHE"] = str(RUN_CACHE)
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(RUN_CACHE, ignore_errors=True)
+
 
 @pytest.fixture
 def implemented_design():
@@ -43,4 +54,5 @@ def design_dict():
 
 
 def pytest_report_header(config):
-    return f"python {sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', 'unset')}"
+    return (f"python {sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', 'unset')}, "
+            f"cache {RUN_CACHE} (removed at the end)")

@@ -264,19 +264,16 @@ def test_device_in_the_lumen_stiffens_about_linearly(design_dict):
 def test_lumen_fill_off_keeps_the_cache_keys(implemented_design):
     from dataclasses import asdict
 
-    from softcath_ros.core.models.section import SOLVER_VERSION, SectionSettings
+    from softcath_ros.core.cache import key_of
+    from softcath_ros.core.models.section import SectionModel, SectionSettings
 
     # the empty-lumen rung's results keep the keys they had before the option existed
     model = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8)
     before = {k: v for k, v in asdict(model.settings).items() if k != "lumen_fill"}
     assert model.settings.key() == before
-    blob = json.dumps({"design": implemented_design.content_hash(), "settings": before,
-                       "version": SOLVER_VERSION, "mesh_nodes": model.mesh.n_nodes}, sort_keys=True)
-    import hashlib
-
-    h = hashlib.sha256(blob.encode())
-    h.update(np.zeros((1, 1)).tobytes())
-    assert model.cache_key(np.zeros((1, 1))) == h.hexdigest()[:20]
+    parts = {"design": implemented_design.content_hash(), "settings": before,
+             "mesh_nodes": model.mesh.n_nodes, "pressures": [[0.0]]}
+    assert model.cache_key(np.zeros((1, 1))) == key_of(SectionModel.solver_version, parts)
     filled = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8,
                         lumen_fill=0.01)
     assert filled.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))

@@ -49,7 +49,7 @@ def test_one_channel_refuses_outside_its_range(one_channel):
 
 def test_table_cached_by_design_content(one_channel, tmp_path):
     m = one_channel
-    again = make_model("surrogate", m.design, cache=m.cache_dir)
+    again = make_model("surrogate", m.design, cache=m.store.root)
     assert again.meta == m.meta                     # loaded, not rebuilt
     assert m.built_now and not again.built_now      # what model_node reports at start-up
     softer = replace(m.design, length=0.03)
@@ -112,12 +112,8 @@ def test_rotated_pairs_refuse_a_non_symmetric_design(tmp_path):
 
 
 def test_predict_cli_with_surrogate(one_channel):
-    env = {**os.environ, "SOFTCATH_CACHE": str(one_channel.cache_dir.parent)}
-    # the fixture's table lives directly in its cache dir; point the CLI's 'surrogate' kind there
-    kind_dir = one_channel.cache_dir.parent / "surrogate"
-    kind_dir.mkdir(exist_ok=True)
-    os.link(one_channel.path, kind_dir / one_channel.path.name) if not (kind_dir / one_channel.path.name).exists() \
-        else None
+    # the CLI finds the fixture's table through the one setting
+    env = {**os.environ, "SOFTCATH_CACHE": str(one_channel.store.root)}
     r = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
                         "--model", "surrogate", "--pressure", "0.15", "0.45", "--unit", "bar", "--json"],
                        capture_output=True, text=True, timeout=120, env=env)

@@ -17,11 +17,12 @@ R_C = 1/|k| against the reference, the tip position error (mm) and the bending-d
 (degrees); per case its time per evaluation (single commands for the table rungs; a cold sweep
 divided by its commands for the solvers) and its failure boundary (the last pressure reached on
 a ramp along the case's direction up to the design's max_pressure; fe3d: the case's own ramp).
-Results are cached per rung and case, so re-running only redraws.
+Results are cached per rung and case (the cache store, core/cache.py, kind ``ladder``, keyed by
+the design's content hash, rung, its declared solver version, options and pressures), so
+re-running only redraws.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import statistics
@@ -31,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import cache_dir, key_of
+from . import cache
 from .design import load_design
 from .errors import ModelError
-from .models import RUNGS, make_model, rung_info
+from .models import RUNGS, make_model, rung_class, rung_info
 from .prediction import predict
 from .units import PA_PER_BAR
 
@@ -78,15 +79,17 @@ SETTINGS = [
 DEFAULT_SETTING = {"closed_form": "closed_form", "surrogate": "surrogate (of section D/20)",
                    "section": "section D/20", "rod": "rod", "fe3d": FE3D[0]}
 SECTION_REFERENCE = "section D/40"
+LADDER_VERSION = "ladder-1"   # bump when what a cached row records changes
 
 
 def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
     """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
     design = load_design(case.design).with_length(case.length)
     pressures = case.pressures
-    path = cache_dir("ladder") / f"{rung}_{key_of(design.content_hash(), rung, options, pressures.tolist())}.json"
-    if path.is_file() and not refresh:
-        return json.loads(path.read_text())
+    key_parts = [design.content_hash(), rung, rung_class(rung).solver_version, options, pressures.tolist()]
+    hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
+    if hit is not None:
+        return hit
     opts = dict(options)
     if rung == "section":
         opts["cache"] = False   # cold: the time is the solver's
@@ -128,7 +131,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
            "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
            "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
            "predictions": [p.to_json() for p in preds]}
-    path.write_text(json.dumps(out))
+    cache.save_json("ladder", LADDER_VERSION, key_parts, out, rung)
     return out
 
 

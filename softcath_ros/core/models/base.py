@@ -128,6 +128,7 @@ class BendModel:
     name = "abstract"
     info = RungInfo(summary="abstract rung")
     built_now = False   # True when the constructor built a table the cache did not hold (surrogate)
+    solver_version: str | None = None   # bumped when the rung's answers change: part of every cache key
 
     def __init__(self, design: Design):
         self.design = design

@@ -16,23 +16,21 @@ time_s; channel volume and area NaN at zero pressure, which is not solved).
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict
 
 import numpy as np
 
-from ..cache import cache_dir, key_of
+from ..cache import CacheStore, store_for
 from ..design import Design
 from ..errors import ModelError
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
 
-CODE_VERSION = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
-
 
 class Fe3dModel(BendModel):
     name = "fe3d"
+    solver_version = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe",
@@ -42,7 +40,7 @@ class Fe3dModel(BendModel):
                  Option("step_control", "object", "a continuation StepControl"),
                  Option("tangent_predictor", "bool", "predict each step along the tangent"),
                  Option("half", "bool", "half model by symmetry (default: when the design allows)"),
-                 Option("cache", "bool", "keep results in the project cache"),
+                 Option("cache", "object", "True (the project cache), a cache root directory, or False"),
                  Option("progress", "bool", "a progress bar per ramp"),
                  Option("threads", "int", "solver threads"),
                  Option("lumen_fill", "float", "fill the lumen with a soft solid of this fraction of the "
@@ -52,7 +50,7 @@ class Fe3dModel(BendModel):
 
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
-                 cache: bool = True, progress: bool = False, threads: int = 2,
+                 cache=True, progress: bool = False, threads: int = 2,
                  lumen_fill: float | None = None, formulation: str = "mixed",
                  reinforcement: str = "membrane"):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
@@ -87,17 +85,18 @@ class Fe3dModel(BendModel):
         if reinforcement not in ("membrane", "rings"):
             raise ModelError(f"fe3d: reinforcement = {reinforcement!r} must be 'membrane' or 'rings'")
         self.reinforcement = reinforcement
-        self.use_cache = cache
+        self.store = store_for(cache)
+        self.use_cache = self.store is not None
         self.progress = progress
         self._problem = None
         self.last_ramps = []
-        self.cache_key = key_of(CODE_VERSION, design.content_hash(), asdict(self.mesh_settings),
-                                asdict(self.newton_settings), asdict(self.step_control),
-                                tangent_predictor, self.half,
-                                # options added later enter the key only when set, so old entries stay valid
-                                *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
-                                *([] if formulation == "mixed" else [{"formulation": formulation}]),
-                                *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]))
+        self._cache_parts = [design.content_hash(), asdict(self.mesh_settings), asdict(self.newton_settings),
+                             asdict(self.step_control), tangent_predictor, self.half,
+                             # options added later enter the key only when set
+                             *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
+                             *([] if formulation == "mixed" else [{"formulation": formulation}]),
+                             *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}])]
+        self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
     @property
@@ -110,25 +109,15 @@ class Fe3dModel(BendModel):
                                         reinforcement=self.reinforcement)
         return self._problem
 
-    def _cache_path(self):
-        return cache_dir("fe3d") / f"{self.cache_key}.json"
-
     def _load_cache(self) -> dict:
         if not self.use_cache:
             return {}
-        path = self._cache_path()
-        try:
-            return json.loads(path.read_text())
-        except (OSError, ValueError):
-            return {}
+        entries = self.store.load_json("fe3d", self.solver_version, self._cache_parts, self.design.name)
+        return entries if isinstance(entries, dict) else {}
 
     def _save_cache(self, entries: dict) -> None:
-        if not self.use_cache:
-            return
-        path = self._cache_path()
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(entries))
-        tmp.replace(path)
+        if self.use_cache:
+            self.store.save_json("fe3d", self.solver_version, self._cache_parts, entries, self.design.name)
 
     @staticmethod
     def _key(p: np.ndarray) -> str:

@@ -29,7 +29,7 @@ from ..design import Design
 from ..errors import ModelError
 from ..rod.law import LawRangeError, LinearLaw
 from ..rod.loads import REST_TIP, Loads, TipPlaneContact
-from ..rod.section_law import LawGrid, section_law
+from ..rod.section_law import LAW_VERSION, LawGrid, section_law
 from ..rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..section_properties import transformed_section
 from ..options import Option
@@ -40,6 +40,7 @@ _PLANE_TOL = 1e-9
 
 class RodModel(BendModel):
     name = "rod"
+    solver_version = f"rod-1/{LAW_VERSION}"   # bump rod-N when the statics change an answer
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
@@ -50,13 +51,14 @@ class RodModel(BendModel):
                  Option("contact", "object", "a TipPlaneContact"),
                  Option("n_segments", "int", "rod segments (at least 4)"),
                  Option("grid", "object", "LawGrid: where the section law is tabulated"),
-                 Option("cache", "bool", "keep the section law in the project cache"),
+                 Option("cache", "object", "True (the project cache), a cache root directory, or False: "
+                                           "where the section law is kept"),
                  Option("progress", "bool", "progress bars while tabulating")),
         more_options="passed to the source rung (e.g. mesh_size)")
 
     def __init__(self, design: Design, source: str = "section", loads: Loads | None = None,
                  tip_force=None, gravity=None, contact: TipPlaneContact | None = None, n_segments: int = 40,
-                 grid: LawGrid | None = None, cache: bool = True, progress: bool = False, **source_options):
+                 grid: LawGrid | None = None, cache=True, progress: bool = False, **source_options):
         """``loads`` or the separate ``tip_force`` (N), ``gravity`` (m/s^2), ``contact``; ``grid`` and
         ``source_options`` (e.g. ``mesh_size``) set how the section law is tabulated."""
         super().__init__(design)

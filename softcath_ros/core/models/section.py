@@ -17,15 +17,14 @@ state's pressure and curvature.
 """
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..cache import CacheStore, store_for
 from ..continuation import Correction, StepControl, ramp
 from ..design import Design
 from ..errors import ModelError
@@ -35,9 +34,6 @@ from ..section_fe.solver import LinearSolver, newton
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
-
-# Bump when the discretisation or the solver changes what a cached result would be.
-SOLVER_VERSION = "section-2"
 
 
 @dataclass(frozen=True)
@@ -76,6 +72,7 @@ class SectionSettings:
 
 class SectionModel(BendModel):
     name = "section"
+    solver_version = "section-2"   # bump when the discretisation or the solver changes an answer
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -97,7 +94,7 @@ class SectionModel(BendModel):
 
     def __init__(self, design: Design, cache: bool | str | Path = False, progress: bool = False,
                  **settings):
-        """``cache``: False, True (the project's cache directory, core/cache.py) or a directory;
+        """``cache``: False, True (the project cache, core/cache.py) or a cache root directory;
         results of whole batches are kept there under a hash of design, mesh, settings and
         pressures. ``progress``: a tqdm bar per batch. ``settings``: ``SectionSettings`` fields."""
         super().__init__(design)
@@ -123,12 +120,7 @@ class SectionModel(BendModel):
                                       lumen_fill=fill)
         self.linear = LinearSolver()
         self.progress = progress
-        if cache is True:
-            from ..cache import cache_dir
-
-            self.cache_dir = cache_dir("section")
-        else:
-            self.cache_dir = Path(cache) if cache else None
+        self.store = store_for(cache)
         # converged states by pressure vector (Pa): starting points for later commands
         self._states: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self._states[tuple([0.0] * design.n_channels)] = self.problem.initial_state()
@@ -137,16 +129,16 @@ class SectionModel(BendModel):
         self._failures: list[tuple] = []
 
     # ------------------------------------------------------------------ identity
+    def _cache_parts(self, pressures: np.ndarray) -> dict:
+        return {"design": self.design.content_hash(), "settings": self.settings.key(),
+                "mesh_nodes": self.mesh.n_nodes, "pressures": np.asarray(pressures, dtype=float).tolist()}
+
     def cache_key(self, pressures: np.ndarray) -> str:
-        blob = json.dumps({"design": self.design.content_hash(), "settings": self.settings.key(),
-                           "version": SOLVER_VERSION, "mesh_nodes": self.mesh.n_nodes}, sort_keys=True)
-        h = hashlib.sha256(blob.encode())
-        h.update(np.ascontiguousarray(pressures, dtype=float).tobytes())
-        return h.hexdigest()[:20]
+        return CacheStore.key(self.solver_version, self._cache_parts(pressures))
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
-        if self.cache_dir is not None:
+        if self.store is not None:
             cached = self._load_cached(pressures)
             if cached is not None:
                 return cached
@@ -192,7 +184,7 @@ class SectionModel(BendModel):
                           message="; ".join(messages), last_converged=last_converged,
                           diagnostics=SolverDiagnostics(newton_iterations=iterations, channel_area=area,
                                                         mesh_nodes=self.mesh.n_nodes, mesh_size=self.mesh.h))
-        if self.cache_dir is not None:
+        if self.store is not None:
             self._save_cached(pressures, state)
         return state
 
@@ -374,34 +366,26 @@ class SectionModel(BendModel):
             bar.close()
 
     # ------------------------------------------------------------------ disk cache
-    def _cache_path(self, pressures) -> Path:
-        return self.cache_dir / f"section_{self.cache_key(pressures)}.npz"
-
     def _load_cached(self, pressures) -> BendState | None:
-        path = self._cache_path(pressures)
-        if not path.is_file():
+        z = self.store.load_arrays("section", self.solver_version, self._cache_parts(pressures), self.design.name)
+        if z is None:
             return None
         try:
-            z = np.load(path, allow_pickle=False)
-            last = json.loads(str(z["last_converged"]))
             return BendState(curvature=z["curvature"], axial_stretch=z["axial_stretch"],
-                             converged=z["converged"], message=str(z["message"]), last_converged=last,
+                             converged=z["converged"], message=str(z["message"]),
+                             last_converged=json.loads(str(z["last_converged"])),
                              diagnostics=SolverDiagnostics(newton_iterations=z["newton_iterations"],
                                                            channel_area=z["channel_area"], mesh_nodes=self.mesh.n_nodes,
                                                            mesh_size=self.mesh.h, cached=True))
-        except (OSError, ValueError, KeyError):
-            return None  # a damaged cache entry is recomputed
+        except (KeyError, ValueError):
+            return None   # an entry without these arrays: solved again
 
     def _save_cached(self, pressures, state: BendState) -> None:
-        path = self._cache_path(pressures)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-        np.savez(tmp, curvature=state.curvature, axial_stretch=state.axial_stretch,
-                 converged=state.converged, message=np.array(state.message),
-                 channel_area=state.diagnostics.channel_area,
-                 newton_iterations=state.diagnostics.newton_iterations,
-                 last_converged=np.array(json.dumps(state.last_converged)))
-        os.replace(tmp, path)
+        self.store.save_arrays("section", self.solver_version, self._cache_parts(pressures), dict(
+            curvature=state.curvature, axial_stretch=state.axial_stretch, converged=state.converged,
+            message=np.array(state.message), channel_area=state.diagnostics.channel_area,
+            newton_iterations=state.diagnostics.newton_iterations,
+            last_converged=np.array(json.dumps(state.last_converged))), self.design.name)
 
 
 __all__ = ["SectionModel", "SectionSettings"]

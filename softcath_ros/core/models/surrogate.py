@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from bisect import bisect_right
 from dataclasses import asdict, dataclass, field
@@ -41,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cache import CacheStore, store_for
 from ..design import Design
 from ..errors import ModelError
 from ..options import Option
@@ -49,6 +49,7 @@ from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
 SURROGATE_VERSION = "surrogate-2"
+_KIND = "surrogate"   # the cache kind of the tables
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
 
@@ -102,6 +103,7 @@ def _direction_error_deg(k_model: np.ndarray, k_ref: np.ndarray) -> np.ndarray:
 
 class SurrogateModel(BendModel):
     name = "surrogate"
+    solver_version = SURROGATE_VERSION
     info = RungInfo(
         summary="tables built offline from a higher rung (default section) for one design",
         models=("free_bending", "device_stiffness"),
@@ -115,7 +117,7 @@ class SurrogateModel(BendModel):
             "common_checks": "commands with all three pressures > 0 that bound the common-mode error",
             "common_tolerance": "relative R_C error above which such commands are refused",
             "pairs": "3 channels: 'each' tabulates all three pairs, 'rotated' pair 0-1 only"}) + (
-            Option("cache", "object", "True (the project cache), a directory, or False (build every time)"),
+            Option("cache", "object", "True (the project cache), a cache root directory, or False (build every time)"),
             Option("progress", "bool", "progress bars while building"),
             Option("rebuild", "bool", "build the table even if the cache holds it")))
 
@@ -123,7 +125,7 @@ class SurrogateModel(BendModel):
                  cache: bool | str | Path = True, progress: bool = False, rebuild: bool = False,
                  **table_settings):
         """``source``: the rung to tabulate; ``source_options``: its options (mesh_size, ...).
-        ``cache``: True (the project cache), a directory, or False (build in memory every time).
+        ``cache``: True (the project cache), a cache root directory, or False (build every time).
         ``progress``: tqdm bars while building. ``table_settings``: ``SurrogateSettings`` fields."""
         super().__init__(design)
         try:
@@ -144,45 +146,39 @@ class SurrogateModel(BendModel):
         if self.settings.pairs not in ("each", "rotated"):
             raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'each' or 'rotated'")
         self.progress = progress
-        if cache is True:
-            from ..cache import cache_dir
-
-            self.cache_dir: Path | None = cache_dir("surrogate")
-        else:
-            self.cache_dir = Path(cache) if cache else None
-        self.key = self._key()
-        loaded = None if rebuild or self.cache_dir is None else self._load()
+        self.store = store_for(cache)
+        self.key = CacheStore.key(self.solver_version, self._cache_parts())
+        loaded = None if rebuild or self.store is None else self._load()
         self.built_now = loaded is None   # the table was built by this constructor (not from the cache)
         if loaded is None:
             self.table, self.meta = self._build()
-            if self.cache_dir is not None:
+            if self.store is not None:
                 self._save()
         else:
             self.table, self.meta = loaded
         self._prepare()
 
     # ------------------------------------------------------------------ identity
-    def _key(self) -> str:
-        from ..cache import key_of
+    def _cache_parts(self) -> list:
+        """The design, the table settings and the source rung's declared version (a changed
+        solver rebuilds the table)."""
+        from . import rung_class
 
-        from importlib import import_module
-
-        from . import RUNGS
-
-        # the source's own code version: a changed solver rebuilds the table
-        module = RUNGS.get(self.settings.source, "").split(":")[0]
         try:
-            mod = import_module(module) if module else None
-        except ImportError:
-            mod = None
-        version = getattr(mod, "SOLVER_VERSION", None) or getattr(mod, "CODE_VERSION", None)
-        return key_of(SURROGATE_VERSION, self.design.content_hash(), asdict(self.settings), version)
+            source_version = rung_class(self.settings.source).solver_version
+        except ModelError:
+            source_version = None   # an unknown source: refused when the table is built
+        return [self.design.content_hash(), asdict(self.settings), source_version]
+
+    def _cache_name(self) -> str:
+        return f"{self.design.name}_{self.settings.source}"
 
     @property
     def path(self) -> Path | None:
-        if self.cache_dir is None:
+        """The table's file in the cache (None without a cache)."""
+        if self.store is None:
             return None
-        return self.cache_dir / f"surrogate_{self.design.name}_{self.settings.source}_{self.key}.npz"
+        return self.store.path(_KIND, self.solver_version, self._cache_parts(), self._cache_name(), "npz")
 
     @property
     def error_bound(self) -> dict:
@@ -202,7 +198,7 @@ class SurrogateModel(BendModel):
         opts = dict(self.settings.source_options)
         if self.settings.source in ("section", "fe3d"):
             opts.setdefault("progress", self.progress if progress is None else progress)
-            opts.setdefault("cache", True)
+            opts.setdefault("cache", self.store if self.store is not None else True)
         return make_model(self.settings.source, self.design, **opts)
 
     def _build(self) -> tuple[dict, dict]:
@@ -387,22 +383,18 @@ class SurrogateModel(BendModel):
 
     # ------------------------------------------------------------------ storage
     def _save(self) -> None:
-        path = self.path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-        np.savez(tmp, meta=np.array(json.dumps(self.meta)), **self.table)
-        os.replace(tmp, path)
+        self.store.save_arrays(_KIND, self.solver_version, self._cache_parts(),
+                               {"meta": np.array(json.dumps(self.meta)), **self.table}, self._cache_name())
 
     def _load(self):
-        path = self.path
-        if not path.is_file():
+        z = self.store.load_arrays(_KIND, self.solver_version, self._cache_parts(), self._cache_name())
+        if z is None:
             return None
         try:
-            z = np.load(path, allow_pickle=False)
-            meta = json.loads(str(z["meta"]))
-            table = {k: z[k] for k in z.files if k != "meta"}
-        except (OSError, ValueError, KeyError):
-            return None  # damaged: rebuilt
+            meta = json.loads(str(z.pop("meta")))
+        except (KeyError, ValueError):
+            return None  # not a table: rebuilt
+        table = z
         if meta.get("key") != self.key:
             return None
         return table, meta

@@ -6,17 +6,16 @@ stiffness the rod adds) are not part of the key.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from ..cache import cache_dir, key_of
+from ..cache import store_for
 from ..design import Design
 from ..section_fe.moment import MomentTable
 from .law import TabulatedLaw
 
-LAW_VERSION = "section-moment-1"
+LAW_VERSION = "section-moment-1"   # bump when the table's computation changes
 
 
 @dataclass(frozen=True)
@@ -38,10 +37,11 @@ class LawGrid:
         return np.arange(0.0, self.pressure_max + 1e-9, self.pressure_step)
 
 
-def section_law(design: Design, grid: LawGrid = LawGrid(), cache: bool = True, progress: bool = False,
+def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress: bool = False,
                 **section_settings) -> TabulatedLaw:
     """``TabulatedLaw`` of the bare section (no device) of a one-channel ``design``.
 
+    ``cache``: True (the project cache, core/cache.py), a cache root directory, or False.
     ``section_settings`` are ``SectionSettings`` fields, e.g. ``lumen_fill=0.02``: a body bent back
     against its pressure (a blocked tip) closes the empty lumen at 0.225-0.3 bar; the fill (a
     self-contact proxy) carries the table to 0.45 bar (README "Model rung: rod")."""
@@ -49,34 +49,34 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache: bool = True, p
 
     body = replace(design, device=None, length=1.0)
     model = SectionModel(body, **section_settings)
-    key = key_of(body.content_hash(), model.settings.key(), asdict(grid), LAW_VERSION, model.mesh.n_nodes)
-    path = cache_dir("rod_law") / f"section_law_{key}.npz" if cache else None
-    table = _load(path) if path is not None else None
+    store = store_for(cache)
+    parts = [body.content_hash(), model.settings.key(), asdict(grid), model.mesh.n_nodes]
+    table = _from_arrays(store.load_arrays(_KIND, LAW_VERSION, parts, design.name)) if store else None
     if table is None:
         table = model.moment_curvature(grid.pressures(), grid.curvatures(), progress=progress)
-        if path is not None:
-            _save(path, table)
+        if store is not None:
+            store.save_arrays(_KIND, LAW_VERSION, parts, _to_arrays(table), design.name)
     mesh = f"section D/{design.outer_diameter / model.mesh.h:.0f}"
     if model.settings.lumen_fill is not None:
         mesh += f", lumen fill {model.settings.lumen_fill:g}"
     return TabulatedLaw(table, source=f"rod law from {mesh}")
 
 
-def _save(path, t: MomentTable) -> None:
-    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-    np.savez(tmp, curvatures=t.curvatures, pressures=t.pressures, moment=t.moment, stretch=t.stretch,
-             messages=np.array(json.dumps(t.messages)), direction=t.direction,
-             pressure_direction=t.pressure_direction)
-    os.replace(tmp, path)
+_KIND = "rod_law"   # the cache kind of the tables
 
 
-def _load(path) -> MomentTable | None:
-    if not path.is_file():
+def _to_arrays(t: MomentTable) -> dict:
+    return dict(curvatures=t.curvatures, pressures=t.pressures, moment=t.moment, stretch=t.stretch,
+                messages=np.array(json.dumps(t.messages)), direction=t.direction,
+                pressure_direction=t.pressure_direction)
+
+
+def _from_arrays(z: dict | None) -> MomentTable | None:
+    if z is None:
         return None
     try:
-        z = np.load(path, allow_pickle=False)
         return MomentTable(curvatures=z["curvatures"], pressures=z["pressures"], moment=z["moment"],
                            stretch=z["stretch"], messages=json.loads(str(z["messages"])),
                            direction=z["direction"], pressure_direction=z["pressure_direction"])
-    except (OSError, ValueError, KeyError):
-        return None    # a damaged entry is recomputed
+    except (KeyError, ValueError):
+        return None    # an entry without these arrays is recomputed

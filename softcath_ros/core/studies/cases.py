@@ -7,13 +7,12 @@ reach comes back with ``converged = False`` and the rung's message.
 """
 from __future__ import annotations
 
-import importlib
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cache import key_of
+from ..cache import CacheStore
 from ..design import design_from_dict
 
 # Bump when what a case records changes (it is part of every case's cache key).
@@ -27,24 +26,28 @@ class CaseSpec:
     pressures: tuple                # ((p_0, .., p_C-1), ...) Pa, one row per command
     options: dict = field(default_factory=dict)   # rung options, e.g. {"mesh_size": 4e-4}
 
-    def key(self) -> str:
-        """Cache key: design content, rung, its options and code version, pressures, this code's version."""
+    def cache_parts(self) -> list:
+        """What the case's answer depends on: design content, rung, its options and declared
+        solver version, pressures (with ``STUDY_CODE_VERSION``: the case's cache entry)."""
         design = design_from_dict(self.design)
-        return key_of(design.content_hash(), self.rung, self.options, _rung_version(self.rung),
-                      [list(map(float, p)) for p in self.pressures], STUDY_CODE_VERSION)
+        return [design.content_hash(), self.rung, self.options, _rung_version(self.rung),
+                [list(map(float, p)) for p in self.pressures]]
+
+    def key(self) -> str:
+        """Cache key (equal for equal cases)."""
+        return CacheStore.key(STUDY_CODE_VERSION, self.cache_parts())
 
 
 def _rung_version(rung: str) -> str | None:
-    """The rung module's SOLVER_VERSION (bumped when its answers change), if it declares one."""
-    from ..models import RUNGS
+    """The rung's declared ``solver_version`` (bumped when its answers change); None for an
+    unknown rung or one whose optional dependency is missing (the case then reports that)."""
+    from ..errors import ModelError
+    from ..models import rung_class
 
-    if rung not in RUNGS:
-        return None
     try:
-        module = importlib.import_module(RUNGS[rung].split(":")[0])
-    except ImportError:
+        return rung_class(rung).solver_version
+    except ModelError:
         return None
-    return getattr(module, "SOLVER_VERSION", None)
 
 
 def solve_case(spec: CaseSpec) -> dict:

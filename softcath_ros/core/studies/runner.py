@@ -9,7 +9,6 @@ Ctrl-C cancels the queued cases, keeps every finished one in the cache and re-ra
 """
 from __future__ import annotations
 
-import json
 import os
 import signal
 import sys
@@ -17,8 +16,9 @@ from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..cache import CacheStore
 from ..errors import SoftcathError
-from .cases import CaseSpec, solve_case
+from .cases import STUDY_CODE_VERSION, CaseSpec, solve_case
 
 
 @dataclass
@@ -58,28 +58,18 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> t
 
 
 class CaseCache:
-    """One JSON file per case under ``directory`` (default: core/cache.py cache_dir("studies"))."""
+    """One JSON entry per case (kind ``studies``, named by rung) in the cache store rooted at
+    ``directory`` (default: the project cache, core/cache.py)."""
 
     def __init__(self, directory: str | Path | None = None):
-        if directory is None:
-            from ..cache import cache_dir
+        self.store = CacheStore(directory)
 
-            directory = cache_dir("studies")
-        self.dir = Path(directory)
-        self.dir.mkdir(parents=True, exist_ok=True)
+    def get(self, spec: CaseSpec) -> dict | None:
+        """The case's recorded answer, or None (absent or damaged: solve again)."""
+        return self.store.load_json("studies", STUDY_CODE_VERSION, spec.cache_parts(), spec.rung)
 
-    def get(self, key: str) -> dict | None:
-        path = self.dir / f"{key}.json"
-        try:
-            return json.loads(path.read_text())
-        except (OSError, ValueError):
-            return None     # absent or damaged: solve again
-
-    def put(self, key: str, value: dict) -> None:
-        path = self.dir / f"{key}.json"
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(value))
-        os.replace(tmp, path)
+    def put(self, spec: CaseSpec, value: dict) -> None:
+        self.store.save_json("studies", STUDY_CODE_VERSION, spec.cache_parts(), value, spec.rung)
 
 
 def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: int | None = None,
@@ -96,7 +86,7 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
     out: list[dict | None] = [None] * len(specs)
     todo: dict[str, list[int]] = {}          # identical cases are solved once
     for i, k in enumerate(keys):
-        hit = store.get(k) if store is not None else None
+        hit = store.get(specs[i]) if store is not None else None
         if hit is not None:
             out[i] = hit
             stats.cached += 1
@@ -124,7 +114,7 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
         else:
             stats.solved += 1
             if store is not None:
-                store.put(key, result)
+                store.put(specs[todo[key][0]], result)
         for i in todo[key]:
             out[i] = result
         if bar is not None:
