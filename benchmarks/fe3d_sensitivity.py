@@ -1,7 +1,7 @@
 """Why does fe3d bend ~13% more than the published FE? One modelling choice at a time, 40 mm.
 
 Each variant changes one thing the published description leaves open or that our model
-simplifies (actuator.md), never the material constants of the silicone:
+simplifies (docs/actuator.md), never the material constants of the silicone:
 
 * where the strain-limiting fibre sits ("just below the lumen": touching it, or mid-wall as
   in the design file), how stiff it is, or no fibre;
@@ -41,7 +41,7 @@ from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 NAME = "fe3d_sensitivity"
 PRESSURES_BAR = [0.05, 0.10, 0.15, 0.20]
-PUBLISHED_MM = {0.15: 31.13, 0.20: 16.86}   # actuator.md, 40 mm
+PUBLISHED_MM = {0.15: 31.13, 0.20: 16.86}   # docs/actuator.md, 40 mm
 
 
 def _fibre_at(y: float):

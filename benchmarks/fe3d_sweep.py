@@ -32,7 +32,7 @@ from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
-PUBLISHED_40MM = {15000.0: 31.13e-3, 20000.0: 16.86e-3}   # actuator.md: R_C of the published FE
+PUBLISHED_40MM = {15000.0: 31.13e-3, 20000.0: 16.86e-3}   # docs/actuator.md: R_C of the published FE
 
 
 def main(argv=None) -> int:

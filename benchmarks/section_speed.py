@@ -24,7 +24,7 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.units import PA_PER_BAR
 
-PUBLISHED_RC_MM = {0.15: 31.13, 0.20: 16.86}   # 3D FE, 40 mm (actuator.md)
+PUBLISHED_RC_MM = {0.15: 31.13, 0.20: 16.86}   # 3D FE, 40 mm (docs/actuator.md)
 
 
 def timed_sweep(design, pressures, **options):

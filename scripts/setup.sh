@@ -10,7 +10,7 @@ if [ ! -x .venv/bin/python ]; then
   echo "[setup] creating .venv with $($python --version)"
   "$python" -m venv .venv
 fi
-stamp=".venv/.softcath-installed-$(cat setup.py package.xml | sha256sum | cut -c1-12)-${extras//,/_}"
+stamp=".venv/.softcath-installed-$(cat setup.py setup.cfg pyproject.toml package.xml | sha256sum | cut -c1-12)-${extras//,/_}"
 if [ ! -f "$stamp" ]; then
   echo "[setup] installing softcath_ros[$extras] into .venv (first run takes a minute)"
   # pip's output goes to a log (the machine's extra indexes make it chatty); shown on failure.

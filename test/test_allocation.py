@@ -40,7 +40,7 @@ def three_dict():
 
 class CoupledNonlinear(BendModel):
     """Test double for a non-linear rung: curvature grows superlinearly with pressure and two
-    active channels bend 5% more than their superposition (actuator.md). No ``curvature_per_pa``,
+    active channels bend 5% more than their superposition (docs/actuator.md). No ``curvature_per_pa``,
     so the allocator must take the Newton path."""
 
     name = "coupled_nonlinear"

@@ -1,7 +1,7 @@
 """3D finite-element rung (fe3d): geometry, physics direction, symmetry, failure reporting,
 cache and command line. Coarse meshes and short bodies keep these fast; the accuracy
 validation against the published FE (40 mm, 0.15/0.20 bar) and the mesh study live in
-benchmarks/fe3d_sweep.py and docs/validation_fe3d.md, with one slow check here."""
+benchmarks/fe3d_sweep.py and docs/validation.md, with one slow check here."""
 from __future__ import annotations
 
 import dataclasses

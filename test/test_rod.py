@@ -1,6 +1,6 @@
 """Rod rung: the section's moment-curvature law, the rod statics with tip force, gravity and tip
 contact, and its refusals. Coarse section mesh (D/8) and a small table keep this fast; the
-production numbers (D/20) are in README "Model rung: rod" and benchmarks/blocking_force.py."""
+production numbers (D/20) are in docs/models/rod.md and benchmarks/blocking_force.py."""
 import dataclasses
 
 import numpy as np

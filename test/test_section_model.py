@@ -1,6 +1,6 @@
 """Section rung (2.5D): derivatives, limits, published FE, mesh convergence, symmetry, failures.
 
-Tolerances are stated per test; the numbers they were set against are in README ("Section rung").
+Tolerances are stated per test; the numbers they were set against are in docs/models/section.md.
 """
 import json
 import math
@@ -17,7 +17,7 @@ from softcath_ros.core.section_fe.mesh import Circle, mesh_section
 from softcath_ros.core.section_fe.problem import SectionProblem
 
 BAR = 1e5
-# Published 3D FE for the implemented design at 40 mm (actuator.md).
+# Published 3D FE for the implemented design at 40 mm (docs/actuator.md).
 PUBLISHED_RC = {0.15: 31.13e-3, 0.20: 16.86e-3}
 
 

@@ -67,7 +67,7 @@ def test_scaling_keeps_the_area_ratio_and_scales_the_walls(implemented_design):
     data["min_wall_thickness"] = 0.2e-3
     small = design_from_dict(data)
     assert area_ratio(small) == pytest.approx(area_ratio(implemented_design))
-    assert min_wall_of(small) == pytest.approx(0.24e-3)   # actuator.md: 0.6 mm walls -> 0.24 mm at 2 mm
+    assert min_wall_of(small) == pytest.approx(0.24e-3)   # docs/actuator.md: 0.6 mm walls -> 0.24 mm at 2 mm
 
 
 def test_sensitivity_variants_cover_the_published_parameters(implemented_design):

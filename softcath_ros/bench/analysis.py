@@ -1,4 +1,4 @@
-"""From a bench recording to per-step statistics (actuator.md "The bench").
+"""From a bench recording to per-step statistics (docs/actuator.md "The bench").
 
 Each ``sample`` marker on the step topic is one reading: the latest measured
 pressures, angle and force received before the marker. On the force bench the scale

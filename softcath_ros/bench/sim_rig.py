@@ -3,7 +3,7 @@
 - Regulator: each channel's pressure follows the command as a first-order lag
   (time constant ``regulator_time_constant``), never below zero.
 - Gauge: reads the true pressure with a fixed per-channel error drawn once in
-  +-``gauge_error`` (0.02 bar, actuator.md) plus white noise.
+  +-``gauge_error`` (0.02 bar, docs/actuator.md) plus white noise.
 - Hysteresis (off by default): the actuator bends with a pressure that lags the true one
   through a play of width ``hysteresis_pressure`` (rate-independent backlash: up to half
   the width below it while loading, above it while unloading), so at equal pressure the

@@ -1,4 +1,4 @@
-"""`softcath` command line (interfaces.md).
+"""`softcath` command line (README.md, "Commands").
 
 Each subcommand is a module in this package with ``register(subparsers)``; the
 handler it sets as ``func`` returns the exit code. Add new ones to ``SUBCOMMANDS``.

@@ -1,4 +1,4 @@
-"""`softcath allocate`: channel pressures for a desired bend, from any rung (interfaces.md).
+"""`softcath allocate`: channel pressures for a desired bend, from any rung.
 
 Exit codes: 0 allocated (possibly saturated: see ``saturated``), 1 the direction is
 unreachable for the design or the model's inverse did not converge (the JSON still

@@ -1,4 +1,4 @@
-"""`softcath predict`: bending for channel pressures, from any rung (interfaces.md)."""
+"""`softcath predict`: bending for channel pressures, from any rung."""
 from __future__ import annotations
 
 import json
@@ -56,7 +56,7 @@ def run(args) -> int:
     else:
         print(f"model {model.name}, design {design.name}, length "
               f"{(args.length or model.design.length) * 1e3:.1f} mm")
-        print(f"{'pressure [bar]':>18} {'R_C [mm]':>10} {'angle [deg]':>12} {'tip x,y,z [mm]':>28}")
+        print(f"{'pressure [bar]':>18} {'1/|k| [mm]':>10} {'angle [deg]':>12} {'tip x,y,z [mm]':>28}")
         for r in results:
             ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in r.pressures_pa)
             if not r.converged:

@@ -1,6 +1,6 @@
 """Pressure allocation: a desired bend -> channel pressures, the inverse of a ``BendModel``.
 
-Minimum-pressure strategy (actuator.md "Optimised designs"): each channel alone bends
+Minimum-pressure strategy (docs/actuator.md "Optimised designs"): each channel alone bends
 the body in one fixed direction (its *bending direction*). Neighbouring bending
 directions less than 180 degrees apart span a *sector*; a request whose direction
 lies in a sector is met by that sector's two channels alone, never by all three,

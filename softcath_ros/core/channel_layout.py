@@ -1,6 +1,6 @@
 """Sizing of N equal circular channels placed symmetrically around a central lumen.
 
-For the 2-DOF design (actuator.md "Optimised designs"): outer radius R, a lumen of
+For the 2-DOF design (docs/actuator.md "Optimised designs"): outer radius R, a lumen of
 radius r_l at the centre, N channels of radius r at distance d from the centre,
 spaced 360/N degrees apart. Every silicone wall must be at least w thick:
 

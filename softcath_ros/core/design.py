@@ -1,4 +1,4 @@
-"""Design files: one actuator per YAML file (interfaces.md), loaded and validated.
+"""Design files: one actuator per YAML file (docs/design_file.md), loaded and validated.
 
 Every error names the offending field and value (``DesignError``). Coordinates are
 on the cross-section, origin on the body axis, metres.

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 from .energy import yeoh
 from .errors import DesignError
 
-# Published sets for Ecoflex 00-30 differ by about 2x in c1 (actuator.md); the
+# Published sets for Ecoflex 00-30 differ by about 2x in c1 (docs/actuator.md); the
 # Kulkarni set is the one the reference simulations use.
 PRESETS: dict[str, dict] = {
     "ecoflex_0030_kulkarni": {
@@ -56,7 +56,7 @@ class YeohMaterial:
 
 
 def material_from_spec(spec, field: str = "material") -> YeohMaterial:
-    """Build a material from a preset name or a mapping as in interfaces.md.
+    """Build a material from a preset name or a mapping as in docs/design_file.md.
 
     ``model: neo_hookean`` takes ``c1`` only (or ``shear_modulus``, c1 = mu/2).
     """

@@ -16,7 +16,7 @@ class Prediction:
     pressures_pa: list[float]
     curvature_per_m: list[float]
     axial_stretch: float
-    radius_of_curvature_m: float | None   # None for a straight backbone
+    radius_of_curvature_m: float | None   # 1/|k|, the stretched centreline's radius (not R_C = l/theta); None when straight
     bending_angle_rad: float
     tip_position_m: list[float]
     tip_orientation_xyzw: list[float]

@@ -1,4 +1,4 @@
-"""Scenes: what is in the world and what the user needs from a model (architecture.md "Scenes").
+"""Scenes: what is in the world and what the user needs from a model (docs/architecture.md "Scenes").
 
 A scene file (YAML, SI units) names the design, a device in the lumen, loads or contact,
 gravity, the pressure range, the accuracy and the rate required:

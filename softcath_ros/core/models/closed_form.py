@@ -7,7 +7,7 @@ along the length. Equilibrium of the linear-elastic section gives
     lambda - 1 = sum_i p_i A_i / EA.
 Linear in pressure, so the whole rung is a 2 x C matrix and a C-vector.
 It ignores wall ballooning and hyperelasticity and so under-predicts bending
-by 2-3x at 0.15-0.2 bar (architecture.md); it is the cheapest rung, not the truest.
+by 2-3x at 0.15-0.2 bar (docs/architecture.md); it is the cheapest rung, not the truest.
 """
 from __future__ import annotations
 

@@ -44,7 +44,7 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
     ``cache``: True (the project cache, core/cache.py), a cache root directory, or False.
     ``section_settings`` are ``SectionSettings`` fields, e.g. ``lumen_fill=0.02``: a body bent back
     against its pressure (a blocked tip) closes the empty lumen at 0.225-0.3 bar; the fill (a
-    self-contact proxy) carries the table to 0.45 bar (README "Model rung: rod")."""
+    self-contact proxy) carries the table to 0.45 bar (docs/models/rod.md)."""
     from ..models.section import SectionModel
 
     body = replace(design, device=None, length=1.0)

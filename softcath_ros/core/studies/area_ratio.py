@@ -1,5 +1,5 @@
 """Area ratio: outer diameter, wall thickness and lumen diameter varied on a grid, the channel(s)
-filling the remaining space; R_C against channel area / body area (actuator.md's key parameter).
+filling the remaining space; R_C against channel area / body area (docs/actuator.md's key parameter).
 
 Layout: a 1-channel design keeps the implemented stacking along y (bottom wall with the fibre,
 lumen, middle wall, channel, outer wall; variation.stacked_layout), every wall equal to the

@@ -1,6 +1,6 @@
 """Device stiffness: R_C against the bending stiffness EI of a device in the lumen.
 
-EI from 0 to 8 N mm^2 (1 N mm^2 = 1e-6 N m^2; actuator.md writes "1 N mm^2 (1e-9 N m^2)",
+EI from 0 to 8 N mm^2 (1 N mm^2 = 1e-6 N m^2; docs/actuator.md writes "1 N mm^2 (1e-9 N m^2)",
 a unit slip: 1 mm^2 = 1e-6 m^2). Device diameter 0.8 x the lumen's (the rung uses only EI).
 A constant pressure moment M against the sum of the bending stiffnesses gives
 R_C = (EI_act + EI_dev) / M: linear in EI_dev, intercept EI_act / M, slope 1 / M. The study
@@ -70,7 +70,7 @@ def run(design: Design, ctx: StudyContext) -> StudyResult:
                         f"{ei_act:.2f} N mm^2 = {ei_act * 1e-6:.2e} N m^2 (closed-form section, small strain: "
                         f"{closed[0, 0] * 1e6:.2f} / {closed[1, 1] * 1e6:.2f} N mm^2 about x / y)")
         findings.append(f"the device becomes non-negligible (R_C +{NOTICEABLE:.0%}) from EI = {ei_noticeable:.2f} N mm^2 "
-                        f"= {ei_noticeable * 1e-6:.2e} N m^2; actuator.md says 'about 1 N mm^2 (1e-9 N m^2)': 1 N mm^2 "
+                        f"= {ei_noticeable * 1e-6:.2e} N m^2; docs/actuator.md says 'about 1 N mm^2 (1e-9 N m^2)': 1 N mm^2 "
                         "is 1e-6 N m^2 (the 1e-9 is a unit slip)")
     bad = [r["label"] for r in rows if r["radius_of_curvature_mm"] is None]
     if bad:
@@ -85,7 +85,7 @@ def run(design: Design, ctx: StudyContext) -> StudyResult:
             ax.plot(x, fit["intercept"] + fit["slope"] * x, "-", label=f"fit, R^2 = {fit['r2']:.4f}")
             ax.axvline(NOTICEABLE * fit["intercept"] / fit["slope"], color="grey", ls=":",
                        label=f"R_C +{NOTICEABLE:.0%}")
-            ax.axvline(1.0, color="C3", ls="--", lw=0.8, label="actuator.md: ~1 N mm^2")
+            ax.axvline(1.0, color="C3", ls="--", lw=0.8, label="docs/actuator.md: ~1 N mm^2")
         ax.set_xlabel("device bending stiffness EI [N mm^2] (1 N mm^2 = 1e-6 N m^2)")
         ax.set_ylabel("R_C [mm]")
         ax.grid(alpha=0.3)

@@ -3,7 +3,7 @@
 Every length scales (core/studies/variation.scale_design_dict): holes, walls, fibre,
 reinforcement pitch and thread, cap, length. Materials and pressure do not, so geometric
 similarity predicts the same strains at the same pressure and R_C proportional to D: a smaller
-actuator bends with a smaller radius at equal pressure (actuator.md). The walls the scaling
+actuator bends with a smaller radius at equal pressure (docs/actuator.md). The walls the scaling
 implies are reported against the fabrication minimum (``min_wall``, default 0.2 mm);
 diameters whose walls fall below it are listed as infeasible.
 """
@@ -57,7 +57,7 @@ def run(design: Design, ctx: StudyContext, min_wall: float = DEFAULT_MIN_WALL) -
             f"{max(ratio) / min(ratio) - 1:.2%} (similarity: R_C proportional to D)")
     for r in rows:
         if abs(r["outer_diameter_mm"] - 2.0) < 1e-9:
-            findings.append(f"at 2 mm the walls become {r['implied_wall_mm']:.2f} mm (actuator.md: 0.24 mm, fragile, "
+            findings.append(f"at 2 mm the walls become {r['implied_wall_mm']:.2f} mm (docs/actuator.md: 0.24 mm, fragile, "
                             "hard to mould)")
     bad = [f"{r['label']} ({r['status']})" for r in rows if r["radius_of_curvature_mm"] is None]
     if bad:

@@ -4,7 +4,7 @@ Parameters (baseline marked in every group): reinforcement pitch and thread diam
 x2), thread shape (square/round), limiting-fibre diameter (x0.5 to x2), fibre placement
 (bottom = the baseline's, top = mirrored across the bending plane's neutral side, none), and
 the material set. The project has one published Ecoflex 00-30 set (core/materials.py);
-actuator.md states published sets differ by about 2x in c1, so the study spans that spread
+docs/actuator.md states published sets differ by about 2x in c1, so the study spans that spread
 with the set scaled by 0.5 and 2, and checks the Yeoh higher terms with its neo-Hookean part.
 """
 from __future__ import annotations
@@ -115,7 +115,7 @@ def run(design: Design, ctx: StudyContext) -> StudyResult:
     if "material set" in groups:
         s = spread(groups["material set"])
         findings.append(f"material set: R_C varies by {'n/a' if s is None else f'{s:.0%}'} of the baseline over the "
-                        "published 2x spread in c1 (the largest single uncertainty, actuator.md)")
+                        "published 2x spread in c1 (the largest single uncertainty, docs/actuator.md)")
 
     def plot(path: str) -> None:
         plt = pyplot()

@@ -114,5 +114,5 @@ def scale_design_dict(data: dict, s: float) -> None:
 
 
 def area_ratio(design: Design) -> float:
-    """Total pressurised channel area over the body's cross-section area (actuator.md's key parameter)."""
+    """Total pressurised channel area over the body's cross-section area (docs/actuator.md's key parameter)."""
     return sum(c.area for c in design.channels) / (math.pi * design.outer_radius ** 2)
