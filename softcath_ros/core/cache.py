@@ -31,8 +31,9 @@ _log = logging.getLogger("softcath_ros.cache")
 
 def default_root() -> Path:
     """The user's cache directory for softcath_ros (not created here)."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "softcath_ros"
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    # the XDG rule: a relative value is ignored
+    return (Path(base) if os.path.isabs(base) else Path.home() / ".cache") / "softcath_ros"
 
 
 def cache_root() -> Path:
