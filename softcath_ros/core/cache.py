@@ -80,14 +80,20 @@ class CacheStore:
         return self.root / kind / (f"{_safe(name)}_{key}.{ext}" if name else f"{key}.{ext}")
 
     # ------------------------------------------------------------------ arrays (npz)
-    def load_arrays(self, kind: str, version: str | None, parts, name: str = "") -> dict[str, np.ndarray] | None:
-        """The arrays saved under this entry, or None (absent, or unreadable: warned and a miss)."""
+    def load_arrays(self, kind: str, version: str | None, parts, name: str = "",
+                    require: tuple[str, ...] = ()) -> dict[str, np.ndarray] | None:
+        """The arrays saved under this entry, or None (absent, or unreadable or without one of the
+        ``require``d arrays: warned and a miss)."""
         path = self.path(kind, version, parts, name, "npz")
         if not path.is_file():
             return None
         try:
             with np.load(path, allow_pickle=False) as z:
-                return {k: z[k] for k in z.files}
+                arrays = {k: z[k] for k in z.files}
+            missing = [k for k in require if k not in arrays]
+            if missing:
+                raise KeyError(f"no array {', '.join(missing)}")
+            return arrays
         except Exception as exc:   # a damaged entry of any sort is rebuilt, never a traceback
             _warn_unreadable(path, exc)
             return None
@@ -154,8 +160,9 @@ def _warn_unreadable(path: Path, exc: Exception) -> None:
 _DEFAULT = CacheStore()
 
 
-def load_arrays(kind: str, version: str | None, parts, name: str = "") -> dict[str, np.ndarray] | None:
-    return _DEFAULT.load_arrays(kind, version, parts, name)
+def load_arrays(kind: str, version: str | None, parts, name: str = "",
+                require: tuple[str, ...] = ()) -> dict[str, np.ndarray] | None:
+    return _DEFAULT.load_arrays(kind, version, parts, name, require)
 
 
 def save_arrays(kind: str, version: str | None, parts, arrays: dict[str, Any], name: str = "") -> Path:
