@@ -83,6 +83,15 @@ def test_damaged_entry_is_a_miss_with_one_warning(tmp_path, caplog, damage):
         assert "\n" not in caplog.records[0].getMessage()
 
 
+def test_entry_without_a_required_array_is_a_miss_with_a_warning(tmp_path, caplog):
+    store = CacheStore(tmp_path)
+    store.save_arrays("section", "v1", PARTS, {"curvature": np.zeros((1, 2))}, name="d")
+    assert store.load_arrays("section", "v1", PARTS, "d", require=("curvature",)) is not None
+    with caplog.at_level(logging.WARNING, logger="softcath_ros.cache"):
+        assert store.load_arrays("section", "v1", PARTS, "d", require=("curvature", "message")) is None
+    assert len(caplog.records) == 1 and "no array message" in caplog.text
+
+
 def test_truncated_npz_of_a_real_entry_is_rebuilt(tmp_path, caplog):
     """A section batch whose file was cut short (a full disk, a killed copy) is solved again, with a
     warning line and no traceback."""
@@ -141,7 +150,7 @@ def test_default_is_the_users_cache_dir_never_the_source_tree(tmp_path, monkeypa
     assert REPO not in default_root().parents and REPO != default_root()
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache_root() == default_root() == tmp_path / "xdg" / "softcath_ros"
-    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/dir")   # ignored, as the XDG rule says
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     assert cache_root() == tmp_path / "home" / ".cache" / "softcath_ros"
 

@@ -31,8 +31,9 @@ _log = logging.getLogger("softcath_ros.cache")
 
 def default_root() -> Path:
     """The user's cache directory for softcath_ros (not created here)."""
-    base = os.environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "softcath_ros"
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    # the XDG rule: a relative value is ignored
+    return (Path(base) if os.path.isabs(base) else Path.home() / ".cache") / "softcath_ros"
 
 
 def cache_root() -> Path:
@@ -79,14 +80,20 @@ class CacheStore:
         return self.root / kind / (f"{_safe(name)}_{key}.{ext}" if name else f"{key}.{ext}")
 
     # ------------------------------------------------------------------ arrays (npz)
-    def load_arrays(self, kind: str, version: str | None, parts, name: str = "") -> dict[str, np.ndarray] | None:
-        """The arrays saved under this entry, or None (absent, or unreadable: warned and a miss)."""
+    def load_arrays(self, kind: str, version: str | None, parts, name: str = "",
+                    require: tuple[str, ...] = ()) -> dict[str, np.ndarray] | None:
+        """The arrays saved under this entry, or None (absent, or unreadable or without one of the
+        ``require``d arrays: warned and a miss)."""
         path = self.path(kind, version, parts, name, "npz")
         if not path.is_file():
             return None
         try:
             with np.load(path, allow_pickle=False) as z:
-                return {k: z[k] for k in z.files}
+                arrays = {k: z[k] for k in z.files}
+            missing = [k for k in require if k not in arrays]
+            if missing:
+                raise KeyError(f"no array {', '.join(missing)}")
+            return arrays
         except Exception as exc:   # a damaged entry of any sort is rebuilt, never a traceback
             _warn_unreadable(path, exc)
             return None
@@ -153,8 +160,9 @@ def _warn_unreadable(path: Path, exc: Exception) -> None:
 _DEFAULT = CacheStore()
 
 
-def load_arrays(kind: str, version: str | None, parts, name: str = "") -> dict[str, np.ndarray] | None:
-    return _DEFAULT.load_arrays(kind, version, parts, name)
+def load_arrays(kind: str, version: str | None, parts, name: str = "",
+                require: tuple[str, ...] = ()) -> dict[str, np.ndarray] | None:
+    return _DEFAULT.load_arrays(kind, version, parts, name, require)
 
 
 def save_arrays(kind: str, version: str | None, parts, arrays: dict[str, Any], name: str = "") -> Path:

@@ -70,6 +70,11 @@ class SectionSettings:
         return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
 
 
+# what a cached batch holds (an entry without one of them is solved again)
+_CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
+                  "last_converged")
+
+
 class SectionModel(BendModel):
     name = "section"
     solver_version = "section-2"   # bump when the discretisation or the solver changes an answer
@@ -367,18 +372,16 @@ class SectionModel(BendModel):
 
     # ------------------------------------------------------------------ disk cache
     def _load_cached(self, pressures) -> BendState | None:
-        z = self.store.load_arrays("section", self.solver_version, self._cache_parts(pressures), self.design.name)
+        z = self.store.load_arrays("section", self.solver_version, self._cache_parts(pressures), self.design.name,
+                                   require=_CACHED_ARRAYS)
         if z is None:
             return None
-        try:
-            return BendState(curvature=z["curvature"], axial_stretch=z["axial_stretch"],
-                             converged=z["converged"], message=str(z["message"]),
-                             last_converged=json.loads(str(z["last_converged"])),
-                             diagnostics=SolverDiagnostics(newton_iterations=z["newton_iterations"],
-                                                           channel_area=z["channel_area"], mesh_nodes=self.mesh.n_nodes,
-                                                           mesh_size=self.mesh.h, cached=True))
-        except (KeyError, ValueError):
-            return None   # an entry without these arrays: solved again
+        return BendState(curvature=z["curvature"], axial_stretch=z["axial_stretch"],
+                         converged=z["converged"], message=str(z["message"]),
+                         last_converged=json.loads(str(z["last_converged"])),
+                         diagnostics=SolverDiagnostics(newton_iterations=z["newton_iterations"],
+                                                       channel_area=z["channel_area"], mesh_nodes=self.mesh.n_nodes,
+                                                       mesh_size=self.mesh.h, cached=True))
 
     def _save_cached(self, pressures, state: BendState) -> None:
         self.store.save_arrays("section", self.solver_version, self._cache_parts(pressures), dict(

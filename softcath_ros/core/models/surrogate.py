@@ -387,17 +387,12 @@ class SurrogateModel(BendModel):
                                {"meta": np.array(json.dumps(self.meta)), **self.table}, self._cache_name())
 
     def _load(self):
-        z = self.store.load_arrays(_KIND, self.solver_version, self._cache_parts(), self._cache_name())
-        if z is None:
+        table = self.store.load_arrays(_KIND, self.solver_version, self._cache_parts(), self._cache_name(),
+                                       require=("meta",))
+        if table is None:
             return None
-        try:
-            meta = json.loads(str(z.pop("meta")))
-        except (KeyError, ValueError):
-            return None  # not a table: rebuilt
-        table = z
-        if meta.get("key") != self.key:
-            return None
-        return table, meta
+        meta = json.loads(str(table.pop("meta")))
+        return (table, meta) if meta.get("key") == self.key else None
 
     # ------------------------------------------------------------------ evaluation
     def _prepare(self) -> None:

@@ -51,7 +51,8 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
     model = SectionModel(body, **section_settings)
     store = store_for(cache)
     parts = [body.content_hash(), model.settings.key(), asdict(grid), model.mesh.n_nodes]
-    table = _from_arrays(store.load_arrays(_KIND, LAW_VERSION, parts, design.name)) if store else None
+    z = store.load_arrays(_KIND, LAW_VERSION, parts, design.name, require=_TABLE_ARRAYS) if store else None
+    table = _from_arrays(z) if z is not None else None
     if table is None:
         table = model.moment_curvature(grid.pressures(), grid.curvatures(), progress=progress)
         if store is not None:
@@ -63,6 +64,7 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
 
 
 _KIND = "rod_law"   # the cache kind of the tables
+_TABLE_ARRAYS = ("curvatures", "pressures", "moment", "stretch", "messages", "direction", "pressure_direction")
 
 
 def _to_arrays(t: MomentTable) -> dict:
@@ -71,12 +73,7 @@ def _to_arrays(t: MomentTable) -> dict:
                 pressure_direction=t.pressure_direction)
 
 
-def _from_arrays(z: dict | None) -> MomentTable | None:
-    if z is None:
-        return None
-    try:
-        return MomentTable(curvatures=z["curvatures"], pressures=z["pressures"], moment=z["moment"],
-                           stretch=z["stretch"], messages=json.loads(str(z["messages"])),
-                           direction=z["direction"], pressure_direction=z["pressure_direction"])
-    except (KeyError, ValueError):
-        return None    # an entry without these arrays is recomputed
+def _from_arrays(z: dict) -> MomentTable:
+    return MomentTable(curvatures=z["curvatures"], pressures=z["pressures"], moment=z["moment"],
+                       stretch=z["stretch"], messages=json.loads(str(z["messages"])),
+                       direction=z["direction"], pressure_direction=z["pressure_direction"])
