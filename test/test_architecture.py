@@ -86,3 +86,52 @@ def test_pure_layers_never_import_ros(layer):
                  for name, imports in _graph().items() if name == layer or name.startswith(layer + ".")}
     offenders = {k: v for k, v in offenders.items() if v}
     assert not offenders, f"{layer} imports ROS: {offenders}"
+
+
+def test_the_ladder_does_not_import_model_selection():
+    """'auto' lives above the ladder: core/model_selection registers it with core/models."""
+    graph = _graph()
+    assert "softcath_ros.core.models" in graph["softcath_ros.core.model_selection"]
+    assert not [m for m, imports in graph.items()
+                if m.startswith("softcath_ros.core.models") and "softcath_ros.core.model_selection" in imports]
+
+
+def test_rung_capabilities_need_no_rung_and_no_ngsolve():
+    import subprocess
+    import sys
+
+    code = ("import sys; from softcath_ros.core.models import RUNGS, rung_info; "
+            "[rung_info(r) for r in RUNGS]; assert 'ngsolve' not in sys.modules; "
+            "assert 'rclpy' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_declared_rung_options_match_the_constructors():
+    """Each rung's RungInfo lists exactly the options its constructor takes (more when it passes
+    further options on, as the rod to its source rung)."""
+    import inspect
+
+    from softcath_ros.core.models import RUNGS, rung_class
+    from softcath_ros.core.options import option_names
+
+    for name in RUNGS:
+        cls = rung_class(name)
+        params = inspect.signature(cls.__init__).parameters
+        named = {p for p, v in params.items() if p not in ("self", "design")
+                 and v.kind not in (inspect.Parameter.VAR_KEYWORD, inspect.Parameter.VAR_POSITIONAL)}
+        declared = set(option_names(cls.info.options))
+        assert named <= declared, (name, named - declared)
+        takes_more = any(v.kind is inspect.Parameter.VAR_KEYWORD for v in params.values())
+        assert takes_more or declared == named, (name, declared - named)
+
+
+def test_declared_study_options_match_run():
+    import inspect
+
+    from softcath_ros.core.options import option_names
+    from softcath_ros.core.studies import STUDIES, study_module
+
+    for name in STUDIES:
+        module = study_module(name)
+        params = list(inspect.signature(module.run).parameters)[2:]   # after design, ctx
+        assert option_names(module.OPTIONS) == params, name

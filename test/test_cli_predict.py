@@ -80,3 +80,30 @@ def test_predict_reports_the_rods_own_tip_and_contact_force():
     np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0)
     free = predict(make_model("closed_form", bench.design), np.array([[10000.0]]))[0]
     assert free.tip_position_m[1] < -1e-4 and "contact_force_n" not in free.to_json()
+
+
+def test_models_lists_what_each_rung_declares():
+    r = softcath("models", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert set(doc) == {"closed_form", "section", "fe3d", "surrogate", "rod"}
+    assert doc["closed_form"]["linear_gain"] and doc["rod"]["solves_backbone"]
+    assert "contact" in doc["rod"]["models"] and "contact" not in doc["section"]["models"]
+    assert doc["section"]["options"]["mesh_size"]["kind"] == "float"
+
+
+def test_rung_options_are_checked_against_the_declaration():
+    from softcath_ros.cli.common import parse_model_options
+    from softcath_ros.core.errors import SoftcathError
+
+    assert parse_model_options("section", ["mesh_size=0.0004", "adaptive=false", "max_newton=12"]) == \
+        {"mesh_size": 0.0004, "adaptive": False, "max_newton": 12}
+    with pytest.raises(SoftcathError, match="has no such option; its options: none"):
+        parse_model_options("closed_form", ["mesh_size=1"])
+    with pytest.raises(SoftcathError, match="expected a float"):
+        parse_model_options("section", ["mesh_size=fine"])
+    with pytest.raises(SoftcathError, match="cannot give"):
+        parse_model_options("fe3d", ["mesh=x"])
+    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "10000", "--option", "tol=1")
+    assert r.returncode == 2 and "model 'closed_form' has no such option" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

@@ -17,6 +17,7 @@ SUBCOMMANDS = [
     "report",
     "recover",
     "predict",
+    "models",
     "allocate",
     "sweep",
     "chart",

@@ -24,3 +24,44 @@ def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray
             raise SoftcathError(f"--pressure {v!r}: values must be finite")
         rows.append(row)
     return np.asarray(rows) * scale
+
+
+def add_option_argument(parser) -> None:
+    parser.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
+                        help="a rung option (repeatable), e.g. mesh_size=0.0004; `softcath models` lists them")
+
+
+def parse_model_options(rung: str, items: list[str]) -> dict:
+    """``NAME=VALUE`` items checked against the options rung ``rung`` declares and converted to
+    their declared kind (bool, int, float, str; others cannot be given on the command line)."""
+    from ..core.models import rung_info
+
+    if not items:
+        return {}
+    if rung == "auto":
+        raise SoftcathError("--option: give options to a named rung, not to --model auto")
+    info = rung_info(rung)
+    kinds = {o.name: o.kind for o in info.options}
+    out = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name:
+            raise SoftcathError(f"--option {item!r}: expected NAME=VALUE")
+        kind = kinds.get(name)
+        if kind is None:
+            known = ", ".join(kinds) or "none"
+            raise SoftcathError(f"--option {name}: model '{rung}' has no such option; its options: {known}")
+        try:
+            if kind == "bool":
+                if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError
+                out[name] = text.lower() in ("true", "1", "yes")
+            elif kind in ("int", "float", "str"):
+                out[name] = {"int": int, "float": float, "str": str}[kind](text)
+            else:
+                raise SoftcathError(f"--option {name}: takes a {kind}, which the command line cannot give")
+        except ValueError:
+            raise SoftcathError(f"--option {name}={text}: expected a {kind}") from None
+        if kind == "float" and not math.isfinite(out[name]):
+            raise SoftcathError(f"--option {name}={text}: must be finite")
+    return out

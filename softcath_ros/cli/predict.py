@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, parse_pressures
+from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures
 
 
 def register(sub) -> None:
@@ -23,6 +23,7 @@ def register(sub) -> None:
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
     p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
+    add_option_argument(p)
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -39,6 +40,7 @@ def run(args) -> int:
         raise SoftcathError("pressures are gauge pressures and must not be negative")
     over = pressures.max() > design.max_pressure
     if args.model == "auto":
+        parse_model_options("auto", args.option)   # refuses options for auto
         from ..core.scene import load_scene
 
         if args.scene is None:
@@ -46,7 +48,7 @@ def run(args) -> int:
         model = make_model("auto", design, scene=load_scene(args.scene))
         print(model.selection.reason, file=sys.stderr)
     else:
-        model = make_model(args.model, design)
+        model = make_model(args.model, design, **parse_model_options(args.model, args.option))
     results = predict(model, pressures, args.length)
     if args.json:
         json.dump({"model": model.name, "design": design.name,

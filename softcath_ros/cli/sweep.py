@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR
+from .common import PA_PER_BAR, add_option_argument, parse_model_options
 
 
 def register(sub) -> None:
@@ -35,6 +35,7 @@ def register(sub) -> None:
                                                "(default: sweep_<design>_<model>)")
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached (rungs that cache)")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    add_option_argument(p)
     p.add_argument("--json", action="store_true", help="print the JSON to stdout as well")
     p.set_defaults(func=run)
 
@@ -75,8 +76,8 @@ def run(args) -> int:
     levels = np.linspace(lo, hi, args.steps)
     pressures = np.zeros((args.steps, design.n_channels))
     pressures[:, args.channel] = levels
-    model = make_model(args.model, design, **_model_options(args.model, True,
-                                                             not args.no_cache))
+    options = {**_model_options(args.model, True, not args.no_cache), **parse_model_options(args.model, args.option)}
+    model = make_model(args.model, design, **options)
     results = predict(model, pressures, design.length)
     rows = []
     for p, r in zip(levels, results):

@@ -12,7 +12,7 @@ constructor takes. Callers read that declaration (or the registry's ``rung_info`
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -104,6 +104,11 @@ class BendState:
                                                 # ramp {"pressure", "curvature", "axial_stretch"} (section)
     diagnostics: SolverDiagnostics | None = None
 
+    def has_optional_fields(self) -> bool:
+        return not (self.tip is None and self.backbone is None and self.contact_force is None
+                    and self.radius_l_over_theta is None and self.last_converged is None
+                    and self.diagnostics is None)
+
     def command(self, i: int) -> "BendState":
         """The state of command ``i`` of a batch, with the leading axis removed from every field."""
         def at(v):
@@ -152,7 +157,15 @@ class BendModel:
             raise ModelError(f"model '{self.name}' for design '{self.design.name}' expects "
                              f"{self.n_channels} channel pressure(s) per command, got shape {p.shape}")
         state = self._evaluate_batch(batch)
-        return state.command(0) if single else state
+        if not single:
+            return state
+        if state.has_optional_fields():
+            return state.command(0)
+        # the common case, kept cheap (a fast rung answers in microseconds): no optional fields to cut
+        state.curvature = state.curvature[0]
+        state.axial_stretch = state.axial_stretch[0]
+        state.converged = state.converged[0]
+        return state
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:  # pragma: no cover - abstract
         raise NotImplementedError
