@@ -43,12 +43,12 @@ def main() -> None:
               f"{batch / med:12.3e} eval/s")
 
     record("evaluate (single, BendState)", 1, time_loops(lambda: model.evaluate(p1), args.repeats, 20000))
-    if hasattr(model, "curvature_single"):
+    if model.info.linear_gain:
         record("curvature_single (fast path)", 1,
                time_loops(lambda: model.curvature_single(p1), args.repeats, 20000))
     record("evaluate + tip_pose (single)", 1,
            time_loops(lambda: tip_pose(model.evaluate(p1).curvature, design.length), args.repeats, 5000))
-    if hasattr(model, "curvature_single"):
+    if model.info.linear_gain:
         def fast_pose():
             k, stretch = model.curvature_single(p1)
             return tip_pose_single(k[0], k[1], design.length * stretch)

@@ -157,6 +157,7 @@ def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, proc
     assert (tmp_path / "fight" / "fight_0.mcap").is_file()  # the recording is still finalised
 
 
+@pytest.mark.timeout(240)   # the whole main job on the quick protocol: about a minute, longer under load
 def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, procs):
     """The main job on the quick protocol: sim_bench_node, model_node, bench_node as processes."""
     env = _env()

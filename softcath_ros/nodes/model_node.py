@@ -91,7 +91,7 @@ class ModelNode(Node):
             self.get_logger().warning(f"max_pressure override ignored: the limit is the design's "
                                    f"{self.max_pressure:g} Pa")
         # Rungs with a one-command fast path (closed form) skip the BendState allocation.
-        self._fast = getattr(self.model, "curvature_single", None)
+        self._fast = self.model.curvature_single if self.model.info.linear_gain else None
 
         self.counters = InputCounters(extra={"design": self.design.name, "model": self.model.name,
                                              "max_pressure_pa": f"{self.max_pressure:g}",

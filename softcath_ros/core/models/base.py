@@ -28,7 +28,8 @@ class RungInfo:
 
     summary: str                                  # one line: what the rung is
     models: tuple[str, ...] = ("free_bending",)   # scene features it models (FEATURES)
-    linear_gain: bool = False        # linear in pressure: ``curvature_per_pa`` (2, C) and ``stretch_per_pa`` (C,)
+    linear_gain: bool = False        # linear in pressure: ``curvature_per_pa`` (2, C), ``stretch_per_pa`` (C,)
+                                     # and the one-command fast path ``curvature_single(p)`` -> (k, stretch)
     solves_backbone: bool = False    # its own backbone and tip pose (BendState.backbone, .tip) replace the arc's,
                                      # and it answers ``solve(pressure, length, loads)`` (planar loads)
     options: tuple[Option, ...] = ()
