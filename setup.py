@@ -20,7 +20,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", glob(package_name + "/config/*.yaml")),
+        ("share/" + package_name + "/config",
+         sorted(set(glob(package_name + "/config/*.yaml")) - {package_name + "/config/ladder_envelope.yaml"})),
     ],
     python_requires=">=3.10",
     install_requires=[

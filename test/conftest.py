@@ -6,8 +6,6 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-DESIGNS = REPO / "softcath_ros" / "config" / "designs"
 
 # Parallel test runs must not see each other's nodes: loopback only, and this run's in-process
 # nodes on a domain leased for the whole session (node processes lease their own: domains.py).
@@ -42,15 +40,16 @@ def pytest_unconfigure(config):
 def implemented_design():
     from softcath_ros.core.design import load_design
 
-    return load_design(DESIGNS / "implemented_5mm.yaml")
+    return load_design("implemented_5mm")
 
 
 @pytest.fixture
 def design_dict():
     """The implemented design as a mutable mapping, for validation tests."""
     from softcath_ros.core.yaml_io import load_yaml
+    from softcath_ros.resources import find
 
-    return load_yaml((DESIGNS / "implemented_5mm.yaml").read_text())
+    return load_yaml(find("design", "implemented_5mm").read_text())
 
 
 def pytest_report_header(config):

@@ -21,8 +21,8 @@ from softcath_ros.core.kinematics import tip_pose
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel, BendState
 from softcath_ros.core.yaml_io import load_yaml
+from softcath_ros.resources import find
 
-DESIGNS = __import__("pathlib").Path(__file__).resolve().parents[1] / "softcath_ros" / "config" / "designs"
 
 DIRECTION_TOL_DEG = 0.5
 MAGNITUDE_RTOL = 0.01
@@ -30,12 +30,12 @@ MAGNITUDE_RTOL = 0.01
 
 @pytest.fixture(scope="module")
 def three():
-    return load_design(DESIGNS / "three_channel_5mm.yaml")
+    return load_design("three_channel_5mm")
 
 
 @pytest.fixture(scope="module")
 def three_dict():
-    return load_yaml((DESIGNS / "three_channel_5mm.yaml").read_text())
+    return load_yaml(find("design", "three_channel_5mm").read_text())
 
 
 class CoupledNonlinear(BendModel):

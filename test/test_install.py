@@ -42,6 +42,18 @@ def _probe(site: Path, cwd: Path) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def _clean_copy(src: Path) -> Path:
+    """The tracked tree copied to ``src``: builds see what a clone has (no stale build/ or untracked
+    files of this checkout) and leave nothing behind in it."""
+    files = subprocess.run(["git", "-C", str(REPO), "ls-files", "-z"], check=True, capture_output=True,
+                           text=True).stdout.split("\0")
+    for f in filter(None, files):
+        if (REPO / f).is_file():
+            (src / f).parent.mkdir(parents=True, exist_ok=True)
+            (src / f).write_bytes((REPO / f).read_bytes())
+    return src
+
+
 def _check(found: dict, root: Path) -> None:
     assert Path(found["package"]).resolve().is_relative_to(root.resolve()), found["package"]
     assert Path(found["envelope"]).resolve().is_relative_to(root.resolve())
@@ -60,7 +72,8 @@ def test_source_checkout(tmp_path):
 def test_pip_wheel_install(tmp_path):
     wheels, site = tmp_path / "wheels", tmp_path / "site"
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                            "-w", str(wheels), str(REPO)], capture_output=True, text=True, timeout=300)
+                            "-w", str(wheels), str(_clean_copy(tmp_path / "src"))], capture_output=True, text=True,
+                           timeout=300)
     assert build.returncode == 0, build.stderr[-2000:]
     wheel = next(wheels.glob("softcath_ros-*.whl"))
     inst = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site),
@@ -71,23 +84,21 @@ def test_pip_wheel_install(tmp_path):
 
 @pytest.mark.slow
 def test_colcon_style_install(tmp_path):
-    """What `colcon build` runs for an ament_python package: setup.py build + install into a prefix."""
-    src = tmp_path / "src"
-    subprocess.run(["git", "-C", str(REPO), "ls-files", "-z"], check=True, capture_output=True)
-    files = subprocess.run(["git", "-C", str(REPO), "ls-files"], check=True, capture_output=True,
-                           text=True).stdout.split()
-    for f in files:  # a clean copy of the tracked tree, so no build output lands in the checkout
-        if (REPO / f).is_file():
-            (src / f).parent.mkdir(parents=True, exist_ok=True)
-            (src / f).write_bytes((REPO / f).read_bytes())
-    prefix = tmp_path / "install"
-    cmd = [sys.executable, "setup.py", "-q", "build", "--build-base", str(tmp_path / "build"), "install",
-           "--prefix", str(prefix), "--single-version-externally-managed", "--record", str(tmp_path / "record")]
+    """What `colcon build` runs for an ament_python package: setup.py egg_info, build and install
+    into a prefix with a record (no colcon needed)."""
+    src = _clean_copy(tmp_path / "src")
+    prefix, build = tmp_path / "install", tmp_path / "build"
+    build.mkdir()  # colcon creates the build folder first
+    cmd = [sys.executable, "setup.py", "-q", "egg_info", "--egg-base", str(build), "build", "--build-base",
+           str(build), "install", "--prefix", str(prefix), "--single-version-externally-managed", "--record",
+           str(build / "install.log")]
     out = subprocess.run(cmd, cwd=src, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     site = next(prefix.glob("lib/python3*/site-packages"))
     share = prefix / "share" / "softcath_ros"
-    assert (share / "package.xml").is_file() and (share / "config" / "model_node.yaml").is_file()
+    assert (share / "package.xml").is_file()
+    params = {"model_node", "allocation_node", "bench_node", "sim_bench_node"}
+    assert {p.stem for p in (share / "config").glob("*.yaml")} == params  # for `--params-file`
     assert (prefix / "share/ament_index/resource_index/packages/softcath_ros").is_file()
     assert (prefix / "lib" / "softcath_ros" / "model_node").is_file()  # `ros2 run softcath_ros model_node`
     _check(_probe(site, tmp_path), site)

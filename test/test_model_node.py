@@ -19,6 +19,7 @@ from softcath_ros.core.kinematics import backbone_poses
 from softcath_ros.core.models import make_model
 from softcath_ros.core.prediction import predict
 from softcath_ros.graph import graph_env
+from softcath_ros.resources import find
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -170,7 +171,7 @@ def test_clamp_policy_clamps_out_of_range_but_rejects_non_finite(start_node):
 
 
 def test_params_file_is_loaded(start_node):
-    node = start_node("--params-file", str(REPO / "softcath_ros" / "config" / "model_node.yaml"), "-p", "backbone_points:=5")
+    node = start_node("--params-file", str(find("params", "model_node")), "-p", "backbone_points:=5")
     pt = node.client.send([10000.0])
     assert pt is not None and len(pt.backbone_m) == 5
     code, err = node.stop(signal.SIGINT)
