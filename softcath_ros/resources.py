@@ -65,9 +65,16 @@ def find(kind: str, name_or_path: str | Path) -> Path:
     raise ResourceNotFound(kind, str(name_or_path), shipped_names(kind))
 
 
+def checkout_root() -> Path | None:
+    """The repository folder when the package runs from a source checkout (the benchmark results
+    live there, not in the package), else None."""
+    root = Path(str(resources.files("softcath_ros"))).resolve().parent
+    return root if (root / "setup.py").is_file() and (root / "benchmarks").is_dir() else None
+
+
 def envelope_path() -> Path:
     """The shipped ladder envelope (written by ``softcath envelope``) that model selection reads."""
     return config_dir() / ENVELOPE_NAME
 
 
-__all__ = ["KINDS", "ResourceNotFound", "config_dir", "envelope_path", "find", "shipped_dir", "shipped_names"]
+__all__ = ["KINDS", "ResourceNotFound", "checkout_root", "config_dir", "envelope_path", "find", "shipped_dir", "shipped_names"]

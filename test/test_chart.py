@@ -46,3 +46,9 @@ def test_chart_refuses_an_old_csv(tmp_path):
     path.write_text("setting,pressure_pa\nx,1\n")
     with pytest.raises(SoftcathError, match="re-run benchmarks/ladder_chart.py"):
         load_rows(str(path))
+
+
+def test_chart_without_results_says_so_in_one_line():
+    with pytest.raises(SoftcathError, match="--csv: no committed results outside a source checkout") as exc:
+        load_rows(None)
+    assert "\n" not in str(exc.value)

@@ -14,7 +14,7 @@ REPO = Path(__file__).resolve().parents[1]
 PROBE = """
 import json, sys
 import softcath_ros
-from softcath_ros.resources import envelope_path, find, shipped_names
+from softcath_ros.resources import checkout_root, envelope_path, find, shipped_names
 from softcath_ros.core.design import load_design
 from softcath_ros.core.scene import load_scene
 from softcath_ros.core.model_selection import select_model
@@ -28,6 +28,7 @@ print(json.dumps({
     "params": str(find("params", "model_node")),
     "designs": shipped_names("design"), "scenes": shipped_names("scene"),
     "auto": select_model(scene).rung,
+    "checkout": str(checkout_root()),
 }))
 """
 
@@ -61,6 +62,8 @@ def _check(found: dict, root: Path) -> None:
     assert {"implemented_5mm", "three_channel_5mm"} <= set(found["designs"])
     assert "free_bending_live" in found["scenes"]
     assert found["auto"]  # model: auto picked a rung from the shipped envelope and scene
+    # the benchmark results (softcath chart's default) exist only in a source checkout
+    assert found["checkout"] == (str(REPO) if root == REPO else "None")
 
 
 def test_source_checkout(tmp_path):

@@ -14,8 +14,8 @@ from pathlib import Path
 
 from ..core.errors import SoftcathError
 from ..core.units import PA_PER_BAR
+from ..resources import checkout_root
 
-RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 NUMBERS = ("pressure_pa", "s_per_eval", "boundary_pa", "rc_rel_error", "tip_error_mm", "direction_error_deg",
            "length_m", "rc_m")
 MARKERS = {"length": "o", "direction": "^"}
@@ -23,8 +23,10 @@ MARKERS = {"length": "o", "direction": "^"}
 
 def register(sub) -> None:
     p = sub.add_parser("chart", help="draw the model ladder charts (speed against accuracy, errors per case family)")
-    p.add_argument("--csv", default=str(RESULTS / "ladder_chart.csv"),
-                   help="results of benchmarks/ladder_chart.py (default: the committed ones)")
+    root = checkout_root()
+    p.add_argument("--csv", default=str(root / "benchmarks/results/ladder_chart.csv") if root else None,
+                   help="rows written by `softcath envelope --results STEM` (STEM.csv) or benchmarks/ladder_chart.py "
+                        "(default in a source checkout: the committed ones)")
     p.add_argument("--out", default=None, help="main PNG to write (default: beside the CSV, same stem); the "
                    "family charts go beside it as <stem>_lengths.png and <stem>_directions.png")
     p.set_defaults(func=run)
@@ -34,7 +36,10 @@ def _float(v: str):
     return None if v in ("", "None") else float(v)
 
 
-def load_rows(path: str) -> list[dict]:
+def load_rows(path: str | None) -> list[dict]:
+    if path is None:
+        raise SoftcathError("--csv: no committed results outside a source checkout; give --csv FILE "
+                            "(written by `softcath envelope --results STEM`)")
     if not Path(path).is_file():
         raise SoftcathError(f"--csv {path}: no such file; run benchmarks/ladder_chart.py first")
     with open(path, newline="") as f:
