@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness import RESULTS, write_results  # benchmarks/ is the script's directory
+from harness import RESULTS, save_figure, write_results  # benchmarks/ is the script's directory
 from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 
@@ -145,7 +145,7 @@ def main() -> None:
         print(f"{k:32s} {v:.3f}" if isinstance(v, float) else f"{k:32s} {v}")
     write_results("allocation_node_rate", {"note": "shared 2-core machine under load; sender and receiver "
                                                    "share this process"}, [row])
-    plot(gaps, row, RESULTS / "allocation_node_rate.png")
+    plot(gaps, row, "allocation_node_rate")
     print(f"results in {RESULTS}/allocation_node_rate.{{json,csv,png}}")
 
 
@@ -179,7 +179,7 @@ def callback_cost_us(domain: int, calls: int = 20000) -> float:
         rclpy.shutdown(context=ctx)
 
 
-def plot(gaps_ms, row, path):
+def plot(gaps_ms, row, name):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -195,7 +195,7 @@ def plot(gaps_ms, row, path):
                  f"allocated {row['node_counted_commands_per_s']:.0f} cmd/s", fontsize=10)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, name, dpi=120)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel
 
-from harness import RESULTS, time_each, write_results  # noqa: E402  (benchmarks/ is the script's directory)
+from harness import RESULTS, save_figure, time_each, write_results  # noqa: E402  (benchmarks/ is the script's directory)
 
 TARGET_US = 100.0
 
@@ -119,11 +119,11 @@ def main() -> None:
     meta = {"design": args.design, "calls": args.calls, "target_median_us": TARGET_US,
             "note": "shared 2-core machine, other jobs running: medians, not minima"}
     write_results("allocation_speed", meta, rows)
-    plot(rows, RESULTS / "allocation_speed.png", design.name)
+    plot(rows, "allocation_speed", design.name)
     print(f"results in {RESULTS}/allocation_speed.{{json,csv,png}}")
 
 
-def plot(rows, path, design_name):
+def plot(rows, name, design_name):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -145,7 +145,7 @@ def plot(rows, path, design_name):
     ax.set_title(f"Pressure allocation, design {design_name}")
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, name, dpi=120)
 
 
 if __name__ == "__main__":

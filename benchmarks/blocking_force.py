@@ -23,12 +23,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import time
 
 import numpy as np
 
-from harness import RESULTS, write_results
+from harness import median_time, save_figure, write_results
 from softcath_ros.bench.blocking import BlockingForce, bench_contact
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
@@ -59,15 +58,6 @@ def ceiling(law, pressures):
         except LawRangeError:
             pass
     return out
-
-
-def median_time(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main(argv=None):
@@ -165,7 +155,7 @@ def _plot(pressures, forces, ceilings, f_cf):
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(RESULTS / "blocking_force.png", dpi=120)
+    save_figure(fig, "blocking_force", dpi=120)
 
 
 if __name__ == "__main__":

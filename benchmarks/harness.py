@@ -1,8 +1,9 @@
-"""What every benchmark shares: timing over repeats, the machine and load the numbers come from,
-and writing results (benchmarks/results/<name>.{json,csv}) and charts (<name>.png).
+"""What every benchmark shares: timing over repeats (median and spread), the machine and load the
+numbers come from (softcath_ros.provenance: CPU, cores, Python, package versions, git commit, load
+average when the script started and when it wrote), and writing results
+(benchmarks/results/<name>.{json,csv}) and charts (<name>.png).
 
-Timing: medians (and the 99th percentile) over many repeats, because these machines are shared
-and noisy; the load average before and after is part of every result's metadata. Node graphs
+Timing: medians over many repeats, because these machines are shared and noisy. Node graphs
 are started on a private DDS domain by softcath_ros.graph.
 """
 from __future__ import annotations
@@ -10,41 +11,16 @@ from __future__ import annotations
 import csv
 import json
 import os
-import platform
-import subprocess
 import time
 from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
 
+from softcath_ros.provenance import machine_meta
+
 RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def _git_commit() -> str:
-    try:
-        out = subprocess.run(["git", "-C", str(RESULTS.parent), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, timeout=10)
-        return out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
-def machine_meta() -> dict:
-    """What the numbers depend on: interpreter, numpy, CPU, load at the time, code version, date."""
-    return {"python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
-            "cpu": _cpu_model(), "cpu_count": os.cpu_count(), "load_average": os.getloadavg(),
-            "git_commit": _git_commit(), "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+LOAD_AT_START = os.getloadavg()   # when the benchmark script imported the harness
 
 
 def time_loops(fn: Callable[[], object], repeats: int, calls: int) -> list[float]:
@@ -56,6 +32,11 @@ def time_loops(fn: Callable[[], object], repeats: int, calls: int) -> list[float
             fn()
         out.append((time.perf_counter() - t0) / calls)
     return out
+
+
+def median_time(fn: Callable[[], object], repeats: int, calls: int = 1) -> float:
+    """Median over ``repeats`` loops of the seconds per call of ``fn``."""
+    return float(np.median(time_loops(fn, repeats, calls)))
 
 
 def time_each(fn: Callable[[object], object], inputs: Iterable) -> np.ndarray:
@@ -70,17 +51,20 @@ def time_each(fn: Callable[[object], object], inputs: Iterable) -> np.ndarray:
 
 
 def summary(seconds) -> dict:
-    """Median, 99th percentile, minimum and count of per-call times (seconds)."""
+    """Median and spread (interquartile range, 99th percentile, minimum, maximum) of per-call
+    times (seconds), and their count."""
     t = np.asarray(seconds, dtype=float)
-    return {"median_s": float(np.median(t)), "p99_s": float(np.percentile(t, 99)), "min_s": float(t.min()),
-            "n": int(t.size)}
+    q1, q3 = np.percentile(t, [25, 75])
+    return {"median_s": float(np.median(t)), "iqr_s": float(q3 - q1), "p99_s": float(np.percentile(t, 99)),
+            "min_s": float(t.min()), "max_s": float(t.max()), "n": int(t.size)}
 
 
 def write_results(name: str, meta: dict, rows: list[dict]) -> Path:
-    """JSON (meta + rows) and CSV (rows) under benchmarks/results/; returns the stem path."""
+    """JSON (machine metadata + ``meta``, whose keys win, + rows) and CSV (rows) under
+    benchmarks/results/; returns the stem path."""
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / f"{name}.json").write_text(json.dumps({"meta": {**meta, **machine_meta()}, "results": rows},
-                                                     indent=2))
+    (RESULTS / f"{name}.json").write_text(json.dumps(
+        {"meta": {**machine_meta(LOAD_AT_START), **meta}, "results": rows}, indent=2))
     with open(RESULTS / f"{name}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

@@ -13,7 +13,7 @@ import argparse
 import statistics
 
 import numpy as np
-from harness import RESULTS, time_loops, write_results
+from harness import RESULTS, save_figure, time_loops, write_results
 
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose, tip_pose_single
@@ -62,11 +62,11 @@ def main() -> None:
 
     stem = write_results("model_throughput", {"model": args.model, "design": args.design,
                                               "repeats": args.repeats}, rows)
-    plot(rows, stem.with_suffix(".png"), args.model)
+    plot(rows, stem.name, args.model)
     print(f"results in {RESULTS}/model_throughput.{{json,csv,png}}")
 
 
-def plot(rows, path, model_name):
+def plot(rows, name, model_name):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -86,7 +86,7 @@ def plot(rows, path, model_name):
     ax.set_title(f"{model_name} rung throughput (median of repeats)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, name, dpi=120)
 
 
 if __name__ == "__main__":

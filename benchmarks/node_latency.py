@@ -41,7 +41,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-from harness import write_results  # noqa: E402
+from harness import save_figure, write_results  # noqa: E402
 from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
@@ -153,7 +153,7 @@ def median_row(name: str, runs: list[dict]) -> dict:
     }
 
 
-def plot(rows: list[dict], runs: dict, path: Path) -> None:
+def plot(rows: list[dict], runs: dict, name: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -190,7 +190,7 @@ def plot(rows: list[dict], runs: dict, path: Path) -> None:
     ax2.set_title(f"medians over repeats (1-min load average ~{np.median([r['loadavg_1min'] for r in rows]):.0f} "
                   f"on {os.cpu_count()} cores)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, name, dpi=110)
 
 
 def main() -> int:
@@ -233,7 +233,7 @@ def main() -> int:
             "note": "2 cores shared with other engineers' jobs; medians over interleaved repeats",
             "runs": {n: [{k: v for k, v in r.items() if not k.startswith("_")} for r in rs] for n, rs in runs.items()}}
     stem = write_results(name, json.loads(json.dumps(meta, default=float)), rows)
-    plot(rows, runs, stem.with_suffix(".png"))
+    plot(rows, runs, stem.name)
     for row in rows:
         print(f"{row['config']:>12}: p50 {row['node_p50_ms']:.3f} ms, p99 {row['node_p99_ms']:.3f} ms "
               f"(e2e p99 {row['e2e_p99_ms']:.3f}), lost {row['lost_tip_max']}, cpu {row['node_cpu_cores']:.2f} cores; "

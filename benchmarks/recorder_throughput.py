@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import RESULTS, write_results  # noqa: E402
+from harness import save_figure, write_results  # noqa: E402
 from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 PAYLOADS = [b"\x00\x01\x00\x00" + struct.pack("<d", float(i)) for i in range(1000)]
@@ -266,7 +266,7 @@ def main() -> int:
     fig.suptitle("recorder: Float64 from DDS into MCAP (2 shared cores, under load"
                  + (f", processes at nice {args.nice})" if args.nice else ")"))
     fig.tight_layout()
-    fig.savefig(RESULTS / f"{name}.png", dpi=110)
+    save_figure(fig, name, dpi=110)
     return 0
 
 

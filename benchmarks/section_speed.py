@@ -19,7 +19,7 @@ import tracemalloc
 
 import numpy as np
 
-from harness import RESULTS, write_results
+from harness import save_figure, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.units import PA_PER_BAR
@@ -99,11 +99,11 @@ def main() -> None:
     meta = {"design": args.design, "target_sweep_s": 2.0, "curves": curves,
             "note": "times under load: other engineers' jobs share the 2 cores"}
     stem = write_results("section_speed", meta, rows)
-    plot(rows, curves, RESULTS / "section_speed.png")
+    plot(rows, curves, "section_speed")
     print(f"results in {stem}.{{json,csv,png}}")
 
 
-def plot(rows, curves, path):
+def plot(rows, curves, name):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -131,7 +131,7 @@ def plot(rows, curves, path):
     bx.tick_params(axis="y", labelsize=7)
     bx.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, name, dpi=120)
 
 
 if __name__ == "__main__":

@@ -13,14 +13,13 @@ Writes benchmarks/results/surrogate_speed.{json,csv,png}.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import RESULTS, time_loops, write_results  # noqa: E402
+from harness import RESULTS, median_time, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
@@ -50,7 +49,7 @@ def main() -> None:
             batch = commands(model, n, rng)
             cases.append(("batched", n, (lambda b=batch: model.evaluate(b)), max(1, 300_000 // n)))
         for case, n, fn, calls in cases:
-            med = statistics.median(time_loops(fn, args.repeats, calls))
+            med = median_time(fn, args.repeats, calls)
             answered = float(np.mean(fn().converged))
             rows.append({"design": name, "case": case, "batch_size": n, "median_s_per_call": med,
                          "evaluations_per_s": n / med, "us_per_evaluation": med / n * 1e6,
@@ -65,11 +64,11 @@ def main() -> None:
               f"max {bound['rc_rel_max']:.3%}, median {bound['rc_rel_median']:.3%}")
     write_results("surrogate_speed", {"repeats": args.repeats, "target_evaluations_per_s": 1e6,
                                       "target_rc_rel_error": 0.005}, rows)
-    plot(rows, RESULTS / "surrogate_speed.png")
+    plot(rows, "surrogate_speed")
     print(f"results in {RESULTS}/surrogate_speed.{{json,csv,png}}")
 
 
-def plot(rows, path) -> None:
+def plot(rows, name) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -86,7 +85,7 @@ def plot(rows, path) -> None:
     ax.set_title("surrogate rung throughput (median of repeats, shared machine)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, name, dpi=120)
 
 
 if __name__ == "__main__":

@@ -192,6 +192,8 @@ def test_envelope_command_writes_what_selection_reads(tmp_path, monkeypatch):
     code = softcath(["envelope", "--out", str(out), "--results", str(tmp_path / "rows"), "--no-fe3d",
                      "--cases", "1ch 40mm", "--settings", "closed_form", "section D/20", "section D/40"])
     assert code == 0 and (tmp_path / "rows.csv").is_file()
+    meta = __import__("json").loads((tmp_path / "rows.json").read_text())["meta"]
+    assert meta["load_average_before"] and meta["load_average_after"] and "numpy" in meta["packages"]
     env = load_envelope(out)
     shipped = load_envelope()
     assert set(env) == set(shipped)

@@ -6,11 +6,10 @@ from __future__ import annotations
 import csv
 import json
 import os
-import sys
-import time
 from pathlib import Path
 
 from ..core.errors import SoftcathError
+from ..provenance import machine_meta
 
 
 def register(sub) -> None:
@@ -63,11 +62,9 @@ def run(args) -> int:
     report(rows)
     if args.results:
         stem = Path(args.results)
-        meta = {"cases": [c.__dict__ for c in cases], "references": references, "loadavg_before": load_before,
-                "loadavg_after": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-                "python": sys.version.split()[0], "cpu_count": os.cpu_count(),
+        meta = {"cases": [c.__dict__ for c in cases], "references": references,
                 "note": "3-channel cases: reference section D/40 (fe3d needs a full model, > 15 min per "
-                        "direction) unless fe3d was run on them"}
+                        "direction) unless fe3d was run on them", **machine_meta(load_before)}
         stem.with_suffix(".json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
         with open(stem.with_suffix(".csv"), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))

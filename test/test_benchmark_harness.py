@@ -1,0 +1,59 @@
+"""benchmarks/harness.py: timing over repeats, results and charts with the machine metadata; and
+every benchmark script still loads (imports resolve) without running its measurement."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture
+def harness(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import harness
+
+    monkeypatch.setattr(harness, "RESULTS", tmp_path)
+    return harness
+
+
+def test_timing_gives_median_and_spread(harness):
+    calls = []
+    per_call = harness.time_loops(lambda: calls.append(1), repeats=5, calls=10)
+    assert len(per_call) == 5 and len(calls) == 50 and all(t >= 0 for t in per_call)
+    assert harness.median_time(lambda: None, repeats=3) >= 0
+    s = harness.summary([1.0, 2.0, 3.0, 4.0, 100.0])
+    assert s["median_s"] == 3.0 and s["min_s"] == 1.0 and s["max_s"] == 100.0 and s["iqr_s"] == 2.0 and s["n"] == 5
+    assert list(harness.time_each(lambda x: x, [1, 2, 3]).shape) == [3]
+
+
+def test_results_and_figure_carry_the_machine_metadata(harness, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stem = harness.write_results("probe", {"case": "x", "load_average_before": "mine"}, [{"a": 1, "b": 2.5}])
+    doc = json.loads(stem.with_suffix(".json").read_text())
+    meta = doc["meta"]
+    assert doc["results"] == [{"a": 1, "b": 2.5}] and stem.with_suffix(".csv").read_text().startswith("a,b")
+    assert meta["case"] == "x" and meta["load_average_before"] == "mine"   # the script's own keys win
+    for key in ("python", "cpu", "cpu_count", "load_average_after", "git_commit", "date"):
+        assert meta[key] not in (None, "")
+    assert {"softcath_ros", "numpy", "scipy"} <= set(meta["packages"])
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    path = Path(harness.save_figure(fig, "probe"))
+    assert path == tmp_path / "probe.png" and path.stat().st_size > 1000 and not plt.get_fignums()
+
+
+def test_every_benchmark_script_loads():
+    """Import each script as a module (its measurement runs only as __main__), in one interpreter."""
+    scripts = sorted(p for p in BENCHMARKS.glob("*.py") if p.name != "harness.py")
+    code = ("import runpy, sys\nsys.path.insert(0, sys.argv[1])\n"
+            "for path in sys.argv[2:]:\n    runpy.run_path(path, run_name='benchmark_import_check')\n")
+    out = subprocess.run([sys.executable, "-c", code, str(BENCHMARKS), *map(str, scripts)], capture_output=True,
+                         text=True, timeout=110)
+    assert out.returncode == 0, out.stderr[-2000:]
