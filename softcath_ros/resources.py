@@ -12,16 +12,16 @@ from pathlib import Path
 
 from .core.errors import SoftcathError
 
-# kind -> folder under softcath_ros/config ("" = the folder itself)
+ENVELOPE_NAME = "ladder_envelope"
+# kind -> (folder under softcath_ros/config, "" = the folder itself; file suffix)
 KINDS = {
-    "design": "designs",
-    "scene": "scenes",
-    "protocol": "protocols",
-    "params": "",
-    "surrogate_table": "surrogate_tables",
+    "design": ("designs", ".yaml"),
+    "scene": ("scenes", ".yaml"),
+    "protocol": ("protocols", ".yaml"),
+    "params": ("", ".yaml"),
+    "envelope": ("", ".yaml"),
+    "surrogate_table": ("surrogate_tables", ".npz"),
 }
-SUFFIX = {"surrogate_table": ".npz"}
-ENVELOPE_NAME = "ladder_envelope.yaml"
 
 
 class ResourceNotFound(SoftcathError):
@@ -40,29 +40,32 @@ def config_dir() -> Path:
 def shipped_dir(kind: str) -> Path:
     if kind not in KINDS:
         raise ValueError(f"unknown resource kind '{kind}'; known: {', '.join(KINDS)}")
-    return config_dir() / KINDS[kind] if KINDS[kind] else config_dir()
+    folder = KINDS[kind][0]
+    return config_dir() / folder if folder else config_dir()
 
 
 def shipped_names(kind: str) -> list[str]:
     """Names of the shipped resources of ``kind`` (file stems), sorted."""
-    folder = shipped_dir(kind)
-    suffix = SUFFIX.get(kind, ".yaml")
+    folder, suffix = shipped_dir(kind), KINDS[kind][1]
     names = sorted(p.stem for p in folder.glob(f"*{suffix}")) if folder.is_dir() else []
-    return [n for n in names if n != Path(ENVELOPE_NAME).stem] if kind == "params" else names
+    if kind == "envelope":   # params and the envelope share the top folder
+        return [n for n in names if n == ENVELOPE_NAME]
+    return [n for n in names if n != ENVELOPE_NAME] if kind == "params" else names
 
 
 def find(kind: str, name_or_path: str | Path) -> Path:
-    """A user's file as given when it exists, else the shipped resource of that name (with or
-    without its suffix); ``ResourceNotFound`` (one line, listing the shipped names) otherwise."""
+    """A user's file as given when it exists, else the shipped resource of that name (a bare name,
+    with or without its suffix); ``ResourceNotFound`` (one line, listing the shipped names)
+    otherwise. A path with a folder part is never replaced by a shipped file of the same name."""
     p = Path(name_or_path)
     if p.is_file():
         return p
-    folder = shipped_dir(kind)
-    suffix = SUFFIX.get(kind, ".yaml")
-    for cand in (folder / p.name, folder / f"{p.name}{suffix}"):
-        if p.name and cand.is_file():
-            return cand
-    raise ResourceNotFound(kind, str(name_or_path), shipped_names(kind))
+    known = shipped_names(kind)
+    suffix = KINDS[kind][1]
+    stem = p.name[: -len(suffix)] if p.name.endswith(suffix) else p.name
+    if len(p.parts) == 1 and stem in known:
+        return shipped_dir(kind) / f"{stem}{suffix}"
+    raise ResourceNotFound(kind, str(name_or_path), known)
 
 
 def checkout_root() -> Path | None:
@@ -74,7 +77,8 @@ def checkout_root() -> Path | None:
 
 def envelope_path() -> Path:
     """The shipped ladder envelope (written by ``softcath envelope``) that model selection reads."""
-    return config_dir() / ENVELOPE_NAME
+    return shipped_dir("envelope") / f"{ENVELOPE_NAME}{KINDS['envelope'][1]}"
 
 
-__all__ = ["KINDS", "ResourceNotFound", "checkout_root", "config_dir", "envelope_path", "find", "shipped_dir", "shipped_names"]
+__all__ = ["ENVELOPE_NAME", "KINDS", "ResourceNotFound", "checkout_root", "config_dir", "envelope_path", "find",
+           "shipped_dir", "shipped_names"]
