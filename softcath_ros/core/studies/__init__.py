@@ -1,4 +1,4 @@
-"""Design studies (issue 7): the published parameter studies, reproduced on any design, and
+"""Design studies: the published parameter studies, reproduced on any design, and
 design optimisation. Each study builds validated design variants (variation.py), solves them
 as cached cases fanned out over an executor (cases.py, runner.py) and returns rows, findings
 and a chart (context.StudyResult) that output.py writes as CSV, PNG and Markdown."""
