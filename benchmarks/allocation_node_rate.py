@@ -22,18 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from harness import RESULTS, save_figure, write_results  # benchmarks/ is the script's directory
+from softcath_ros import topics  # noqa: E402
 from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 
 SENDER = """
 import math, sys, time, rclpy
 from geometry_msgs.msg import Vector3Stamped
+from softcath_ros import topics
 rate, seconds = float(sys.argv[1]), float(sys.argv[2])
 rclpy.init()
 node = rclpy.create_node("alloc_rate_sender")
-pub = node.create_publisher(Vector3Stamped, "/softcath/bend_cmd", 100)
+pub = node.create_publisher(Vector3Stamped, topics.BEND_CMD, 100)
 m = Vector3Stamped()
-m.header.frame_id = "softcath_base"
+m.header.frame_id = topics.FRAME_ID
 period, n = 1.0 / rate, 0
 t0 = time.perf_counter()
 while time.perf_counter() - t0 < seconds:
@@ -78,14 +80,14 @@ def main() -> None:
     def on_diag(msg):
         for st in msg.status:
             values = {kv.key: kv.value for kv in st.values}
-            if st.name == "softcath_allocation: commands":
+            if st.name == f"{topics.ALLOCATION_NODE}: commands":
                 accepted.append((time.perf_counter(), int(values["accepted"])))
-            elif st.name == "softcath_allocation: output":
+            elif st.name == f"{topics.ALLOCATION_NODE}: output":
                 published.append((time.perf_counter(), int(values["messages_published"])))
 
-    node.create_subscription(Float64MultiArray, "/softcath/pressure_cmd",
+    node.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
                              lambda m: arrivals.append(time.perf_counter()), 100)
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, 10)
     sender = None
 
     try:
@@ -165,7 +167,7 @@ def callback_cost_us(domain: int, calls: int = 20000) -> float:
         msgs = []
         for i in range(calls):
             m = Vector3Stamped()
-            m.header.frame_id = "softcath_base"
+            m.header.frame_id = topics.FRAME_ID
             m.vector.x, m.vector.y = 5.0 * np.cos(i * 1e-3), 5.0 * np.sin(i * 1e-3)
             msgs.append(m)
         out = np.empty(calls)

@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from softcath_ros import topics
+
 RESIDUES = 997
 
 
@@ -144,17 +146,17 @@ def main() -> int:
         if "wall0" not in window or done.is_set():
             return  # only reports from the measured window
         for st in msg.status:
-            if st.name.startswith("softcath_model"):
+            if st.name.startswith(topics.MODEL_NODE):
                 diagnostics.append({"name": st.name, "level": int.from_bytes(st.level, "little")
                                     if isinstance(st.level, bytes) else int(st.level), "message": st.message,
                                     "values": {kv.key: kv.value for kv in st.values}})
 
     window = {}
     done = threading.Event()
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
-    tip_sub = node.create_subscription(PoseStamped, "/softcath/tip_pose", on_tip, qos)
-    bb_sub = node.create_subscription(PoseArray, "/softcath/backbone", on_backbone, qos)
-    pub = node.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
+    node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, 10)
+    tip_sub = node.create_subscription(PoseStamped, topics.TIP_POSE, on_tip, qos)
+    bb_sub = node.create_subscription(PoseArray, topics.BACKBONE, on_backbone, qos)
+    pub = node.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, qos)
     executor = EventsExecutor()
     executor.add_node(node)
     if args.realtime_priority:

@@ -3,6 +3,7 @@ import json
 
 import numpy as np
 
+from softcath_ros import topics
 from softcath_ros.bench.protocol import ProtocolRunner, expand_steps
 
 
@@ -40,10 +41,8 @@ def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True):
     from softcath_ros.recording import BagWriter
 
     with BagWriter(bag_dir, custom_data={"simulated": str(simulated).lower()}) as w:
-        w.add_topic("/softcath/bench/step", "std_msgs/msg/String")
-        w.add_topic("/softcath/pressure_measured", "std_msgs/msg/Float64MultiArray")
-        w.add_topic("/softcath/bench/angle", "std_msgs/msg/Float64")
-        w.add_topic("/softcath/bench/force", "std_msgs/msg/Float64")
+        for topic in (topics.BENCH_STEP, topics.PRESSURE_MEASURED, topics.BENCH_ANGLE, topics.BENCH_FORCE):
+            w.add_topic(topic, topics.MESSAGE_TYPES[topic])
         w.add_metadata("softcath", {"simulated": str(simulated).lower(), "protocol": "test"})
         w.add_attachment("design.yaml", "application/yaml", design_yaml.encode())
         merged = [(t, "m", v) for t, v in streams["pressure_measured"]] + \
@@ -52,11 +51,11 @@ def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True):
         merged.sort(key=lambda x: x[0])
         for t, kind, v in merged:
             if kind == "m":
-                w.write("/softcath/pressure_measured", serialize_message(Float64MultiArray(data=list(map(float, v)))), t)
+                w.write(topics.PRESSURE_MEASURED, serialize_message(Float64MultiArray(data=list(map(float, v)))), t)
             elif kind == "a":
-                w.write("/softcath/bench/angle", serialize_message(Float64(data=float(v))), t)
+                w.write(topics.BENCH_ANGLE, serialize_message(Float64(data=float(v))), t)
             elif kind == "f":
-                w.write("/softcath/bench/force", serialize_message(Float64(data=float(v))), t)
+                w.write(topics.BENCH_FORCE, serialize_message(Float64(data=float(v))), t)
             else:
-                w.write("/softcath/bench/step", serialize_message(String(data=json.dumps(v))), t)
+                w.write(topics.BENCH_STEP, serialize_message(String(data=json.dumps(v))), t)
     return bag_dir / f"{bag_dir.name}_0.mcap"

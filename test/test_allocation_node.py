@@ -18,6 +18,7 @@ from geometry_msgs.msg import PointStamped, Vector3Stamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from domains import private_domain  # noqa: E402
+from softcath_ros import topics  # noqa: E402
 from softcath_ros.core.allocation import Allocator  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
@@ -56,15 +57,15 @@ class Operator:
         self.executor.add_node(self.node)
         self.pressures = []   # (monotonic time, [Pa ...])
         self.diagnostics = {}  # status name suffix ("commands" | "output") -> latest status
-        self.node.create_subscription(Float64MultiArray, "/softcath/pressure_cmd",
+        self.node.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
                                       lambda m: self.pressures.append((time.monotonic(), list(m.data))), 50)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
-        self.bend = self.node.create_publisher(Vector3Stamped, "/softcath/bend_cmd", 10)
-        self.tip = self.node.create_publisher(PointStamped, "/softcath/tip_target", 10)
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, 50)
+        self.bend = self.node.create_publisher(Vector3Stamped, topics.BEND_CMD, 10)
+        self.tip = self.node.create_publisher(PointStamped, topics.TIP_TARGET, 10)
 
     def _on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name.startswith("softcath_allocation: "):
+            if status.name.startswith(topics.ALLOCATION_NODE + ": "):
                 self.diagnostics[status.name.split(": ", 1)[1]] = status
 
     def spin(self, seconds, until=None):
@@ -75,13 +76,13 @@ class Operator:
                 return True
         return until is None
 
-    def send_bend(self, kx, ky, frame="softcath_base"):
+    def send_bend(self, kx, ky, frame=topics.FRAME_ID):
         m = Vector3Stamped()
         m.header.frame_id = frame
         m.vector.x, m.vector.y, m.vector.z = float(kx), float(ky), 123.0  # z is ignored
         self.bend.publish(m)
 
-    def send_tip(self, x, y, z, frame="softcath_base"):
+    def send_tip(self, x, y, z, frame=topics.FRAME_ID):
         m = PointStamped()
         m.header.frame_id = frame
         m.point.x, m.point.y, m.point.z = float(x), float(y), float(z)
@@ -234,14 +235,14 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import GetParameters, SetParameters
 
-    client = op.node.create_client(SetParameters, "/softcath_allocation/set_parameters")
+    client = op.node.create_client(SetParameters, f"/{topics.ALLOCATION_NODE}/set_parameters")
     assert client.wait_for_service(timeout_sec=10.0)
     req = SetParameters.Request(parameters=[Parameter(name="max_pressure", value=ParameterValue(
         type=ParameterType.PARAMETER_DOUBLE, double_value=90e3))])
     future = client.call_async(req)
     op.spin(20.0, until=future.done)
     assert future.done() and not future.result().results[0].successful
-    get = op.node.create_client(GetParameters, "/softcath_allocation/get_parameters")
+    get = op.node.create_client(GetParameters, f"/{topics.ALLOCATION_NODE}/get_parameters")
     assert get.wait_for_service(timeout_sec=10.0)
     fut = get.call_async(GetParameters.Request(names=["max_pressure"]))
     op.spin(20.0, until=fut.done)
@@ -266,7 +267,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
     model = start_node(EXE.parent / "model_node", domain, "design:=three_channel_5mm")
     op = Operator(domain)
     tips = []
-    op.node.create_subscription(PoseStamped, "/softcath/tip_pose",
+    op.node.create_subscription(PoseStamped, topics.TIP_POSE,
                                 lambda m: tips.append((m.pose.position.x, m.pose.position.y, m.pose.position.z)), 50)
     try:
         # Poses flowing proves model_node hears allocation_node; the operator's bend_cmd must

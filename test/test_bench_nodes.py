@@ -11,6 +11,7 @@ import yaml
 from mcap.reader import make_reader
 
 from domains import private_env
+from softcath_ros import topics
 from softcath_ros.graph import graph_env
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -64,8 +65,8 @@ def test_quick_protocol_records_a_simulated_run(tmp_path, procs):
     assert yaml.safe_load(meta["rosbag2"]["serialized_metadata"])["custom_data"]["simulated"] == "true"
     assert names == {"protocol.yaml", "design.yaml"}
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
-    assert counts["/softcath/bench/step"] == 2 + 28 * (3 + 2)  # start/end + per step: start, settled, end, samples
-    assert counts["/softcath/pressure_measured"] > 200 and counts["/softcath/pressure_cmd"] > 100
+    assert counts[topics.BENCH_STEP] == 2 + 28 * (3 + 2)  # start/end + per step: start, settled, end, samples
+    assert counts[topics.PRESSURE_MEASURED] > 200 and counts[topics.PRESSURE_CMD] > 100
     for c in summary.channels.values():
         assert c.message_encoding == "cdr" and yaml.safe_load(c.metadata["offered_qos_profiles"])
     from softcath_ros.bench.report import write_report
@@ -128,11 +129,11 @@ def test_direction_protocol_runs_through_allocation_node(tmp_path, procs):
     assert bench.returncode == 0, out
     s = _summary(out)
     assert s["state"] == "done" and s["dropped"] == 0 and s["unsettled_steps"] == []
-    assert s["per_topic"]["/softcath/bend_cmd"] > 20 and s["per_topic"]["/softcath/pressure_cmd"] > 20
+    assert s["per_topic"][topics.BEND_CMD] > 20 and s["per_topic"][topics.PRESSURE_CMD] > 20
     path = tmp_path / "dir" / "dir_0.mcap"
     from softcath_ros.recording.reader import iter_messages
-    bends = [m.message for m in iter_messages(path, topics=["/softcath/bend_cmd"])]
-    assert all(b.header.frame_id == "softcath_base" for b in bends)
+    bends = [m.message for m in iter_messages(path, topics=[topics.BEND_CMD])]
+    assert all(b.header.frame_id == topics.FRAME_ID for b in bends)
     top = max(bends, key=lambda b: np.hypot(b.vector.x, b.vector.y))
     assert np.degrees(np.arctan2(top.vector.y, top.vector.x)) == pytest.approx(60.0, abs=1e-6)
     expected = Allocator(make_model("closed_form", load_design("three_channel_5mm"))).allocate(
@@ -153,7 +154,7 @@ def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, proc
     out, _ = bench.communicate(timeout=60)
     assert bench.returncode == 4, out
     # Refused at the start, or stopped within a second if allocation_node appeared after it.
-    assert "/softcath_allocation" in _summary(out)["error"] and "/softcath/pressure_cmd" in _summary(out)["error"]
+    assert f"/{topics.ALLOCATION_NODE}" in _summary(out)["error"] and topics.PRESSURE_CMD in _summary(out)["error"]
     assert (tmp_path / "fight" / "fight_0.mcap").is_file()  # the recording is still finalised
 
 
@@ -170,8 +171,8 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     with open(result["recording"], "rb") as f:
         summary = make_reader(f).get_summary()
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
-    assert counts["/softcath/tip_pose"] > 50 and counts["/softcath/backbone"] > 50
-    assert counts["/softcath/pressure_cmd"] > 50 and "/softcath/bend_cmd" not in counts  # no allocation_node
+    assert counts[topics.TIP_POSE] > 50 and counts[topics.BACKBONE] > 50
+    assert counts[topics.PRESSURE_CMD] > 50 and topics.BEND_CMD not in counts  # no allocation_node
     assert "## Hysteresis" in Path(result["report"]).read_text()
 
 

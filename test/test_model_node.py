@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from domains import private_domain, private_env
+from softcath_ros import topics
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import backbone_poses
 from softcath_ros.core.models import make_model
@@ -50,7 +51,7 @@ class Running:
         rclpy.init(context=self.context, domain_id=self.domain)
         self.client = SweepClient(node_name="test_model_node_client", timeout_s=5.0, context=self.context)
         self.diagnostics = []
-        self.client.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 10)
+        self.client.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.diagnostics.append, 10)
         self.client.wait_for_model_node(timeout_s=30.0)
 
     def counters(self, timeout_s: float = 4.0, **wanted) -> dict:
@@ -61,7 +62,7 @@ class Running:
             for arr in self.diagnostics:
                 for st in arr.status:
                     kv = {v.key: v.value for v in st.values}
-                    if st.name.startswith("softcath_model") and all(kv.get(k) == str(w) for k, w in wanted.items()):
+                    if st.name.startswith(topics.MODEL_NODE) and all(kv.get(k) == str(w) for k, w in wanted.items()):
                         found.update(kv, _level=st.level)
                         return True
             return False
@@ -116,9 +117,9 @@ def test_poses_arrive_match_core_and_backbone_ends_at_tip(start_node, preparatio
     np.testing.assert_allclose(pt.tip_orientation_xyzw, quat, rtol=0, atol=1e-12)
     # Stamped with the time the node received the command: between our send and our receipt.
     assert before <= pt.stamp_ns <= after
-    assert node.client._tips[-1].header.frame_id == "softcath_base"
+    assert node.client._tips[-1].header.frame_id == topics.FRAME_ID
     bb_msg = node.client._backbones[-1]
-    assert bb_msg.header.frame_id == "softcath_base"
+    assert bb_msg.header.frame_id == topics.FRAME_ID
     assert bb_msg.header.stamp == node.client._tips[-1].header.stamp
     backbone = np.array(pt.backbone_m)
     assert backbone.shape == (7, 3)

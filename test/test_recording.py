@@ -6,12 +6,12 @@ import struct
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 import yaml
 from mcap.reader import make_reader
 
+from softcath_ros import topics
 from softcath_ros.core.errors import SoftcathError
 from softcath_ros.recording import BagWriter, OfferedQos, RecordingError, adapt_request_to_offers
 from softcath_ros.recording.msg_definitions import full_definition, type_description_hash
@@ -66,14 +66,8 @@ def test_qos_yaml_round_trip_and_adaptation():
 
 # --------------------------------------------------------------------------- round trip
 
-ROUND_TRIP_TYPES = {
-    "/softcath/pressure_cmd": "std_msgs/msg/Float64MultiArray",
-    "/softcath/bench/angle": F64,
-    "/softcath/tip_pose": "geometry_msgs/msg/PoseStamped",
-    "/softcath/backbone": "geometry_msgs/msg/PoseArray",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-    "/softcath/bench/step": "std_msgs/msg/String",
-}
+ROUND_TRIP_TYPES = {t: topics.MESSAGE_TYPES[t] for t in (topics.PRESSURE_CMD, topics.BENCH_ANGLE, topics.TIP_POSE,
+                                                          topics.BACKBONE, topics.DIAGNOSTICS, topics.BENCH_STEP)}
 
 
 def _sample_messages():
@@ -85,17 +79,17 @@ def _sample_messages():
     out = []
     for i in range(25):
         ps = PoseStamped()
-        ps.header.frame_id = "softcath_base"
+        ps.header.frame_id = topics.FRAME_ID
         ps.header.stamp.sec, ps.header.stamp.nanosec = i, 7 * i
         ps.pose.position.x, ps.pose.orientation.w = 0.001 * i, 1.0
         arr = PoseArray(poses=[Pose() for _ in range(i % 4)])
-        arr.header.frame_id = "softcath_base"
+        arr.header.frame_id = topics.FRAME_ID
         diag = DiagnosticArray(status=[DiagnosticStatus(level=b"\x01", name="softcath_bench", message=f"m{i}",
                                                         values=[KeyValue(key="k", value=str(i))])])
-        out += [("/softcath/pressure_cmd", Float64MultiArray(data=[1000.0 * i, 2.5])),
-                ("/softcath/bench/angle", Float64(data=0.01 * i)),
-                ("/softcath/tip_pose", ps), ("/softcath/backbone", arr), ("/diagnostics", diag),
-                ("/softcath/bench/step", String(data='{"step": %d}' % i))]
+        out += [(topics.PRESSURE_CMD, Float64MultiArray(data=[1000.0 * i, 2.5])),
+                (topics.BENCH_ANGLE, Float64(data=0.01 * i)),
+                (topics.TIP_POSE, ps), (topics.BACKBONE, arr), (topics.DIAGNOSTICS, diag),
+                (topics.BENCH_STEP, String(data='{"step": %d}' % i))]
     return out
 
 

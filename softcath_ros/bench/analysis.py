@@ -15,11 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import topics
+
 DEFAULT_TOPICS = {
-    "step": "/softcath/bench/step",
-    "pressure_measured": "/softcath/pressure_measured",
-    "angle": "/softcath/bench/angle",
-    "force": "/softcath/bench/force",
+    "step": topics.BENCH_STEP,
+    "pressure_measured": topics.PRESSURE_MEASURED,
+    "angle": topics.BENCH_ANGLE,
+    "force": topics.BENCH_FORCE,
 }
 
 

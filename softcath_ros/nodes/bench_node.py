@@ -178,8 +178,8 @@ class BenchNode(Node):
                 elif t - self.t_ready >= self.start_delay:
                     self.begin(t)
             elif t > self.wait_timeout:
-                self.fail("no rig: nothing publishes /softcath/pressure_measured or listens to "
-                          "/softcath/pressure_cmd (start sim_bench_node or the hardware driver)"
+                self.fail(f"no rig: nothing publishes {topics.PRESSURE_MEASURED} or listens to "
+                          f"{topics.PRESSURE_CMD} (start sim_bench_node or the hardware driver)"
                           + ("; a protocol by direction also needs allocation_node" if self.by_direction
                              else ""), 3)
             return

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .. import topics
+
 
 @dataclass
 class InputCounters:
@@ -33,7 +35,7 @@ class DiagnosticsReporter:
     """Publishes ``counters`` on /diagnostics every ``period`` seconds from ``node``'s timer."""
 
     def __init__(self, node, counters: InputCounters, status_name: str, hardware_id: str,
-                 period: float = 1.0, topic: str = "/diagnostics", answer_load=None):
+                 period: float = 1.0, topic: str = topics.DIAGNOSTICS, answer_load=None):
         """``answer_load`` (core.answer_load.AnswerLoad), when given, adds a second status
         saying whether the node keeps up with its commands (WARN when it falls behind)."""
         from diagnostic_msgs.msg import DiagnosticArray

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import topics
 from ..core.units import PA_PER_BAR
 
 
@@ -58,9 +59,9 @@ class SweepClient:
         qos = stream_qos(100)
         self._tips: list = []
         self._backbones: list = []
-        self._tip_sub = self.node.create_subscription(PoseStamped, "/softcath/tip_pose", self._tips.append, qos)
-        self._bb_sub = self.node.create_subscription(PoseArray, "/softcath/backbone", self._backbones.append, qos)
-        self._pub = self.node.create_publisher(Float64MultiArray, "/softcath/pressure_cmd", qos)
+        self._tip_sub = self.node.create_subscription(PoseStamped, topics.TIP_POSE, self._tips.append, qos)
+        self._bb_sub = self.node.create_subscription(PoseArray, topics.BACKBONE, self._backbones.append, qos)
+        self._pub = self.node.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, qos)
         self._executor = SingleThreadedExecutor(context=context)
         self._executor.add_node(self.node)
 
@@ -143,7 +144,7 @@ def plot_backbones(points: list[SweepPoint | None], path: Path, title: str = "")
                 label=f"{max(p.pressures_pa) / PA_PER_BAR:.3f} bar")
         ax.plot(b[-1, 1], b[-1, 2], "o", color=cmap(max(p.pressures_pa) / pmax), ms=3)
     ax.set_aspect("equal")
-    ax.set_xlabel("y [mm] (softcath_base)")
+    ax.set_xlabel(f"y [mm] ({topics.FRAME_ID})")
     ax.set_ylabel("z [mm]")
     ax.set_title(title or "predicted backbones from /softcath/backbone")
     ax.grid(alpha=0.3)
