@@ -28,6 +28,7 @@ from pathlib import Path
 from .core.errors import SoftcathError
 
 DOMAIN_RANGE = (100, 230)   # ROS_DOMAIN_IDs leased here; 0-99 stay free for users' own graphs
+READY_MARK = "ready: spinning"  # the shared node runtime logs this once a node spins (nodes/runtime.py)
 LOCK_DIR = Path(tempfile.gettempdir()) / "softcath_ros_domains"
 
 
@@ -124,6 +125,30 @@ def stop_process(proc: subprocess.Popen, grace_s: float = 10.0, sig=signal.SIGIN
     return proc.returncode
 
 
+def wait_ready(proc: subprocess.Popen, timeout_s: float = 60.0, mark: str = READY_MARK) -> str:
+    """Read ``proc``'s piped output until a line holds ``mark`` (by default: the node is up and
+    spinning); returns the text read so far (it is no longer in the pipe). SoftcathError, with
+    that text's tail, when the process ends first or ``timeout_s`` passes."""
+    import selectors
+
+    fd = proc.stdout.fileno()
+    text = b""
+    with selectors.DefaultSelector() as sel:
+        sel.register(fd, selectors.EVENT_READ)
+        end = time.monotonic() + timeout_s
+        while mark.encode() not in text:
+            left = end - time.monotonic()
+            if left <= 0 or not sel.select(timeout=left):
+                raise SoftcathError(f"not ready after {timeout_s:g} s: {text.decode(errors='replace')[-500:]}")
+            chunk = os.read(fd, 65536)
+            if not chunk:  # the process closed its output: it ended
+                proc.wait()
+                raise SoftcathError(f"exited with {proc.returncode} before it was ready: "
+                                    f"{text.decode(errors='replace')[-500:]}")
+            text += chunk
+    return text.decode(errors="replace")
+
+
 class NodeGraph:
     """Nodes as separate processes on one private domain; a context manager that stops them all.
 
@@ -143,6 +168,11 @@ class NodeGraph:
         proc = subprocess.Popen(cmd, env=self.env, stdout=stdout, stderr=stderr, text=True, **popen)
         self.processes.append((node, proc))
         return proc
+
+    def wait_ready(self, *procs: subprocess.Popen, timeout_s: float = 60.0) -> list[str]:
+        """``wait_ready`` for each of ``procs`` (started with piped output) within ``timeout_s`` in all."""
+        end = time.monotonic() + timeout_s
+        return [wait_ready(p, max(0.0, end - time.monotonic())) for p in procs]
 
     def stop(self, grace_s: float = 10.0) -> dict[str, int]:
         """Stop every node still running (SIGINT, then kill after ``grace_s``); exit codes by node."""
@@ -166,5 +196,5 @@ class NodeGraph:
                 self.lease.release()
 
 
-__all__ = ["DOMAIN_RANGE", "DomainLease", "NodeGraph", "graph_env", "lease_domain", "node_command", "ros_args",
-           "stop_process"]
+__all__ = ["DOMAIN_RANGE", "READY_MARK", "DomainLease", "NodeGraph", "graph_env", "lease_domain", "node_command",
+           "ros_args", "stop_process", "wait_ready"]

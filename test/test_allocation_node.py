@@ -19,6 +19,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from domains import private_domain  # noqa: E402
 from softcath_ros import topics  # noqa: E402
+from softcath_ros.graph import wait_ready  # noqa: E402
 from softcath_ros.core.allocation import Allocator  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
@@ -302,10 +303,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
 def test_clean_exit_on_signal(sig):
     proc = start_node(EXE, private_domain())
     try:
-        deadline = time.monotonic() + 20
-        out = ""
-        while "publishing at" not in out and time.monotonic() < deadline:  # wait until it is up
-            out += proc.stdout.readline()
+        out = wait_ready(proc, timeout_s=60.0)  # an event (the node spins), not a time
         assert "publishing at" in out
         code = stop(proc, sig)
         rest = proc.stdout.read()

@@ -74,11 +74,14 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     ``startup_errors``: exception types that mean "cannot start with this configuration";
     they are logged as one line and give exit code 2. A node that ends by itself has a
     ``finished`` property (spinning stops when it is true) and a ``finish()`` method, called on
-    the way out whether it finished or was interrupted, that returns the exit code.
+    the way out whether it finished or was interrupted, that returns the exit code. Once the node
+    spins it logs ``graph.READY_MARK`` (what ``graph.wait_ready`` waits for).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    from ..graph import READY_MARK
 
     rclpy.init(args=args)
     node = None
@@ -97,6 +100,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
             problem = set_realtime_priority(priority)
             if problem:
                 node.get_logger().warning(problem + "; running with normal scheduling")
+        node.get_logger().info(f"{READY_MARK} on the {name} executor")
         ends = hasattr(type(node), "finished")
         spin(executor, name, (lambda: node.finished) if ends else None)
     except (KeyboardInterrupt, ExternalShutdownException):
