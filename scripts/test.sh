@@ -3,7 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh "ros,test,fe,cluster"
-# Each pytest run gets its own DDS domain and stays on loopback, so parallel runs do not see each other.
+# DDS stays on loopback; test/conftest.py leases the run its own domain and every node test
+# another (softcath_ros.graph), so parallel runs do not see each other.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( (RANDOM % 100) + 100 ))}"
 exec .venv/bin/python -m pytest "$@"
