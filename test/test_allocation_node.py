@@ -90,11 +90,12 @@ class Operator:
         self.tip.publish(m)
 
     def stream_bend(self, k, seconds, rate=100.0):
-        """Publish ``k`` at ``rate`` for ``seconds``; returns the time of the last send."""
+        """Publish ``k`` at ``rate`` for ``seconds``; returns the time just before the last send
+        (the node cannot have received it earlier, however the scheduler delays this process)."""
         end = time.monotonic() + seconds
         while True:
-            self.send_bend(*k)
             sent = time.monotonic()
+            self.send_bend(*k)
             self.spin(1.0 / rate)
             if time.monotonic() >= end:
                 return sent
@@ -116,7 +117,7 @@ def wire(request):
     proc = start_node(EXE, domain, *params)
     op = Operator(domain)
     try:
-        assert op.spin(20.0, until=lambda: len(op.pressures) > 3), "allocation_node did not start publishing"
+        assert op.spin(60.0, until=lambda: len(op.pressures) > 3), "allocation_node did not start publishing"
         yield op, proc
     finally:
         op.close()
@@ -128,7 +129,7 @@ def allocator():
     return Allocator(make_model("closed_form", load_design("three_channel_5mm")))
 
 
-def reaches(op, expected, since, seconds=5.0):
+def reaches(op, expected, since, seconds=15.0):
     """Spin until a message published after index ``since`` equals ``expected`` exactly (to
     rounding). The operator may lag behind a fast stream, and once the stream stops the watchdog
     vents, so "some message since the command" rather than "the latest one"."""
@@ -142,7 +143,9 @@ def reaches(op, expected, since, seconds=5.0):
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
 
-@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.4", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+# command_timeout 1 s (not less): an operator starved on a loaded machine must not trip the
+# watchdog in the middle of its command stream.
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=1.0", "diagnostics_period:=0.2")], indirect=True, ids=[""])
 def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
     op, proc = wire
     assert np.all(np.array(op.pressures[-1][1]) == 0.0)  # vented before any command
@@ -153,7 +156,7 @@ def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
         assert reaches(op, expected, mark), (k, op.pressures[-1][1], expected)
     assert np.max(op.pressures[-1][1]) == 50e3  # the last request is beyond reach: saturated at max_pressure
     op.spin(0.3)
-    assert op.spin(3.0, until=lambda: op.last_diag("output").get("saturated") == "true")
+    assert op.spin(15.0, until=lambda: op.last_diag("output").get("saturated") == "true")
     tip = [0.004, 0.001, 0.0392]
     mark = len(op.pressures)
     end = time.monotonic() + 0.4
@@ -164,7 +167,7 @@ def test_bend_and_tip_commands_give_the_allocators_pressures(wire, allocator):
     assert proc.poll() is None
 
 
-@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.4", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=1.0", "diagnostics_period:=0.2")], indirect=True, ids=[""])
 def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     op, proc = wire
     mark = len(op.pressures)
@@ -181,7 +184,7 @@ def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     op.send_tip(0.0, 0.0, 50.0)            # absurdly far
     op.send_tip(0.0, 0.0, -0.01)           # behind the base: no arc ends there
     op.send_tip(0.001, 0.0, 0.039, frame="camera")
-    assert op.spin(5.0, until=lambda: op.last_diag("commands").get("rejected") == "9"), op.last_diag("commands")
+    assert op.spin(20.0, until=lambda: op.last_diag("commands").get("rejected") == "9"), op.last_diag("commands")
     diag = op.diagnostics["commands"]
     assert diag.level == DiagnosticStatus.WARN and "rejected" in diag.message
     # None of them changed the output: every non-zero message is the good command's (held until
@@ -194,22 +197,24 @@ def test_bad_input_rejected_counted_and_node_keeps_running(wire, allocator):
     assert proc.poll() is None
 
 
-@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=0.3", "diagnostics_period:=0.2")], indirect=True, ids=[""])
+@pytest.mark.parametrize("wire", [("max_pressure_rate:=1.0e7", "command_timeout:=1.0", "diagnostics_period:=0.2")], indirect=True, ids=[""])
 def test_watchdog_vents_after_timeout_and_resumes(wire, allocator):
     op, proc = wire
+    mark = len(op.pressures)
     t_last = op.stream_bend([3.0, 0.0], 0.5)
-    assert max(op.pressures[-1][1]) > 0
-    assert op.spin(3.0, until=lambda: op.pressures[-1][1] == [0.0, 0.0, 0.0])
-    vent_time = time.monotonic() - t_last
-    # not before the timeout; soon after it (the bound leaves room for a loaded machine's scheduling)
-    assert 0.3 <= vent_time < 2.0, vent_time
-    assert op.spin(2.0, until=lambda: op.last_diag("output").get("watchdog") == "vented")
+    assert reaches(op, allocator.allocate([3.0, 0.0]).pressures, mark)
+    assert op.spin(30.0, until=lambda: op.pressures[-1][1] == [0.0, 0.0, 0.0])
+    vent_time = op.pressures[-1][0] - t_last
+    # Causal, so it holds under any load: the vent cannot reach us before the timeout after the
+    # last command was sent. "Soon after" is what the generous wait above allows.
+    assert vent_time >= 1.0, vent_time
+    assert op.spin(15.0, until=lambda: op.last_diag("output").get("watchdog") == "vented")
     vented = op.diagnostics["output"]
     assert vented.level == DiagnosticStatus.WARN and "vented" in vented.message
     mark = len(op.pressures)
     op.stream_bend([0.0, 5.0], 0.4)
     assert reaches(op, allocator.allocate([0.0, 5.0]).pressures, mark)
-    assert op.spin(2.0, until=lambda: op.last_diag("output").get("watchdog") == "ok")
+    assert op.spin(15.0, until=lambda: op.last_diag("output").get("watchdog") == "ok")
 
 
 @pytest.mark.parametrize("wire", [("max_pressure_rate:=50000.0", "max_pressure:=20000", "command_timeout:=0.5",
@@ -225,9 +230,10 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     rising = values[:, 0]
     reached = np.argmax(rising >= 20e3 - 1e-9)
     # Channel 0 may climb at most 50 kPa/s after the first command (sent at t0, received later);
-    # the first step may count the time since the previous publish (one 10 ms period), so 20 kPa
-    # cannot be reached before t0 + 0.4 s - 10 ms. Reception only adds delay: one-sided.
-    assert times[reached] - t0 >= 0.4 - 0.01, times[reached] - t0
+    # the first step may count the time since the previous publish (one 10 ms period, longer when
+    # a loaded machine starves the node: 0.2 s allowed), so 20 kPa cannot be reached before
+    # t0 + 0.4 s - 0.2 s; a jump would reach it at once. Reception only adds delay: one-sided.
+    assert times[reached] - t0 >= 0.4 - 0.2, times[reached] - t0
     # And it is a ramp, not a jump: many intermediate values on the way up.
     ramp = rising[:reached]
     assert np.count_nonzero((ramp > 0) & (ramp < 20e3)) >= 10
@@ -237,14 +243,14 @@ def test_rate_limit_and_read_only_lowered_max_pressure(wire):
     from rcl_interfaces.srv import GetParameters, SetParameters
 
     client = op.node.create_client(SetParameters, f"/{topics.ALLOCATION_NODE}/set_parameters")
-    assert client.wait_for_service(timeout_sec=10.0)
+    assert client.wait_for_service(timeout_sec=30.0)
     req = SetParameters.Request(parameters=[Parameter(name="max_pressure", value=ParameterValue(
         type=ParameterType.PARAMETER_DOUBLE, double_value=90e3))])
     future = client.call_async(req)
     op.spin(20.0, until=future.done)
     assert future.done() and not future.result().results[0].successful
     get = op.node.create_client(GetParameters, f"/{topics.ALLOCATION_NODE}/get_parameters")
-    assert get.wait_for_service(timeout_sec=10.0)
+    assert get.wait_for_service(timeout_sec=30.0)
     fut = get.call_async(GetParameters.Request(names=["max_pressure"]))
     op.spin(20.0, until=fut.done)
     value = fut.result().values[0]
@@ -264,7 +270,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
 
     design = load_design("three_channel_5mm")
     domain = private_domain()
-    alloc = start_node(EXE, domain, "command_timeout:=0.4", "max_pressure_rate:=1.0e6")
+    alloc = start_node(EXE, domain, "command_timeout:=1.0", "max_pressure_rate:=1.0e6")
     model = start_node(EXE.parent / "model_node", domain, "design:=three_channel_5mm")
     op = Operator(domain)
     tips = []
@@ -273,7 +279,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
     try:
         # Poses flowing proves model_node hears allocation_node; the operator's bend_cmd must
         # also be matched by allocation_node before streaming, or the first stream is lost.
-        assert op.spin(30.0, until=lambda: len(tips) > 3 and op.bend.get_subscription_count() > 0), \
+        assert op.spin(60.0, until=lambda: len(tips) > 3 and op.bend.get_subscription_count() > 0), \
             "no tip_pose from model_node, or allocation_node does not hear bend_cmd"
         model_cf = make_model("closed_form", design)
         for deg in (0.0, 100.0, 215.0, 300.0):
@@ -283,7 +289,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
             expected, _ = tip_pose(state.curvature, design.length * state.axial_stretch)
             mark = len(tips)
             op.stream_bend(k, 0.3)
-            assert op.spin(5.0, until=lambda: any(np.allclose(t, expected, atol=1e-9) for t in tips[mark:])), \
+            assert op.spin(15.0, until=lambda: any(np.allclose(t, expected, atol=1e-9) for t in tips[mark:])), \
                 (deg, tips[-1], expected)
             got = next(t for t in tips[mark:] if np.allclose(t, expected, atol=1e-9))
             # The pose that came back over DDS bends the commanded way: direction within 0.5 deg
@@ -292,7 +298,7 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
             assert abs(math.degrees(math.remainder(math.atan2(got[1], got[0]) - phi, 2 * math.pi))) < 0.5
             assert np.hypot(*k_back) == pytest.approx(6.0, rel=0.01)
         # Stream stops: vent, the tip goes back to straight.
-        assert op.spin(5.0, until=lambda: np.allclose(tips[-1], [0.0, 0.0, design.length], atol=1e-12)), tips[-1]
+        assert op.spin(15.0, until=lambda: np.allclose(tips[-1], [0.0, 0.0, design.length], atol=1e-12)), tips[-1]
     finally:
         op.close()
         stop(alloc)

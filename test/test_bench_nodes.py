@@ -3,7 +3,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -12,11 +11,14 @@ from mcap.reader import make_reader
 
 from domains import private_env
 from softcath_ros import topics
+from softcath_ros.graph import wait_ready
 from softcath_ros.graph import graph_env
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 VENV_BIN = Path(sys.executable).parent
+
+RUN_TIMEOUT_S = 180  # a protocol of ~20 s: generous for a loaded machine
 
 
 def _env():
@@ -50,7 +52,7 @@ def test_quick_protocol_records_a_simulated_run(tmp_path, procs):
     _start(procs, ["sim_bench_node"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
                            "-p", "name:=run"], env)
-    out, _ = bench.communicate(timeout=90)
+    out, _ = bench.communicate(timeout=RUN_TIMEOUT_S)
     assert bench.returncode == 0, out
     s = _summary(out)
     assert s["state"] == "done" and s["dropped"] == 0 and s["unsettled_steps"] == []
@@ -82,12 +84,13 @@ def test_sigint_finalises_the_recording(tmp_path, procs):
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=default", "-p",
                            f"output_dir:={tmp_path}", "-p", "name:=cut"], env)
     path = tmp_path / "cut" / "cut_0.mcap"
-    deadline = time.time() + 40
-    while time.time() < deadline and (not path.exists() or path.stat().st_size < 20000):
-        time.sleep(0.2)
+    # An event, not a file size or a time: the protocol has started (after a start delay in which
+    # the recorder already took the rig's readings), so the recording holds messages by then.
+    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
     bench.send_signal(signal.SIGINT)
-    out, _ = bench.communicate(timeout=20)
-    assert _summary(out)["state"] == "interrupted"
+    out = before + bench.communicate(timeout=60)[0]
+    assert bench.returncode == 130 and _summary(out)["state"] == "interrupted"
+    assert _summary(out)["messages"] > 0
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()  # a finished file: summary section present
     assert summary is not None and summary.statistics.message_count == _summary(out)["messages"]
@@ -98,7 +101,7 @@ def test_unwritable_output_fails_at_start_with_a_clear_message(tmp_path, procs):
     blocker.write_text("x")
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p",
                            f"output_dir:={blocker}/sub"], _env())
-    out, _ = bench.communicate(timeout=30)
+    out, _ = bench.communicate(timeout=60)
     assert bench.returncode == 2
     assert "cannot create recording directory" in out
 
@@ -125,7 +128,7 @@ def test_direction_protocol_runs_through_allocation_node(tmp_path, procs):
     _start(procs, ["allocation_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={protocol}", "-p",
                            f"output_dir:={tmp_path}", "-p", "name:=dir"], env)
-    out, _ = bench.communicate(timeout=90)
+    out, _ = bench.communicate(timeout=RUN_TIMEOUT_S)
     assert bench.returncode == 0, out
     s = _summary(out)
     assert s["state"] == "done" and s["dropped"] == 0 and s["unsettled_steps"] == []
@@ -151,7 +154,7 @@ def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, proc
     _start(procs, ["allocation_node", "--ros-args", "-p", "design:=implemented_5mm"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
                            "-p", "name:=fight"], env)
-    out, _ = bench.communicate(timeout=60)
+    out, _ = bench.communicate(timeout=RUN_TIMEOUT_S)
     assert bench.returncode == 4, out
     # Refused at the start, or stopped within a second if allocation_node appeared after it.
     assert f"/{topics.ALLOCATION_NODE}" in _summary(out)["error"] and topics.PRESSURE_CMD in _summary(out)["error"]
@@ -164,7 +167,7 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     env = _env()
     run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path),
                          "--json"], env)
-    out, _ = run.communicate(timeout=150)
+    out, _ = run.communicate(timeout=RUN_TIMEOUT_S + 60)
     assert run.returncode == 0, out
     result = json.loads(out[out.index("{"):])
     assert result["dropped"] == 0 and Path(result["report"]).is_file()

@@ -49,12 +49,12 @@ class Running:
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain)
-        self.client = SweepClient(node_name="test_model_node_client", timeout_s=5.0, context=self.context)
+        self.client = SweepClient(node_name="test_model_node_client", timeout_s=10.0, context=self.context)
         self.diagnostics = []
         self.client.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.diagnostics.append, 10)
-        self.client.wait_for_model_node(timeout_s=30.0)
+        self.client.wait_for_model_node(timeout_s=60.0)
 
-    def counters(self, timeout_s: float = 4.0, **wanted) -> dict:
+    def counters(self, timeout_s: float = 20.0, **wanted) -> dict:
         """The first /diagnostics report whose counters include ``wanted`` (waits for it)."""
         found = {}
 
@@ -70,7 +70,7 @@ class Running:
         self.client.spin_until(match, timeout_s)
         return found
 
-    def stop(self, sig=signal.SIGINT, timeout_s: float = 10.0):
+    def stop(self, sig=signal.SIGINT, timeout_s: float = 30.0):
         """Signal the node; (exit code, stderr)."""
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
