@@ -81,10 +81,18 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
+    import signal
+
     from ..graph import READY_MARK
 
+    # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
+    # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
+    # (an except clause, the bench recording's finalisation) and print a traceback. A no-op
+    # Python handler, installed before rclpy.init so rclpy still chains to it, leaves the
+    # shutdown to the context alone, as for SIGTERM.
+    signal.signal(signal.SIGINT, lambda signum, frame: None)
     rclpy.init(args=args)
-    node = None
+    node = executor = None
     code = 0
     try:
         try:
@@ -112,6 +120,10 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
         if rclpy.ok():
             raise
     finally:
+        if executor is not None:
+            # Before the node goes: an EventsExecutor destroyed with the node's callbacks still
+            # registered aborts the process (a signal right after start-up showed it).
+            executor.shutdown()
         if node is not None:
             if hasattr(node, "finish"):
                 code = node.finish()
