@@ -1,7 +1,6 @@
 """Offline bench runs for tests: the protocol engine driving the simulated rig on a fake clock."""
 import json
 
-import numpy as np
 
 from softcath_ros import topics
 from softcath_ros.bench.protocol import ProtocolRunner, expand_steps

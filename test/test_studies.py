@@ -4,7 +4,6 @@ Coarse section meshes (D/12) and few cases keep this file fast; the full studies
 benchmarks/study_speed.py and their outputs are committed under docs/studies/."""
 from __future__ import annotations
 
-import math
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np

@@ -19,14 +19,12 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import yaml
 
 from ..core.errors import SoftcathError
 from ..core.yaml_io import load_yaml
-from ..core.units import PA_PER_BAR
 
 BENCHES = ("angle", "force")
 

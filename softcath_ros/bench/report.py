@@ -2,7 +2,6 @@
 models overlaid, before/after calibration)."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
