@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -43,7 +44,7 @@ RCLError = _rclpy.RCLError
 class AllocationNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
+        p = partial(declare, self)
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
         model_name = p("model", "closed_form", "model rung used for the inverse")
         self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",

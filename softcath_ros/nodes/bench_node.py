@@ -28,6 +28,7 @@ import json
 import sys
 import time
 from datetime import datetime
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,7 @@ DEFAULT_TOPICS = topics.RECORDED
 class BenchNode(Node):
     def __init__(self, **node_options):
         super().__init__(topics.BENCH_NODE, **node_options)
-        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
+        p = partial(declare, self)
         protocol_name = p("protocol", "default", "protocol file or shipped protocol name")
         design_name = p("design", "", "design file or shipped design name (default: the protocol's)")
         model_name = p("model", "closed_form", "model rung the allocator uses for a protocol by direction")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import time
+from functools import partial
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
@@ -48,7 +49,7 @@ class ModelNode(Node):
     def __init__(self, **node_options):
         """``node_options`` go to rclpy's Node (e.g. ``context`` for in-process tests)."""
         super().__init__(topics.MODEL_NODE, **node_options)
-        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
+        p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
         model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form, or auto (needs scene)")
         scene_name = p("scene", "", "scene YAML file or shipped scene name: with model auto, picks the rung")

@@ -17,6 +17,7 @@ Executors (``benchmarks/node_latency.py`` compares them):
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from typing import Callable
 
@@ -81,8 +82,6 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-
-    import signal
 
     from ..graph import READY_MARK
 

@@ -13,6 +13,7 @@ import json
 import sys
 import time
 from dataclasses import asdict
+from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -39,7 +40,7 @@ class SimBenchNode(Node):
 
     def __init__(self, **node_options):
         super().__init__(topics.SIM_BENCH_NODE, **node_options)
-        p = lambda name, default, description, **kw: declare(self, name, default, description, **kw)  # noqa: E731
+        p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design file or shipped design name")
         model_name = p("model", "closed_form", "model rung that stands for the true actuator")
         rate_hz = p("rate_hz", 100.0, "publishing rate of the readings, Hz", minimum=1.0, maximum=10000.0)

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..design import Design
 from ..errors import ModelError
-from ..options import Option, option_names
+from ..options import Option
 from ..scene import FEATURES   # what a rung can model: the scene's features (the envelope's capabilities)
 
 
@@ -43,15 +43,6 @@ class RungInfo:
 
     def accepts(self, name: str) -> bool:
         return bool(self.more_options) or any(o.name == name for o in self.options)
-
-    def check_options(self, rung: str, options: dict) -> None:
-        """ModelError naming the first option the rung does not take (and the ones it does)."""
-        if self.more_options:
-            return
-        for name in options:
-            if name not in option_names(self.options):
-                known = ", ".join(option_names(self.options)) or "none"
-                raise ModelError(f"model '{rung}' has no option '{name}'; its options: {known}")
 
 
 def options_of(settings_cls, descriptions: dict[str, str]) -> tuple[Option, ...]:
