@@ -169,7 +169,7 @@ def test_three_channels_bend_away_from_each_and_not_under_common_pressure(design
 # --------------------------------------------------------------------------- continuation and failures
 
 def test_sweep_reports_the_lumen_closing_instead_of_numbers(implemented_design):
-    model = make_model("section", implemented_design)
+    model = make_model("section", implemented_design, contact_distance=None)    # no wall contact
     ps = np.linspace(0.0, 0.35 * BAR, 15)[:, None]
     state = model.evaluate(ps)
     ok = state.converged
@@ -238,7 +238,8 @@ def test_ramp_reaches_checkpoints_and_reports_the_last_converged_state():
 
 def test_predict_cli_with_the_section_rung():
     out = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
-                          "--model", "section", "--pressure", "0.15", "0.4", "--unit", "bar", "--json"],
+                          "--model", "section", "--pressure", "0.15", "0.4", "--unit", "bar", "--json",
+                          "--option", "adaptive=false"],     # fixed steps: 0.4 bar is not reached
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     results = json.loads(out.stdout)["results"]
@@ -261,22 +262,22 @@ def test_device_in_the_lumen_stiffens_about_linearly(design_dict):
 
 # --------------------------------------------------------------------------- lumen fill (self-contact proxy)
 
-def test_lumen_fill_off_keeps_the_cache_keys(implemented_design):
+def test_cache_keys_hold_the_contact_and_fill_settings(implemented_design):
     from dataclasses import asdict
 
     from softcath_ros.core.cache import key_of
     from softcath_ros.core.models.section import SectionModel, SectionSettings
 
-    # the empty-lumen rung's results keep the keys they had before the option existed
+    # an unset lumen fill is left out of the key; the contact's barrier distance is in it
     model = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8)
     before = {k: v for k, v in asdict(model.settings).items() if k != "lumen_fill"}
-    assert model.settings.key() == before
+    assert model.settings.key() == before and before["contact_distance"] == 0.01
     parts = {"design": implemented_design.content_hash(), "settings": before,
              "mesh_nodes": model.mesh.n_nodes, "pressures": [[0.0]]}
     assert model.cache_key(np.zeros((1, 1))) == key_of(SectionModel.solver_version, parts)
-    filled = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8,
-                        lumen_fill=0.01)
-    assert filled.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))
+    for other in ({"lumen_fill": 0.01}, {"contact_distance": 0.02}, {"contact_distance": None}):
+        changed = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8, **other)
+        assert changed.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))
     assert SectionSettings(lumen_fill=0.02).key()["lumen_fill"] == 0.02
 
 
@@ -339,7 +340,7 @@ def test_lumen_fill_barely_changes_bending_while_the_lumen_is_open(implemented_d
 def test_lumen_fill_carries_the_ramp_past_the_empty_lumen_closing(implemented_design):
     d = implemented_design
     ps = np.array([[0.30 * BAR], [0.35 * BAR]])
-    empty = make_model("section", d, mesh_size=d.outer_diameter / 12).evaluate(ps)
+    empty = make_model("section", d, mesh_size=d.outer_diameter / 12, contact_distance=None).evaluate(ps)
     assert not empty.converged.any() and "lumen" in empty.message       # stops near 0.28 bar
     model = make_model("section", d, mesh_size=d.outer_diameter / 12, lumen_fill=0.02)
     filled = model.evaluate(ps)

@@ -56,7 +56,10 @@ class SectionSettings:
                                         # "end_cap": only the end caps' axial force (the closed form's load)
     lumen_fill: float | None = None     # fill the empty lumen with a soft compressible solid whose shear
                                         # modulus is this fraction of the silicone's (a self-contact proxy);
-                                        # None: empty lumen, which stops the ramp when its walls touch
+                                        # None: empty lumen (with wall contact, below)
+    contact_distance: float | None = 0.01  # self-contact of the empty lumen's wall: barrier distance as a
+                                           # fraction of the lumen's diameter (section_fe/terms/contact.py);
+                                           # None: no contact, the ramp stops when the walls touch
 
     def key(self) -> dict:
         """The settings as they enter cache keys; an unset lumen_fill is left out, so results of
@@ -77,7 +80,7 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-2"   # bump when the discretisation or the solver changes an answer
+    solver_version = "section-3"   # bump when the discretisation or the solver changes an answer
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -95,7 +98,9 @@ class SectionModel(BendModel):
             "contact_resolution": "how finely the wall-contact pressure is located, Pa",
             "local_radius": "a command this close (Pa) to a solved one starts from it",
             "pressure_load": "'follower' (deformed walls and end caps) or 'end_cap' (the closed form's load)",
-            "lumen_fill": "fill the lumen with a soft solid of this fraction of the silicone's shear modulus"}))
+            "lumen_fill": "fill the lumen with a soft solid of this fraction of the silicone's shear modulus",
+            "contact_distance": "lumen wall self-contact: barrier distance, fraction of the lumen diameter "
+                                "(None: no contact)"}))
 
     def __init__(self, design: Design, cache: bool | str | Path = False, progress: bool = False,
                  **settings):
@@ -122,7 +127,7 @@ class SectionModel(BendModel):
                              "'follower' or 'end_cap'")
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
                                       end_cap_only=self.settings.pressure_load == "end_cap",
-                                      lumen_fill=fill)
+                                      lumen_fill=fill, contact_distance=self.settings.contact_distance)
         self.linear = LinearSolver()
         self.progress = progress
         self.store = store_for(cache)
@@ -252,7 +257,7 @@ class SectionModel(BendModel):
                 corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
                 if self.problem.fill is not None:
                     corr.message += f", lumen fill min det F {self.problem.fill_min_jacobian(previous):.3g}"
-                if gaps[i] < 2 * self.settings.min_hole_gap and not self.problem.filled_holes[i]:
+                if gaps[i] < 2 * self.settings.min_hole_gap and np.isfinite(self.problem.open_hole_gaps(previous)[i]):
                     # the walls are about to touch: the same validity limit as contact itself
                     corr.outside_domain = True
                     corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"

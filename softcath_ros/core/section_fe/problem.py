@@ -17,6 +17,7 @@ Potential per unit reference length (all terms SI, J/m), one module per term in 
        + oint 1/2 k_h (ds/dS - 1)^2 dS               hoop.py: hoop rings on the outer boundary
        - sum_i p_i V_i                               pressure_volume.py: channel volumes
        + 1/2 EI_dev |k|^2                            device.py: device in the lumen
+       + kappa sum l_i b(gap_ij^2)                    contact.py: self-contact of the lumen wall
 
 Internally everything is non-dimensional: lengths in units of the outer radius R,
 energy densities in units of the silicone's c1 (so curvature k R, energy Pi / (c1 R^2)).
@@ -32,6 +33,7 @@ from .mesh import SectionMesh
 from .quadrature import NODAL_POINTS, NODAL_WEIGHTS, TRIANGLE_POINTS, TRIANGLE_WEIGHTS
 from .shape import p2_triangle
 from .terms import Contribution, Term
+from .terms.contact import WallContact
 from .terms.device import DeviceBending
 from .terms.fibre import Fibre
 from .terms.hoop import HoopRings
@@ -47,9 +49,12 @@ class SectionProblem:
     ky R, element pressures / c1]. ``terms`` lists the potential's terms (``terms/``)."""
 
     def __init__(self, design: Design, mesh: SectionMesh, hoop_tension_only: bool = False,
-                 end_cap_only: bool = False, lumen_fill: float | None = None):
+                 end_cap_only: bool = False, lumen_fill: float | None = None,
+                 contact_distance: float | None = None):
         """``lumen_fill``: the fill's shear modulus as a fraction of the silicone's (2 c1); the
         mesh must then have a fill region (``mesh_section(..., filled=...)``), and vice versa.
+        ``contact_distance``: self-contact of the (empty) lumen wall with this barrier distance,
+        as a fraction of the lumen's diameter (``terms/contact.py``); None: no contact.
         ``end_cap_only``: the pressure acts only through the end caps (the closed form's load)."""
         self.design = design
         self.end_cap_only = end_cap_only
@@ -99,6 +104,13 @@ class SectionProblem:
         self.channels = [ChannelPressure(X, edges, i, end_cap_only, block_dofs(edges, self.i_glob), self.n_u)
                          for i, edges in enumerate(mesh.hole_edges[:design.n_channels])]
         self.terms += self.channels
+        self.contact: list[tuple[int, WallContact]] = []   # (hole index, its wall contact)
+        if contact_distance is not None and design.lumen is not None:
+            i = design.n_channels
+            if not self.filled_holes[i]:
+                wall = WallContact(X, mesh.hole_edges[i], contact_distance * 2 * design.lumen.radius / R, self.n_u)
+                self.contact.append((i, wall))
+                self.terms.append(wall)
         if design.device is not None:
             self.terms.append(DeviceBending(design.device.bending_stiffness / (c_ref * R**4), self.i_glob))
 
@@ -219,9 +231,18 @@ class SectionProblem:
         return np.inf if self.lumen_fill is None else self.lumen_fill.min_jacobian(x)
 
     def open_hole_gaps(self, x) -> np.ndarray:
-        """``hole_gaps`` with the filled holes at inf: their fill resists closing, so they are no
-        reason to stop (their collapse shows up as an inverted fill element instead)."""
-        return np.where(self.filled_holes, np.inf, self.hole_gaps(x))
+        """``hole_gaps`` with the filled holes and the holes with wall contact at inf: their fill
+        or contact resists closing, so they are no reason to stop (a collapsing fill shows up as
+        an inverted fill element instead)."""
+        resisted = self.filled_holes.copy()
+        for i, _ in self.contact:
+            resisted[i] = True
+        return np.where(resisted, np.inf, self.hole_gaps(x))
+
+    def contact_min_gap(self, x) -> float:
+        """The smallest wall-to-wall distance (m) of the holes with contact (inf without contact;
+        negative if a wall polygon crosses itself)."""
+        return min((w.min_gap(x) * self.R for _, w in self.contact), default=np.inf)
 
     def hole_gaps(self, x) -> np.ndarray:
         """Per hole (channels, then lumen): the smallest distance between its deformed wall points

@@ -1,0 +1,204 @@
+"""Frictionless self-contact of a hole's wall (the lumen): a smoothly clamped log-barrier.
+
+The wall is the closed polygon through its corner and midside nodes (counter-clockwise about
+the hole). Every wall vertex i is kept away from every wall segment j not incident to it by
+
+    Pi_c = kappa sum_(i,j) l_i w(t_ij) b(s_ij),   b(s) = -(s - s_hat)^2 ln(s / s_hat) for s < s_hat, else 0,
+
+s_ij the squared distance from vertex i to the line of segment j, t_ij the parameter of its
+foot on the segment (0 at its start, 1 at its end), s_hat = d_hat^2 with d_hat the barrier
+distance, and l_i the reference wall length vertex i stands for (the sum is a quadrature over
+the wall). The window w(t) is 1 on the segment, 0 more than WINDOW beyond its ends, and a C2
+step across each end such that the windows of two collinear neighbours sum to 1: the wall is
+treated as one smooth surface, not a chain of segments with corners. So the potential is C2
+everywhere (b = b' = b'' = 0 at s_hat; w C2), which keeps Newton quadratic when pairs enter or
+leave the barrier's range or a foot slides from one segment to the next (a point-segment
+distance, as in IPC, switches between point-line and point-point and its Hessian jumps there:
+Newton then cycles at the folded shoulders of a closing lumen). b -> inf as s -> 0, so the
+walls never touch; a state whose wall polygon crosses itself (a Newton step that jumped a
+vertex through the opposite wall) is inadmissible (energy inf), so the solver backtracks
+instead of tunnelling.
+
+Why a barrier (not a penalty or an augmented Lagrangian): the gap stays positive at every
+iterate, not only at convergence; it needs no outer loop (augmented Lagrangian), and the answer
+depends on d_hat only through the equilibrium gap, a fraction of d_hat (kappa = KAPPA_SCALE /
+d_hat^3 puts that gap at a fixed fraction of d_hat for a given contact pressure in units of c1).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import INADMISSIBLE, Contribution
+
+# kappa = KAPPA_SCALE / d_hat^3 (non-dimensional: lengths / R, energy / (c1 R^2)): at a contact
+# pressure p_c (/ c1) the gap is about 2 KAPPA_SCALE d_hat / p_c.
+KAPPA_SCALE = 0.25
+# half-width of the window's steps at the segment's ends (fraction of the segment)
+WINDOW = 0.25
+
+# the pair's local coordinates z = (p, a, b): p the vertex, (a, b) the segment
+_J_E = np.array([[0, 0, -1, 0, 1, 0], [0, 0, 0, -1, 0, 1]], float)   # e = b - a = J_e z
+_J_V = np.array([[1, 0, -1, 0, 0, 0], [0, 1, 0, -1, 0, 0]], float)   # v = p - a = J_v z
+_ROT = np.array([[0.0, 1.0], [-1.0, 0.0]])                           # e x v = e^T ROT v
+_D2C = _J_E.T @ _ROT @ _J_V + (_J_E.T @ _ROT @ _J_V).T              # d2(e x v)/dz2
+_D2L = 2 * _J_E.T @ _J_E                                             # d2(e.e)/dz2
+_D2Q = _J_V.T @ _J_E + _J_E.T @ _J_V                                 # d2(v.e)/dz2
+
+
+def barrier(s, s_hat):
+    """b(s), b'(s), b''(s) of the clamped log-barrier (valid for 0 < s < s_hat)."""
+    r = s - s_hat
+    ln = np.log(s / s_hat)
+    b = -r * r * ln
+    b1 = -2 * r * ln - r * r / s
+    b2 = -2 * ln - 4 * r / s + r * r / (s * s)
+    return b, b1, b2
+
+
+def smooth_step(u):
+    """S(u) = 6u^5 - 15u^4 + 10u^3 on [0, 1] (0 below, 1 above), S', S'': C2."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2, 60 * u * (1 - u) * (1 - 2 * u)
+
+
+def window(t):
+    """w(t), w'(t), w''(t): 1 on [WINDOW, 1 - WINDOW], 0 outside [-WINDOW, 1 + WINDOW]."""
+    h = 2 * WINDOW
+    lo, lo1, lo2 = smooth_step((t + WINDOW) / h)
+    hi, hi1, hi2 = smooth_step((1 + WINDOW - t) / h)
+    return lo * hi, (lo1 * hi - lo * hi1) / h, (lo2 * hi - 2 * lo1 * hi1 + lo * hi2) / h**2
+
+
+def line_distance2(p, a, b, derivatives: bool = True):
+    """Squared distance s from points p to the lines through segments (a, b) and the foot's
+    parameter t (each (n,)); with ``derivatives`` also ds, dt (n, 6) and d2s, d2t (n, 6, 6)
+    with respect to (p, a, b)."""
+    e, v = b - a, p - a
+    L = np.einsum("ni,ni->n", e, e)
+    c = e[:, 0] * v[:, 1] - e[:, 1] * v[:, 0]
+    q = np.einsum("ni,ni->n", v, e)
+    s, t = c * c / L, q / L
+    if not derivatives:
+        return s, t
+    dc = np.zeros((len(p), 6))
+    dc[:, 0], dc[:, 1] = -e[:, 1], e[:, 0]                 # dc/dp
+    dc[:, 4], dc[:, 5] = v[:, 1], -v[:, 0]                 # dc/db
+    dc[:, 2:4] = -(dc[:, 0:2] + dc[:, 4:6])                # dc/da (translation invariance)
+    dL = np.concatenate([np.zeros((len(p), 2)), -2 * e, 2 * e], 1)
+    dq = e @ _J_V + v @ _J_E
+    inv = 1.0 / L
+    o = lambda x, y: x[:, :, None] * y[:, None, :]         # noqa: E731 (outer product per pair)
+    n3 = lambda x: x[:, None, None]                        # noqa: E731
+    ds = (2 * c * inv)[:, None] * dc - (c * c * inv**2)[:, None] * dL
+    d2s = (n3(2 * inv) * o(dc, dc) + n3(2 * c * inv) * _D2C - n3(2 * c * inv**2) * (o(dc, dL) + o(dL, dc))
+           + n3(2 * c * c * inv**3) * o(dL, dL) - n3(c * c * inv**2) * _D2L)
+    dt = inv[:, None] * dq - (q * inv**2)[:, None] * dL
+    d2t = (n3(inv) * _D2Q - n3(inv**2) * (o(dq, dL) + o(dL, dq)) - n3(q * inv**2) * _D2L
+           + n3(2 * q * inv**3) * o(dL, dL))
+    return s, t, ds, dt, d2s, d2t
+
+
+def point_segment_distance(p, a, b):
+    """Distance from points p to segments (a, b) (the nearest point of the segment)."""
+    e, v = b - a, p - a
+    t = np.clip(np.einsum("ni,ni->n", v, e) / np.einsum("ni,ni->n", e, e), 0.0, 1.0)
+    return np.linalg.norm(v - t[:, None] * e, axis=1)
+
+
+def _segments_cross(P, i, j):
+    """True where polygon segments i and j (vertex k to k + 1) properly intersect."""
+    m = len(P)
+    a, b = P[i], P[(i + 1) % m]
+    c, d = P[j], P[(j + 1) % m]
+
+    def cross(u, w):
+        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+
+    return (cross(b - a, c - a) * cross(b - a, d - a) < 0) & (cross(d - c, a - c) * cross(d - c, b - c) < 0)
+
+
+class WallContact:
+    """Self-contact of the wall of one hole (edges (b, 3), counter-clockwise about the hole)."""
+
+    def __init__(self, X, edges: np.ndarray, distance: float, n_u: int):
+        """``distance``: the barrier distance d_hat (/ R)."""
+        self.ids = edges[:, :2].ravel()                     # polygon vertices: corner, midside, ...
+        m = len(self.ids)
+        self.m, self.n_u, self._X = m, n_u, X
+        self.d_hat = float(distance)
+        self.s_hat = self.d_hat ** 2
+        self.kappa = KAPPA_SCALE / self.d_hat ** 3
+        P = X[self.ids]
+        seg = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+        self.weight = 0.5 * (seg + np.roll(seg, 1))          # reference wall length per vertex
+        vi, sj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+        off = (sj - vi) % m                                  # segment j runs from vertex j to j + 1
+        keep = (off >= 1) & (off <= m - 2)                   # every segment not incident to vertex i
+        self.pv, self.ps = vi[keep], sj[keep]
+        # segment pairs for the crossing test: neither the same nor neighbours
+        si, sk = np.triu_indices(m, k=2)
+        far = (sk - si) <= m - 2
+        self.cross_i, self.cross_j = si[far], sk[far]
+        d = np.empty(2 * m, dtype=np.int64)
+        d[0::2], d[1::2] = 2 * self.ids, 2 * self.ids + 1
+        self.dofs = d[None]                                  # one block: every wall coordinate
+
+    def _points(self, x):
+        u = x[:self.n_u].reshape(-1, 2)
+        return self._X[self.ids] + u[self.ids]
+
+    def _pair_points(self, P, sel=slice(None)):
+        return P[self.pv[sel]], P[self.ps[sel]], P[(self.ps[sel] + 1) % self.m]
+
+    def min_gap(self, x) -> float:
+        """The smallest distance (/ R) from a wall vertex to a wall segment not incident to it;
+        negative if the wall polygon crosses itself."""
+        P = self._points(x)
+        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+            return -1.0
+        return float(point_segment_distance(*self._pair_points(P)).min())
+
+    def _active(self, x):
+        """(wall points, the pairs within the barrier's range) or None if inadmissible."""
+        P = self._points(x)
+        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+            return None
+        s, t = line_distance2(*self._pair_points(P), derivatives=False)
+        near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
+        if np.any(s[near] <= 0):
+            return None
+        return P, np.flatnonzero(near)
+
+    def energy(self, x, pressures) -> float:
+        got = self._active(x)
+        if got is None:
+            return np.inf
+        P, a = got
+        s, t = line_distance2(*self._pair_points(P, a), derivatives=False)
+        return float(self.kappa * np.sum(self.weight[self.pv[a]] * window(t)[0] * barrier(s, self.s_hat)[0]))
+
+    def assemble(self, x, pressures) -> Contribution:
+        got = self._active(x)
+        if got is None:
+            return INADMISSIBLE
+        P, a = got
+        m = self.m
+        g = np.zeros((1, 2 * m))
+        H = np.zeros((1, 2 * m, 2 * m))
+        if not len(a):
+            return Contribution(0.0, g, H)
+        s, t, ds, dt, d2s, d2t = line_distance2(*self._pair_points(P, a))
+        b, b1, b2 = barrier(s, self.s_hat)
+        w, w1, w2 = window(t)
+        k = self.kappa * self.weight[self.pv[a]]
+        n3 = lambda v: (k * v)[:, None, None]                 # noqa: E731
+        gl = (k * w * b1)[:, None] * ds + (k * w1 * b)[:, None] * dt
+        Hl = (n3(w * b2) * ds[:, :, None] * ds[:, None, :] + n3(w * b1) * d2s
+              + n3(w1 * b1) * (ds[:, :, None] * dt[:, None, :] + dt[:, :, None] * ds[:, None, :])
+              + n3(w2 * b) * dt[:, :, None] * dt[:, None, :] + n3(w1 * b) * d2t)
+        verts = np.stack([self.pv[a], self.ps[a], (self.ps[a] + 1) % m], 1)
+        loc = np.empty((len(a), 6), dtype=np.int64)
+        loc[:, 0::2], loc[:, 1::2] = 2 * verts, 2 * verts + 1
+        np.add.at(g[0], loc, gl)
+        np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
+        return Contribution(float(np.sum(k * w * b)), g, H)
