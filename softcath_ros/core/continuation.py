@@ -22,6 +22,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
+# Why a ramp stopped (``RampResult.stop_reason``): every stop is one of these.
+LIMIT_POINT = "physical limit point"               # the tangent turns singular: p cannot grow further on this branch
+MATERIAL_RANGE = "material outside its fitted range"  # e.g. a Yeoh set with c3 < 0 past its convexity limit
+OUTSIDE_MODEL = "outside the model's validity"     # e.g. walls touching with contact switched off
+NUMERICAL_FAILURE = "numerical failure"            # the corrector failed for none of the reasons above
+
 
 @dataclass
 class StepControl:
@@ -49,6 +55,7 @@ class Correction:
     info: dict = field(default_factory=dict)
     outside_domain: bool = False     # the solve converged but the state is outside the model's
                                      # validity (e.g. self-contact): another predictor will not help
+    stop_reason: str = ""            # one of the reasons above when the corrector knows it
 
 
 @dataclass
@@ -69,6 +76,7 @@ class RampResult:
     steps: int = 0                   # accepted steps
     cuts: int = 0                    # rejected attempts
     iterations: int = 0              # corrector iterations in total (accepted and rejected)
+    stop_reason: str = ""            # empty when converged, else LIMIT_POINT, MATERIAL_RANGE, ...
 
 
 def secant(t0: float, s0, t1: float, s1, t: float):
@@ -127,6 +135,7 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             if not control.adaptive or dt * control.shrink < floor:
                 why = f": {corr.message}" if corr.message else ""
                 result.converged = False
+                result.stop_reason = corr.stop_reason or NUMERICAL_FAILURE
                 result.message = (f"did not converge at {describe(t_new)} (last converged "
                                   f"{describe(t)}, step {dt:.3g} after {result.cuts} cut(s){why})")
                 return result

@@ -45,3 +45,20 @@ def neo_hookean(i1, log_j, mu, lam):
 def neo_hookean_derivatives(log_j, mu, lam):
     """(dW/dI1, dW/d(ln J), d2W/d(ln J)^2) of ``neo_hookean`` (the mixed derivative is zero)."""
     return 0.5 * mu, lam * log_j - mu, lam
+
+
+def yeoh_convexity_limit(c1, c2, c3) -> tuple[float, float] | None:
+    """Where a Yeoh density stops being convex in I1b (d2W/dI1b^2 = 2 c2 + 6 c3 (I1b - 3) < 0):
+    (I1b there, the uniaxial stretch lambda with lambda^2 + 2 / lambda = I1b), or None if it never
+    does (c3 >= 0 and c2 >= 0). Fitted coefficients with c3 < 0 (Kulkarni's set, fitted on
+    uniaxial data) say nothing beyond it: a solution that reaches it has left their range."""
+    if c3 >= 0 and c2 >= 0:
+        return None
+    i1 = 3.0 + (max(-c2 / (3.0 * c3), 0.0) if c3 < 0 else 0.0)
+    lo, hi = 1.0, 2.0
+    while hi * hi + 2.0 / hi < i1:
+        hi *= 2.0
+    for _ in range(200):                      # lambda^2 + 2/lambda increases for lambda > 1
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if mid * mid + 2.0 / mid < i1 else (lo, mid)
+    return i1, 0.5 * (lo + hi)

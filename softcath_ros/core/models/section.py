@@ -25,8 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import CacheStore, store_for
-from ..continuation import Correction, StepControl, ramp
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, Correction,
+                            StepControl, ramp)
 from ..design import Design
+from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
@@ -72,6 +74,9 @@ class SectionSettings:
     def resolved_mesh_size(self, design: Design) -> float:
         return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
 
+
+# a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
+LIMIT_RATIO = 0.25
 
 # what a cached batch holds (an entry without one of them is solved again)
 _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
@@ -129,6 +134,9 @@ class SectionModel(BendModel):
                                       end_cap_only=self.settings.pressure_load == "end_cap",
                                       lumen_fill=fill, contact_distance=self.settings.contact_distance)
         self.linear = LinearSolver()
+        mat = design.material
+        self._material_limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)   # (I1b, uniaxial stretch) or None
+        self._rest_eigenvalue = None
         self.progress = progress
         self.store = store_for(cache)
         # converged states by pressure vector (Pa): starting points for later commands
@@ -260,6 +268,7 @@ class SectionModel(BendModel):
                 if gaps[i] < 2 * self.settings.min_hole_gap and np.isfinite(self.problem.open_hole_gaps(previous)[i]):
                     # the walls are about to touch: the same validity limit as contact itself
                     corr.outside_domain = True
+                    corr.stop_reason = OUTSIDE_MODEL
                     corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"
             else:
                 gaps = self.problem.open_hole_gaps(corr.state)
@@ -267,8 +276,18 @@ class SectionModel(BendModel):
                     name = hole_names[int(np.argmin(gaps))]
                     corr.converged = False
                     corr.outside_domain = True
+                    corr.stop_reason = OUTSIDE_MODEL
                     corr.message = (f"the walls of the {name} touch (gap {gaps.min():.1%} of its diameter); "
-                                    "self-contact is not modelled")
+                                    "self-contact is off (contact_distance None)")
+                elif self._material_limit is not None:
+                    i1 = self.problem.max_isochoric_i1(corr.state)
+                    limit, stretch = self._material_limit
+                    if i1 > limit:
+                        corr.converged = False
+                        corr.outside_domain = True
+                        corr.stop_reason = MATERIAL_RANGE
+                        corr.message = (f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit:.3g} (uniaxial "
+                                        f"stretch {stretch:.3g}) where its Yeoh energy (c3 < 0) stops being convex")
             return corr
 
         def describe(t: float) -> str:
@@ -279,6 +298,10 @@ class SectionModel(BendModel):
         control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
                               adaptive=s.adaptive, domain_step=s.contact_resolution)
         result = ramp(corrector, self._states[start_key], cum[1:], control, describe=describe)
+        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and s.adaptive:
+            t_next = cum[1 + len(result.points)]          # the command it could not reach
+            result = self._probe_limit_point(result, corrector, min(result.last_load + 2 * s.min_step, t_next),
+                                             lambda t: pressure_at(t) / c_ref, describe)
         done = []
         for i, point in zip(todo, result.points):
             self._remember(pressures[i], point.state)
@@ -292,8 +315,35 @@ class SectionModel(BendModel):
         last = {"pressure": last_p.tolist(), "curvature": k.tolist(), "axial_stretch": float(lam)}
         # Commands further out along the same direction from this state fail the same way.
         failing_p = pressure_at(min(result.last_load + s.min_step, cum[-1]))
-        self._failures.append((tuple(float(v) for v in last_p), failing_p, result.message, last))
-        return done, failed, self._failure_message(pressures[failed], result.message), last
+        why = f"{result.message} [stop: {result.stop_reason}]"
+        self._failures.append((tuple(float(v) for v in last_p), failing_p, why, last))
+        return done, failed, self._failure_message(pressures[failed], why), last
+
+    def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
+        """A ramp that failed for no named reason, looked at closer: creep on from its last state
+        with steps of min_step / 64 and compare the tangent's smallest eigenvalue there with its
+        value at rest. Near zero (below LIMIT_RATIO of it), the path has reached a limit point or a
+        bifurcation that pressure control cannot pass; otherwise it stays a numerical failure."""
+        s = self.settings
+        probe = ramp(corrector, result.last_state, [t_probe],
+                     StepControl(initial_step=s.min_step / 8, max_step=s.min_step, min_step=s.min_step / 64),
+                     start=result.last_load, describe=describe)
+        if probe.steps:
+            result.last_load, result.last_state = probe.last_load, probe.last_state
+        if self._rest_eigenvalue is None:
+            x0 = self.problem.consistent_pressures(self.problem.initial_state())
+            self._rest_eigenvalue = self.problem.smallest_tangent_eigenvalue(x0, pressure_of(0.0) * 0)
+        ratio = self.problem.smallest_tangent_eigenvalue(result.last_state, pressure_of(result.last_load)) \
+            / self._rest_eigenvalue
+        if ratio < LIMIT_RATIO:
+            result.stop_reason = LIMIT_POINT
+            result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: the tangent's smallest "
+                               f"eigenvalue is {ratio:.1%} of its value at rest (pressure control cannot pass it)")
+        else:
+            result.message += (f"; {NUMERICAL_FAILURE}: the tangent's smallest eigenvalue at the last converged "
+                               f"state ({describe(result.last_load)}) is {ratio:.0%} of its value at rest, "
+                               "so no limit point is near")
+        return result
 
     def _known_failure(self, start_key: tuple, target: np.ndarray):
         start = np.asarray(start_key)

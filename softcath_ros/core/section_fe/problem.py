@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..design import Design
+from ..energy import isochoric_i1
 from .kinematics import N_GLOBAL, ElementRule, block_dofs, kinematics
 from .mesh import SectionMesh
 from .quadrature import NODAL_POINTS, NODAL_WEIGHTS, TRIANGLE_POINTS, TRIANGLE_WEIGHTS
@@ -238,6 +239,21 @@ class SectionProblem:
         for i, _ in self.contact:
             resisted[i] = True
         return np.where(resisted, np.inf, self.hole_gaps(x))
+
+    def max_isochoric_i1(self, x) -> float:
+        """The largest isochoric first invariant I1b in the silicone (at the quadrature points)."""
+        kin = kinematics(self.rule, x, self.n_u)
+        J = kin.det2 * kin.f33
+        I1 = np.einsum("eqij,eqij->eq", kin.F2, kin.F2) + kin.f33**2
+        return float(np.max(np.where(self.body.dA_silicone > 0, isochoric_i1(I1, J), 3.0)))
+
+    def smallest_tangent_eigenvalue(self, x, pressures) -> float:
+        """The tangent's eigenvalue nearest zero at ``x`` (pressures / c1): it goes to zero at a limit
+        point or a bifurcation of the pressure-controlled path."""
+        import scipy.sparse.linalg as spla
+
+        K = self.assemble(x, pressures)[2]
+        return float(spla.eigsh(K.tocsc(), k=1, sigma=-1e-9, which="LM", return_eigenvectors=False)[0])
 
     def contact_min_gap(self, x) -> float:
         """The smallest wall-to-wall distance (m) of the holes with contact (inf without contact;
