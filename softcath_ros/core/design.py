@@ -307,14 +307,14 @@ def design_from_dict(data, source: str | None = None) -> Design:
         raise DesignError("limits.max_pressure", None, "missing: every design must state its safe maximum pressure (Pa)")
     max_pressure = _positive(limits["max_pressure"], "limits.max_pressure")
     cap = _positive(get("cap_thickness"), "cap_thickness")
-    if cap >= length:
-        raise DesignError("cap_thickness", cap, f"not shorter than the length {length}")
 
     design = Design(name=name, length=length, outer_diameter=outer, channels=channels, lumen=lumen,
                     limiting_fibre=fibre, reinforcement=reinforcement, cap_thickness=cap,
                     material=material, device=device, max_pressure=max_pressure,
                     min_wall_thickness=min_wall, source=source)
     check_plausible(design)
+    if cap >= length:
+        raise DesignError("cap_thickness", cap, f"not shorter than the length {length}")
     check_geometry(design)
     return design
 
