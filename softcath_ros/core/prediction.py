@@ -61,6 +61,8 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
         pos, quat = tip_pose(state.curvature, arc)
         angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.contact_force
+    # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
+    measured_rc = state.radius_l_over_theta if own_length else None
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]
@@ -70,7 +72,8 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             pressures_pa=[float(v) for v in p],
             curvature_per_m=[float(v) for v in k],
             axial_stretch=float(state.axial_stretch[i]),
-            radius_of_curvature_m=(length / abs(theta)) if theta != 0 else None,
+            radius_of_curvature_m=(float(measured_rc[i]) if measured_rc is not None and np.isfinite(measured_rc[i])
+                                   else length / abs(theta) if theta != 0 else None),
             centreline_radius_m=(1.0 / kappa) if kappa > 0 else None,
             bending_angle_rad=float(angle[i]),
             tip_position_m=[float(v) for v in pos[i]],
