@@ -232,3 +232,18 @@ def test_model_node_applies_a_calibration_parameter(implemented_design, tmp_path
             AllocationNode(context=context, parameter_overrides=[Parameter("calibration", value=str(path))])
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_allocate_applies_a_calibration(implemented_design, tmp_path, capsys):
+    """The allocator inverts the calibrated rung: with the material unscaled, a shift s needs 1 / (1 - s)
+    times the pressure for the same bend."""
+    from softcath_ros.cli import main
+
+    path = _calibration(implemented_design, shift=0.2, scale=1.0).save(tmp_path / "c.yaml")
+    base = ["allocate", "--design", "implemented_5mm", "--curvature", "0,-10", "--json"]
+    assert main(base) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert main(base + ["--calibration", str(path)]) == 0
+    calibrated = json.loads(capsys.readouterr().out)
+    assert calibrated["model"] == "closed_form calibrated"
+    assert calibrated["pressures_pa"][0] == pytest.approx(plain["pressures_pa"][0] / 0.8, rel=1e-9)
