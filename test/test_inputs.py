@@ -150,3 +150,21 @@ def test_documented_report_glob_matches_recordings_only(tmp_path, monkeypatch, c
     assert (runs / "bench_default_20261201_110000" / "report.md").is_file()
     assert main(["report"]) == 0
     assert "bench_default_20261201_110000" in capsys.readouterr().err
+
+
+def test_pressure_sweep_table_reports_r_c_as_l_over_theta():
+    """The tool's table (tools/pressure_sweep.py) reads R_C = l / theta off the tip pose, 1/|k| apart."""
+    import io
+
+    from softcath_ros.core.kinematics import tip_pose
+    from softcath_ros.tools.pressure_sweep import SweepPoint, print_table
+
+    k, length, stretch = np.array([0.0, -30.0]), 0.04, 1.1
+    pos, quat = tip_pose(k[None, :], np.array([length * stretch]))
+    point = SweepPoint([20000.0], pos[0].tolist(), quat[0].tolist(), [], 0)
+    out = io.StringIO()
+    print_table([point], [[20000.0]], length, file=out)
+    cells = out.getvalue().splitlines()[1].split()
+    theta = 30.0 * length * stretch
+    assert float(cells[1]) == pytest.approx(length / theta * 1e3, abs=0.006)   # printed to 0.01 mm
+    assert float(cells[2]) == pytest.approx(1e3 / 30.0, abs=0.006)
