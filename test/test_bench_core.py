@@ -98,8 +98,10 @@ def test_rig_regulator_lag_gauge_error_and_biases(implemented_design):
     rig.mount("angle", 0.02)
     r = rig.read()
     assert r.pressures[0] == pytest.approx(30000.0 + rig.gauge_bias[0], rel=1e-6)
-    k_true = np.hypot(*model.evaluate(np.array([30000.0 * 0.75])).curvature)
-    assert r.angle == pytest.approx(k_true * 0.02 * 0.95 * math.cos(0.15), rel=1e-6)
+    state = model.evaluate(np.array([30000.0 * 0.75]))
+    k_true = np.hypot(*state.curvature)
+    # the sample's arc is stretched: theta = |k| stretch l
+    assert r.angle == pytest.approx(k_true * state.axial_stretch * 0.02 * 0.95 * math.cos(0.15), rel=1e-6)
     assert r.angle < k_true * 0.02  # friction and out-of-plane bending under-read
     rig.mount("force", 0.017)
     f = rig.read()
@@ -238,12 +240,15 @@ def test_report_on_a_recording_with_known_values(tmp_path, implemented_design):
     path = write_recording(tmp_path / "known", events, streams, yaml.safe_dump(implemented_design.to_dict()))
     result = write_report(path)
     top = [s for s in result["stats"] if s.bench == "angle" and s.level == 30000.0][0]
-    k = float(np.hypot(*model.evaluate(top.pressure_mean).curvature))
-    assert top.curvature_mean == pytest.approx(k, rel=1e-9)
-    assert top.model["closed_form"]["radius"] == pytest.approx(1 / k, rel=1e-9)
+    state = model.evaluate(top.pressure_mean)
+    k = float(np.hypot(*state.curvature)) * float(state.axial_stretch)   # theta / l
+    assert top.curvature_mean == pytest.approx(k, rel=1e-5)   # mean over samples; f(mean p) to 2nd order
+    assert top.model["closed_form"]["radius"] == pytest.approx(1 / k, rel=1e-9)   # R_C = l / theta
     assert top.radius_mean == pytest.approx(1 / k, rel=1e-3)  # mean of l/theta over slightly varying p
-    # Linear rung, noise-free rig: the spread in curvature is exactly the spread in pressure.
-    assert top.curvature_std == pytest.approx(k / top.pressure_mean[0] * top.pressure_std[0], rel=1e-6)
+    # Noise-free rig: the spread in theta / l = g p (1 + a p) is its slope times the spread in pressure.
+    g, a = float(np.hypot(*model.curvature_per_pa[:, 0])), float(model.stretch_per_pa[0])
+    slope = g * (1 + 2 * a * top.pressure_mean[0])
+    assert top.curvature_std == pytest.approx(slope * top.pressure_std[0], rel=1e-3)
     text = open(result["report"]).read()
     assert f"| {top.curvature_mean:.2f} ± {top.curvature_std:.2f} |" in text and "Hysteresis" in text
     assert len(result["plots"]) == 3 and all(open(p, "rb").read(4) == b"\x89PNG" for p in result["plots"])

@@ -177,6 +177,10 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     assert counts[topics.TIP_POSE] > 50 and counts[topics.BACKBONE] > 50
     assert counts[topics.PRESSURE_CMD] > 50 and topics.BEND_CMD not in counts  # no allocation_node
     assert "## Hysteresis" in Path(result["report"]).read_text()
+    # the logs stay out of the README's `softcath report runs/bench_default_*/` glob
+    run_dir = Path(result["recording"]).parent
+    assert [p.name for p in tmp_path.glob("bench_quick_*/")] == [run_dir.name]
+    assert (tmp_path / "logs" / run_dir.name / "bench_node.log").is_file()
 
 
 def test_a_domain_another_graph_uses_is_not_leased(procs):

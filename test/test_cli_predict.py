@@ -25,7 +25,11 @@ def test_predict_json_matches_model():
     k = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4]).curvature
     assert bent["pressures_pa"] == [20000.0]
     assert bent["curvature_per_m"] == pytest.approx(k.tolist())
-    assert bent["radius_of_curvature_m"] == pytest.approx(1 / abs(k[1]))
+    stretch = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4]).axial_stretch
+    # R_C = l / theta (theta = |k| l stretch); 1/|k| under its own name
+    assert bent["radius_of_curvature_m"] == pytest.approx(1 / (abs(k[1]) * stretch))
+    assert bent["radius_of_curvature_m"] == pytest.approx(0.04 / bent["bending_angle_rad"])
+    assert bent["centreline_radius_m"] == pytest.approx(1 / abs(k[1]))
     assert bent["converged"] is True and len(bent["tip_orientation_xyzw"]) == 4
     assert bent["tip_position_m"][1] < 0   # bends towards -y, away from the channel
 

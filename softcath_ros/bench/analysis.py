@@ -240,20 +240,35 @@ def hysteresis(stats: list[StepStats], family_alpha: float = 0.01) -> list[Hyste
     return out
 
 
-def overlay_model(stats: list[StepStats], model, label: str, pressure_scale: float = 1.0) -> None:
-    """Store the model's curvature, R_C and blocking force at each step's mean measured pressure
-    (times ``pressure_scale``, e.g. 1 - a fitted pressure shift) in ``stats[i].model[label]``."""
+MODEL_QUANTITIES = ("curvature", "radius", "force")
+
+
+def model_quantities(stats: list[StepStats], model) -> dict[str, np.ndarray]:
+    """The model's theta / l (1/m), R_C = l / theta (m) and blocking force (N) at each step's mean
+    measured pressure; NaN where it did not converge (or is straight, for R_C)."""
+    from ..core.prediction import angle_per_length
     from .blocking import BlockingForce
 
-    if not stats:
-        return
     force = BlockingForce(model)
-    p = np.array([s.pressure_mean for s in stats]) * pressure_scale
+    p = np.array([s.pressure_mean for s in stats])
     state = model.evaluate(np.clip(p, 0.0, None))
     k = np.atleast_2d(state.curvature)
-    kmag = np.hypot(k[:, 0], k[:, 1])
+    per_length = angle_per_length(state)   # theta / l: what the angle bench reads as curvature
     conv = np.atleast_1d(state.converged)
+    with np.errstate(divide="ignore"):
+        radius = np.where(conv & (per_length > 0), 1.0 / per_length, math.nan)
+    return {"curvature": np.where(conv, per_length, math.nan), "radius": radius,
+            "force": np.array([float(force.from_curvature(k[i], s.length)) if conv[i] else math.nan
+                               for i, s in enumerate(stats)])}
+
+
+def overlay_model(stats: list[StepStats], model, label: str, band95: dict | None = None) -> None:
+    """Store ``model_quantities`` in ``stats[i].model[label]``; ``band95`` (same keys, 95% half-widths,
+    e.g. from a calibration's covariance) as ``<quantity>_band95``."""
+    if not stats:
+        return
+    q = model_quantities(stats, model)
     for i, s in enumerate(stats):
-        s.model[label] = {"curvature": float(kmag[i]) if conv[i] else math.nan,
-                          "radius": float(1.0 / kmag[i]) if conv[i] and kmag[i] > 0 else math.nan,
-                          "force": float(force.from_curvature(k[i], s.length)) if conv[i] else math.nan}
+        s.model[label] = {name: float(q[name][i]) for name in MODEL_QUANTITIES}
+        if band95 is not None:
+            s.model[label].update({f"{name}_band95": float(band95[name][i]) for name in MODEL_QUANTITIES})

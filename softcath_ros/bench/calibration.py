@@ -4,10 +4,14 @@ Parameters (both dimensionless):
 - ``pressure_shift`` s: the model is evaluated at (1 - s) times the measured pressure
   (the published FE-to-experiment gap is s ~ 0.25);
 - ``material_scale`` m: every Yeoh coefficient of the body multiplied by m.
-Residuals: every sample's curvature (angle bench) and tared blocking force (force
+Residuals: every sample's bending angle per sample length theta / l (angle bench; the model's is
+|k| x axial stretch) and tared blocking force (force
 bench), each divided by its step's spread (floored at the reading noise) so the two
 benches weigh comparably. scipy least squares; 95% confidence intervals from the
-Jacobian at the optimum, cov = (J^T J)^-1 * SSR / (n - 2). The bench's own biases
+Jacobian at the optimum, cov = (J^T J)^-1 * SSR / (n - k). The force bench's tare (each trial's
+p = 0 reading) is one noisy reading shared by all of that trial's forces: each (sample, trial)
+gets a fitted force offset (nuisance parameters, k = 2 + their number), so the intervals of
+shift and scale include the tare's error instead of treating the trial's forces as independent. The bench's own biases
 (friction, out-of-plane) are not separated from the model error: the fit absorbs them.
 For the closed form, curvature depends on (1 - s) / m and force on (1 - s) only, so
 both benches are needed to tell the two apart; the correlation is reported.
@@ -15,12 +19,14 @@ both benches are needed to tell the two apart; the correlation is reported.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..core.calibration_file import scaled_design
 from ..core.errors import SoftcathError
+from ..core.prediction import angle_per_length
 from .analysis import SampleRow, summarise
 from .blocking import BlockingForce
 
@@ -33,6 +39,7 @@ class CalibrationResult:
     pressure_shift: float
     material_scale: float
     ci95: dict[str, float]       # half-widths
+    covariance: list             # 2x2 [[var shift, cov], [cov, var scale]]
     correlation: float
     n_residuals: int
     rms_before: float            # normalised residual rms at s = 0, m = 1
@@ -42,10 +49,6 @@ class CalibrationResult:
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
-
-
-def scaled_design(design, material_scale: float):
-    return replace(design, material=design.material.scaled(material_scale))
 
 
 def _residual_setup(rows: list[SampleRow], curvature_floor: float, force_floor: float):
@@ -75,6 +78,8 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
     pressures = np.clip(np.array([r.pressure for r in use]), 0.0, None)
     is_angle = np.array([r.bench == "angle" for r in use])
     lengths = np.array([r.length for r in use])
+    trials = sorted({(r.sample_name, r.drive, r.trial) for r in use if r.bench == "force"})
+    group = np.array([-1 if r.bench == "angle" else trials.index((r.sample_name, r.drive, r.trial)) for r in use])
     if is_angle.all() or not is_angle.any():
         bench = "angle" if is_angle.all() else "force"
         note = f"only the {bench} bench was recorded: shift and scale are weakly separable"
@@ -82,14 +87,14 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
         note = ""
 
     def predict(x):
-        shift, scale = x
+        shift, scale, offsets = x[0], x[1], x[2:]
         model = make_model(rung, scaled_design(design, scale))
         state = model.evaluate(pressures * (1.0 - shift))
         k = np.atleast_2d(state.curvature)
-        kmag = np.hypot(k[:, 0], k[:, 1])
         force = BlockingForce(model)
-        f = np.array([force.from_curvature(k[i], lengths[i]) for i in range(len(use))])
-        pred = np.where(is_angle, kmag, f)
+        f = np.array([force.from_curvature(k[i], lengths[i]) if not is_angle[i] else 0.0 for i in range(len(use))])
+        f = f + np.where(group >= 0, offsets[np.maximum(group, 0)] if len(offsets) else 0.0, 0.0)
+        pred = np.where(is_angle, angle_per_length(state), f)
         conv = np.atleast_1d(state.converged)
         return np.where(conv, pred, np.nan)
 
@@ -97,34 +102,25 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
         r = (predict(x) - meas) / sigma
         return np.nan_to_num(r, nan=1e3)
 
-    r0 = residuals(np.array(x0, dtype=float))
-    sol = least_squares(residuals, x0=np.array(x0, dtype=float), bounds=([-0.9, 0.05], [0.9, 20.0]),
-                        x_scale=[0.1, 0.3], diff_step=1e-4)
-    n, k = len(sol.fun), 2
+    n_off = len(trials)
+    start = np.concatenate([np.asarray(x0, dtype=float), np.zeros(n_off)])
+    r0 = residuals(start)
+    sol = least_squares(residuals, x0=start, bounds=([-0.9, 0.05] + [-np.inf] * n_off, [0.9, 20.0] + [np.inf] * n_off),
+                        x_scale=[0.1, 0.3] + [force_floor] * n_off, diff_step=1e-4)
+    n, k = len(sol.fun), 2 + n_off
     dof = max(n - k, 1)
     s2 = float(sol.fun @ sol.fun) / dof
     try:
-        cov = np.linalg.inv(sol.jac.T @ sol.jac) * s2
+        cov = (np.linalg.inv(sol.jac.T @ sol.jac) * s2)[:2, :2]
         half = Z95 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
         corr = float(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])) if cov[0, 0] > 0 and cov[1, 1] > 0 else math.nan
     except np.linalg.LinAlgError:
+        cov = np.full((2, 2), math.inf)
         half, corr = np.array([math.inf, math.inf]), math.nan
         note = (note + "; " if note else "") + "singular Jacobian: parameters not identifiable from this data"
     return CalibrationResult(rung=rung, pressure_shift=float(sol.x[0]), material_scale=float(sol.x[1]),
                              ci95={"pressure_shift": float(half[0]), "material_scale": float(half[1])},
+                             covariance=[[float(v) for v in row] for row in cov],
                              correlation=corr, n_residuals=n,
                              rms_before=float(np.sqrt(np.mean(r0**2))), rms_after=float(np.sqrt(np.mean(sol.fun**2))),
                              success=bool(sol.success), message="; ".join(x for x in (sol.message, note) if x))
-
-
-def calibrated_design_dict(design, result: CalibrationResult, recording: str) -> dict:
-    """The design file of the calibrated actuator: material scaled by the fit. The pressure
-    shift is a model correction, not a design property: it goes in the description and in
-    the calibration sidecar the report reads."""
-    d = scaled_design(design, result.material_scale).to_dict()
-    d["name"] = f"{design.name}_calibrated"
-    d["description"] = (f"{design.name} calibrated on {recording} with rung {result.rung}: material scale "
-                        f"{result.material_scale:.4g} +- {result.ci95['material_scale']:.2g} (95%), pressure shift "
-                        f"{result.pressure_shift:.4g} +- {result.ci95['pressure_shift']:.2g} (95%, apply as "
-                        f"p_model = (1 - shift) p)")
-    return d

@@ -2,6 +2,7 @@
 models overlaid, before/after calibration)."""
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +30,7 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
             lines += ["## Angle bench: radius of curvature", "",
                       "R_C = l / theta per reading; mean ± std over trials and samples (— where the bend is "
                       "within the reading noise).", ""]
-            head = ["drive", "phase", "p cmd [bar]", "p measured [bar]", "n", "curvature [1/m]", "R_C [mm]"]
+            head = ["drive", "phase", "p cmd [bar]", "p measured [bar]", "n", "theta / l [1/m]", "R_C [mm]"]
             head += [f"R_C {lb} [mm]" for lb in labels]
         else:
             lines += ["## Blocking-force bench", "", "Scale reading minus the reading at p = 0 of the same trial.", ""]
@@ -69,17 +70,19 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
         lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
                   + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
     if calibration:
-        c = calibration
+        c = calibration.to_dict()
         lines += ["## Calibration", "",
-                  f"Rung `{c['rung']}` fitted to this recording (95% confidence from the Jacobian):", "",
+                  f"Rung `{c['rung']}` fitted to `{c['recording']}` (sha256 {c['recording_sha256'][:12]}..., "
+                  f"{c['date']}; 95% confidence from the Jacobian), applied to every overlaid rung "
+                  "(bands: 95% from its covariance):", "",
                   f"- pressure shift: {c['pressure_shift']:.4f} ± {c['ci95']['pressure_shift']:.4f} "
                   "(model evaluated at (1 − shift) × p)",
                   f"- material scale: {c['material_scale']:.4f} ± {c['ci95']['material_scale']:.4f} "
                   "(all Yeoh coefficients × scale)",
-                  f"- parameter correlation: {c['correlation']:.3f}",
+                  f"- parameter correlation: {calibration.correlation:.3f}",
                   f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
                   f"({c['n_residuals']} readings)", ""]
-        if c.get("message"):
+        if c["message"]:
             lines += [f"Solver: {c['message']}", ""]
     if plots:
         lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
@@ -95,7 +98,8 @@ def plot(stats: list[StepStats], out_dir: Path, stem: str) -> list[str]:
     paths = []
     labels = list(stats[0].model) if stats else []
     styles = ["-", "--", ":", "-."]
-    for bench, qty, ylabel, scale in (("angle", "radius", "R_C [mm]", 1e3), ("angle", "curvature", "curvature [1/m]", 1.0),
+    for bench, qty, ylabel, scale in (("angle", "radius", "R_C = l / theta [mm]", 1e3),
+                                      ("angle", "curvature", "theta / l [1/m]", 1.0),
                                       ("force", "force", "blocking force [mN]", 1e3)):
         rows = [s for s in stats if s.bench == bench]
         if not rows:
@@ -113,11 +117,16 @@ def plot(stats: list[StepStats], out_dir: Path, stem: str) -> list[str]:
                 ax.errorbar(x[ok], y[ok], yerr=np.nan_to_num(e[ok]), fmt=marker, capsize=3, ms=5,
                             label=f"bench {drive}, {phase}", mfc="none" if phase == "unloading" else None)
             sel = sorted([s for s in rows if s.drive == drive and s.phase == "loading"], key=lambda s: s.pressure_magnitude)
-            for lb, ls in zip(labels, styles):
+            for lb, ls in zip(labels, itertools.cycle(styles)):
                 x = np.array([s.pressure_magnitude for s in sel]) / PA_PER_BAR
                 y = np.array([s.model[lb][qty] for s in sel]) * scale
                 ok = np.isfinite(y)
-                ax.plot(x[ok], y[ok], ls, label=f"model {lb}")
+                line, = ax.plot(x[ok], y[ok], ls, label=f"model {lb}")
+                if sel and f"{qty}_band95" in sel[0].model[lb]:
+                    half = np.array([s.model[lb][f"{qty}_band95"] for s in sel]) * scale
+                    ok &= np.isfinite(half)
+                    ax.fill_between(x[ok], y[ok] - half[ok], y[ok] + half[ok], color=line.get_color(), alpha=0.2,
+                                    label=f"model {lb}, 95% band")
         ax.set_xlabel("measured pressure [bar]")
         ax.set_ylabel(ylabel)
         if qty == "radius":
@@ -143,17 +152,18 @@ def recording_design(path):
     return None if data is None else design_from_dict(load_yaml(data.decode()), source=f"{path}:design.yaml")
 
 
-def write_report(recording, design=None, rungs=("closed_form",), calibration: dict | None = None,
-                 out_dir=None, topics: dict | None = None) -> dict:
+def write_report(recording, design=None, rungs=("closed_form",), calibration=None,
+                 out_dir=None, topics: dict | None = None, cache: bool = True) -> dict:
     """Analyse ``recording`` and write report.md + PNGs. Returns paths and the statistics.
 
-    ``calibration`` (from calibrate, as a mapping) adds the calibrated model as an overlay:
-    the rung on the design with the fitted material scale, at (1 - shift) p."""
+    ``calibration`` (a ``core.calibration_file.Calibration``) is applied to every rung in ``rungs``:
+    each is overlaid as it is and calibrated, the calibrated one with its 95% band. ``cache``:
+    whether rungs that cache may read their cache (``--no-cache``)."""
+    from ..core.calibration_file import band95, build_model
     from ..core.errors import SoftcathError
-    from ..core.models import make_model
+    from ..core.models import run_options
     from ..recording.reader import read_metadata, recording_file
-    from .analysis import hysteresis, overlay_model, rows_from_recording, summarise
-    from .calibration import scaled_design
+    from .analysis import MODEL_QUANTITIES, hysteresis, model_quantities, overlay_model, rows_from_recording, summarise
 
     path = recording_file(recording)
     out = Path(out_dir) if out_dir else path.parent
@@ -161,23 +171,33 @@ def write_report(recording, design=None, rungs=("closed_form",), calibration: di
     design = design or recording_design(path)
     if design is None:
         raise SoftcathError(f"{path} has no design attached; pass --design")
+    if calibration is not None:
+        calibration.check_design(design)
     rows = rows_from_recording(path, topics)
     if not rows:
         raise SoftcathError(f"{path}: no bench readings (no 'sample' markers on the step topic)")
     stats = summarise(rows)
+    overlaid = []
     for rung in rungs:
-        overlay_model(stats, make_model(rung, design), rung)
-    if calibration:
-        cal_model = make_model(calibration["rung"], scaled_design(design, calibration["material_scale"]))
-        overlay_model(stats, cal_model, f"{calibration['rung']} calibrated",
-                      pressure_scale=1.0 - calibration["pressure_shift"])
+        opts = run_options(rung, cache=cache)
+        overlay_model(stats, build_model(rung, design, **opts), rung)
+        overlaid.append(rung)
+        if calibration is not None:
+            def quantities(c, rung=rung, opts=opts):
+                q = model_quantities(stats, build_model(rung, design, c, **opts))
+                return np.stack([q[name] for name in MODEL_QUANTITIES])
+
+            half = band95(calibration, quantities)
+            overlay_model(stats, build_model(rung, design, calibration, **opts), f"{rung} calibrated",
+                          band95=dict(zip(MODEL_QUANTITIES, half)))
+            overlaid.append(f"{rung} calibrated")
     hyst = hysteresis(stats)
     meta = read_metadata(path).get("softcath", {})
     info = {"recording": str(path), "design": design.name,
             "simulated": meta.get("simulated", "unknown"),
             "protocol": meta.get("protocol", "unknown"),
             "readings": f"{len(rows)} ({sum(not r.settled for r in rows)} from unsettled steps)",
-            "models overlaid": ", ".join(list(rungs) + ([f"{calibration['rung']} calibrated"] if calibration else []))}
+            "models overlaid": ", ".join(overlaid)}
     if meta.get("simulated") == "true":
         info["note"] = "simulated rig (sim_bench_node), not hardware"
     plots = plot(stats, out, "report")

@@ -12,7 +12,8 @@
   gap between model and experiment (the model's curve lies on the experiment's when its
   input pressure is shifted by about 25%): the rig bends as the model does at
   (1 - pressure_shift) times the true pressure.
-- Angle bench: bending angle theta = |k| l of the mounted sample, read low by the known
+- Angle bench: bending angle theta = |k| lambda l of the mounted sample (its arc is stretched by
+  the axial stretch lambda), read low by the known
   biases: friction on the paper (a fractional under-read) and out-of-plane bending
   (the paper sees the projection, cos of the tilt); plus reading noise.
 - Force bench: blocking force (bench.blocking), read low by the same friction, plus a
@@ -27,6 +28,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .blocking import BlockingForce
+from ..core.prediction import angle_per_length
 from ..core.units import PA_PER_BAR
 
 
@@ -91,17 +93,20 @@ class SimulatedRig:
         self.bending_pressures = np.clip(self.bending_pressures, self.true_pressures - half,
                                          self.true_pressures + half)
 
+    def true_state(self):
+        return self.model.evaluate(np.clip(self.bending_pressures, 0.0, None) * (1.0 - self.params.pressure_shift))
+
     def true_curvature(self) -> np.ndarray:
-        state = self.model.evaluate(np.clip(self.bending_pressures, 0.0, None) * (1.0 - self.params.pressure_shift))
-        return np.asarray(state.curvature, dtype=float)
+        return np.asarray(self.true_state().curvature, dtype=float)
 
     def read(self) -> RigReading:
         p = self.params
         gauge = self.true_pressures + self.gauge_bias + self.rng.normal(0.0, p.gauge_noise, self.true_pressures.shape)
-        k = self.true_curvature()
+        state = self.true_state()
+        k = np.asarray(state.curvature, dtype=float)
         keep = (1.0 - p.friction_underread)
         if self.bench == "angle":
-            angle = float(np.hypot(*k)) * self.length * keep * math.cos(p.out_of_plane_tilt)
+            angle = float(angle_per_length(state)[0]) * self.length * keep * math.cos(p.out_of_plane_tilt)
             force = 0.0
         else:
             angle = 0.0

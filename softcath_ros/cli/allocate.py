@@ -31,6 +31,8 @@ def register(sub) -> None:
                    help="lower the design's max_pressure (Pa), e.g. to stay where a rung converges")
     p.add_argument("--reachable-set", type=int, default=0, metavar="N",
                    help="also report the maximum curvature on N equally spaced directions")
+    p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
+    p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -47,12 +49,15 @@ def _floats(text: str, n: int, option: str) -> list[float]:
 
 def run(args) -> int:
     from ..core.allocation import Allocator
-    from ..core.models import make_model
+    from ..core.calibration_file import build_model, load_calibration
+    from ..core.models import run_options
 
     if (args.direction is None) != (args.angle is None):
         raise SoftcathError("--direction and --angle go together")
     design = load_design(args.design)
-    allocator = Allocator(make_model(args.model, design), max_pressure=args.max_pressure)
+    calibration = load_calibration(args.calibration) if args.calibration else None
+    model = build_model(args.model, design, calibration, **run_options(args.model, cache=not args.no_cache))
+    allocator = Allocator(model, max_pressure=args.max_pressure)
     if args.curvature is not None:
         k = _floats(args.curvature, 2, "--curvature")
         result = allocator.allocate(k)

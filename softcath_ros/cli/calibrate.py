@@ -1,55 +1,59 @@
-"""`softcath calibrate FILE.mcap --design D`: fit pressure shift and material scale, write a calibrated design."""
+"""`softcath calibrate RECORDING`: fit pressure shift and material scale, write the calibration file."""
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
-
-import yaml
 
 
 def register(sub) -> None:
     from ..core.models import available_models
 
-    p = sub.add_parser("calibrate", help="fit a model to a bench recording and write a calibrated design")
-    p.add_argument("file", help="the bench recording (.mcap or its bag directory)")
+    p = sub.add_parser("calibrate", help="fit a model to a bench recording and write a calibration file")
+    p.add_argument("file", nargs="*", help="the bench recording (.mcap or its bag directory); several: the newest "
+                                           "(default: the newest under runs/)")
     p.add_argument("--design", default=None, help="design to calibrate (default: the one attached to the recording)")
     p.add_argument("--model", default="closed_form", help=f"rung to fit: {', '.join(available_models())}")
     p.add_argument("--output", default=None,
-                   help="calibrated design file (default: <design>_calibrated.yaml beside the recording)")
+                   help="calibration file (default: <design>.calibration.yaml beside the recording)")
+    p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..bench.analysis import rows_from_recording
-    from ..bench.calibration import calibrate, calibrated_design_dict
+    from ..bench.calibration import calibrate
     from ..bench.report import recording_design, write_report
+    from ..core.calibration_file import from_fit
     from ..core.design import load_design
     from ..core.errors import SoftcathError
     from ..recording.reader import recording_file
+    from .report import pick_recording
 
-    path = recording_file(args.file)
+    path = recording_file(pick_recording(args.file, "calibrate"))
     design = load_design(args.design) if args.design else recording_design(path)
     if design is None:
         raise SoftcathError(f"{path} has no design attached; pass --design")
     result = calibrate(rows_from_recording(path), design, args.model)
-    out = Path(args.output) if args.output else path.parent / f"{design.name}_calibrated.yaml"
-    out.write_text(yaml.safe_dump(calibrated_design_dict(design, result, path.name), sort_keys=False))
-    sidecar = out.with_suffix(".calibration.yaml")
-    cal = {**result.to_json(), "recording": str(path), "design": design.name, "calibrated_design": str(out)}
-    sidecar.write_text(yaml.safe_dump(cal, sort_keys=False))
-    rep = write_report(path, design, [args.model], cal, out_dir=path.parent)
+    if not all(math.isfinite(v) for row in result.covariance for v in row):
+        raise SoftcathError(f"{path}: shift and scale are not identifiable from this recording ({result.message})")
+    calibration = from_fit(result, design, path)
+    out = Path(args.output) if args.output else path.parent / f"{design.name}.calibration.yaml"
+    calibration.save(out)
+    rep = write_report(path, design, [args.model], calibration, out_dir=path.parent, cache=not args.no_cache)
     if args.json:
-        json.dump({**cal, "report": rep["report"]}, sys.stdout, indent=2)
+        json.dump({**calibration.to_dict(), "correlation": calibration.correlation, "calibration_file": str(out),
+                   "report": rep["report"]}, sys.stdout, indent=2)
         print()
     else:
-        print(f"rung {result.rung}: pressure shift {result.pressure_shift:.4f} ± {result.ci95['pressure_shift']:.4f}, "
-              f"material scale {result.material_scale:.4f} ± {result.ci95['material_scale']:.4f} (95%), "
-              f"correlation {result.correlation:.2f}")
+        ci = calibration.ci95
+        print(f"rung {result.rung}: pressure shift {result.pressure_shift:.4f} ± {ci['pressure_shift']:.4f}, "
+              f"material scale {result.material_scale:.4f} ± {ci['material_scale']:.4f} (95%), "
+              f"correlation {calibration.correlation:.2f}")
         print(f"normalised residual rms {result.rms_before:.3g} -> {result.rms_after:.3g}"
               + ("" if result.success else f" (solver: {result.message})"))
-        print(f"calibrated design: {out}")
-        print(f"calibration:       {sidecar}")
+        print(f"calibration: {out}  (use it with --calibration {out})")
         print(f"report (before/after): {rep['report']}")
     return 0

@@ -32,6 +32,7 @@ def register(sub) -> None:
     p.add_argument("--sim-model", default="closed_form", help="rung that plays the rig's truth")
     p.add_argument("--model", nargs="+", default=["closed_form"], help="rung(s) overlaid in the report")
     p.add_argument("--output-dir", default="runs", help="where the recording directory goes (default runs/)")
+    p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
     p.add_argument("--timeout", type=float, default=170.0, help="give up after this many seconds")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
@@ -51,7 +52,8 @@ def run(args) -> int:
                ("model_node", {"design": design_arg, "model": args.model[0]})]
     if protocol.drive == "direction":
         helpers.append(("allocation_node", {"design": design_arg, "model": args.model[0]}))
-    logs = out_dir / f"{name}_logs"
+    # Not beside the recording: `softcath report runs/bench_default_*/` must match recordings only.
+    logs = out_dir / "logs" / name
     logs.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     say = (lambda *a: None) if args.json else (lambda *a: print(*a, flush=True))
@@ -95,7 +97,7 @@ def run(args) -> int:
         tail = "\n".join(lines[-8:])
         raise SoftcathError(f"bench_node failed (exit {bench.returncode}); logs in {logs}\n{tail}")
     summary = json.loads(summary_lines[-1][len("summary: "):])
-    report = write_report(summary["recording"], design, args.model)
+    report = write_report(summary["recording"], design, args.model, cache=not args.no_cache)
     elapsed = time.monotonic() - t0
     if args.json:
         json.dump({"recording": summary["recording"], "report": report["report"], "plots": report["plots"],

@@ -26,6 +26,7 @@ def register(sub) -> None:
                    help="run fe3d on the 3-channel cases too (full model: > 15 min per direction)")
     p.add_argument("--refresh", nargs="*", default=None, metavar="RUNG",
                    help="recompute cached results of these rungs (no names: all)")
+    p.add_argument("--no-cache", action="store_true", help="recompute every cached result (= --refresh, all rungs)")
     p.add_argument("--cases", nargs="+", default=None, metavar="CASE",
                    help=f"a subset of: {', '.join(repr(c.name) for c in CASES)}")
     p.add_argument("--settings", nargs="+", default=None, metavar="LABEL",
@@ -49,7 +50,7 @@ def run(args) -> int:
         raise SoftcathError(f"--out {out}: folder {out.parent} does not exist")
     cases = [known_cases[c] for c in args.cases] if args.cases else CASES
     settings = [known_settings[s] for s in args.settings] if args.settings else SETTINGS
-    refresh = () if args.refresh is None else tuple(args.refresh or ["all"])
+    refresh = ("all",) if args.no_cache else () if args.refresh is None else tuple(args.refresh or ["all"])
     load_before = os.getloadavg()
     rows, references = [], {}
     for case in cases:

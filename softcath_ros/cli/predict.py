@@ -1,4 +1,9 @@
-"""`softcath predict`: bending for channel pressures, from any rung."""
+"""`softcath predict`: bending for channel pressures, from any rung.
+
+Exit codes (as `softcath sweep`): 0 all converged, 1 some command did not converge (the output
+still lists every command), 2 bad input (pressures above the design's max_pressure included).
+With ``--calibration`` the rung is calibrated and each result carries a 95% band.
+"""
 from __future__ import annotations
 
 import json
@@ -23,52 +28,93 @@ def register(sub) -> None:
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
     p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
+    p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
+    p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     add_option_argument(p)
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..core.models import make_model
+    from ..core.calibration_file import build_model, load_calibration
+    from ..core.models import run_options
     from ..core.prediction import format_mm, predict
 
     design = load_design(args.design)
     if args.length is not None and args.length <= 0:
         raise SoftcathError(f"--length {args.length}: must be positive (m)")
     pressures = parse_pressures(args.pressure, design.n_channels, args.unit)
-    if np.any(pressures < 0):
-        raise SoftcathError("pressures are gauge pressures and must not be negative")
-    over = pressures.max() > design.max_pressure
+    check_pressure_limits(pressures, design)
+    calibration = load_calibration(args.calibration) if args.calibration else None
     if args.model == "auto":
         parse_model_options("auto", args.option)   # refuses options for auto
         from ..core.scene import load_scene
 
         if args.scene is None:
             raise SoftcathError("--model auto needs --scene FILE (what the model must handle)")
-        model = make_model("auto", design, scene=load_scene(args.scene))
-        print(model.selection.reason, file=sys.stderr)
+        options = {"scene": load_scene(args.scene)}
     else:
-        model = make_model(args.model, design, **parse_model_options(args.model, args.option))
+        options = {**run_options(args.model, cache=not args.no_cache), **parse_model_options(args.model, args.option)}
+    model = build_model(args.model, design, calibration, **options)
+    if args.model == "auto":
+        print(model.selection.reason, file=sys.stderr)
     results = predict(model, pressures, args.length)
+    if calibration is not None:
+        add_bands(results, args.model, design, calibration, pressures, args.length, options)
+    length = args.length if args.length is not None else model.design.length
     if args.json:
-        json.dump({"model": model.name, "design": design.name,
-                   "length_m": args.length if args.length is not None else model.design.length,
-                   "results": [r.to_json() for r in results]}, sys.stdout, indent=2)
+        doc = {"model": model.name, "design": design.name, "length_m": length,
+               "results": [r.to_json() for r in results]}
+        if calibration is not None:
+            doc["calibration"] = {"file": args.calibration, **{k: calibration.to_dict()[k] for k in (
+                "rung", "design_hash", "pressure_shift", "material_scale", "covariance", "recording", "date")}}
+        json.dump(doc, sys.stdout, indent=2)
         print()
     else:
-        print(f"model {model.name}, design {design.name}, length "
-              f"{(args.length or model.design.length) * 1e3:.1f} mm")
-        print(f"{'pressure [bar]':>18} {'1/|k| [mm]':>10} {'angle [deg]':>12} {'tip x,y,z [mm]':>28}")
+        print(f"model {model.name}, design {design.name}, length {length * 1e3:.1f} mm")
+        print(f"{'pressure [bar]':>18} {'R_C=l/theta [mm]':>17} {'1/|k| [mm]':>11} {'angle [deg]':>12} "
+              f"{'tip x,y,z [mm]':>28}")
         for r in results:
             ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in r.pressures_pa)
             if not r.converged:
                 print(f"{ps:>18}  did not converge: {r.reason}")
                 continue
             tip = ",".join(f"{v * 1e3:.2f}" for v in r.tip_position_m)
+            rc = format_mm(r.radius_of_curvature_m)
+            if r.band95 is not None and r.band95.get("radius_of_curvature_m") is not None:
+                rc += f" ± {r.band95['radius_of_curvature_m'] * 1e3:.2f}"
             force = "" if r.contact_force_n is None else f"   contact force {r.contact_force_n * 1e3:.2f} mN"
-            print(f"{ps:>18} {format_mm(r.radius_of_curvature_m):>10} "
+            print(f"{ps:>18} {rc:>17} {format_mm(r.centreline_radius_m):>11} "
                   f"{math.degrees(r.bending_angle_rad):12.2f} {tip:>28}{force}")
-    if over:
-        print(f"warning: some pressures exceed the design's max_pressure {design.max_pressure:g} Pa",
-              file=sys.stderr)
-    return 0
+    return 0 if all(r.converged for r in results) else 1
+
+
+def check_pressure_limits(pressures: np.ndarray, design) -> None:
+    """Gauge pressures in [0, max_pressure] (the design's safety limit), else a one-line error."""
+    if np.any(pressures < 0):
+        raise SoftcathError("pressures are gauge pressures and must not be negative")
+    top = float(pressures.max()) if pressures.size else 0.0
+    if top > design.max_pressure:
+        raise SoftcathError(f"pressure {top:g} Pa ({top / PA_PER_BAR:g} bar) exceeds design '{design.name}' "
+                            f"max_pressure {design.max_pressure:g} Pa ({design.max_pressure / PA_PER_BAR:g} bar)")
+
+
+BAND_FIELDS = ("radius_of_curvature_m", "centreline_radius_m", "bending_angle_rad")
+
+
+def add_bands(results, name, design, calibration, pressures, length, options) -> None:
+    """Each converged result's 95% band (half-widths) of R_C, 1/|k|, angle and tip position from the
+    calibration's covariance (core/calibration_file.band95: the rung rebuilt at +-1 sigma)."""
+    from ..core.calibration_file import band95, build_model
+    from ..core.prediction import predict
+
+    def quantities(c):
+        rows = predict(build_model(name, design, c, **options), pressures, length)
+        return np.array([[np.nan if not r.converged or getattr(r, f) is None else getattr(r, f) for f in BAND_FIELDS]
+                         + (list(r.tip_position_m) if r.converged else [np.nan] * 3) for r in rows], dtype=float)
+
+    half = band95(calibration, quantities)
+    for r, h in zip(results, half):
+        if r.converged:
+            r.band95 = {**{f: (None if not math.isfinite(v) else float(v)) for f, v in zip(BAND_FIELDS, h[:3])},
+                        "tip_position_m": [None if not math.isfinite(v) else float(v) for v in h[3:]]}

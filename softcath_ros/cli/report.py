@@ -1,23 +1,52 @@
-"""`softcath report FILE.mcap`: per-step statistics, hysteresis, model overlay (Markdown + PNG)."""
+"""`softcath report [RECORDING]`: per-step statistics, hysteresis, model overlay (Markdown + PNG)."""
 from __future__ import annotations
 
 import json
 import math
 import sys
+from pathlib import Path
+
+DEFAULT_RUNS = "runs"   # where `softcath characterise` puts recordings (its --output-dir default)
 
 
 def register(sub) -> None:
     from ..core.models import available_models
 
     p = sub.add_parser("report", help="analyse a bench recording: table + plots, model overlaid")
-    p.add_argument("file", help="the bench recording (.mcap or its bag directory)")
+    p.add_argument("file", nargs="*", help="the bench recording (.mcap or its bag directory); several: the newest "
+                                           f"(default: the newest under {DEFAULT_RUNS}/)")
     p.add_argument("--design", default=None, help="design to overlay (default: the one attached to the recording)")
     p.add_argument("--model", nargs="+", default=["closed_form"],
                    help=f"rung(s) to overlay: {', '.join(available_models())}")
-    p.add_argument("--calibration", default=None, help="calibration YAML from `softcath calibrate` to overlay")
+    p.add_argument("--calibration", default=None,
+                   help="calibration file from `softcath calibrate`: each rung is overlaid calibrated too, with its band")
     p.add_argument("--out", default=None, help="output directory (default: beside the recording)")
+    p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
+
+
+def pick_recording(paths: list[str], command: str) -> Path:
+    """The recording a command works on: the one given, the newest of several (a shell glob such as
+    ``runs/bench_default_*/``), or the newest bench recording under runs/. Says which on stderr."""
+    from ..core.errors import SoftcathError
+
+    if not paths:
+        root = Path(DEFAULT_RUNS)
+        candidates = [d for d in root.glob("*/") if any(d.glob("*.mcap"))] if root.is_dir() else []
+        if not candidates:
+            raise SoftcathError(f"no recording given and none under {root}/: pass RECORDING "
+                                "(run `softcath characterise` to make one)")
+    else:
+        candidates = [Path(p) for p in paths]
+        missing = [str(p) for p in candidates if not p.exists()]
+        if missing:
+            raise SoftcathError(f"{missing[0]}: no such recording")
+        if len(candidates) == 1:
+            return candidates[0]
+    newest = max(candidates, key=lambda p: p.stat().st_mtime)
+    print(f"softcath {command}: using the newest of {len(candidates)} recording(s): {newest}", file=sys.stderr)
+    return newest
 
 
 def stats_json(stats) -> list[dict]:
@@ -27,22 +56,20 @@ def stats_json(stats) -> list[dict]:
     return [{"bench": s.bench, "drive": s.drive, "phase": s.phase, "level": s.level, "n": s.n,
              "pressure_mean_pa": s.pressure_mean.tolist(), "pressure_std_pa": s.pressure_std.tolist(),
              "curvature_mean_per_m": clean(s.curvature_mean), "curvature_std_per_m": clean(s.curvature_std),
-             "radius_mean_m": clean(s.radius_mean), "radius_std_m": clean(s.radius_std),
+             "radius_of_curvature_mean_m": clean(s.radius_mean), "radius_of_curvature_std_m": clean(s.radius_std),
              "force_mean_n": clean(s.force_mean), "force_std_n": clean(s.force_std), "unsettled": s.unsettled,
              "model": {k: {q: clean(v) for q, v in d.items()} for k, d in s.model.items()}} for s in stats]
 
 
 def run(args) -> int:
     from ..bench.report import write_report
+    from ..core.calibration_file import load_calibration
     from ..core.design import load_design
-    from ..core.yaml_io import load_yaml
 
     design = load_design(args.design) if args.design else None
-    calibration = None
-    if args.calibration:
-        with open(args.calibration) as f:
-            calibration = load_yaml(f.read())
-    result = write_report(args.file, design, args.model, calibration, args.out)
+    calibration = load_calibration(args.calibration) if args.calibration else None
+    result = write_report(pick_recording(args.file, "report"), design, args.model, calibration, args.out,
+                          cache=not args.no_cache)
     if args.json:
         json.dump({"report": result["report"], "plots": result["plots"], "steps": stats_json(result["stats"]),
                    "hysteresis": [h.__dict__ for h in result["hysteresis"]]}, sys.stdout, indent=2, default=float)

@@ -3,7 +3,9 @@
 One channel ramps (``--channel``, default 0), the others stay at zero. The whole range goes
 to the model as one batch so continuation rungs (section, fe3d) ramp once and show their
 progress. Points that did not converge are written with ``converged = false`` and no
-numbers; the sweep exits 1 if any did not.
+numbers. Exit codes (as `softcath predict`): 0 all converged, 1 some point did not (files and
+JSON still written), 2 bad input (a pressure above the design's max_pressure included).
+``radius_of_curvature_m`` is R_C = l / theta; ``centreline_radius_m`` is 1/|k|.
 """
 from __future__ import annotations
 
@@ -35,28 +37,18 @@ def register(sub) -> None:
                                                "(default: sweep_<design>_<model>)")
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached (rungs that cache)")
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
     add_option_argument(p)
     p.add_argument("--json", action="store_true", help="print the JSON to stdout as well")
     p.set_defaults(func=run)
 
 
-def _model_options(name: str, progress: bool, cache: bool) -> dict:
-    """Options the rung declares among progress/cache (rungs differ)."""
-    from ..core.models import rung_info
-
-    info = rung_info(name)
-    opts = {}
-    if info.accepts("progress"):
-        opts["progress"] = progress
-    if info.accepts("cache"):
-        opts["cache"] = cache
-    return opts
-
-
 def run(args) -> int:
     from ..core.design import load_design
-    from ..core.models import RUNGS, make_model
+    from ..core.calibration_file import build_model, load_calibration
+    from ..core.models import RUNGS, make_model, run_options
     from ..core.prediction import predict
+    from .predict import check_pressure_limits
 
     design = load_design(args.design)
     if args.length is not None:
@@ -76,8 +68,11 @@ def run(args) -> int:
     levels = np.linspace(lo, hi, args.steps)
     pressures = np.zeros((args.steps, design.n_channels))
     pressures[:, args.channel] = levels
-    options = {**_model_options(args.model, True, not args.no_cache), **parse_model_options(args.model, args.option)}
-    model = make_model(args.model, design, **options)
+    check_pressure_limits(pressures, design)
+    calibration = load_calibration(args.calibration) if args.calibration else None
+    options = {**run_options(args.model, progress=True, cache=not args.no_cache),
+               **parse_model_options(args.model, args.option)}
+    model = build_model(args.model, design, calibration, **options)
     results = predict(model, pressures, design.length)
     rows = []
     for p, r in zip(levels, results):
@@ -85,9 +80,8 @@ def run(args) -> int:
         rows.append({
             "pressure_pa": float(p), "pressure_bar": float(p / PA_PER_BAR), "converged": ok,
             "bending_angle_deg": math.degrees(r.bending_angle_rad) if ok else None,
-            "radius_l_over_theta_m": (design.length / r.bending_angle_rad
-                                      if ok and r.bending_angle_rad > 0 else None),
             "radius_of_curvature_m": r.radius_of_curvature_m if ok else None,
+            "centreline_radius_m": r.centreline_radius_m if ok else None,
             "curvature_x_per_m": r.curvature_per_m[0] if ok else None,
             "curvature_y_per_m": r.curvature_per_m[1] if ok else None,
             "axial_stretch": r.axial_stretch if ok else None,
@@ -114,7 +108,7 @@ def run(args) -> int:
         print(f"{'p [bar]':>8} {'angle [deg]':>12} {'L/theta [mm]':>13}")
         for r in rows:
             if r["converged"]:
-                rc = r["radius_l_over_theta_m"]
+                rc = r["radius_of_curvature_m"]
                 print(f"{r['pressure_bar']:8.4f} {r['bending_angle_deg']:12.2f} "
                       f"{'inf' if rc is None else f'{rc * 1e3:.2f}':>13}")
             else:
@@ -136,11 +130,11 @@ def plot_sweep(rows: list[dict], path: str, title: str) -> str:
     ax1.plot(p, [r["bending_angle_deg"] for r in ok], "o-")
     ax1.set_xlabel("pressure [bar]")
     ax1.set_ylabel("bending angle [deg]")
-    rc = [(r["pressure_bar"], r["radius_l_over_theta_m"] * 1e3) for r in ok if r["radius_l_over_theta_m"]]
+    rc = [(r["pressure_bar"], r["radius_of_curvature_m"] * 1e3) for r in ok if r["radius_of_curvature_m"]]
     if rc:
         ax2.plot(*zip(*rc), "o-")
     ax2.set_xlabel("pressure [bar]")
-    ax2.set_ylabel("R_C = L / theta [mm]")
+    ax2.set_ylabel("R_C = l / theta [mm]")
     ax2.set_yscale("log")
     failed = [r["pressure_bar"] for r in rows if not r["converged"]]
     if failed:

@@ -16,7 +16,8 @@ class Prediction:
     pressures_pa: list[float]
     curvature_per_m: list[float]
     axial_stretch: float
-    radius_of_curvature_m: float | None   # 1/|k|, the stretched centreline's radius (not R_C = l/theta); None when straight
+    radius_of_curvature_m: float | None   # R_C = l / theta: length over the tip's bending angle; None when straight
+    centreline_radius_m: float | None     # 1/|k|, the stretched centreline's radius; None when straight
     bending_angle_rad: float
     tip_position_m: list[float]
     tip_orientation_xyzw: list[float]
@@ -24,17 +25,20 @@ class Prediction:
     solve_time_s: float
     reason: str = ""
     contact_force_n: float | None = None   # the tip's contact reaction, for rungs that model contact
+    band95: dict | None = None   # 95% half-widths from a calibration's covariance (core/calibration_file.py)
 
     def to_json(self) -> dict:
         d = dict(self.__dict__)
         if self.converged:
             d.pop("reason")
         else:  # never print numbers from a solve that failed
-            for key in ("curvature_per_m", "axial_stretch", "radius_of_curvature_m", "bending_angle_rad",
-                        "tip_position_m", "tip_orientation_xyzw", "contact_force_n"):
+            for key in ("curvature_per_m", "axial_stretch", "radius_of_curvature_m", "centreline_radius_m",
+                        "bending_angle_rad", "tip_position_m", "tip_orientation_xyzw", "contact_force_n", "band95"):
                 d[key] = None
         if d["contact_force_n"] is None:   # only rungs that model contact report it
             d.pop("contact_force_n")
+        if d["band95"] is None:
+            d.pop("band95")
         return d
 
 
@@ -57,15 +61,20 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
         pos, quat = tip_pose(state.curvature, arc)
         angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.contact_force
+    # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
+    measured_rc = state.radius_l_over_theta if own_length else None
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]
         kappa = float(np.hypot(*k))
+        theta = float(angle[i])
         out.append(Prediction(
             pressures_pa=[float(v) for v in p],
             curvature_per_m=[float(v) for v in k],
             axial_stretch=float(state.axial_stretch[i]),
-            radius_of_curvature_m=(1.0 / kappa) if kappa > 0 else None,
+            radius_of_curvature_m=(float(measured_rc[i]) if measured_rc is not None and np.isfinite(measured_rc[i])
+                                   else length / abs(theta) if theta != 0 else None),
+            centreline_radius_m=(1.0 / kappa) if kappa > 0 else None,
             bending_angle_rad=float(angle[i]),
             tip_position_m=[float(v) for v in pos[i]],
             tip_orientation_xyzw=[float(v) for v in quat[i]],
@@ -74,6 +83,13 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             reason="" if state.converged[i] else (state.message or "did not converge"),
             contact_force_n=None if contact is None else float(np.asarray(contact)[i])))
     return out
+
+
+def angle_per_length(state) -> np.ndarray:
+    """theta / l of a constant-curvature state (batched): |k| x axial stretch, 1/m. What a bench reads
+    as curvature (tip angle over sample length); its inverse is R_C = l / theta."""
+    k = np.atleast_2d(state.curvature)
+    return np.hypot(k[:, 0], k[:, 1]) * np.atleast_1d(state.axial_stretch)
 
 
 def state_backbone(state, length: float, n_points: int, index: int = 0):

@@ -30,7 +30,7 @@ from ..core.allocation import Allocator
 from ..core.errors import SoftcathError
 from ..core.command_shaping import CommandWatchdog, RateLimiter, check_frame, check_vector
 from ..core.design import load_design
-from ..core.models import make_model
+from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters
 from .parameters import declare
@@ -47,6 +47,8 @@ class AllocationNode(Node):
         p = partial(declare, self)
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
         model_name = p("model", "closed_form", "model rung used for the inverse")
+        calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
+                                                "('' = none)")
         self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",
                           minimum=1.0, maximum=1e9)
         self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped",
@@ -78,7 +80,8 @@ class AllocationNode(Node):
         # requested direction instead of clipping channels one by one at the wire.
         self.design = replace(design, max_pressure=min(float(requested_max), design.max_pressure))
         self.max_pressure = self.design.max_pressure
-        self.allocator = Allocator(make_model(model_name, self.design), hysteresis_deg=hysteresis)
+        calibration = load_calibration(calibration_file) if calibration_file else None
+        self.allocator = Allocator(build_model(model_name, self.design, calibration), hysteresis_deg=hysteresis)
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
                                   "tip_target farther than this from the base (m) is a fault and rejected",
                                   minimum=0.0)

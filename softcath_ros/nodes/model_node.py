@@ -30,7 +30,7 @@ from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
 from ..core.prediction import state_backbone
-from ..core.models import make_model
+from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
@@ -53,6 +53,8 @@ class ModelNode(Node):
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
         model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form, or auto (needs scene)")
         scene_name = p("scene", "", "scene YAML file or shipped scene name: with model auto, picks the rung")
+        calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
+                                                "('' = none)")
         n_points = p("backbone_points", 20, "number of poses in /softcath/backbone, base to tip",
                      minimum=2, maximum=10000)
         # 1000 = 1 s at 1 kHz: a reliable keep-last writer overwrites samples a late reader has
@@ -73,11 +75,12 @@ class ModelNode(Node):
                         maximum=3600.0)
 
         self.design = load_design(design_name)
+        self.calibration = load_calibration(calibration_file) if calibration_file else None
         if model_name == "auto":
             from ..core.scene import load_scene
 
             scene = load_scene(scene_name) if scene_name else None
-            self.model = make_model("auto", self.design, scene=scene)
+            self.model = build_model("auto", self.design, self.calibration, scene=scene)
             self.design = self.model.design       # the scene's device included
             self.get_logger().info(self.model.selection.reason)
         else:
@@ -126,7 +129,7 @@ class ModelNode(Node):
         if model_name == "surrogate":
             self.get_logger().info("model surrogate: loading its table (built now if not in the cache)")
         t0 = time.perf_counter()
-        model = make_model(model_name, self.design)
+        model = build_model(model_name, self.design, self.calibration)
         took = time.perf_counter() - t0
         if model.built_now:
             self.get_logger().warning(

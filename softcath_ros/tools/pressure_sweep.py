@@ -33,7 +33,8 @@ class SweepPoint:
     stamp_ns: int
 
     def radius_and_angle(self) -> tuple[float, float]:
-        """(R_C in m, inf when straight; bending angle in rad) of the arc through the tip."""
+        """(1/|k| of the arc through the tip in m, inf when straight; bending angle theta in rad).
+        R_C = l / theta needs the sample's unstretched length l (``print_table``)."""
         from ..core.kinematics import curvature_for_tip
 
         x, y, z = self.tip_position_m
@@ -115,17 +116,20 @@ def sweep_commands(start: float, stop: float, steps: int, n_channels: int, chann
     return p
 
 
-def print_table(points: list[SweepPoint | None], commands, file=sys.stdout) -> None:
-    print(f"{'pressure [bar]':>16} {'R_C [mm]':>10} {'angle [deg]':>12} {'tip x, y, z [mm]':>28}", file=file)
+def print_table(points: list[SweepPoint | None], commands, length: float, file=sys.stdout) -> None:
+    """One line per command: R_C = l / theta (``length`` l in m, the design's), 1/|k|, angle, tip."""
+    print(f"{'pressure [bar]':>16} {'R_C=l/theta [mm]':>17} {'1/|k| [mm]':>11} {'angle [deg]':>12} "
+          f"{'tip x, y, z [mm]':>28}", file=file)
     for cmd, pt in zip(commands, points):
         ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in cmd)
         if pt is None:
             print(f"{ps:>16}  no pose (rejected by the node or timed out; see /diagnostics)", file=file)
             continue
-        rc, angle = pt.radius_and_angle()
+        centreline, angle = pt.radius_and_angle()
         tip = ", ".join(f"{v * 1e3:7.2f}" for v in pt.tip_position_m)
-        rc_s = "inf" if math.isinf(rc) else f"{rc * 1e3:.2f}"
-        print(f"{ps:>16} {rc_s:>10} {math.degrees(angle):12.2f} {tip:>28}", file=file)
+        rc_s = "inf" if angle == 0 else f"{length / abs(angle) * 1e3:.2f}"
+        k_s = "inf" if math.isinf(centreline) else f"{centreline * 1e3:.2f}"
+        print(f"{ps:>16} {rc_s:>17} {k_s:>11} {math.degrees(angle):12.2f} {tip:>28}", file=file)
 
 
 def plot_backbones(points: list[SweepPoint | None], path: Path, title: str = "") -> Path:
@@ -163,6 +167,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=8)
     ap.add_argument("--unit", choices=("bar", "Pa"), default="bar")
     ap.add_argument("--channels", type=int, default=1, help="channels of the node's design")
+    ap.add_argument("--length", type=float, default=0.040,
+                    help="the node's design length in m, for R_C = l / theta (default 0.040: implemented_5mm)")
     ap.add_argument("--channel", type=int, default=0, help="channel that is swept")
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
     ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
@@ -191,7 +197,7 @@ def main(argv=None) -> int:
         if client is not None:
             client.close()
         rclpy.try_shutdown()
-    print_table(points, commands)
+    print_table(points, commands, args.length)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps([p.__dict__ if p else None for p in points], indent=1))

@@ -55,6 +55,15 @@ def rung_info(name: str) -> RungInfo:
     return rung_class(name).info
 
 
+def run_options(name: str, *, progress: bool | None = None, cache: bool | None = None) -> dict:
+    """Of ``progress`` and ``cache`` (None: leave the rung's default), those rung ``name`` declares:
+    what a command passes for ``--no-cache`` and its progress bar (rungs differ; "auto" takes neither)."""
+    if name not in RUNGS:
+        return {}
+    info = rung_info(name)
+    return {k: v for k, v in (("progress", progress), ("cache", cache)) if v is not None and info.accepts(k)}
+
+
 def make_model(name: str, design: Design, **options) -> BendModel:
     """Instantiate the rung ``name`` for ``design``; unknown names list the known ones.
     ``"auto"`` picks a rung for ``scene=`` (registered by core/model_selection.py)."""
@@ -64,4 +73,5 @@ def make_model(name: str, design: Design, **options) -> BendModel:
 
 
 __all__ = ["BendModel", "BendState", "CHOOSERS", "RUNGS", "RungInfo", "SolverDiagnostics",
-           "TipPose", "available_models", "make_model", "register_chooser", "rung_class", "rung_info"]
+           "TipPose", "available_models", "make_model", "register_chooser", "rung_class", "rung_info",
+           "run_options"]

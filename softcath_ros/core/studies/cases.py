@@ -16,7 +16,7 @@ from ..cache import CacheStore
 from ..design import design_from_dict
 
 # Bump when what a case records changes (it is part of every case's cache key).
-STUDY_CODE_VERSION = "studies-1"
+STUDY_CODE_VERSION = "studies-2"   # 2: radius_of_curvature_m is l / theta (was 1/|k|)
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,8 @@ def _rung_version(rung: str) -> str | None:
 def solve_case(spec: CaseSpec) -> dict:
     """Evaluate one case: {"results": [per command], "solve_time_s": wall time of the solve}.
 
-    Per command: curvature (1/m), R_C = 1/|k| (m; None if straight or not converged), axial
+    Per command: curvature (1/m), R_C = l / theta = 1 / (|k| x stretch) (m; None if straight or not
+    converged), the centreline's radius 1/|k| (``centreline_radius_m``), axial
     stretch, converged, message, and for the section rung the largest principal stretch in
     the silicone (``max_principal_stretch``), the strain measure the optimiser limits."""
     from ..models import make_model
@@ -71,9 +72,11 @@ def solve_case(spec: CaseSpec) -> dict:
         ok = bool(state.converged[i])
         k = state.curvature[i]
         kappa = float(np.hypot(*k)) if ok else float("nan")
+        theta_per_length = kappa * float(state.axial_stretch[i]) if ok else float("nan")
         row = {"pressures_pa": [float(v) for v in p], "converged": ok,
                "curvature_per_m": [float(v) for v in k] if ok else None,
-               "radius_of_curvature_m": (1.0 / kappa) if ok and kappa > 0 else None,
+               "radius_of_curvature_m": (1.0 / theta_per_length) if ok and kappa > 0 else None,
+               "centreline_radius_m": (1.0 / kappa) if ok and kappa > 0 else None,
                "axial_stretch": float(state.axial_stretch[i]) if ok else None,
                "max_principal_stretch": max_principal_stretch(model, p) if ok else None,
                "message": ""}

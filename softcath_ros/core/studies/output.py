@@ -81,7 +81,7 @@ def _fmt(v) -> str:
 def markdown(result: StudyResult, ctx: StudyContext, accuracy: dict, files: dict) -> str:
     lines = [f"# {result.title} ({result.design})", "",
              f"- rung: `{ctx.rung}`; {accuracy['note']}",
-             f"- pressure: {ctx.pressure / PA_PER_BAR:g} bar on channel {ctx.channel}, R_C = 1/|k|",
+             f"- pressure: {ctx.pressure / PA_PER_BAR:g} bar on channel {ctx.channel}, R_C = l / theta",
              f"- cases: {len(result.rows)} rows; {sum(1 for r in result.rows if not r.get('feasible', True))} infeasible, "
              f"{sum(1 for r in result.rows if r.get('feasible', True) and not r.get('converged', True))} did not converge "
              "(listed, never dropped)",

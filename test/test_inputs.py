@@ -1,0 +1,170 @@
+"""Inputs a user gets wrong: unit slips in design files, pressures above the limit, exit codes that
+agree between predict and sweep, --no-cache wherever a command reads the cache, the documented
+report command on a runs/ folder."""
+import os
+import time
+
+import numpy as np
+import pytest
+
+from softcath_ros.cli import build_parser, main
+from softcath_ros.core.design import design_from_dict
+from softcath_ros.core.errors import DesignError
+from softcath_ros.core.models import RUNGS, BendModel, BendState, RungInfo
+
+
+@pytest.mark.parametrize("path, value, fragment", [
+    (("outer_diameter",), 4, "4 m outer_diameter is implausible: design files are in metres; 0.004?"),
+    (("length",), 40, "40 m length is implausible: design files are in metres; 0.04?"),
+    (("limits", "max_pressure"), 0.5, "0.5 Pa limits.max_pressure is implausible: design files are in pascals; "
+                                      "50000 (0.5 bar)?"),
+    (("limits", "max_pressure"), 50, "50000 (50 kPa)?"),
+    (("limits", "max_pressure"), 5e7, "implausible"),
+    (("material", "c1"), 12.7, "12.7 Pa material.c1 is implausible: design files are in pascals; 12700 (12.7 kPa)?"),
+    (("cap_thickness",), 1.0, "1 m cap_thickness is implausible"),
+])
+def test_unit_slips_in_a_design_file_are_refused_with_the_likely_value(design_dict, path, value, fragment):
+    d = design_dict
+    for key in path[:-1]:
+        d = d[key]
+    d[path[-1]] = value
+    with pytest.raises(DesignError) as exc:
+        design_from_dict(design_dict)
+    assert fragment in str(exc.value) and exc.value.field == ".".join(path)
+
+
+def test_channel_diameter_in_millimetres_is_refused_as_a_slip(design_dict):
+    design_dict["channels"][0]["diameter"] = 1.7
+    with pytest.raises(DesignError, match=r"channels\[0\].diameter.*in metres; 0.0017\?"):
+        design_from_dict(design_dict)
+
+
+@pytest.mark.parametrize("command", [
+    ["predict", "--design", "implemented_5mm", "--pressure", "0.2", "0.6", "--unit", "bar"],
+    ["sweep", "--design", "implemented_5mm", "--to", "0.6", "--unit", "bar", "--no-plot"],
+    ["predict", "--design", "implemented_5mm", "--pressure", "60000"],
+])
+def test_pressures_above_max_pressure_are_refused_by_predict_and_sweep(command, capsys, tmp_path):
+    if command[0] == "sweep":
+        command += ["--out", str(tmp_path / "s")]
+    assert main(command) == 2
+    err = capsys.readouterr().err.strip()
+    assert "exceeds design 'implemented_5mm' max_pressure 50000 Pa (0.5 bar)" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "s.json").exists()
+
+
+class HalfFailingRung(BendModel):
+    """Converges below 20 kPa only (for exit codes without a slow solver)."""
+
+    name = "half_failing"
+    info = RungInfo(summary="test rung")
+
+    def _evaluate_batch(self, pressures):
+        n = len(pressures)
+        ok = pressures.max(axis=1) < 20000.0
+        return BendState(np.column_stack([np.zeros(n), -pressures[:, 0] * 1e-3]), np.ones(n), ok,
+                         message="" if ok.all() else "toy limit at 20 kPa")
+
+
+@pytest.fixture
+def half_failing(monkeypatch):
+    monkeypatch.setitem(RUNGS, "half_failing", "test_inputs:HalfFailingRung")
+
+
+def test_predict_and_sweep_agree_on_exit_codes(half_failing, capsys, tmp_path):
+    import json
+
+    base = ["--design", "implemented_5mm", "--model", "half_failing"]
+    assert main(["predict", *base, "--pressure", "0.1", "--unit", "bar", "--json"]) == 0
+    assert main(["predict", *base, "--pressure", "0.1", "0.3", "--unit", "bar", "--json"]) == 1
+    capsys.readouterr()
+    assert main(["predict", *base, "--pressure", "0.1", "0.3", "--unit", "bar", "--json"]) == 1
+    printed = json.loads(capsys.readouterr().out)        # the JSON is still printed
+    assert [r["converged"] for r in printed["results"]] == [True, False]
+    assert main(["sweep", *base, "--to", "0.15", "--unit", "bar", "--steps", "3", "--no-plot",
+                 "--out", str(tmp_path / "a")]) == 0
+    assert main(["sweep", *base, "--to", "0.3", "--unit", "bar", "--steps", "3", "--no-plot",
+                 "--out", str(tmp_path / "b")]) == 1
+    assert (tmp_path / "b.json").is_file()
+    assert main(["sweep", *base, "--to", "0.3", "--unit", "bar", "--steps", "1"]) == 2
+
+
+def _subparsers():
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return action.choices
+
+
+@pytest.mark.parametrize("command", ["predict", "sweep", "allocate", "report", "calibrate", "characterise",
+                                     "study", "envelope"])
+def test_every_command_that_reads_the_cache_has_no_cache(command):
+    options = {o for a in _subparsers()[command]._actions for o in a.option_strings}
+    assert "--no-cache" in options
+
+
+def test_no_cache_reaches_the_rung(monkeypatch, capsys):
+    """predict --no-cache builds a caching rung with cache=False (the section rung declares it)."""
+    import softcath_ros.core.calibration_file as cf
+
+    seen = {}
+    real = cf.make_model
+
+    def spy(name, design, **options):
+        seen.update(options)
+        return real("closed_form", design)
+
+    monkeypatch.setattr(cf, "make_model", spy)
+    assert main(["predict", "--design", "implemented_5mm", "--model", "section", "--pressure", "1000",
+                 "--no-cache"]) == 0
+    assert seen == {"cache": False}
+
+
+def test_documented_report_glob_matches_recordings_only(tmp_path, monkeypatch, capsys):
+    """`softcath report runs/bench_default_*/` (README): characterise keeps its logs out of that glob, and
+    several matching runs mean the newest; no argument means the newest under runs/."""
+    import yaml
+
+    from bench_sim_helpers import run_offline, write_recording
+    from softcath_ros.bench.protocol import load_protocol
+    from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
+    from softcath_ros.cli import characterise
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.models import make_model
+
+    src = open(characterise.__file__).read()
+    assert 'out_dir / "logs" / name' in src and '_logs"' not in src
+    design = load_design("implemented_5mm")
+    events, streams = run_offline(load_protocol("quick"), SimulatedRig(make_model("closed_form", design),
+                                                                       RigParams(seed=1)))
+    monkeypatch.chdir(tmp_path)
+    runs = tmp_path / "runs"
+    for i, name in enumerate(("bench_default_20261201_100000", "bench_default_20261201_110000")):
+        write_recording(runs / name, events, streams, yaml.safe_dump(design.to_dict()))
+        os.utime(runs / name, (time.time() + i, time.time() + i))
+    (runs / "logs" / "bench_default_20261201_110000").mkdir(parents=True)
+    matched = sorted(str(p) + "/" for p in runs.glob("bench_default_*/"))
+    assert len(matched) == 2
+    assert main(["report", *matched]) == 0
+    out = capsys.readouterr()
+    assert "newest of 2" in out.err and "bench_default_20261201_110000" in out.err
+    assert (runs / "bench_default_20261201_110000" / "report.md").is_file()
+    assert main(["report"]) == 0
+    assert "bench_default_20261201_110000" in capsys.readouterr().err
+
+
+def test_pressure_sweep_table_reports_r_c_as_l_over_theta():
+    """The tool's table (tools/pressure_sweep.py) reads R_C = l / theta off the tip pose, 1/|k| apart."""
+    import io
+
+    from softcath_ros.core.kinematics import tip_pose
+    from softcath_ros.tools.pressure_sweep import SweepPoint, print_table
+
+    k, length, stretch = np.array([0.0, -30.0]), 0.04, 1.1
+    pos, quat = tip_pose(k[None, :], np.array([length * stretch]))
+    point = SweepPoint([20000.0], pos[0].tolist(), quat[0].tolist(), [], 0)
+    out = io.StringIO()
+    print_table([point], [[20000.0]], length, file=out)
+    cells = out.getvalue().splitlines()[1].split()
+    theta = 30.0 * length * stretch
+    assert float(cells[1]) == pytest.approx(length / theta * 1e3, abs=0.006)   # printed to 0.01 mm
+    assert float(cells[2]) == pytest.approx(1e3 / 30.0, abs=0.006)
