@@ -64,8 +64,9 @@ def test_three_channel_pairs_match_linear_source_exactly(tmp_path, pairs):
     give the closed form's answer on every pair and, because a common pressure only stretches a
     linear symmetric body, for commands with all three channels pressurised too."""
     d = load_design("three_channel_5mm")
-    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9, pairs=pairs)
-    assert m.table["table"].shape[0] == (1 if pairs == "rotated" else 3)
+    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, pressure_step=6250.0, pairs=pairs)
+    assert set(m.table["ray_pair"].tolist()) == ({0} if pairs == "rotated" else {0, 1, 2})
+    assert m._flat.shape[0] == (1 if pairs == "rotated" else 3) * m.settings.fine_points ** 2
     cf = make_model("closed_form", d)
     rng = np.random.default_rng(3)
     p = rng.uniform(0, d.max_pressure, (300, 3))
