@@ -7,13 +7,15 @@ import sys
 
 
 def register(sub) -> None:
+    from ..bench.report import DEFAULT_OVERLAY
     from ..core.models import available_models
 
     p = sub.add_parser("report", help="analyse a bench recording: table + plots, model overlaid")
     p.add_argument("file", help="the bench recording (.mcap or its bag directory)")
     p.add_argument("--design", default=None, help="design to overlay (default: the one attached to the recording)")
-    p.add_argument("--model", nargs="+", default=["closed_form"],
-                   help=f"rung(s) to overlay: {', '.join(available_models())}")
+    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
+                   help=f"rung(s) to overlay (default: {' '.join(DEFAULT_OVERLAY)}, the section rung's table and "
+                        f"the fast, rough closed form): {', '.join(available_models())}")
     p.add_argument("--calibration", default=None, help="calibration YAML from `softcath calibrate` to overlay")
     p.add_argument("--out", default=None, help="output directory (default: beside the recording)")
     p.add_argument("--json", action="store_true", help="machine-readable output")

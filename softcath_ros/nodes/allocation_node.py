@@ -46,7 +46,7 @@ class AllocationNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = partial(declare, self)
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
-        model_name = p("model", "closed_form", "model rung used for the inverse")
+        model_name = p("model", "surrogate", "model rung used for the inverse")
         self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",
                           minimum=1.0, maximum=1e9)
         self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped",

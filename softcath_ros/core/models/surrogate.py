@@ -76,8 +76,7 @@ class SurrogateSettings:
     held_out_rays: int = 3              # 3 channels: rays used only to measure the error, one per pair
                                         # in turn (1 channel: always one)
     fine_points: int = 321              # 3 channels: resampled points per axis (bilinear read-out)
-    common_rays: int = 2                # rays with all three pressures > 0 that measure the common-mode error
-                                        # (up to 0.6 max_pressure)
+    common_rays: int = 3                # rays with all three pressures > 0 that measure the common-mode error
     common_tolerance: float = 0.01      # such commands are answered while within this in R_C (relative) ...
     common_direction_tolerance: float = 0.5   # ... and this in direction (degrees), refused beyond
     pairs: str = "auto"                 # 3 channels: "auto" uses the section's 3-fold symmetry when it
@@ -323,12 +322,13 @@ class SurrogateModel(BendModel):
         for i, (r, t) in enumerate(held):
             pool.submit(("held", i), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
         pool.submit(("common",), np.repeat(mags[:, None], 3, 1))
+        # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
+        # (a vented channel that has not yet reached zero is the usual case)
         checks = []
         for i in range(s.common_rays):
-            w = rng.uniform(0.2, 1.0, 3)
-            w[i % 3] = 1.0
-            checks.append(w / w.max())
-            pool.submit(("check", i), mags[mags <= 0.6 * pmax, None] * checks[-1][None, :])
+            w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
+            checks.append(np.roll(w, i % 3))
+            pool.submit(("check", i), mags[:, None] * checks[-1][None, :])
 
         def surface(r):
             arrays = rays[r].arrays()
