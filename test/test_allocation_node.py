@@ -29,8 +29,12 @@ EXE = Path(sys.executable).parent / "allocation_node"
 
 
 def start_node(exe, domain, *params):
+    """The node on the closed form unless ``params`` name a model: these tests check the node's
+    mechanics against the exactly invertible rung (the default rung: test_model_node_surrogate.py)."""
     env = graph_env(domain)
     args = [str(exe), "--ros-args"]
+    if not any(p.startswith("model:=") for p in params):
+        params = ("model:=closed_form", *params)
     for p in params:
         args += ["-p", p]
     return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -139,7 +139,7 @@ def test_direction_protocol_runs_through_allocation_node(tmp_path, procs):
     assert all(b.header.frame_id == topics.FRAME_ID for b in bends)
     top = max(bends, key=lambda b: np.hypot(b.vector.x, b.vector.y))
     assert np.degrees(np.arctan2(top.vector.y, top.vector.x)) == pytest.approx(60.0, abs=1e-6)
-    expected = Allocator(make_model("closed_form", load_design("three_channel_5mm"))).allocate(
+    expected = Allocator(make_model("surrogate", load_design("three_channel_5mm"))).allocate(   # the default rung
         (top.vector.x, top.vector.y)).pressures
     rows = [r for r in rows_from_recording(path) if r.level == 1.0]
     assert len(rows) == 2

@@ -112,11 +112,11 @@ def test_truncated_npz_of_a_real_entry_is_rebuilt(tmp_path, caplog):
 
 def test_surrogate_table_damaged_is_rebuilt(tmp_path):
     d = load_design("implemented_5mm")
-    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9)
+    m = make_model("surrogate", d, source="closed_form", cache=tmp_path, pressure_step=6250.0)
     assert m.built_now and m.path.parent == tmp_path / "surrogate" and m.path.name.startswith("implemented_5mm_")
-    assert not make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9).built_now
+    assert not make_model("surrogate", d, source="closed_form", cache=tmp_path, pressure_step=6250.0).built_now
     m.path.write_bytes(b"garbage")
-    again = make_model("surrogate", d, source="closed_form", cache=tmp_path, grid_points=9)
+    again = make_model("surrogate", d, source="closed_form", cache=tmp_path, pressure_step=6250.0)
     assert again.built_now and again.meta["key"] == m.meta["key"]
 
 
@@ -127,8 +127,8 @@ def test_cache_options_of_the_rungs(tmp_path, monkeypatch):
     assert store_for(tmp_path / "mine").root == tmp_path / "mine"
     assert store_for(str(tmp_path / "mine")).root == tmp_path / "mine"
     d = load_design("implemented_5mm")
-    assert make_model("surrogate", d, source="closed_form", cache=False, grid_points=9).path is None
-    m = make_model("surrogate", d, source="closed_form", cache=True, grid_points=9)
+    assert make_model("surrogate", d, source="closed_form", cache=False, pressure_step=6250.0).path is None
+    m = make_model("surrogate", d, source="closed_form", cache=True, pressure_step=6250.0)
     assert m.path.is_file() and tmp_path / "env" / "surrogate" == m.path.parent
 
 

@@ -10,6 +10,10 @@ import numpy as np
 from .analysis import Hysteresis, StepStats
 from ..core.units import PA_PER_BAR
 
+# Overlaid by default: the accurate rung through its table (the section rung's surrogate) and the fast,
+# rough closed form.
+DEFAULT_OVERLAY = ("surrogate", "closed_form")
+
 
 def _fmt(x: float, scale: float = 1.0, digits: int = 2) -> str:
     return "—" if x is None or not np.isfinite(x) else f"{x * scale:.{digits}f}"
@@ -152,7 +156,7 @@ def recording_design(path):
     return None if data is None else design_from_dict(load_yaml(data.decode()), source=f"{path}:design.yaml")
 
 
-def write_report(recording, design=None, rungs=("closed_form",), calibration=None,
+def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None,
                  out_dir=None, topics: dict | None = None, cache: bool = True) -> dict:
     """Analyse ``recording`` and write report.md + PNGs. Returns paths and the statistics.
 

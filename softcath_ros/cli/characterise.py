@@ -20,6 +20,7 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+from ..bench.report import DEFAULT_OVERLAY
 from ..core.errors import SoftcathError
 from ..graph import NodeGraph, stop_process
 
@@ -29,8 +30,10 @@ def register(sub) -> None:
                        "(nodes as separate processes) and write recording + report")
     p.add_argument("--protocol", default="default", help="shipped protocol name or a path")
     p.add_argument("--design", default=None, help="design (default: the protocol's)")
-    p.add_argument("--sim-model", default="closed_form", help="rung that plays the rig's truth")
-    p.add_argument("--model", nargs="+", default=["closed_form"], help="rung(s) overlaid in the report")
+    p.add_argument("--sim-model", default="surrogate", help="rung that plays the rig's truth (default: the section "
+                   "rung's table)")
+    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
+                   help="rung(s) overlaid in the report; the first also drives the nodes (default: %(default)s)")
     p.add_argument("--output-dir", default="runs", help="where the recording directory goes (default runs/)")
     p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
     p.add_argument("--timeout", type=float, default=170.0, help="give up after this many seconds")

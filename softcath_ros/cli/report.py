@@ -10,14 +10,16 @@ DEFAULT_RUNS = "runs"   # where `softcath characterise` puts recordings (its --o
 
 
 def register(sub) -> None:
+    from ..bench.report import DEFAULT_OVERLAY
     from ..core.models import available_models
 
     p = sub.add_parser("report", help="analyse a bench recording: table + plots, model overlaid")
     p.add_argument("file", nargs="*", help="the bench recording (.mcap or its bag directory); several: the newest "
                                            f"(default: the newest under {DEFAULT_RUNS}/)")
     p.add_argument("--design", default=None, help="design to overlay (default: the one attached to the recording)")
-    p.add_argument("--model", nargs="+", default=["closed_form"],
-                   help=f"rung(s) to overlay: {', '.join(available_models())}")
+    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
+                   help=f"rung(s) to overlay (default: {' '.join(DEFAULT_OVERLAY)}, the section rung's table and "
+                        f"the fast, rough closed form): {', '.join(available_models())}")
     p.add_argument("--calibration", default=None,
                    help="calibration file from `softcath calibrate`: each rung is overlaid calibrated too, with its band")
     p.add_argument("--out", default=None, help="output directory (default: beside the recording)")

@@ -46,7 +46,7 @@ class AllocationNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = partial(declare, self)
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
-        model_name = p("model", "closed_form", "model rung used for the inverse")
+        model_name = p("model", "surrogate", "model rung used for the inverse")
         calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
                                                 "('' = none)")
         self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",

@@ -51,7 +51,7 @@ class ModelNode(Node):
         super().__init__(topics.MODEL_NODE, **node_options)
         p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
-        model_name = p("model", "closed_form", "model rung (core.models), e.g. closed_form, or auto (needs scene)")
+        model_name = p("model", "surrogate", "model rung (core.models), e.g. surrogate, closed_form, or auto (needs scene)")
         scene_name = p("scene", "", "scene YAML file or shipped scene name: with model auto, picks the rung")
         calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
                                                 "('' = none)")
@@ -124,10 +124,10 @@ class ModelNode(Node):
             f"executor={self.executor_name}, qos {reliability} depth {depth}, messages {self.preparation}")
 
     def _make_model(self, model_name: str):
-        """The rung, saying so when start-up waits for it: a surrogate whose table is not in the
-        cache builds it here (about a second for 1 channel, minutes for 3 channels)."""
+        """The rung, saying so when start-up waits for it: a surrogate whose table is neither shipped
+        nor in the cache builds it here (seconds for 1 channel, tens of seconds for 3 channels)."""
         if model_name == "surrogate":
-            self.get_logger().info("model surrogate: loading its table (built now if not in the cache)")
+            self.get_logger().info("model surrogate: loading its table (built now if neither shipped nor cached)")
         t0 = time.perf_counter()
         model = build_model(model_name, self.design, self.calibration)
         took = time.perf_counter() - t0
@@ -136,8 +136,9 @@ class ModelNode(Node):
                 f"model {model_name}: its table for design {self.design.name} was not in the cache and was built "
                 f"at start-up in {took:.1f} s (now cached at {model.path}); max R_C error against its source: "
                 + ", ".join(f"{part} {b.get('rc_rel_max', float('nan')):.2%}" for part, b in model.error_bound.items()))
-        elif took > 1.0:
-            self.get_logger().info(f"model {model_name}: ready in {took:.1f} s")
+        elif took > 1.0 or model_name == "surrogate":
+            self.get_logger().info(f"model {model_name}: ready in {took:.1f} s"
+                                   + (f" ({model.origin} table {model.table_path})" if model_name == "surrogate" else ""))
         return model
 
     def _new_messages(self):

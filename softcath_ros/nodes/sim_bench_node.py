@@ -10,6 +10,7 @@ Publishes at ``rate_hz``: /softcath/pressure_measured (Float64MultiArray, Pa),
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import asdict
@@ -42,7 +43,7 @@ class SimBenchNode(Node):
         super().__init__(topics.SIM_BENCH_NODE, **node_options)
         p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design file or shipped design name")
-        model_name = p("model", "closed_form", "model rung that stands for the true actuator")
+        model_name = p("model", "surrogate", "model rung that stands for the true actuator (default: the section rung's table)")
         rate_hz = p("rate_hz", 100.0, "publishing rate of the readings, Hz", minimum=1.0, maximum=10000.0)
         values = {}
         for name, default in asdict(RigParams()).items():
@@ -54,6 +55,7 @@ class SimBenchNode(Node):
         model = make_model(model_name, design)
         self.rig = SimulatedRig(model, params)
         self.rejected = 0
+        self.unanswered = 0   # readings not published: the truth rung refused the pressures (outside its table)
         self.command = np.zeros(design.n_channels)
         self.pub_p = self.create_publisher(Float64MultiArray, topics.PRESSURE_MEASURED, 10)
         self.pub_a = self.create_publisher(Float64, topics.BENCH_ANGLE, 10)
@@ -102,15 +104,22 @@ class SimBenchNode(Node):
         self.rig.advance(dt, self.command)
         r = self.rig.read()
         self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
+        if not (math.isfinite(r.angle) and math.isfinite(r.force)):
+            self.unanswered += 1     # never a made-up reading
+            return
         self.pub_a.publish(Float64(data=r.angle))
         self.pub_f.publish(Float64(data=r.force))
 
     def diagnostics(self):
-        st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == 0 else DiagnosticStatus.WARN,
+        st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == self.unanswered == 0
+                              else DiagnosticStatus.WARN,
                               name=topics.SIM_BENCH_NODE, hardware_id="simulated",
                               message="simulated rig running" + (f", {self.rejected} commands rejected"
-                                                                 if self.rejected else ""),
+                                                                 if self.rejected else "")
+                              + (f", {self.unanswered} readings withheld (the truth rung refused the pressures)"
+                                 if self.unanswered else ""),
                               values=[KeyValue(key="rejected_commands", value=str(self.rejected)),
+                                      KeyValue(key="withheld_readings", value=str(self.unanswered)),
                                       KeyValue(key="bench", value=self.rig.bench),
                                       KeyValue(key="sample_length_m", value=f"{self.rig.length:g}")])
         msg = DiagnosticArray(status=[st])

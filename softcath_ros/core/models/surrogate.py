@@ -1,37 +1,44 @@
 """Surrogate rung: tables built offline from a higher rung (default ``section``) for one design.
 
 What is tabulated (pressures in Pa, from 0 to the design's max_pressure or to where the source
-stops converging, whichever comes first; the table ends there):
+stops converging, whichever comes first; the table ends there). The source is sampled along rays
+of commands, one fresh ramp from rest per ray, in parallel (``surrogate_build.py``):
 
 - 1 channel: curvature vector and axial stretch over the channel pressure, a cubic spline
-  through the source's answers on a grid (plus the last pressure the source reached).
+  through the source's answers every ``pressure_step`` (plus the last pressure it reached).
 - 3 channels: the response to two active channels (a, b) = (p_r, p_r+1) with the third at
-  zero, which is how the allocator drives the body: one table over (a, b) per pair, a cubic
-  spline through the source's grid resampled onto a fine grid that is read bilinearly
-  (bilinear on the fine grid is what makes a batch of 1e6 commands take a fraction of a
-  second). With ``pairs="rotated"`` (3-fold symmetric sections only) just pair 0-1 is built
-  and rotated by 120 and 240 degrees for the others (rotating the body by 120 degrees maps
-  channel i onto channel i + 1): a third of the cost, but the section rung's mesh is not
-  exactly symmetric, which costs up to ~2% in R_C near lumen contact, so the default
-  tabulates each pair.
+  zero, which is how the allocator drives the body. Per pair, rays t = b / (a + b) sampled at
+  sums a + b every ``pressure_step``, added adaptively where the response bends; a bicubic
+  spline through them over (t, a + b) is resampled when the table is loaded onto a fine (a, b)
+  grid that is read bilinearly (what makes a batch of 1e6 commands take a fraction of a
+  second). A 3-fold symmetric section (equal channels at equal angles: ``pairs="auto"``) needs
+  the rays of half of pair 0-1 only: the other half is its mirror image and pairs 1-2 and 2-0
+  are rotations by 120 and 240 degrees. ``pairs="each"`` solves every pair over its whole range.
 - Commands with all three pressures > 0 (the allocator never sends them, an operator might):
   the common part m = min(p) is subtracted and treated as pure stretch,
       k(p) ~ k_pair(p - m),   lambda(p) ~ lambda_pair(p - m) + lambda_common(m) - 1,
   with lambda_common tabulated from the source at equal pressures. A common pressure also
-  stiffens the body a little, which this leaves out; the error this makes is measured against
-  the source at a few such commands and stored (``error_bound['common_mode']``).
+  stiffens the body, which this leaves out: the error is measured against the source along
+  rays with all three channels pressurised, and such commands are answered only up to the
+  common pressure below which it stayed within ``common_tolerance`` (R_C) and
+  ``common_direction_tolerance``; above it they are refused (``error_bound['common_mode']``).
 
-The error against the source is measured at held-out commands (not on the grid; for 3
-channels on all three pairs, so the symmetry assumption is checked too) and stored with the
-table: ``error_bound``. Outside the built range the surrogate refuses: ``converged`` False,
-NaN numbers and a message naming the range and, if the source failed, where and why.
+The error against the source is measured at held-out commands (on rays not in the table, at
+pressures between its points; for 3 channels on all three pairs and both sides of the mirror,
+so the symmetry assumption is checked too) and stored with the table: ``error_bound``. Outside
+the built range the surrogate refuses: ``converged`` False, NaN numbers and a message naming the
+range and, if the source failed, where and why.
 
-Tables are stored in the cache (core/cache.py, kind ``surrogate``) under a hash of the design's
-content, the source rung, its options and the table settings: a changed design builds anew.
+Where a table comes from: a table shipped with the package (``config/surrogate_tables/``,
+written by ``softcath surrogate build --shipped``), the cache (core/cache.py, kind ``surrogate``)
+or a file given as ``table=``; each is used only if its key (a hash of the design's content, the
+source rung, its options and solver version, the table settings and SURROGATE_VERSION) is the
+model's. A missing or stale table is built (with a log line saying why) into the cache.
 """
 from __future__ import annotations
 
 import json
+import logging
 import math
 import time
 from bisect import bisect_right
@@ -45,33 +52,40 @@ from ..design import Design
 from ..errors import ModelError
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, options_of
+from .surrogate_build import direction_error_deg, rc_error
 from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-2"
+SURROGATE_VERSION = "surrogate-3"
 _KIND = "surrogate"   # the cache kind of the tables
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
+_log = logging.getLogger("softcath_ros.surrogate")
 
 
 @dataclass(frozen=True)
 class SurrogateSettings:
     source: str = "section"             # the rung the table is built from
     source_options: dict = field(default_factory=dict)  # its options (mesh_size, ...): part of the key
-    grid_points: int = 21               # source evaluations per pressure axis
+    pressure_step: float = 2000.0       # Pa between table points along a ray (3 channels: in a + b)
+    initial_rays: int = 5               # 3 channels: rays over half a pair (t in [0, 1/2]) before refinement
+    max_rays: int = 13                  # 3 channels: most rays over half a pair
+    ray_tolerance: float = 0.005        # split between rays where the table misses the middle ray by more
+                                        # than this in R_C (relative) ...
+    ray_direction_tolerance: float = 0.2    # ... or by more than this in direction (degrees)
+    held_out_rays: int = 3              # 3 channels: rays used only to measure the error, one per pair
+                                        # in turn (1 channel: always one)
     fine_points: int = 321              # 3 channels: resampled points per axis (bilinear read-out)
-    held_out: int = 24                  # source evaluations used only to measure the error
-    common_points: int = 9              # equal-pressure commands for lambda_common
-    common_checks: int = 5              # commands with all three pressures > 0 to bound that error
-    common_tolerance: float = 0.005     # relative R_C error above which such commands are refused
-    pairs: str = "each"                 # 3 channels: "each" tabulates all three pairs; "rotated" only
-                                        # pair 0-1 and rotates it (a third of the cost, exact only if
-                                        # the source is exactly 3-fold symmetric: the section rung's
-                                        # mesh is not, up to ~2% in R_C near lumen contact)
+    common_rays: int = 3                # rays with all three pressures > 0 that measure the common-mode error
+    common_tolerance: float = 0.01      # such commands are answered while within this in R_C (relative) ...
+    common_direction_tolerance: float = 0.5   # ... and this in direction (degrees), refused beyond
+    pairs: str = "auto"                 # 3 channels: "auto" uses the section's 3-fold symmetry when it
+                                        # has it, "rotated" requires it, "each" solves every pair
 
 
 def _symmetric_three(design: Design, tol: float = 1e-7) -> bool:
-    """True when the section maps onto itself under a 120 degree rotation (channel i -> i + 1)."""
+    """True when the section maps onto itself under a 120 degree rotation (channel i -> i + 1);
+    with circular holes it then is also mirror symmetric between any two channels."""
     if design.n_channels != 3:
         return False
     c, s = _COS[1], _SIN[1]
@@ -89,16 +103,7 @@ def _symmetric_three(design: Design, tol: float = 1e-7) -> bool:
     return True
 
 
-def _rc_error(k_model: np.ndarray, k_ref: np.ndarray) -> np.ndarray:
-    """Relative error in R_C = 1/|k|: |R_model - R_ref| / R_ref."""
-    km = np.hypot(k_model[..., 0], k_model[..., 1])
-    kr = np.hypot(k_ref[..., 0], k_ref[..., 1])
-    return np.abs(kr / km - 1.0)
-
-
-def _direction_error_deg(k_model: np.ndarray, k_ref: np.ndarray) -> np.ndarray:
-    d = np.arctan2(k_model[..., 1], k_model[..., 0]) - np.arctan2(k_ref[..., 1], k_ref[..., 0])
-    return np.degrees(np.abs((d + np.pi) % (2 * np.pi) - np.pi))
+_rc_error, _direction_error_deg = rc_error, direction_error_deg   # (tests and benchmarks import these names)
 
 
 class SurrogateModel(BendModel):
@@ -110,23 +115,35 @@ class SurrogateModel(BendModel):
         options=options_of(SurrogateSettings, {
             "source": "the rung the table is built from (default section)",
             "source_options": "that rung's options (mesh_size, ...): part of the table's key",
-            "grid_points": "source evaluations per pressure axis",
+            "pressure_step": "Pa between table points along a ray (3 channels: in the pair's sum)",
+            "initial_rays": "3 channels: rays over half a pair before refinement",
+            "max_rays": "3 channels: most rays over half a pair",
+            "ray_tolerance": "relative R_C miss at a middle ray above which rays are added",
+            "ray_direction_tolerance": "direction miss (degrees) at a middle ray above which rays are added",
+            "held_out_rays": "3 channels: rays used only to measure the error",
             "fine_points": "3 channels: resampled points per axis (bilinear read-out)",
-            "held_out": "source evaluations used only to measure the error",
-            "common_points": "equal-pressure commands for the common-mode stretch",
-            "common_checks": "commands with all three pressures > 0 that bound the common-mode error",
-            "common_tolerance": "relative R_C error above which such commands are refused",
-            "pairs": "3 channels: 'each' tabulates all three pairs, 'rotated' pair 0-1 only"}) + (
+            "common_rays": "rays with all three pressures > 0 that measure the common-mode error",
+            "common_tolerance": "relative R_C error up to which such commands are answered",
+            "common_direction_tolerance": "direction error (degrees) up to which such commands are answered",
+            "pairs": "3 channels: 'auto' (symmetry if the section has it), 'rotated' (requires it), 'each'"}) + (
             Option("cache", "object", "True (the project cache), a cache root directory, or False (build every time)"),
+            Option("table", "str", "a table file (softcath surrogate build --out); refused if stale"),
+            Option("shipped", "bool", "use a table shipped with the package when it is current (default True)"),
+            Option("workers", "int", "processes that build the table (default: the machine's cores, at most 8)"),
             Option("progress", "bool", "progress bars while building"),
-            Option("rebuild", "bool", "build the table even if the cache holds it")))
+            Option("rebuild", "bool", "build the table even if the cache or the package holds it"),
+            Option("build", "bool", "False: refuse (one line, saying why) instead of building a missing table")))
 
     def __init__(self, design: Design, source: str = "section", source_options: dict | None = None,
                  cache: bool | str | Path = True, progress: bool = False, rebuild: bool = False,
+                 table: str | Path = "", shipped: bool = True, workers: int | None = None, build: bool = True,
                  **table_settings):
         """``source``: the rung to tabulate; ``source_options``: its options (mesh_size, ...).
         ``cache``: True (the project cache), a cache root directory, or False (build every time).
-        ``progress``: tqdm bars while building. ``table_settings``: ``SurrogateSettings`` fields."""
+        ``table``: a table file to use (must be current). ``shipped``: use the package's table.
+        ``workers``: build processes. ``progress``: tqdm bars while building. ``build``: False refuses
+        (ModelError) instead of building a table it does not find current.
+        ``table_settings``: ``SurrogateSettings`` fields."""
         super().__init__(design)
         try:
             self.settings = SurrogateSettings(source=source, source_options=dict(source_options or {}),
@@ -135,25 +152,52 @@ class SurrogateModel(BendModel):
             raise ModelError(f"model 'surrogate': {exc}; settings: {list(SurrogateSettings.__annotations__)}") from None
         if self.settings.source == "surrogate":
             raise ModelError("model 'surrogate': source 'surrogate' would tabulate itself")
+        if self.settings.pairs not in ("auto", "each", "rotated"):
+            raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'auto', 'each' or 'rotated'")
+        if not self.settings.pressure_step > 0:
+            raise ModelError(f"model 'surrogate': pressure_step {self.settings.pressure_step!r} must be > 0 Pa")
+        symmetric = _symmetric_three(design)
         if design.n_channels == 1:
             self.kind = "one_channel"
-        elif design.n_channels == 3 and (self.settings.pairs == "each" or _symmetric_three(design)):
+        elif design.n_channels == 3 and (self.settings.pairs != "rotated" or symmetric):
             self.kind = "three_channel"
         else:
             raise ModelError(f"model 'surrogate': design '{design.name}' has {design.n_channels} channels and "
                              f"pairs='{self.settings.pairs}'; the surrogate tabulates 1-channel designs, 3-channel "
-                             "designs (pairs='each') and 3-fold symmetric 3-channel designs (pairs='rotated')")
-        if self.settings.pairs not in ("each", "rotated"):
-            raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'each' or 'rotated'")
+                             "designs (pairs='auto' or 'each') and 3-fold symmetric 3-channel designs "
+                             "(pairs='rotated')")
+        self.rotated = self.kind == "three_channel" and symmetric and self.settings.pairs != "each"
+        from .surrogate_build import default_workers
+
+        self.workers = default_workers() if workers is None else max(1, int(workers))
         self.progress = progress
         self.store = store_for(cache)
         self.key = CacheStore.key(self.solver_version, self._cache_parts())
-        loaded = None if rebuild or self.store is None else self._load()
-        self.built_now = loaded is None   # the table was built by this constructor (not from the cache)
+        self.origin = ""          # where the table came from: "file", "shipped", "cache" or "built"
+        self.table_path: Path | None = None
+        self.stale_reason = "forced rebuild" if rebuild else "none shipped, none in the cache"
+        loaded = None
+        if table:
+            loaded = self._load_file(Path(table), required=True)
+            self.origin, self.table_path = "file", Path(table)
+        elif not rebuild:
+            loaded = self._load_shipped() if shipped else None
+            if loaded is None and self.store is not None:
+                loaded = self._load()
+                if loaded is not None:
+                    self.origin, self.table_path = "cache", self.path
+        self.built_now = loaded is None   # the table was built by this constructor (not found current)
+        if loaded is None and not build:
+            raise ModelError(f"model 'surrogate': no current table for design '{design.name}' from "
+                             f"'{self.settings.source}': {self.stale_reason}")
         if loaded is None:
+            _log.warning("surrogate: no current table for design '%s' from '%s' (%s); building one%s",
+                         design.name, self.settings.source, self.stale_reason,
+                         f" into {self.path}" if self.store is not None else " (no cache)")
             self.table, self.meta = self._build()
+            self.origin = "built"
             if self.store is not None:
-                self._save()
+                self.table_path = self._save()
         else:
             self.table, self.meta = loaded
         self._prepare()
@@ -180,6 +224,12 @@ class SurrogateModel(BendModel):
             return None
         return self.store.path(_KIND, self.solver_version, self._cache_parts(), self._cache_name(), "npz")
 
+    def shipped_path(self) -> Path:
+        """Where the package keeps (or would keep) this design's table."""
+        from ...resources import shipped_dir
+
+        return shipped_dir("surrogate_table") / f"{self._cache_name()}.npz"
+
     @property
     def error_bound(self) -> dict:
         """Measured error against the source at held-out commands (see module docstring)."""
@@ -192,207 +242,299 @@ class SurrogateModel(BendModel):
         return 0.0, float(self.meta["max_pressure"])
 
     # ------------------------------------------------------------------ building
-    def _source(self, progress: bool | None = None):
-        from . import make_model
-
+    def _source_options(self) -> dict:
         opts = dict(self.settings.source_options)
         if self.settings.source in ("section", "fe3d"):
-            opts.setdefault("progress", self.progress if progress is None else progress)
-            opts.setdefault("cache", self.store if self.store is not None else True)
-        return make_model(self.settings.source, self.design, **opts)
+            opts.setdefault("progress", False)
+            opts.setdefault("cache", self.store if self.store is not None else False)
+        return opts
 
     def _build(self) -> tuple[dict, dict]:
-        t0 = time.perf_counter()
-        src = self._source()
-        if self.kind == "one_channel":
-            table, meta = self._build_one(src)
-        else:
-            table, meta = self._build_three(src)
-        meta.update({"version": SURROGATE_VERSION, "key": self.key, "design": self.design.name,
-                     "design_hash": self.design.content_hash(), "kind": self.kind,
-                     "settings": asdict(self.settings), "build_seconds": time.perf_counter() - t0})
-        return table, meta
-
-    def _stage(self, desc: str, total: int):
         from tqdm import tqdm
 
-        return tqdm(total=total, desc=f"surrogate: {desc}", unit="cmd", disable=not self.progress)
+        from .surrogate_build import RayPool
 
-    def _run(self, src, pressures: np.ndarray, desc: str) -> BendState:
-        with self._stage(desc, len(pressures)) as bar:
-            state = src.evaluate(pressures)
-            bar.update(len(pressures))
-        return state
+        t0 = time.perf_counter()
+        with tqdm(total=0, desc=f"surrogate {self.design.name}: {self.settings.source} rays", unit="ray",
+                  disable=not self.progress) as bar:
+            pool = RayPool(self.design, self.settings.source, self._source_options(), self.workers, bar)
+            try:
+                table, meta = self._build_one(pool) if self.kind == "one_channel" else self._build_three(pool)
+            except BaseException:
+                pool.close(cancel=True)
+                raise
+            pool.close()
+        meta.update({"version": SURROGATE_VERSION, "key": self.key, "design": self.design.name,
+                     "design_hash": self.design.content_hash(), "kind": self.kind, "rotated": self.rotated,
+                     "settings": asdict(self.settings), "source_version": self._cache_parts()[2],
+                     "build_seconds": time.perf_counter() - t0, "workers": self.workers})
+        return table, meta
 
-    def _build_one(self, src) -> tuple[dict, dict]:
+    def _build_one(self, pool) -> tuple[dict, dict]:
         s = self.settings
         pmax = self.design.max_pressure
-        grid = np.linspace(0.0, pmax, s.grid_points)
-        st = self._run(src, grid[:, None], "grid")
-        ok = st.converged
-        n_ok = int(np.argmin(ok)) if not ok.all() else len(grid)  # the table ends at the first failure
+        grid = np.linspace(0.0, pmax, max(int(math.ceil(pmax / s.pressure_step)), 4) + 1)
+        mids = 0.5 * (grid[1:] + grid[:-1])     # held out: where interpolation error is largest
+        pool.submit("table", grid[:, None])
+        pool.submit("held", mids[:, None])
+        res = dict(pool.results())
+        r = res["table"]
+        n_ok = r["n_ok"]
         if n_ok < 4:
-            raise ModelError(f"model 'surrogate': source '{s.source}' converged at only {n_ok} of the grid "
-                             f"pressures from 0 ({st.message}); too few for a table")
-        p = grid[:n_ok]
-        y = np.column_stack([st.curvature[:n_ok], st.axial_stretch[:n_ok]])
-        failure = ""
-        if n_ok < len(grid):
-            failure = st.message.split("; ")[0]  # the later ones repeat the first failure
-            last = (st.last_converged or [None] * len(grid))[n_ok]
-            if last is not None and last["pressure"][0] > p[-1] + 1.0:
-                p = np.append(p, last["pressure"][0])
-                y = np.vstack([y, [*last["curvature"], last["axial_stretch"]]])
-        # held-out: midpoints between knots (where interpolation error is largest)
-        mids = 0.5 * (p[1:] + p[:-1])
-        take = np.linspace(0, len(mids) - 1, min(s.held_out, len(mids))).round().astype(int)
-        held = np.unique(mids[take])
-        table = {"p": p, "y": y}
-        self.table, self.meta = table, {"max_pressure": float(p[-1])}
+            raise ModelError(f"model 'surrogate': source '{s.source}' converged at only {n_ok} of the table's "
+                             f"pressures from 0 ({r['message']}); too few for a table")
+        p, y = grid[:n_ok], r["values"][:n_ok]
+        last = r["last"]
+        if last is not None and last["pressure"][0] > p[-1] + 1.0:
+            p = np.append(p, last["pressure"][0])
+            y = np.vstack([y, [*last["curvature"], last["axial_stretch"]]])
+        self.table, self.meta = {"p": p, "y": y}, {"max_pressure": float(p[-1])}
         self._prepare()
-        ref = self._run(src, held[:, None], "held-out")
+        h = res["held"]
+        n_h = h["n_ok"]
+        held = mids[:n_h][mids[:n_h] <= p[-1]]
         mine = self.evaluate(held[:, None])
-        good = ref.converged
-        bound = self._errors(mine, ref, good, held[:, None])
-        meta = {"max_pressure": float(p[-1]), "source_failure": failure, "source_evaluations":
-                int(len(grid) + len(held)), "error_bound": {"one_channel": bound}}
-        return table, meta
+        bound = self._errors(mine, h["values"][:len(held)], held[:, None])
+        meta = {"max_pressure": float(p[-1]), "source_failure": r["message"],
+                "source_evaluations": int(len(grid) + len(mids)), "source_rays": 2,
+                "error_bound": {"one_channel": bound}}
+        return self.table, meta
 
-    def _build_three(self, src) -> tuple[dict, dict]:
-        s = self.settings
-        pmax = self.design.max_pressure
-        g = np.linspace(0.0, pmax, s.grid_points)
-        n = len(g)
-        # pair r: channel r at a, channel r + 1 at b, the third at zero; "rotated" builds pair 0 only
-        pairs = 1 if s.pairs == "rotated" else 3
-        tabs, oks, messages, failed = [], [], [], 0
-        for r in range(pairs):
-            z, conv, msgs = self._pair_grid(g, r)
-            cell_ok = conv[:-1, :-1] & conv[1:, :-1] & conv[:-1, 1:] & conv[1:, 1:]
-            # and not next to a failed cell: the response turns sharply where the source is about to
-            # fail (lumen walls closing), which a spline through the grid does not follow
-            near = np.pad(cell_ok, 1, constant_values=True)
-            oks.append(cell_ok & near[:-2, 1:-1] & near[2:, 1:-1] & near[1:-1, :-2] & near[1:-1, 2:])
-            tabs.append(self._resample(g, z, conv))
-            messages += msgs
-            failed += int((~conv).sum())
-        fine = np.linspace(0.0, pmax, s.fine_points)
-        tab, cell_ok = np.stack(tabs), np.stack(oks)
-        # equal pressures: pure stretch (the curvature there is the source's asymmetry, kept as a check)
-        cm = np.linspace(0.0, pmax, s.common_points)
-        stc = self._run(src, np.repeat(cm[:, None], 3, 1), "common pressure")
-        cm_ok = stc.converged
-        n_cm = int(np.argmin(cm_ok)) if not cm_ok.all() else len(cm)
-        table = {"grid": g, "fine": fine, "table": tab, "cell_ok": cell_ok,
-                 "common_p": cm[:n_cm], "common_stretch": stc.axial_stretch[:n_cm]}
-        self.table = table
-        self.meta = {"max_pressure": float(pmax), "max_common_pressure": float(cm[n_cm - 1]) if n_cm else 0.0}
-        self._prepare()
+    def _build_three(self, pool) -> tuple[dict, dict]:
+        from .surrogate_build import PairRays, mirrored, pair_commands, pair_surface, reflection
+
+        s, d = self.settings, self.design
+        pmax = d.max_pressure
+        n_step = max(int(math.ceil(pmax / s.pressure_step)), 4)
+        sums = np.linspace(0.0, 2.0 * pmax, 2 * n_step + 1)      # a + b along a pair's ray
+        mags = np.linspace(0.0, pmax, n_step + 1)                # the largest channel pressure
+        pairs = (0,) if self.rotated else (0, 1, 2)
+        half = 0.5 if self.rotated else 1.0
+        refl = reflection(d) if self.rotated else None
+        rays = {r: PairRays(sums) for r in pairs}
         rng = np.random.default_rng(0)
-        # held-out pair commands on all three pairs, inside usable cells
-        held = []
-        while len(held) < s.held_out:
-            a, b = rng.uniform(0.05 * pmax, pmax, 2)
-            ia, ib = min(int(a / g[1]), n - 2), min(int(b / g[1]), n - 2)
-            zero = len(held) % 3
-            if not cell_ok[((zero + 1) % 3) % pairs, ia, ib]:
+        n0 = s.initial_rays if self.rotated else 2 * s.initial_rays - 1
+        rounds = {0: [(r, float(t)) for r in pairs for t in np.linspace(0.0, half, n0)]}
+        for r, t in rounds[0]:
+            pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax))
+        # held out: every pair, t off the table's rays, sums between the table's
+        held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
+        for i, (r, t) in enumerate(held):
+            pool.submit(("held", i), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
+        pool.submit(("common",), np.repeat(mags[:, None], 3, 1))
+        # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
+        # (a vented channel that has not yet reached zero is the usual case)
+        checks = []
+        for i in range(s.common_rays):
+            w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
+            checks.append(np.roll(w, i % 3))
+            pool.submit(("check", i), mags[:, None] * checks[-1][None, :])
+
+        def surface(r):
+            arrays = rays[r].arrays()
+            return pair_surface(*(mirrored(*arrays, refl) if self.rotated else arrays), sums)
+
+        results, waiting, refine_log = {}, {0: len(rounds[0])}, []
+        for tag, res in pool.results():
+            if tag[0] != "ray":
+                results[tag] = res
                 continue
-            p = np.zeros(3)
-            p[(zero + 1) % 3], p[(zero + 2) % 3] = a, b
-            held.append(p)
-        held = np.array(held)
-        ref = self._fresh_each(held, "held-out")
-        bound = self._errors(self.evaluate(held), ref, ref.converged, held)
-        # commands with all three > 0: the common-part approximation
-        common = []
-        while len(common) < s.common_checks:
-            p = rng.uniform(0.05 * pmax, 0.6 * pmax, 3)
-            if p.min() <= self.meta["max_common_pressure"]:
-                common.append(p)
-        common = np.array(common)
-        refc = self._fresh_each(common, "common-mode checks")
-        cbound = self._errors(self.evaluate(common), refc, refc.converged, common)
-        failure = "; ".join(messages[:3] + [stc.message.split("; ")[0]] if stc.message else messages[:3])
-        meta = {"max_pressure": float(pmax), "max_common_pressure": self.meta["max_common_pressure"],
-                "source_failure": failure, "failed_grid_points": failed,
-                "source_evaluations": int(pairs * n * n + len(cm) + len(held) + len(common)),
+            _, k, r, t = tag
+            results[tag] = res
+            waiting[k] -= 1
+            if waiting[k]:
+                continue
+            # round k is complete: judge its middle rays against the table without them, then add them
+            split = []
+            if k > 0:
+                surf = {r: surface(r) for r in pairs}
+                for r, t, lo, hi in rounds[k]:
+                    got = results[("ray", k, r, t)]
+                    n = got["n_ok"]
+                    ev, reachable = surf[r]
+                    m = sums[1:n]
+                    inside = reachable(np.full(len(m), t), m)
+                    if inside.any():
+                        want = ev(np.full(int(inside.sum()), t), m[inside])
+                        miss_rc = float(np.nanmax(rc_error(want[:, :2], got["values"][1:n][inside, :2])))
+                        miss_dir = float(np.nanmax(direction_error_deg(want[:, :2], got["values"][1:n][inside, :2])))
+                    else:
+                        miss_rc = miss_dir = float("inf")
+                    refine_log.append({"pair": r, "t": t, "rc_miss": miss_rc, "direction_miss_deg": miss_dir})
+                    if miss_rc > s.ray_tolerance or miss_dir > s.ray_direction_tolerance:
+                        split += [(r, 0.5 * (lo + t), lo, t), (r, 0.5 * (t + hi), t, hi)]
+            for item in rounds[k]:
+                r, t = item[0], item[1]
+                rays[r].add(t, results.pop(("ray", k, r, t)))
+            if k == 0:
+                split = []
+                for r in pairs:
+                    ts = sorted(rays[r].t)
+                    split += [(r, 0.5 * (a + b), a, b) for a, b in zip(ts[:-1], ts[1:])]
+            room = {r: s.max_rays - len(rays[r].t) for r in pairs}
+            nxt = []
+            for item in split:
+                if room[item[0]] > 0 and item[3] - item[2] > 1.0 / 256:
+                    room[item[0]] -= 1
+                    nxt.append(item)
+            if nxt:
+                rounds[k + 1], waiting[k + 1] = nxt, len(nxt)
+                for r, t, _, _ in nxt:
+                    pool.submit(("ray", k + 1, r, t), pair_commands(3, r, t, sums, pmax))
+        # the table
+        arrs = [rays[r].arrays() for r in pairs]
+        cm = results[("common",)]
+        n_cm = cm["n_ok"]
+        table = {"sums": sums, "ray_pair": np.concatenate([np.full(len(a[0]), r) for r, a in zip(pairs, arrs)]),
+                 "ray_t": np.concatenate([a[0] for a in arrs]), "ray_values": np.concatenate([a[1] for a in arrs]),
+                 "ray_reach": np.concatenate([a[2] for a in arrs]), "ray_complete": np.concatenate([a[3] for a in arrs]),
+                 "common_p": mags[:n_cm], "common_stretch": cm["values"][:n_cm, 2]}
+        max_common = float(mags[n_cm - 1]) if n_cm else 0.0
+        self.table = table
+        self.meta = {"max_pressure": float(pmax), "rotated": self.rotated, "max_common_pressure": max_common}
+        self._prepare()
+        # held-out error
+        cmds, vals = [], []
+        for i, (r, t) in enumerate(held):
+            h = results[("held", i)]
+            c = pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax)[:h["n_ok"]]
+            cmds.append(c[1:] if len(c) and not c[0].any() else c)
+            vals.append(h["values"][:h["n_ok"]][len(c) - len(cmds[-1]):])
+        cmds, vals = np.vstack(cmds), np.vstack(vals)
+        inside = cmds.max(1) <= pmax                     # the rays were solved one step beyond max_pressure
+        cmds, vals = cmds[inside], vals[inside]
+        bound = self._errors(self.evaluate(cmds), vals, cmds)
+        # commands with all three > 0: the common-mode error against the common pressure
+        cc, cv = [], []
+        for i, w in enumerate(checks):
+            h = results[("check", i)]
+            cc.append(mags[1:h["n_ok"], None] * w[None, :])
+            cv.append(h["values"][1:h["n_ok"]])
+        cc, cv = np.vstack(cc), np.vstack(cv)
+        mine = self.evaluate(cc)
+        use = mine.converged
+        rc = rc_error(mine.curvature[use], cv[use, :2])
+        dr = direction_error_deg(mine.curvature[use], cv[use, :2])
+        common = cc[use].min(1)
+        bad = (rc > s.common_tolerance) | (dr > s.common_direction_tolerance)
+        # answered up to the largest checked common pressure below the first one off by too much
+        # (every checked one when none was: then up to the equal-pressure table's end)
+        answered = common < common[bad].min() if bad.any() else np.ones(len(common), dtype=bool)
+        if bad.any():
+            limit = float(common[answered].max()) if answered.any() else 0.0
+        else:
+            limit = max_common
+        cbound = self._errors(mine, cv, cc, within=np.flatnonzero(use)[answered])
+        cbound.update({"checked_points": int(use.sum()), "rc_rel_max_checked": float(rc.max()) if rc.size else None,
+                       "direction_deg_max_checked": float(dr.max()) if dr.size else None,
+                       "max_common_pressure_pa": limit, "tolerance_rc_rel": s.common_tolerance,
+                       "tolerance_direction_deg": s.common_direction_tolerance})
+        failures = [res["message"] for tag, res in sorted(results.items(), key=lambda x: str(x[0]))
+                    if tag[0] in ("ray", "common") and res["message"]]
+        failures += [m for r in pairs for m in rays[r].messages]
+        reach_bar = {f"{r}:{t:.4f}": None if c else float(sums[n - 1] / PA_PER_BAR) if n else 0.0
+                     for r, a in zip(pairs, arrs) for t, n, c in zip(a[0], a[2], a[3])}
+        n_rays = sum(len(a[0]) for a in arrs)
+        meta = {"max_pressure": float(pmax), "rotated": self.rotated, "max_common_pressure": limit,
+                "max_common_table_pressure": max_common,
+                "source_failure": "; ".join(dict.fromkeys(failures[:3])),
+                "source_rays": int(n_rays + len(held) + 1 + len(checks)), "table_rays": int(n_rays),
+                "source_evaluations": int(sum(len(pair_commands(3, r, t, sums, pmax))
+                                              for r, a in zip(pairs, arrs) for t in a[0])
+                                          + len(cmds) + len(mags) * (1 + len(checks))),
+                "ray_reach_sum_bar": reach_bar, "refinement": refine_log,
                 "error_bound": {"pair": bound, "common_mode": cbound},
-                "common_checks_bar": (common / PA_PER_BAR).round(4).tolist(),
-                "common_curvature_max_per_m": float(np.nanmax(np.abs(stc.curvature[:n_cm]))) if n_cm else 0.0}
+                "common_checks_direction": [w.round(4).tolist() for w in checks],
+                "common_curvature_max_per_m": float(np.nanmax(np.abs(cm["values"][:n_cm, :2]))) if n_cm else 0.0}
         return table, meta
-
-    def _fresh_each(self, pressures: np.ndarray, desc: str) -> BendState:
-        """The source's answer to each command on its own ramp from zero (see the pair grid)."""
-        states = []
-        with self._stage(desc, len(pressures)) as bar:
-            for p in pressures:
-                states.append(self._source(progress=False).evaluate(p[None, :]))
-                bar.update(1)
-        return BendState(curvature=np.vstack([st.curvature for st in states]),
-                         axial_stretch=np.concatenate([st.axial_stretch for st in states]),
-                         converged=np.concatenate([st.converged for st in states]),
-                         message="; ".join(st.message for st in states if st.message))
-
-    def _pair_grid(self, g: np.ndarray, r: int):
-        """The source on the grid g x g for pair r, one monotone ramp per row, each from a fresh
-        source: (0, 0) -> (a, 0) -> (a, b) with b rising. Fresh because the section rung's answers
-        were seen to depend on the path after it had visited high pressures or failed (up to ~10%
-        in R_C on one serpentine path through the grid), so no row inherits another's."""
-        n = len(g)
-        z = np.full((n, n, 3), np.nan)
-        conv = np.zeros((n, n), dtype=bool)
-        messages = []
-        with self._stage(f"pair {r}-{(r + 1) % 3} grid", n * n) as bar:
-            for i, a in enumerate(g):
-                row = np.zeros((n, 3))
-                row[:, r], row[:, (r + 1) % 3] = a, g
-                st = self._source(progress=False).evaluate(row)
-                conv[i] = st.converged
-                z[i] = np.column_stack([st.curvature, st.axial_stretch])
-                if st.message:
-                    messages.append(st.message.split("; ")[0])
-                bar.update(n)
-        return z, conv, messages
-
-    def _resample(self, g: np.ndarray, z: np.ndarray, conv: np.ndarray) -> np.ndarray:
-        """Cubic spline through the grid, sampled on the fine grid. Failed grid points are filled
-        from the nearest converged one only so the spline can be built (their cells are refused)."""
-        from scipy.interpolate import RectBivariateSpline
-
-        z = z.copy()
-        if not conv.all():
-            good = np.argwhere(conv)
-            for i, j in np.argwhere(~conv):
-                gi, gj = good[np.argmin(np.abs(good - (i, j)).sum(1))]
-                z[i, j] = z[gi, gj]
-        fine = np.linspace(g[0], g[-1], self.settings.fine_points)
-        return np.stack([RectBivariateSpline(g, g, z[..., c], kx=3, ky=3, s=0)(fine, fine) for c in range(3)], -1)
 
     @staticmethod
-    def _errors(mine: BendState, ref: BendState, good: np.ndarray, pressures: np.ndarray) -> dict:
-        use = good & mine.converged
+    def _errors(mine: BendState, ref: np.ndarray, pressures: np.ndarray, within=None) -> dict:
+        """R_C, direction and stretch errors of ``mine`` against the source's values ``ref`` (N, 3)
+        where both answered (and, if given, only at the indices ``within``)."""
+        use = mine.converged & np.isfinite(ref).all(1)
+        if within is not None:
+            keep = np.zeros(len(use), dtype=bool)
+            keep[within] = True
+            use &= keep
+        out = {"points": int(use.sum()), "refused": int((~mine.converged & np.isfinite(ref).all(1)).sum())}
         if not use.any():
-            return {"points": 0}
-        rc = _rc_error(mine.curvature[use], ref.curvature[use])
+            return out
+        rc = rc_error(mine.curvature[use], ref[use, :2])
         worst = int(np.argmax(rc))
-        return {"points": int(use.sum()), "rc_rel_max": float(rc.max()), "rc_rel_median": float(np.median(rc)),
-                "direction_deg_max": float(_direction_error_deg(mine.curvature[use], ref.curvature[use]).max()),
-                "stretch_abs_max": float(np.abs(mine.axial_stretch[use] - ref.axial_stretch[use]).max()),
-                "worst_at_bar": (pressures[use][worst] / PA_PER_BAR).round(4).tolist(),
-                "source_not_converged": int((~good).sum())}
+        out.update({"rc_rel_max": float(rc.max()), "rc_rel_median": float(np.median(rc)),
+                    "direction_deg_max": float(direction_error_deg(mine.curvature[use], ref[use, :2]).max()),
+                    "stretch_abs_max": float(np.abs(mine.axial_stretch[use] - ref[use, 2]).max()),
+                    "worst_at_bar": (pressures[use][worst] / PA_PER_BAR).round(4).tolist()})
+        return out
 
     # ------------------------------------------------------------------ storage
-    def _save(self) -> None:
-        self.store.save_arrays(_KIND, self.solver_version, self._cache_parts(),
-                               {"meta": np.array(json.dumps(self.meta)), **self.table}, self._cache_name())
+    def _arrays(self) -> dict:
+        return {"meta": np.array(json.dumps(self.meta)), **self.table}
+
+    def _save(self) -> Path:
+        return self.store.save_arrays(_KIND, self.solver_version, self._cache_parts(), self._arrays(),
+                                      self._cache_name())
+
+    def write(self, path: str | Path) -> Path:
+        """The table as a file (``softcath surrogate build --out``; the shipped tables)."""
+        from ..cache import _atomic_write
+
+        path = Path(path)
+        _atomic_write(path, lambda f: np.savez(f, **self._arrays()))
+        return path
+
+    @staticmethod
+    def _split(arrays: dict):
+        meta = json.loads(str(arrays.pop("meta")))
+        return arrays, meta
 
     def _load(self):
         table = self.store.load_arrays(_KIND, self.solver_version, self._cache_parts(), self._cache_name(),
                                        require=("meta",))
         if table is None:
             return None
-        meta = json.loads(str(table.pop("meta")))
+        table, meta = self._split(table)
         return (table, meta) if meta.get("key") == self.key else None
+
+    def _load_file(self, path: Path, required: bool = False):
+        """The table in ``path`` if it is this model's (same key); else None, or with ``required`` a
+        one-line error saying why it does not fit."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                table, meta = self._split({k: z[k] for k in z.files})
+        except Exception as exc:
+            if required:
+                raise ModelError(f"model 'surrogate': table {path} cannot be read ({type(exc).__name__})") from None
+            return None
+        if meta.get("key") == self.key:
+            return table, meta
+        self.stale_reason = self._stale_reason(meta)
+        if required:
+            raise ModelError(f"model 'surrogate': table {path} is not current for design '{self.design.name}' "
+                             f"({self.stale_reason}); rebuild it: softcath surrogate build {self.design.name}")
+        return None
+
+    def _stale_reason(self, meta: dict) -> str:
+        if meta.get("design_hash") != self.design.content_hash():
+            return f"built for another design content (hash {meta.get('design_hash')})"
+        if meta.get("version") != SURROGATE_VERSION:
+            return f"built by {meta.get('version')}, this is {SURROGATE_VERSION}"
+        now = self._cache_parts()[2]
+        if meta.get("source_version", now) != now:
+            return f"built from {meta.get('source_version')}, the source rung is now {now}"
+        return "built with other table settings"
+
+    def _load_shipped(self):
+        path = self.shipped_path()
+        if not path.is_file():
+            return None
+        loaded = self._load_file(path)
+        if loaded is not None:
+            self.origin, self.table_path = "shipped", path
+        else:
+            self.stale_reason = f"the shipped table {path.name} is stale: {self.stale_reason}"
+        return loaded
 
     # ------------------------------------------------------------------ evaluation
     def _prepare(self) -> None:
@@ -406,22 +548,36 @@ class SurrogateModel(BendModel):
             self._breaks = t["p"].tolist()
             self._coeffs = self._spline.c  # (4, m, 3)
         else:
-            fine = t["fine"]
-            self._nf = len(fine) - 1
-            self._hf = float(fine[1] - fine[0])
-            self._flat = np.ascontiguousarray(t["table"].reshape(-1, 3))
-            self._rotated = t["table"].shape[0] == 1
-            g = t["grid"]
-            self._hg = float(g[1] - g[0])
-            self._ng = len(g) - 1
-            self._cell_ok = t["cell_ok"]
+            tab, self._cell_ok = self._fine_tables()
+            self._nf = self.settings.fine_points - 1
+            self._hf = self._pmax / self._nf
+            self._flat = np.ascontiguousarray(tab.reshape(-1, 3))
+            self._rotated = tab.shape[0] == 1
             self._all_ok = bool(self._cell_ok.all())
             self._cp, self._cs = t["common_p"], t["common_stretch"]
             self._max_common = float(self.meta["max_common_pressure"])
-            cm_err = (self.meta.get("error_bound") or {}).get("common_mode", {}).get("rc_rel_max")
-            self._common_refused = cm_err is not None and not cm_err <= self.settings.common_tolerance
-            if self._common_refused:
-                self._max_common = 0.0
+
+    def _fine_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), and
+        which of its cells lie where the source converged on both bracketing rays."""
+        from .surrogate_build import mirrored, pair_surface, reflection
+
+        t = self.table
+        fine = np.linspace(0.0, self._pmax, self.settings.fine_points)
+        a, b = np.meshgrid(fine, fine, indexing="ij")
+        m = a + b
+        tq = np.divide(b, m, out=np.zeros_like(m), where=m > 0)
+        tabs, oks = [], []
+        for r in ((0,) if self.meta["rotated"] else (0, 1, 2)):
+            sel = t["ray_pair"] == r
+            rays = (t["ray_t"][sel], t["ray_values"][sel], t["ray_reach"][sel], t["ray_complete"][sel])
+            if self.meta["rotated"]:
+                rays = mirrored(*rays, reflection(self.design))
+            ev, reachable = pair_surface(*rays, t["sums"])
+            tabs.append(ev(tq.ravel(), m.ravel()).reshape(*m.shape, 3))
+            node = reachable(tq, m)
+            oks.append(node[:-1, :-1] & node[1:, :-1] & node[:-1, 1:] & node[1:, 1:])
+        return np.stack(tabs), np.stack(oks)
 
     def _refusal(self, p: np.ndarray, why: str) -> str:
         msg = (f"surrogate: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p)} bar {why} "
@@ -443,11 +599,12 @@ class SurrogateModel(BendModel):
             k, lam, ok = self._three(pressures, inside)
             reason = "is outside the table's range (negative, above the range, or where the source failed)"
             first = np.flatnonzero(~ok)
-            if first.size and inside[first[0]] and pressures[first[0]].min() > 0.0 and self._common_refused:
-                err = self.meta["error_bound"]["common_mode"]["rc_rel_max"]
-                reason = (f"has all three pressures > 0: treating the common part as pure stretch was measured "
-                          f"{err:.1%} off the source in R_C (tolerance {self.settings.common_tolerance:.1%}), "
-                          "so the surrogate does not answer it")
+            if first.size and inside[first[0]] and pressures[first[0]].min() > self._max_common:
+                s = self.settings
+                reason = (f"has a pressure common to all three channels above {self._max_common / PA_PER_BAR:.4f} "
+                          f"bar, beyond which treating it as pure stretch was measured off the source by more than "
+                          f"{s.common_tolerance:.1%} in R_C or {s.common_direction_tolerance:g} degrees, so the "
+                          "surrogate does not answer it")
         if not ok.all():
             k = np.where(ok[:, None], k, np.nan)
             lam = np.where(ok, lam, np.nan)
@@ -484,8 +641,8 @@ class SurrogateModel(BendModel):
         lam = kl[:, 2] + np.interp(m, self._cp, self._cs) - 1.0
         ok = inside & (m <= self._max_common)
         if not self._all_ok:
-            ia = np.minimum((a / self._hg).astype(np.intp), self._ng - 1)
-            ib = np.minimum((b / self._hg).astype(np.intp), self._ng - 1)
+            ia = np.minimum((a / self._hf).astype(np.intp), self._nf - 1)
+            ib = np.minimum((b / self._hf).astype(np.intp), self._nf - 1)
             ok &= self._cell_ok[pair, ia, ib]
         return k, lam, ok
 
