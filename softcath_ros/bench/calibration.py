@@ -128,3 +128,24 @@ def calibrated_design_dict(design, result: CalibrationResult, recording: str) ->
                         f"{result.pressure_shift:.4g} +- {result.ci95['pressure_shift']:.2g} (95%, apply as "
                         f"p_model = (1 - shift) p)")
     return d
+
+
+def load_calibration(path) -> dict:
+    """A calibration file written by ``softcath calibrate`` (the ``.calibration.yaml`` sidecar),
+    read with the bounded reader and checked: ``rung`` a known rung, ``material_scale`` > 0 and
+    ``pressure_shift`` < 1, both finite. Anything else is one line naming the field."""
+    from ..core.models import available_models
+    from ..core.yaml_io import load_yaml_file
+
+    data = load_yaml_file(path)
+    if not isinstance(data, dict):
+        raise SoftcathError(f"calibration {path}: must be a mapping (the .calibration.yaml `softcath calibrate` writes)")
+    rung = data.get("rung")
+    if rung not in available_models():
+        raise SoftcathError(f"calibration {path}: field 'rung' = {rung!r}: not one of {available_models()}")
+    for key, ok, rule in (("material_scale", lambda v: v > 0, "must be positive"),
+                          ("pressure_shift", lambda v: v < 1, "must be below 1")):
+        v = data.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
+            raise SoftcathError(f"calibration {path}: field '{key}' = {v!r}: {rule} (a finite number)")
+    return data

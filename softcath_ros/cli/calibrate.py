@@ -1,11 +1,12 @@
 """`softcath calibrate FILE.mcap --design D`: fit pressure shift and material scale, write a calibrated design."""
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import yaml
+
+from ..core import json_output
 
 
 def register(sub) -> None:
@@ -41,7 +42,7 @@ def run(args) -> int:
     sidecar.write_text(yaml.safe_dump(cal, sort_keys=False))
     rep = write_report(path, design, [args.model], cal, out_dir=path.parent)
     if args.json:
-        json.dump({**cal, "report": rep["report"]}, sys.stdout, indent=2)
+        json_output.dump({**cal, "report": rep["report"]}, sys.stdout, indent=2)
         print()
     else:
         print(f"rung {result.rung}: pressure shift {result.pressure_shift:.4f} ± {result.ci95['pressure_shift']:.4f}, "

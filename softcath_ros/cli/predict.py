@@ -1,15 +1,15 @@
 """`softcath predict`: bending for channel pressures, from any rung."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 
 import numpy as np
 
+from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures
+from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures, positive_float
 
 
 def register(sub) -> None:
@@ -21,7 +21,7 @@ def register(sub) -> None:
     p.add_argument("--pressure", required=True, nargs="+",
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
-    p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
     add_option_argument(p)
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -33,8 +33,6 @@ def run(args) -> int:
     from ..core.prediction import format_mm, predict
 
     design = load_design(args.design)
-    if args.length is not None and args.length <= 0:
-        raise SoftcathError(f"--length {args.length}: must be positive (m)")
     pressures = parse_pressures(args.pressure, design.n_channels, args.unit)
     if np.any(pressures < 0):
         raise SoftcathError("pressures are gauge pressures and must not be negative")
@@ -51,7 +49,7 @@ def run(args) -> int:
         model = make_model(args.model, design, **parse_model_options(args.model, args.option))
     results = predict(model, pressures, args.length)
     if args.json:
-        json.dump({"model": model.name, "design": design.name,
+        json_output.dump({"model": model.name, "design": design.name,
                    "length_m": args.length if args.length is not None else model.design.length,
                    "results": [r.to_json() for r in results]}, sys.stdout, indent=2)
         print()

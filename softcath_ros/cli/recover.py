@@ -1,8 +1,9 @@
 """`softcath recover FILE.mcap`: rebuild a truncated recording, keeping every complete message."""
 from __future__ import annotations
 
-import json
 import sys
+
+from ..core import json_output
 
 
 def register(sub) -> None:
@@ -20,7 +21,7 @@ def run(args) -> int:
 
     report = recover(recording_file(args.file), args.output)
     if args.json:
-        json.dump(report.to_json(), sys.stdout, indent=2)
+        json_output.dump(report.to_json(), sys.stdout, indent=2)
         print()
         return 0
     state = "was complete" if report.was_complete else f"was truncated ({report.stop_reason or 'cut'})"

@@ -1,9 +1,10 @@
 """`softcath report FILE.mcap`: per-step statistics, hysteresis, model overlay (Markdown + PNG)."""
 from __future__ import annotations
 
-import json
 import math
 import sys
+
+from ..core import json_output
 
 
 def register(sub) -> None:
@@ -33,18 +34,15 @@ def stats_json(stats) -> list[dict]:
 
 
 def run(args) -> int:
+    from ..bench.calibration import load_calibration
     from ..bench.report import write_report
     from ..core.design import load_design
-    from ..core.yaml_io import load_yaml
 
     design = load_design(args.design) if args.design else None
-    calibration = None
-    if args.calibration:
-        with open(args.calibration) as f:
-            calibration = load_yaml(f.read())
+    calibration = load_calibration(args.calibration) if args.calibration else None
     result = write_report(args.file, design, args.model, calibration, args.out)
     if args.json:
-        json.dump({"report": result["report"], "plots": result["plots"], "steps": stats_json(result["stats"]),
+        json_output.dump({"report": result["report"], "plots": result["plots"], "steps": stats_json(result["stats"]),
                    "hysteresis": [h.__dict__ for h in result["hysteresis"]]}, sys.stdout, indent=2, default=float)
         print()
     else:

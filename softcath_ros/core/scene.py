@@ -34,7 +34,7 @@ from pathlib import Path
 from .design import Design, Device, load_design
 from .errors import SoftcathError
 from .rod.loads import REST_TIP, Loads, TipPlaneContact
-from .yaml_io import load_yaml
+from .yaml_io import load_yaml_file
 
 FEATURES = ("free_bending", "device_stiffness", "tip_load", "contact", "gravity")
 
@@ -186,8 +186,5 @@ def load_scene(name_or_path: str | Path) -> Scene:
     except ResourceNotFound as exc:
         raise SceneError("<file>", str(name_or_path),
                          f"no such file or shipped scene (shipped: {', '.join(exc.known)})") from None
-    try:
-        raw = load_yaml(path.read_text())
-    except Exception as exc:  # noqa: BLE001 - a YAML syntax error is reported as the scene's fault
-        raise SceneError("<file>", str(path), f"not valid YAML: {exc}") from None
+    raw = load_yaml_file(path)
     return scene_from_dict(raw, base_dir=path.parent)
