@@ -134,6 +134,8 @@ def load_calibration(path) -> dict:
     """A calibration file written by ``softcath calibrate`` (the ``.calibration.yaml`` sidecar),
     read with the bounded reader and checked: ``rung`` a known rung, ``material_scale`` > 0 and
     ``pressure_shift`` < 1, both finite. Anything else is one line naming the field."""
+    from ..core.checks import finite_number
+    from ..core.errors import shown
     from ..core.models import available_models
     from ..core.yaml_io import load_yaml_file
 
@@ -142,10 +144,11 @@ def load_calibration(path) -> dict:
         raise SoftcathError(f"calibration {path}: must be a mapping (the .calibration.yaml `softcath calibrate` writes)")
     rung = data.get("rung")
     if rung not in available_models():
-        raise SoftcathError(f"calibration {path}: field 'rung' = {rung!r}: not one of {available_models()}")
+        raise SoftcathError(f"calibration {path}: field 'rung' = {shown(rung)}: not one of {available_models()}")
     for key, ok, rule in (("material_scale", lambda v: v > 0, "must be positive"),
                           ("pressure_shift", lambda v: v < 1, "must be below 1")):
-        v = data.get(key)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
-            raise SoftcathError(f"calibration {path}: field '{key}' = {v!r}: {rule} (a finite number)")
+        v = finite_number(data.get(key))
+        if v is None or not ok(v):
+            raise SoftcathError(f"calibration {path}: field '{key}' = {shown(data.get(key))}: {rule} (a finite number)")
+        data[key] = v
     return data

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
-from ..core.errors import SoftcathError
-from ..core.names import NAME_RULE, is_file_name
+from ..core.errors import SoftcathError, shown
+from ..core.checks import NAME_RULE, finite_number, is_file_name
 from ..core.yaml_io import load_yaml_file
 
 BENCHES = ("angle", "force")
@@ -32,7 +32,7 @@ BENCHES = ("angle", "force")
 
 class ProtocolError(SoftcathError):
     def __init__(self, field_name: str, value, reason: str):
-        super().__init__(f"protocol field '{field_name}' = {value!r}: {reason}")
+        super().__init__(f"protocol field '{field_name}' = {shown(value)}: {reason}")
 
 
 @dataclass(frozen=True)
@@ -122,9 +122,9 @@ def _num(d: dict, key: str, default=None, *, positive=False, nonneg=False, maxim
         if default is None:
             raise ProtocolError(name, None, "missing required field")
         return float(default)
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ProtocolError(name, v, "must be a finite number")
+    v = finite_number(d[key])
+    if v is None:
+        raise ProtocolError(name, d[key], "must be a finite number")
     if positive and v <= 0:
         raise ProtocolError(name, v, "must be positive")
     if nonneg and v < 0:

@@ -16,7 +16,7 @@ from .yaml_io import load_yaml_file
 
 from .errors import DesignError
 from .materials import YeohMaterial, material_from_spec
-from .names import NAME_RULE, is_file_name
+from .checks import NAME_RULE, finite_number, is_file_name
 
 # Thinnest silicone wall we accept unless the design states its own minimum (m).
 # 0.2 mm is about what moulding of Ecoflex reliably gives; the implemented design has 0.6 mm.
@@ -309,12 +309,10 @@ def _point(value, field_name) -> tuple[float, float]:
 
 
 def _number(value, field_name) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DesignError(field_name, value, "must be a number")
-    value = float(value)
-    if not math.isfinite(value):
-        raise DesignError(field_name, value, "must be finite")
-    return value
+    v = finite_number(value)
+    if v is None:
+        raise DesignError(field_name, value, "must be a finite number")
+    return v
 
 
 def _positive(value, field_name) -> float:
