@@ -44,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from ..graph import default_to_localhost_discovery
+
+    default_to_localhost_discovery()
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
