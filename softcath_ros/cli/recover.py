@@ -10,7 +10,8 @@ def register(sub) -> None:
     p = sub.add_parser("recover", help="rebuild a truncated MCAP recording (recorder killed, power lost)")
     p.add_argument("file", help="the .mcap file (or its bag directory)")
     p.add_argument("--output", default=None,
-                   help="write the recovered file here (default: in place, original kept as FILE.truncated)")
+                   help="write the recovered file here (default: in place; the damaged original is kept in "
+                        "<bag>.damaged/ beside the bag folder, or as FILE.truncated outside a bag folder)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
@@ -30,4 +31,6 @@ def run(args) -> int:
     for topic, n in sorted(report.per_topic.items()):
         print(f"  {topic}: {n}")
     print(f"recovered recording: {report.output}")
+    if report.damaged_original:
+        print(f"damaged original:    {report.damaged_original}")
     return 0
