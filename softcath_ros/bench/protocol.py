@@ -183,7 +183,8 @@ def protocol_from_dict(data) -> Protocol:
     if drive == "channels" and (not channels or not all(
             isinstance(c, int) and not isinstance(c, bool) and 0 <= c < MAX_LIST for c in channels)):
         raise ProtocolError("channels", list(channels), f"must be a non-empty list of channel indices (0-{MAX_LIST - 1})")
-    directions = tuple(_num({"v": v}, "v", where="directions_deg.") for v in _list(data, "directions_deg", []))
+    directions = tuple(_num({f"directions_deg[{i}]": v}, f"directions_deg[{i}]")
+                       for i, v in enumerate(_list(data, "directions_deg", [])))
     if drive == "direction" and not directions:
         raise ProtocolError("directions_deg", [], "drive 'direction' needs at least one direction")
 
@@ -195,7 +196,7 @@ def protocol_from_dict(data) -> Protocol:
         levels = sc["levels"]
         if not isinstance(levels, list) or not levels or len(levels) > MAX_LEVELS:
             raise ProtocolError("staircase.levels", levels, f"must be a non-empty list of at most {MAX_LEVELS} levels")
-        levels = tuple(_num({"v": v}, "v", where="staircase.levels.") for v in levels)
+        levels = tuple(_num({f"levels[{i}]": v}, f"levels[{i}]", where="staircase.") for i, v in enumerate(levels))
     else:
         top = _num(sc, "max", positive=True, where="staircase.")
         step = _num(sc, "step", positive=True, where="staircase.")
