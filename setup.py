@@ -46,6 +46,7 @@ setup(
             "ros-rmw-fastrtps-cpp>=9.3",
         ],
         "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",
+                 "hypothesis>=6.80",
                  # test_install.py builds a wheel offline (no build isolation): bdist_wheel
                  "wheel>=0.40"],
         "bench": ["psutil>=5.9"],

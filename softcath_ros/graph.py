@@ -8,7 +8,8 @@ machine never see each other's topics:
   ``probe_s`` it also listens on the domain and skips it when a foreign participant shows up
   (a graph started by other means).
 - ``NodeGraph`` starts node executables with parameters on the leased domain (loopback only,
-  ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), and stops them: SIGINT, then SIGKILL after a grace.
+  ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set otherwise), and stops them: SIGINT, then
+  SIGKILL after a grace.
 
 No rclpy import at module level: only the optional probe needs it.
 """
@@ -90,10 +91,25 @@ def lease_domain(domain_range: tuple[int, int] = DOMAIN_RANGE, probe_s: float = 
     raise SoftcathError(f"no free ROS_DOMAIN_ID in {lo}..{hi}: every one is leased or in use")
 
 
+DISCOVERY_RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+
+
+def default_to_localhost_discovery(environ=None) -> str:
+    """Keep DDS discovery on this machine unless the user asked otherwise: set
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST when it is unset or empty (an explicit value, e.g.
+    SUBNET to reach a rig on the network, wins). Every softcath executable calls this before
+    rclpy starts (docs/nodes.md, "Network"). Returns the range in effect."""
+    environ = os.environ if environ is None else environ
+    if not environ.get(DISCOVERY_RANGE_VAR, "").strip():
+        environ[DISCOVERY_RANGE_VAR] = "LOCALHOST"
+    return environ[DISCOVERY_RANGE_VAR]
+
+
 def graph_env(domain: int, base: dict | None = None) -> dict:
-    """The environment of a node on ``domain``: loopback discovery, unbuffered output."""
+    """The environment of a node on ``domain``: loopback discovery unless set, unbuffered output."""
     env = dict(os.environ if base is None else base)
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    env.update(ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
+    default_to_localhost_discovery(env)
     return env
 
 

@@ -75,3 +75,73 @@ def test_nodes_refuse_bad_parameters_at_start_in_one_line(node, param):
                           env=env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
     assert param.split(":=")[0] in proc.stderr and "Traceback" not in proc.stderr
+
+
+PARAMS_FILES = {
+    "syntax": ("softcath_model:\n  ros__parameters: [1,\n", "not valid YAML"),
+    "no_ros_parameters": ("softcath_model:\n  design: implemented_5mm\n", "no ros__parameters"),
+    "duplicate_keys": ("softcath_model:\n  ros__parameters:\n    design: implemented_5mm\n"
+                       "    design: three_channel_5mm\n", "duplicate key 'design'"),
+    "integer_beyond_64_bits": ("/**:\n  ros__parameters:\n    backbone_points: 99999999999999999999\n", "64 bits"),
+    "alias": ("a: &x {ros__parameters: {backbone_points: 5}}\nsoftcath_model: *x\n", "aliases"),
+    "not_utf8": (b"softcath_model:\n  ros__parameters:\n    design: \xff\n", "not UTF-8"),
+    "missing": (None, "cannot read"),
+}
+
+
+def _start(node: str, *ros_args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return subprocess.run([sys.executable, "-m", f"softcath_ros.nodes.{node}", "--ros-args", *ros_args],
+                          env=env, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("case", sorted(PARAMS_FILES))
+def test_bad_params_files_are_one_line_before_rcl_reads_them(tmp_path, case):
+    content, words = PARAMS_FILES[case]
+    path = tmp_path / "params.yaml"
+    if content is not None:
+        path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    proc = _start("model_node", "--params-file", str(path))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and str(path) in lines[0], proc.stderr
+
+
+@pytest.mark.parametrize("node", ["allocation_node", "sim_bench_node", "bench_node"])
+def test_every_node_checks_its_params_file(tmp_path, node):
+    path = tmp_path / "params.yaml"
+    path.write_text("some_node:\n  rate_hz: 5\n")
+    proc = _start(node, "--params-file", str(path))
+    assert proc.returncode == 2 and "no ros__parameters" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("rule, words", [("backbone_points:=[1,", "not valid YAML"),
+                                         ("backbone_points", "expected NAME:=VALUE"),
+                                         ("backbone_points:=abc", "backbone_points")])
+def test_bad_parameter_rules_are_one_line(rule, words):
+    proc = _start("model_node", "-p", rule)
+    assert proc.returncode == 2 and words in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_discovery_stays_on_this_machine_unless_set():
+    from softcath_ros.graph import default_to_localhost_discovery, graph_env
+
+    env = {}
+    assert default_to_localhost_discovery(env) == "LOCALHOST" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert default_to_localhost_discovery({"ROS_AUTOMATIC_DISCOVERY_RANGE": ""}) == "LOCALHOST"
+    explicit = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    assert default_to_localhost_discovery(explicit) == "SUBNET"
+    assert graph_env(120, base={})["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert graph_env(120, base=explicit)["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"
+
+
+def test_a_node_started_without_the_variable_uses_localhost_discovery():
+    """The executable itself sets it (before rclpy starts): the node's environment shows it."""
+    code = ("import os, sys\nfrom softcath_ros.nodes import runtime\n"
+            "sys.argv = ['x', '--ros-args', '--params-file', '/nonexistent']\n"
+            "code = runtime.run_node(lambda: None)\n"
+            "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'), code)\n")
+    env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert proc.stdout.split() == ["LOCALHOST", "2"], proc.stdout + proc.stderr

@@ -1,6 +1,7 @@
 """Recording: rosbag2-compatible MCAP round trip, every record rosbag2 relies on, recovery."""
 import os
 import random
+import shutil
 import signal
 import struct
 import subprocess
@@ -319,3 +320,41 @@ def test_sigkill_recorder_then_recover_keeps_all_but_the_last_second(tmp_path):
     # flush count, not a wall-clock window, so a loaded machine cannot make it flaky).
     assert len(kept) >= flushes[-1] > flushes[0] > 0
     assert times == sorted(times)
+
+
+def test_recover_in_a_bag_folder_keeps_custom_data_and_moves_the_damaged_original_out(tmp_path):
+    """The bench's custom_data (protocol, design, simulated) survives recovery, and the damaged
+    original leaves the bag folder (ros2 bag would read it as part of the bag)."""
+    bag = tmp_path / "bench_x"
+    w = BagWriter(bag, flush_period_s=1e9, fsync=False, custom_data={"protocol": "quick", "design": "d1"})
+    w.add_topic("/x", F64)
+    w.custom_data["simulated"] = "true"
+    w.add_metadata("softcath", {"protocol": "quick", "design": "d1", "simulated": "true", "n_steps": "3"})
+    for i in range(50):
+        w.write("/x", cdr_float64(float(i)), log_time_ns=i + 1)
+    w.flush()
+    cut = w.path.read_bytes()          # the recorder killed here: no rosbag2 record, no summary
+    w.close()
+    complete = w.path.read_bytes()
+    for content, label in ((cut, "truncated"), (complete, "complete")):
+        w.path.write_bytes(content)
+        for stale in tmp_path.glob("bench_x.damaged*"):
+            shutil.rmtree(stale)
+        report = recover(w.path)
+        assert report.custom_data == {"protocol": "quick", "design": "d1", "simulated": "true"}, label
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        assert meta["custom_data"] == report.custom_data and meta["message_count"] == 50, label
+        assert sorted(p.name for p in bag.iterdir()) == ["bench_x_0.mcap", "metadata.yaml"], label
+        kept = tmp_path / "bench_x.damaged" / "bench_x_0.mcap"
+        assert report.damaged_original == str(kept) and kept.read_bytes() == content, label
+        assert len(_messages(w.path)) == 50
+
+
+def test_recover_output_into_a_missing_folder_is_one_line(tmp_path):
+    with BagWriter(tmp_path / "b") as w:
+        w.add_topic("/x", F64)
+        w.write("/x", cdr_float64(1.0), log_time_ns=1)
+    with pytest.raises(SoftcathError, match="does not exist"):
+        recover(w.path, tmp_path / "missing" / "out.mcap")
+    with pytest.raises(SoftcathError, match="damaged file itself"):
+        recover(w.path, w.path)

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import topics
+from ..core.errors import SoftcathError
 
 DEFAULT_TOPICS = {
     "step": topics.BENCH_STEP,
@@ -121,15 +122,22 @@ def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[Samp
     by_topic = {v: k for k, v in topics.items()}
     events: list[tuple[int, dict]] = []
     streams: dict[str, list] = {"pressure_measured": [], "angle": [], "force": []}
-    for m in iter_messages(path, topics=list(topics.values())):
-        kind = by_topic[m.topic]
-        if kind == "step":
-            events.append((m.log_time_ns, json.loads(m.message.data)))
-        elif kind == "pressure_measured":
-            streams[kind].append((m.log_time_ns, np.asarray(m.message.data, dtype=float)))
-        else:
-            streams[kind].append((m.log_time_ns, float(m.message.data)))
-    return rows_from_events(events, streams)
+    try:
+        for m in iter_messages(path, topics=list(topics.values())):
+            kind = by_topic[m.topic]
+            if kind == "step":
+                ev = json.loads(m.message.data)
+                if not isinstance(ev, dict):
+                    raise ValueError("a step marker is not a JSON object")
+                events.append((m.log_time_ns, ev))
+            elif kind == "pressure_measured":
+                streams[kind].append((m.log_time_ns, np.asarray(m.message.data, dtype=float)))
+            else:
+                streams[kind].append((m.log_time_ns, float(m.message.data)))
+        return rows_from_events(events, streams)
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:   # a recording not written by the bench
+        raise SoftcathError(f"{path}: not a bench recording the report can read ({type(exc).__name__}: "
+                            f"{str(exc)[:120]})") from None
 
 
 def summarise(rows: list[SampleRow], angle_resolution: float = math.radians(1.0)) -> list[StepStats]:

@@ -23,15 +23,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
-from ..core.errors import SoftcathError
-from ..core.yaml_io import load_yaml
+from ..core.errors import SoftcathError, shown
+from ..core.checks import NAME_RULE, finite_number, is_file_name
+from ..core.yaml_io import load_yaml_file
 
 BENCHES = ("angle", "force")
 
 
 class ProtocolError(SoftcathError):
     def __init__(self, field_name: str, value, reason: str):
-        super().__init__(f"protocol field '{field_name}' = {value!r}: {reason}")
+        super().__init__(f"protocol field '{field_name}' = {shown(value)}: {reason}")
 
 
 @dataclass(frozen=True)
@@ -102,27 +103,59 @@ def load_protocol(name_or_path) -> Protocol:
         p = find("protocol", name_or_path)
     except ResourceNotFound as exc:
         raise ProtocolError("protocol", str(name_or_path), f"no such file or shipped protocol; shipped: {exc.known}") from None
-    try:
-        data = load_yaml(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ProtocolError("protocol", str(p), f"not valid YAML: {exc}") from None
-    return protocol_from_dict(data)
+    return protocol_from_dict(load_yaml_file(p))
 
 
-def _num(d: dict, key: str, default=None, *, positive=False, nonneg=False, where="") -> float:
+# Bounds on the size of a protocol: a run is held in memory as its list of steps and takes
+# minutes per hundred steps, so a typo (a step of 0.001 bar, trials: 1e8) is refused here.
+MAX_STEPS = 10_000
+MAX_LEVELS = 500
+MAX_TRIALS = 100
+MAX_SAMPLES_PER_STEP = 1000
+MAX_LIST = 64            # channels, directions, benches, samples per bench
+MAX_SECONDS = 600.0      # dwell, settle hold and timeout, sample period
+
+
+def _num(d: dict, key: str, default=None, *, positive=False, nonneg=False, maximum=None, where="") -> float:
     name = f"{where}{key}"
     if key not in d:
         if default is None:
             raise ProtocolError(name, None, "missing required field")
         return float(default)
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ProtocolError(name, v, "must be a finite number")
+    v = finite_number(d[key])
+    if v is None:
+        raise ProtocolError(name, d[key], "must be a finite number")
     if positive and v <= 0:
         raise ProtocolError(name, v, "must be positive")
     if nonneg and v < 0:
         raise ProtocolError(name, v, "must not be negative")
+    if maximum is not None and v > maximum:
+        raise ProtocolError(name, v, f"must not exceed {maximum:g}")
     return float(v)
+
+
+def _int(d: dict, key: str, default: int, lo: int, hi: int) -> int:
+    v = d.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise ProtocolError(key, v, f"must be an integer in [{lo}, {hi}]")
+    return v
+
+
+def _list(d: dict, key: str, default, where: str = "") -> list:
+    v = d.get(key, default)
+    if not isinstance(v, list) or len(v) > MAX_LIST:
+        raise ProtocolError(f"{where}{key}", v, f"must be a list of at most {MAX_LIST} entries")
+    return v
+
+
+def _mapping(d: dict, key: str, allowed: set, where: str = "") -> dict:
+    v = d.get(key, {})
+    if not isinstance(v, dict):
+        raise ProtocolError(f"{where}{key}", v, f"must be a mapping with keys from {sorted(allowed)}")
+    for k in v:
+        if k not in allowed:
+            raise ProtocolError(f"{where}{key}.{k}", v[k], f"unknown key; allowed: {sorted(allowed)}")
+    return v
 
 
 _KEYS = {"name", "description", "design", "drive", "channels", "directions_deg", "staircase", "trials",
@@ -130,35 +163,46 @@ _KEYS = {"name", "description", "design", "drive", "channels", "directions_deg",
 
 
 def protocol_from_dict(data) -> Protocol:
+    """Validate a protocol mapping: every field's type and range (``ProtocolError`` names field,
+    value and reason) and the size of the run (at most ``MAX_STEPS`` steps)."""
     if not isinstance(data, dict):
         raise ProtocolError("protocol", data, "must be a mapping")
     for k in data:
         if k not in _KEYS:
             raise ProtocolError(k, data[k], f"unknown field; known: {sorted(_KEYS)}")
     name = data.get("name")
-    if not isinstance(name, str) or not name:
-        raise ProtocolError("name", name, "must be a non-empty string")
+    if not is_file_name(name):
+        raise ProtocolError("name", name, NAME_RULE)
+    for key in ("description", "design"):
+        if data.get(key) is not None and not isinstance(data[key], str):
+            raise ProtocolError(key, data[key], "must be a string")
     drive = data.get("drive", "channels")
     if drive not in ("channels", "direction"):
         raise ProtocolError("drive", drive, "must be 'channels' or 'direction'")
-    channels = tuple(data.get("channels", [0]))
-    if drive == "channels" and (not channels or not all(isinstance(c, int) and c >= 0 for c in channels)):
-        raise ProtocolError("channels", list(channels), "must be a non-empty list of channel indices")
-    directions = tuple(float(x) for x in data.get("directions_deg", []))
+    channels = tuple(_list(data, "channels", [0]))
+    if drive == "channels" and (not channels or not all(
+            isinstance(c, int) and not isinstance(c, bool) and 0 <= c < MAX_LIST for c in channels)):
+        raise ProtocolError("channels", list(channels), f"must be a non-empty list of channel indices (0-{MAX_LIST - 1})")
+    directions = tuple(_num({f"directions_deg[{i}]": v}, f"directions_deg[{i}]")
+                       for i, v in enumerate(_list(data, "directions_deg", [])))
     if drive == "direction" and not directions:
         raise ProtocolError("directions_deg", [], "drive 'direction' needs at least one direction")
 
     sc = data.get("staircase")
     if not isinstance(sc, dict):
         raise ProtocolError("staircase", sc, "must be a mapping with levels, or max and step")
+    _mapping(data, "staircase", {"levels", "max", "step", "down"})
     if "levels" in sc:
         levels = sc["levels"]
-        if not isinstance(levels, list) or not levels:
-            raise ProtocolError("staircase.levels", levels, "must be a non-empty list")
-        levels = tuple(_num({"v": v}, "v", where="staircase.levels.") for v in levels)
+        if not isinstance(levels, list) or not levels or len(levels) > MAX_LEVELS:
+            raise ProtocolError("staircase.levels", levels, f"must be a non-empty list of at most {MAX_LEVELS} levels")
+        levels = tuple(_num({f"levels[{i}]": v}, f"levels[{i}]", where="staircase.") for i, v in enumerate(levels))
     else:
         top = _num(sc, "max", positive=True, where="staircase.")
         step = _num(sc, "step", positive=True, where="staircase.")
+        if top / step > MAX_LEVELS:
+            raise ProtocolError("staircase.step", step, f"gives {top / step:.3g} levels up to max {top:g}; "
+                                f"at most {MAX_LEVELS}")
         n = int(round(top / step))
         if abs(n * step - top) > 1e-9 * top:
             raise ProtocolError("staircase.step", step, f"does not divide max {top}")
@@ -168,41 +212,54 @@ def protocol_from_dict(data) -> Protocol:
     if drive == "direction" and levels[-1] > 1.0:
         raise ProtocolError("staircase.levels", list(levels),
                             "for drive 'direction' levels are fractions of the reachable curvature (<= 1)")
+    down = sc.get("down", True)
+    if not isinstance(down, bool):
+        raise ProtocolError("staircase.down", down, "must be true or false")
 
-    settle = data.get("settle", {})
-    if not isinstance(settle, dict):
-        raise ProtocolError("settle", settle, "must be a mapping {tolerance, hold, timeout}")
+    settle = _mapping(data, "settle", {"tolerance", "max_offset", "hold", "timeout"})
     benches_raw = data.get("benches")
-    if not isinstance(benches_raw, list) or not benches_raw:
-        raise ProtocolError("benches", benches_raw, "must be a non-empty list of {kind, samples}")
+    if not isinstance(benches_raw, list) or not benches_raw or len(benches_raw) > MAX_LIST:
+        raise ProtocolError("benches", benches_raw, f"must be a non-empty list of at most {MAX_LIST} {{kind, samples}}")
     benches = []
     for i, b in enumerate(benches_raw):
         where = f"benches[{i}]"
         if not isinstance(b, dict) or b.get("kind") not in BENCHES:
             raise ProtocolError(f"{where}.kind", b.get("kind") if isinstance(b, dict) else b,
                                 f"must be one of {BENCHES}")
+        for k in b:
+            if k not in ("kind", "samples"):
+                raise ProtocolError(f"{where}.{k}", b[k], "unknown key; allowed: ['kind', 'samples']")
         samples = b.get("samples")
-        if not isinstance(samples, list) or not samples:
-            raise ProtocolError(f"{where}.samples", samples, "must be a non-empty list of {name, length}")
-        benches.append(BenchSpec(b["kind"], tuple(
-            BenchSample(str(s.get("name", f"sample{j}")),
-                        _num(s, "length", positive=True, where=f"{where}.samples[{j}].")) for j, s in
-            enumerate(samples))))
-    trials = data.get("trials", 1)
-    if not isinstance(trials, int) or trials < 1:
-        raise ProtocolError("trials", trials, "must be a positive integer")
-    n_samples = data.get("samples_per_step", 3)
-    if not isinstance(n_samples, int) or n_samples < 1:
-        raise ProtocolError("samples_per_step", n_samples, "must be a positive integer")
+        if not isinstance(samples, list) or not samples or len(samples) > MAX_LIST:
+            raise ProtocolError(f"{where}.samples", samples,
+                                f"must be a non-empty list of at most {MAX_LIST} {{name, length}}")
+        specs = []
+        for j, s in enumerate(samples):
+            at = f"{where}.samples[{j}]"
+            if not isinstance(s, dict) or set(s) - {"name", "length"}:
+                raise ProtocolError(at, s, "must be a mapping {name, length}")
+            sample_name = s.get("name", f"sample{j}")
+            if not isinstance(sample_name, str) or not sample_name:
+                raise ProtocolError(f"{at}.name", sample_name, "must be a non-empty string")
+            specs.append(BenchSample(sample_name, _num(s, "length", positive=True, maximum=10.0, where=f"{at}.")))
+        benches.append(BenchSpec(b["kind"], tuple(specs)))
+    trials = _int(data, "trials", 1, 1, MAX_TRIALS)
+    n_samples = _int(data, "samples_per_step", 3, 1, MAX_SAMPLES_PER_STEP)
+    n_drives = len(channels) if drive == "channels" else len(directions)
+    n_steps = sum(len(b.samples) for b in benches) * n_drives * trials * (2 * len(levels) - 1 if down else len(levels))
+    if n_steps > MAX_STEPS:
+        raise ProtocolError("protocol", name, f"expands to {n_steps} steps; at most {MAX_STEPS} (fewer levels, "
+                            "trials, samples or benches)")
     return Protocol(
-        name=name, description=str(data.get("description", "")), design=data.get("design"), drive=drive,
-        channels=channels, directions_deg=directions, levels=levels, down=bool(sc.get("down", True)),
-        trials=trials, dwell=_num(data, "dwell", 0.5, nonneg=True),
+        name=name, description=str(data.get("description") or ""), design=data.get("design"), drive=drive,
+        channels=channels, directions_deg=directions, levels=levels, down=down,
+        trials=trials, dwell=_num(data, "dwell", 0.5, nonneg=True, maximum=MAX_SECONDS),
         settle_tolerance=_num(settle, "tolerance", 1000.0, positive=True, where="settle."),
         settle_max_offset=_num(settle, "max_offset", 3000.0, positive=True, where="settle."),
-        settle_hold=_num(settle, "hold", 0.2, nonneg=True, where="settle."),
-        settle_timeout=_num(settle, "timeout", 5.0, positive=True, where="settle."),
-        samples_per_step=n_samples, sample_period=_num(data, "sample_period", 0.05, positive=True),
+        settle_hold=_num(settle, "hold", 0.2, nonneg=True, maximum=MAX_SECONDS, where="settle."),
+        settle_timeout=_num(settle, "timeout", 5.0, positive=True, maximum=MAX_SECONDS, where="settle."),
+        samples_per_step=n_samples,
+        sample_period=_num(data, "sample_period", 0.05, positive=True, maximum=MAX_SECONDS),
         benches=tuple(benches), source=data)
 
 

@@ -149,11 +149,12 @@ def plot(stats: list[StepStats], out_dir: Path, stem: str) -> list[str]:
 def recording_design(path):
     """The design attached to a bench recording (attachment 'design.yaml'), or None."""
     from ..core.design import design_from_dict
-    from ..core.yaml_io import load_yaml
+    from ..core.yaml_io import decode_text, load_yaml
     from ..recording.reader import read_attachments
 
     data = read_attachments(path).get("design.yaml")
-    return None if data is None else design_from_dict(load_yaml(data.decode()), source=f"{path}:design.yaml")
+    source = f"{path}:design.yaml"
+    return None if data is None else design_from_dict(load_yaml(decode_text(data, source), source), source=source)
 
 
 def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None,

@@ -27,21 +27,36 @@ SUBCOMMANDS = [
 ]
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a bad argument is one line (``softcath CMD: error: ...``) and exit 2, like
+    every other user error; ``--help`` still shows the usage."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="softcath", description="softcath_ros command line: model, "
+    parser = OneLineParser(prog="softcath", description="softcath_ros command line: model, "
                                      "steer and characterise a soft catheter actuator (see README).")
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     for name in SUBCOMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    from ..graph import default_to_localhost_discovery
+
+    default_to_localhost_discovery()
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except SoftcathError as exc:
         print(f"softcath {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file the user named cannot be read or written (missing folder, permission)
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"softcath {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"softcath {args.command}: interrupted", file=sys.stderr)

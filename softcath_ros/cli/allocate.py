@@ -6,13 +6,15 @@ says so), 2 bad input.
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 
+from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR
+from .common import PA_PER_BAR, bounded_int, finite_float, positive_float
+
+MAX_DIRECTIONS = 3600   # 0.1 deg apart; each direction is one bisection on the model
 
 
 def register(sub) -> None:
@@ -23,14 +25,14 @@ def register(sub) -> None:
     p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--curvature", metavar="KX,KY", help="curvature vector in softcath_base, 1/m")
-    target.add_argument("--direction", type=float, metavar="DEG",
+    target.add_argument("--direction", type=finite_float, metavar="DEG",
                         help="bending direction, degrees from +x towards +y (use with --angle)")
     target.add_argument("--tip", metavar="X,Y,Z", help="desired tip position in softcath_base, m")
-    p.add_argument("--angle", type=float, metavar="DEG", help="bending angle, degrees (with --direction)")
-    p.add_argument("--max-pressure", type=float, default=None, metavar="PA",
+    p.add_argument("--angle", type=finite_float, metavar="DEG", help="bending angle, degrees (with --direction)")
+    p.add_argument("--max-pressure", type=positive_float, default=None, metavar="PA",
                    help="lower the design's max_pressure (Pa), e.g. to stay where a rung converges")
-    p.add_argument("--reachable-set", type=int, default=0, metavar="N",
-                   help="also report the maximum curvature on N equally spaced directions")
+    p.add_argument("--reachable-set", type=bounded_int(0, MAX_DIRECTIONS), default=0, metavar="N",
+                   help=f"also report the maximum curvature on N equally spaced directions (N <= {MAX_DIRECTIONS})")
     p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
     p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     p.add_argument("--json", action="store_true", help="machine-readable output")
@@ -84,7 +86,7 @@ def run(args) -> int:
                                                            for d in rs.channel_directions],
                                 "channel_max_curvature_per_m": rs.channel_max_curvature.tolist()}
     if args.json:
-        json.dump(out, sys.stdout, indent=2)
+        json_output.dump(out, sys.stdout, indent=2)
         print()
     else:
         _print_human(out, design.length)

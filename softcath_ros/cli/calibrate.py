@@ -1,10 +1,11 @@
 """`softcath calibrate RECORDING`: fit pressure shift and material scale, write the calibration file."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
+
+from ..core import json_output
 
 
 def register(sub) -> None:
@@ -44,7 +45,7 @@ def run(args) -> int:
     calibration.save(out)
     rep = write_report(path, design, [args.model], calibration, out_dir=path.parent, cache=not args.no_cache)
     if args.json:
-        json.dump({**calibration.to_dict(), "correlation": calibration.correlation, "calibration_file": str(out),
+        json_output.dump({**calibration.to_dict(), "correlation": calibration.correlation, "calibration_file": str(out),
                    "report": rep["report"]}, sys.stdout, indent=2)
         print()
     else:

@@ -1,12 +1,46 @@
 """Helpers shared by the `softcath` subcommands."""
 from __future__ import annotations
 
+import argparse
 import math
 
 import numpy as np
 
 from ..core.errors import SoftcathError
 from ..core.units import PA_PER_BAR
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (``nan``/``inf`` are refused, as every number a user gives)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be positive")
+    return value
+
+
+def bounded_int(lo: int, hi: int):
+    """argparse type: an integer in [lo, hi] (counts that size memory and run time are bounded)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{value}: must lie in [{lo}, {hi}]")
+        return value
+    parse.__name__ = "integer"
+    return parse
 
 
 def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray:

@@ -4,10 +4,10 @@ rung; core/ladder.py) and write the envelope that `model: auto` reads, plus the 
 from __future__ import annotations
 
 import csv
-import json
 import os
 from pathlib import Path
 
+from ..core import json_output
 from ..core.errors import SoftcathError
 from ..provenance import machine_meta
 
@@ -66,7 +66,7 @@ def run(args) -> int:
         meta = {"cases": [c.__dict__ for c in cases], "references": references,
                 "note": "3-channel cases: reference section D/40 (fe3d needs a full model, > 15 min per "
                         "direction) unless fe3d was run on them", **machine_meta(load_before)}
-        stem.with_suffix(".json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
+        stem.with_suffix(".json").write_text(json_output.dumps({"meta": meta, "results": rows}, indent=2))
         with open(stem.with_suffix(".csv"), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader()

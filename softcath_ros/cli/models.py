@@ -2,7 +2,8 @@
 it takes (from each rung's ``RungInfo``; nothing is built)."""
 from __future__ import annotations
 
-import json
+from ..core import json_output
+
 
 
 def register(sub) -> None:
@@ -22,7 +23,7 @@ def run(args) -> int:
                      "options": {o.name: {"kind": o.kind, "description": o.description} for o in info.options},
                      "more_options": info.more_options}
     if args.json:
-        print(json.dumps(doc, indent=2))
+        print(json_output.dumps(doc, indent=2))
         return 0
     for name, d in doc.items():
         flags = [f for f in ("linear_gain", "solves_backbone") if d[f]]

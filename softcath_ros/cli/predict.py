@@ -6,15 +6,15 @@ With ``--calibration`` the rung is calibrated and each result carries a 95% band
 """
 from __future__ import annotations
 
-import json
 import math
 import sys
 
 import numpy as np
 
+from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures
+from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures, positive_float
 
 
 def register(sub) -> None:
@@ -26,7 +26,7 @@ def register(sub) -> None:
     p.add_argument("--pressure", required=True, nargs="+",
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
-    p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
     p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
     p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
@@ -41,8 +41,6 @@ def run(args) -> int:
     from ..core.prediction import format_mm, predict
 
     design = load_design(args.design)
-    if args.length is not None and args.length <= 0:
-        raise SoftcathError(f"--length {args.length}: must be positive (m)")
     pressures = parse_pressures(args.pressure, design.n_channels, args.unit)
     check_pressure_limits(pressures, design)
     calibration = load_calibration(args.calibration) if args.calibration else None
@@ -68,7 +66,7 @@ def run(args) -> int:
         if calibration is not None:
             doc["calibration"] = {"file": args.calibration, **{k: calibration.to_dict()[k] for k in (
                 "rung", "design_hash", "pressure_shift", "material_scale", "covariance", "recording", "date")}}
-        json.dump(doc, sys.stdout, indent=2)
+        json_output.dump(doc, sys.stdout, indent=2)
         print()
     else:
         print(f"model {model.name}, design {design.name}, length {length * 1e3:.1f} mm")

@@ -1,12 +1,13 @@
 """`softcath report [RECORDING]`: per-step statistics, hysteresis, model overlay (Markdown + PNG)."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 DEFAULT_RUNS = "runs"   # where `softcath characterise` puts recordings (its --output-dir default)
+
+from ..core import json_output
 
 
 def register(sub) -> None:
@@ -73,7 +74,7 @@ def run(args) -> int:
     result = write_report(pick_recording(args.file, "report"), design, args.model, calibration, args.out,
                           cache=not args.no_cache)
     if args.json:
-        json.dump({"report": result["report"], "plots": result["plots"], "steps": stats_json(result["stats"]),
+        json_output.dump({"report": result["report"], "plots": result["plots"], "steps": stats_json(result["stats"]),
                    "hysteresis": [h.__dict__ for h in result["hysteresis"]]}, sys.stdout, indent=2, default=float)
         print()
     else:

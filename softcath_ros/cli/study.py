@@ -3,11 +3,12 @@
 --scheduler, and are cached per case so an interrupted study resumes where it stopped."""
 from __future__ import annotations
 
-import json
 import time
 
+from ..core import json_output
 from ..core.errors import SoftcathError
 from ..core.units import PA_PER_BAR
+from .common import bounded_int, positive_float
 
 
 def register(sub) -> None:
@@ -18,16 +19,16 @@ def register(sub) -> None:
     p.add_argument("name", choices=list(STUDIES), help="which study")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
     p.add_argument("--model", default="section", help="model rung (default section)")
-    p.add_argument("--pressure", type=float, default=None,
+    p.add_argument("--pressure", type=positive_float, default=None,
                    help="pressure on channel 0 at which R_C is compared (default 0.15 bar)")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
-    p.add_argument("--mesh-size", type=float, default=None,
+    p.add_argument("--mesh-size", type=positive_float, default=None,
                    help="section rung element size in m (default: the rung's, outer diameter / 20)")
-    p.add_argument("--min-wall", type=float, default=None,
+    p.add_argument("--min-wall", type=positive_float, default=None,
                    help="fabrication minimum wall in m for channel-shift, area-ratio, miniaturise (default 0.2 mm)")
-    p.add_argument("--max-stretch", type=float, default=None,
+    p.add_argument("--max-stretch", type=positive_float, default=None,
                    help="optimise: largest principal stretch allowed in the silicone (default 2.0)")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per CPU; "
+    p.add_argument("--workers", type=bounded_int(1, 256), default=None, help="local worker processes (default: one per CPU; "
                                                              "1 solves in this process)")
     p.add_argument("--scheduler", default=None,
                    help="address of a Dask distributed scheduler (tcp://host:8786) to run the cases on "
@@ -86,7 +87,7 @@ def run(args) -> int:
     result.meta.update(wall_time_s=elapsed, cases=ctx.stats.__dict__, executor=where)
     files = write_study(result, ctx, args.out, length=design.length)
     if args.json:
-        print(json.dumps({"study": result.name, "design": result.design, "rung": ctx.rung, "files": files,
+        print(json_output.dumps({"study": result.name, "design": result.design, "rung": ctx.rung, "files": files,
                           "findings": result.findings, "meta": {k: v for k, v in result.meta.items()
                                                                 if k not in ("history", "curves")},
                           "rows": result.rows}, indent=2, default=str))

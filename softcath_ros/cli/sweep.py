@@ -10,15 +10,17 @@ JSON still written), 2 bad input (a pressure above the design's max_pressure inc
 from __future__ import annotations
 
 import csv
-import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from ..core import json_output
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, parse_model_options
+from .common import PA_PER_BAR, add_option_argument, bounded_int, finite_float, parse_model_options, positive_float
+
+MAX_STEPS = 10_000   # a sweep's rows are held in memory and plotted
 
 
 def register(sub) -> None:
@@ -27,12 +29,13 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="pressure sweep through a model: CSV, JSON and a plot")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
     p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
-    p.add_argument("--from", dest="p_from", type=float, default=0.0, help="first pressure (default 0)")
-    p.add_argument("--to", dest="p_to", type=float, required=True, help="last pressure")
-    p.add_argument("--steps", type=int, default=11, help="number of pressures, ends included (default 11)")
+    p.add_argument("--from", dest="p_from", type=finite_float, default=0.0, help="first pressure (default 0)")
+    p.add_argument("--to", dest="p_to", type=finite_float, required=True, help="last pressure")
+    p.add_argument("--steps", type=bounded_int(2, MAX_STEPS), default=11,
+                   help=f"number of pressures, ends included, 2-{MAX_STEPS} (default 11)")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --from/--to (default Pa)")
-    p.add_argument("--channel", type=int, default=0, help="which channel ramps (0-based; default 0)")
-    p.add_argument("--length", type=float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--channel", type=bounded_int(0, 63), default=0, help="which channel ramps (0-based; default 0)")
+    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
     p.add_argument("--out", default=None, help="output prefix: writes PREFIX.csv, PREFIX.json, PREFIX.png "
                                                "(default: sweep_<design>_<model>)")
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached (rungs that cache)")
@@ -92,7 +95,7 @@ def run(args) -> int:
     prefix.parent.mkdir(parents=True, exist_ok=True)
     doc = {"model": model.name, "design": design.name, "length_m": design.length, "channel": args.channel,
            "results": rows}
-    Path(f"{prefix}.json").write_text(json.dumps(doc, indent=2))
+    Path(f"{prefix}.json").write_text(json_output.dumps(doc, indent=2))
     with open(f"{prefix}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -102,7 +105,7 @@ def run(args) -> int:
         written.append(plot_sweep(rows, f"{prefix}.png", f"{design.name}, {model.name}, "
                                   f"L = {design.length * 1e3:.0f} mm, channel {args.channel}"))
     if args.json:
-        json.dump(doc, sys.stdout, indent=2)
+        json_output.dump(doc, sys.stdout, indent=2)
         print()
     else:
         print(f"{'p [bar]':>8} {'angle [deg]':>12} {'L/theta [mm]':>13}")

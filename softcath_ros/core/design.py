@@ -11,12 +11,12 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-import yaml
 
-from .yaml_io import load_yaml
+from .yaml_io import load_yaml_file
 
 from .errors import DesignError
 from .materials import YeohMaterial, material_from_spec
+from .checks import NAME_RULE, finite_number, is_file_name
 
 # Thinnest silicone wall we accept unless the design states its own minimum (m).
 # 0.2 mm is about what moulding of Ecoflex reliably gives; the implemented design has 0.6 mm.
@@ -229,11 +229,7 @@ def resolve_design_path(name_or_path: str | Path) -> Path:
 def load_design(name_or_path: str | Path) -> Design:
     """Load and validate a design file (path, or the name of a shipped design)."""
     path = resolve_design_path(name_or_path)
-    try:
-        data = load_yaml(path.read_text())
-    except yaml.YAMLError as exc:
-        raise DesignError("design", str(path), f"not valid YAML: {exc}") from None
-    return design_from_dict(data, source=str(path))
+    return design_from_dict(load_yaml_file(path), source=str(path))
 
 
 def design_from_dict(data, source: str | None = None) -> Design:
@@ -248,8 +244,8 @@ def design_from_dict(data, source: str | None = None) -> Design:
     get = lambda k: data.get(k, _OPTIONAL.get(k))  # noqa: E731
 
     name = data["name"]
-    if not isinstance(name, str) or not name:
-        raise DesignError("name", name, "must be a non-empty string")
+    if not is_file_name(name):
+        raise DesignError("name", name, NAME_RULE)
     length = _positive(data["length"], "length")
     outer = _positive(data["outer_diameter"], "outer_diameter")
     min_wall = _positive(get("min_wall_thickness"), "min_wall_thickness")
@@ -381,12 +377,10 @@ def _point(value, field_name) -> tuple[float, float]:
 
 
 def _number(value, field_name) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DesignError(field_name, value, "must be a number")
-    value = float(value)
-    if not math.isfinite(value):
-        raise DesignError(field_name, value, "must be finite")
-    return value
+    v = finite_number(value)
+    if v is None:
+        raise DesignError(field_name, value, "must be a finite number")
+    return v
 
 
 def _positive(value, field_name) -> float:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .energy import yeoh
+from .checks import finite_number
 from .errors import DesignError
 
 # Published sets for Ecoflex 00-30 differ by about 2x in c1 (docs/actuator.md); the
@@ -100,10 +101,8 @@ def material_from_spec(spec, field: str = "material") -> YeohMaterial:
 
 
 def _number(value, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DesignError(field, value, "must be a number")
-    value = float(value)
-    if value != value or value in (float("inf"), float("-inf")):
-        raise DesignError(field, value, "must be finite")
-    return value
+    v = finite_number(value)
+    if v is None:
+        raise DesignError(field, value, "must be a finite number")
+    return v
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from .errors import ModelError
 from .models import make_model, register_chooser
 from .scene import Scene
-from .yaml_io import load_yaml
+from .yaml_io import load_yaml_file
 
 
 
@@ -28,7 +28,7 @@ def load_envelope(path: str | Path | None = None) -> dict:
     p = Path(path) if path is not None else envelope_path()
     if not p.is_file():
         raise ModelError(f"no ladder envelope at {p}: measure the rungs with `softcath envelope --out FILE`")
-    data = load_yaml(p.read_text())
+    data = load_yaml_file(p)
     if not isinstance(data, dict) or not isinstance(data.get("rungs"), dict):
         raise ModelError(f"ladder envelope {p}: expected a mapping with 'rungs'")
     return data

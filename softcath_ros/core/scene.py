@@ -32,9 +32,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .design import Design, Device, load_design
-from .errors import SoftcathError
+from .checks import finite_number
+from .errors import SoftcathError, shown
 from .rod.loads import REST_TIP, Loads, TipPlaneContact
-from .yaml_io import load_yaml
+from .yaml_io import load_yaml_file
 
 FEATURES = ("free_bending", "device_stiffness", "tip_load", "contact", "gravity")
 
@@ -44,7 +45,7 @@ class SceneError(SoftcathError):
 
     def __init__(self, field: str, value, reason: str):
         self.field, self.value, self.reason = field, value, reason
-        super().__init__(f"scene field '{field}' = {value!r}: {reason}")
+        super().__init__(f"scene field '{field}' = {shown(value)}: {reason}")
 
 
 @dataclass(frozen=True)
@@ -82,11 +83,12 @@ _KEYS = {"name", "description", "design", "length", "device", "loads", "gravity"
 
 
 def _number(value, field: str, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    v = finite_number(value)
+    if v is None:
         raise SceneError(field, value, "must be a finite number")
-    if positive and value <= 0:
-        raise SceneError(field, value, "must be positive")
-    return float(value)
+    if positive and v <= 0:
+        raise SceneError(field, v, "must be positive")
+    return v
 
 
 def scene_from_dict(raw, base_dir: Path | None = None) -> Scene:
@@ -186,8 +188,5 @@ def load_scene(name_or_path: str | Path) -> Scene:
     except ResourceNotFound as exc:
         raise SceneError("<file>", str(name_or_path),
                          f"no such file or shipped scene (shipped: {', '.join(exc.known)})") from None
-    try:
-        raw = load_yaml(path.read_text())
-    except Exception as exc:  # noqa: BLE001 - a YAML syntax error is reported as the scene's fault
-        raise SceneError("<file>", str(path), f"not valid YAML: {exc}") from None
+    raw = load_yaml_file(path)
     return scene_from_dict(raw, base_dir=path.parent)

@@ -3,7 +3,8 @@
 A node keeps one ``InputCounters`` per input stream, bumps it per message (cheap:
 plain ints) and lets a ``DiagnosticsReporter`` timer publish the totals periodically.
 Level: OK while everything since the last report was accepted, WARN when something
-was clamped, rejected or failed in the model since then.
+was clamped, rejected, failed in the model, superseded by a newer command before it was
+answered, or lost by the middleware since then.
 """
 from __future__ import annotations
 
@@ -18,15 +19,18 @@ class InputCounters:
     rejected: int = 0        # bad input: nothing published
     clamped: int = 0         # out of range, clamped into the limits and then used
     model_failed: int = 0    # valid input, but the model did not converge / gave non-finite numbers
+    superseded: int = 0      # replaced by a newer command before it was answered (the newest is answered)
+    lost: int = 0            # dropped by the middleware before the node took them (DDS message-lost events)
     last_reason: str = ""    # why the most recent command was rejected, clamped or failed
     extra: dict = field(default_factory=dict)  # fixed key/values shown with the counters
 
     def problems(self) -> int:
-        return self.rejected + self.clamped + self.model_failed
+        return self.rejected + self.clamped + self.model_failed + self.superseded + self.lost
 
     def key_values(self) -> list[tuple[str, str]]:
         kv = [("accepted", str(self.accepted)), ("rejected", str(self.rejected)),
               ("clamped", str(self.clamped)), ("model_failed", str(self.model_failed)),
+              ("superseded", str(self.superseded)), ("lost", str(self.lost)),
               ("last_reason", self.last_reason)]
         return kv + [(k, str(v)) for k, v in self.extra.items()]
 
@@ -56,7 +60,8 @@ class DiagnosticsReporter:
         new_problems = c.problems() - self._problems_at_last_report
         self._problems_at_last_report = c.problems()
         if new_problems:
-            level, message = DiagnosticStatus.WARN, f"{new_problems} command(s) rejected, clamped or failed: {c.last_reason}"
+            level, message = (DiagnosticStatus.WARN, f"{new_problems} command(s) rejected, clamped, failed, superseded "
+                              f"or lost: {c.last_reason}")
         else:
             level, message = DiagnosticStatus.OK, "all commands since the last report accepted"
         status = DiagnosticStatus(level=level, name=self._name, message=message, hardware_id=self._hardware_id,

@@ -21,6 +21,8 @@ import signal
 import sys
 from typing import Callable
 
+from ..core.errors import SoftcathError
+
 EXECUTORS = ("events", "single", "multi")
 
 
@@ -70,6 +72,102 @@ def spin(executor, name: str, finished: Callable[[], bool] | None = None) -> Non
         executor.spin()
 
 
+INT64 = (-2**63, 2**63 - 1)
+
+
+def ros_arguments(argv: list[str]) -> list[str]:
+    """The ROS arguments in ``argv``: everything between ``--ros-args`` and ``--`` (or the end)."""
+    out, inside = [], False
+    for a in argv:
+        if a == "--ros-args":
+            inside = True
+        elif a == "--" and inside:
+            inside = False
+        elif inside:
+            out.append(a)
+    return out
+
+
+def params_files(argv: list[str]) -> list[str]:
+    """The ``--params-file PATH`` arguments among the ROS arguments of ``argv``."""
+    ros = ros_arguments(argv)
+    return [ros[i + 1] if i + 1 < len(ros) else "" for i, a in enumerate(ros) if a == "--params-file"]
+
+
+def check_parameter_rules(argv: list[str]) -> None:
+    """Check ``-p NAME:=VALUE`` rules before rcl does (its refusal is a multi-line error): the
+    ``:=`` is there and VALUE is YAML (as rcl reads it)."""
+    from ..core.yaml_io import load_yaml
+
+    ros = ros_arguments(argv)
+    for i, a in enumerate(ros):
+        if a not in ("-p", "--param"):
+            continue
+        rule = ros[i + 1] if i + 1 < len(ros) else ""
+        name, sep, value = rule.partition(":=")
+        if not sep or not name:
+            raise SoftcathError(f"-p {rule!r}: expected NAME:=VALUE")
+        load_yaml(value, f"-p {name}")
+
+
+def check_params_file(path: str) -> None:
+    """Check a node parameter file before rcl reads it, so every fault is one line (rcl's own
+    messages come as a multi-line RCLError traceback): it exists, is bounded YAML with unique keys
+    (core.yaml_io), maps node names (optionally nested in namespaces, or ``/**``) to
+    ``ros__parameters`` mappings, and every value is a bool, integer (int64), finite-or-not float,
+    string or a list of one of those."""
+    from ..core.yaml_io import load_yaml_file
+
+    if not path:
+        raise SoftcathError("--params-file needs a file name")
+    data = load_yaml_file(path, f"params file {path}")
+    if not isinstance(data, dict) or not data:
+        raise SoftcathError(f"params file {path}: must map node names to {{ros__parameters: {{...}}}}")
+
+    def node_entry(value, where: str) -> None:
+        if not isinstance(value, dict):
+            raise SoftcathError(f"params file {path}: '{where}' must be a mapping with ros__parameters")
+        if "ros__parameters" not in value:
+            for key, inner in value.items():       # a namespace level: /ns: {node: {ros__parameters}}
+                if not isinstance(inner, dict):
+                    raise SoftcathError(f"params file {path}: '{where}' has no ros__parameters (found '{key}' "
+                                        "instead); the form is NODE_NAME: {ros__parameters: {name: value}}")
+                node_entry(inner, f"{where}/{key}")
+            return
+        for key in value:
+            if key != "ros__parameters":
+                raise SoftcathError(f"params file {path}: '{where}.{key}' beside ros__parameters; "
+                                    "parameters go under ros__parameters")
+        parameters(value["ros__parameters"], f"{where}.ros__parameters")
+
+    def parameters(value, where: str) -> None:
+        if not isinstance(value, dict):
+            raise SoftcathError(f"params file {path}: '{where}' must be a mapping of parameter: value")
+        for name, v in value.items():
+            at = f"{where}.{name}"
+            if isinstance(v, dict):              # nested names: a.b: value
+                parameters(v, at)
+                continue
+            items = v if isinstance(v, list) else [v]
+            for item in items:
+                if item is None or not isinstance(item, (bool, int, float, str)):
+                    raise SoftcathError(f"params file {path}: '{at}' = {item!r}: a parameter is a bool, number, "
+                                        "string or a list of one kind")
+                if isinstance(item, int) and not isinstance(item, bool) and not INT64[0] <= item <= INT64[1]:
+                    raise SoftcathError(f"params file {path}: '{at}' = {item}: integer beyond 64 bits")
+            if isinstance(v, list) and len({type(i) for i in v}) > 1:
+                raise SoftcathError(f"params file {path}: '{at}' = {v!r}: a list parameter holds one kind of value")
+
+    for key, value in data.items():
+        node_entry(value, str(key))
+
+
+def _rcl_reason(exc: Exception) -> str:
+    """rcl's error text without its source locations (``, at /project/src/...``)."""
+    text = " ".join(str(exc).split())
+    return text.split(", at /")[0]
+
+
 def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     """Create the node with ``factory()``, spin it on ``node.executor_name``; return the exit code.
 
@@ -83,7 +181,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-    from ..graph import READY_MARK
+    from ..graph import READY_MARK, default_to_localhost_discovery
 
     # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
     # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
@@ -91,7 +189,19 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     # Python handler, installed before rclpy.init so rclpy still chains to it, leaves the
     # shutdown to the context alone, as for SIGTERM.
     signal.signal(signal.SIGINT, lambda signum, frame: None)
-    rclpy.init(args=args)
+    default_to_localhost_discovery()
+    try:
+        argv = sys.argv if args is None else list(args)
+        check_parameter_rules(argv)
+        for path in params_files(argv):
+            check_params_file(path)
+        rclpy.init(args=args)
+    except SoftcathError as exc:
+        print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+        return 2
+    except _rclpy.RCLError as exc:      # e.g. a -p value rcl cannot parse
+        print(f"[ERROR] cannot start: invalid ROS arguments: {_rcl_reason(exc)}", file=sys.stderr)
+        return 2
     node = None
     name = ""
     code = 0

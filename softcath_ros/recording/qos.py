@@ -77,13 +77,23 @@ def adapt_request_to_offers(offers: list[OfferedQos]) -> tuple[str, str, list[st
 
 def parse_qos_yaml(text: str) -> list[OfferedQos]:
     """Inverse of ``qos_profiles_yaml`` (tolerates an empty string, as rosbag2 does)."""
+    from ..core.errors import SoftcathError
+    from ..core.yaml_io import load_yaml
+
     if not text or not text.strip():
         return []
-    nodes = yaml.safe_load(text) or []
+    nodes = load_yaml(text, "offered_qos_profiles") or []
 
     def ns(d):
         return int(d["sec"]) * 1_000_000_000 + int(d["nsec"])
 
+    try:
+        return _profiles(nodes, ns)
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
+        raise SoftcathError(f"offered_qos_profiles: not a list of QoS profiles ({type(exc).__name__}: {exc})") from None
+
+
+def _profiles(nodes, ns) -> list[OfferedQos]:
     return [OfferedQos(history=str(n["history"]), depth=int(n["depth"]), reliability=str(n["reliability"]),
                        durability=str(n["durability"]), deadline_ns=ns(n["deadline"]),
                        lifespan_ns=ns(n["lifespan"]), liveliness=str(n["liveliness"]),

@@ -1,12 +1,24 @@
-"""Reading recordings back: decoded messages, metadata records and attachments."""
+"""Reading recordings back: decoded messages, metadata records and attachments.
+
+Whatever is wrong with a file (not MCAP, truncated, a record longer than the file, random
+bytes, an unreadable path) comes out as one ``RecordingReadError`` line, never mcap's own
+exceptions (InvalidMagic, RecordLengthLimitExceeded, EndOfFile, struct/zstd errors, ...).
+"""
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator, NamedTuple
 
 from mcap.reader import make_reader
 
 from ..core.errors import SoftcathError
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+class RecordingReadError(SoftcathError):
+    """A recording that cannot be read (not MCAP, damaged, unreadable)."""
 
 
 class RecordedMessage(NamedTuple):
@@ -21,10 +33,10 @@ def _open(path) -> Path:
     if p.is_dir():
         files = sorted(p.glob("*.mcap"))
         if not files:
-            raise SoftcathError(f"{p}: no .mcap file in this directory")
+            raise RecordingReadError(f"{p}: no .mcap file in this directory")
         p = files[0]
     if not p.is_file():
-        raise SoftcathError(f"{p}: no such recording")
+        raise RecordingReadError(f"{p}: no such recording")
     return p
 
 
@@ -33,32 +45,37 @@ def recording_file(path) -> Path:
     return _open(path)
 
 
+@contextmanager
+def _reader(path, what: str, **kwargs):
+    """An mcap reader over ``path``; any failure while opening or reading is one line."""
+    p = _open(path)
+    try:
+        with open(p, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                raise RecordingReadError(f"{p}: not an MCAP recording (no MCAP magic at its start)")
+            f.seek(0)
+            yield make_reader(f, **kwargs)
+    except SoftcathError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - torn or foreign files: say what to do
+        detail = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        raise RecordingReadError(f"{p}: cannot read {what} ({detail.splitlines()[0]}); if the recorder was "
+                                 f"killed, run `softcath recover {p}` first") from None
+
+
 def iter_messages(path, topics: list[str] | None = None) -> Iterator[RecordedMessage]:
     from mcap_ros2.decoder import DecoderFactory
 
-    p = _open(path)
-    with open(p, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        try:
-            for _schema, channel, message, decoded in reader.iter_decoded_messages(topics=topics,
-                                                                                   log_time_order=True):
-                yield RecordedMessage(channel.topic, message.log_time, message.publish_time, decoded)
-        except Exception as exc:  # noqa: BLE001 - torn or foreign files: say what to do
-            raise SoftcathError(f"{p}: cannot read messages ({type(exc).__name__}: {exc}); "
-                                f"if the recorder was killed, run `softcath recover {p}` first") from None
+    with _reader(path, "messages", decoder_factories=[DecoderFactory()]) as reader:
+        for _schema, channel, message, decoded in reader.iter_decoded_messages(topics=topics, log_time_order=True):
+            yield RecordedMessage(channel.topic, message.log_time, message.publish_time, decoded)
 
 
 def read_metadata(path) -> dict[str, dict[str, str]]:
-    p = _open(path)
-    with open(p, "rb") as f:
-        reader = make_reader(f)
-        try:
-            return {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        except Exception as exc:  # noqa: BLE001
-            raise SoftcathError(f"{p}: cannot read metadata ({exc}); try `softcath recover {p}`") from None
+    with _reader(path, "metadata") as reader:
+        return {m.name: dict(m.metadata) for m in reader.iter_metadata()}
 
 
 def read_attachments(path) -> dict[str, bytes]:
-    p = _open(path)
-    with open(p, "rb") as f:
-        return {a.name: a.data for a in make_reader(f).iter_attachments()}
+    with _reader(path, "attachments") as reader:
+        return {a.name: a.data for a in reader.iter_attachments()}

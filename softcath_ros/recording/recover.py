@@ -4,11 +4,19 @@ The recorder writes self-contained chunks (schemas and channels travel in the ch
 that first uses them), so a file cut anywhere holds a readable prefix: every record
 before the cut. This reads that prefix record by record, keeps each chunk whose
 length and CRC check out (a torn last chunk is dropped), and writes a complete file
-with summary, statistics and a fresh ``rosbag2`` metadata record.
+with summary, statistics and a fresh ``rosbag2`` metadata record. That record keeps the
+recording's ``custom_data`` (protocol, design, simulated): from the old ``rosbag2`` record when
+the file still has one, else from the ``softcath`` metadata record the bench writes at the start.
+
+Recovered in place, the damaged original is kept outside the bag folder (``ros2 bag`` reads
+every ``.mcap`` listed in, or found in, the folder): ``<bag>.damaged/<name>.mcap`` beside the bag
+folder; a file that is not in a bag folder keeps it beside itself as ``<name>.mcap.truncated``.
 """
 from __future__ import annotations
 
 import os
+import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +41,8 @@ class RecoveryReport:
     stop_reason: str = ""
     per_topic: dict[str, int] = field(default_factory=dict)
     last_log_time_ns: int = 0
+    custom_data: dict[str, str] = field(default_factory=dict)
+    damaged_original: str = ""       # where the damaged file was kept (in-place recovery)
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -67,21 +77,62 @@ def _records(path: Path, report: RecoveryReport):
                 return
 
 
+# custom_data keys taken from the bench's ``softcath`` metadata record when no rosbag2 record survived.
+CUSTOM_KEYS = ("protocol", "design", "simulated")
+
+
+def in_bag_folder(path: Path) -> bool:
+    """Whether ``path`` is the recording of a bag folder (``<bag>/<bag>_0.mcap``)."""
+    return path.name == f"{path.parent.name}_0.mcap"
+
+
+def damaged_copy_path(src: Path) -> Path:
+    """Where in-place recovery keeps the damaged original (module docstring)."""
+    if in_bag_folder(src):
+        return src.parent.parent / f"{src.parent.name}.damaged" / src.name
+    return src.with_name(src.name + ".truncated")
+
+
+def _custom_data_of(rosbag2_record: dict) -> dict[str, str]:
+    from ..core.yaml_io import load_yaml
+
+    try:
+        node = load_yaml(rosbag2_record.get("serialized_metadata", ""), "rosbag2 metadata record")
+    except SoftcathError:
+        return {}
+    custom = node.get("custom_data") if isinstance(node, dict) else None
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}
+
+
+def _offered_qos(text: str):
+    """The channel's offered QoS, or none when a damaged file holds something else there."""
+    try:
+        return parse_qos_yaml(text)
+    except SoftcathError:
+        return []
+
+
 def recover(source, output=None) -> RecoveryReport:
-    """Write the recoverable content of ``source`` to ``output`` (default: in place, the
-    damaged original kept as ``<name>.truncated``). Returns what was kept."""
+    """Write the recoverable content of ``source`` to ``output`` (default: in place, the damaged
+    original kept where ``damaged_copy_path`` says). Returns what was kept."""
     src = Path(source)
     if not src.is_file():
         raise SoftcathError(f"{src}: no such file")
     in_place = output is None
     dst = src.with_suffix(".recovering.mcap") if in_place else Path(output)
+    if not in_place:
+        if not dst.parent.is_dir():
+            raise SoftcathError(f"--output {dst}: folder {dst.parent} does not exist")
+        if dst.exists() and dst.resolve() == src.resolve():
+            raise SoftcathError(f"--output {dst}: is the damaged file itself; leave --output out to recover in place")
     report = RecoveryReport(source=str(src), output=str(src if in_place else dst))
     schemas: dict[int, int] = {}       # old id -> new id
     channels: dict[int, int] = {}
     topics: dict[int, TopicInfo] = {}
     schema_names: dict[int, str] = {}
     t_min, t_max = None, 0
-    custom: dict[str, str] = {}
+    custom: dict[str, str] = {}        # from the softcath record
+    old_custom: dict[str, str] = {}    # from a surviving rosbag2 record (wins)
     header_ok = False
     with open(dst, "wb") as out:
         writer = Writer(out, compression=CompressionType.ZSTD)
@@ -101,7 +152,7 @@ def recover(source, output=None) -> RecoveryReport:
                         rec.topic, rec.message_encoding, schemas.get(rec.schema_id, 0), dict(rec.metadata))
                     topics[rec.id] = TopicInfo(
                         name=rec.topic, type=schema_names.get(rec.schema_id, ""),
-                        offered_qos=parse_qos_yaml(rec.metadata.get("offered_qos_profiles", "")),
+                        offered_qos=_offered_qos(rec.metadata.get("offered_qos_profiles", "")),
                         type_hash=rec.metadata.get("topic_type_hash", ""),
                         serialization_format=rec.message_encoding)
             elif isinstance(rec, Message):
@@ -115,10 +166,11 @@ def recover(source, output=None) -> RecoveryReport:
                 t_max = max(t_max, rec.log_time)
             elif isinstance(rec, Metadata):
                 if rec.name == "rosbag2":
+                    old_custom = _custom_data_of(rec.metadata)
                     continue  # rebuilt below from what was actually kept
                 writer.add_metadata(rec.name, dict(rec.metadata))
                 if rec.name == "softcath":
-                    custom.update(rec.metadata)
+                    custom.update({k: v for k, v in rec.metadata.items() if k in CUSTOM_KEYS})
             elif isinstance(rec, Attachment):
                 writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
         if not header_ok:
@@ -127,7 +179,9 @@ def recover(source, output=None) -> RecoveryReport:
             raise SoftcathError(f"{src}: not an MCAP file or its header is damaged; nothing to recover")
         start = t_min or 0
         relative = src.name
-        node = bm.bag_metadata(list(topics.values()), relative, start, t_max - start, report.messages)
+        report.custom_data = {**custom, **old_custom}
+        node = bm.bag_metadata(list(topics.values()), relative, start, t_max - start, report.messages,
+                               report.custom_data)
         writer.add_metadata("rosbag2", {"serialized_metadata": bm.dump(node)})
         writer.finish()
         out.flush()
@@ -135,10 +189,13 @@ def recover(source, output=None) -> RecoveryReport:
     report.per_topic = {t.name: t.message_count for t in topics.values()}
     report.last_log_time_ns = t_max
     if in_place:
-        backup = src.with_name(src.name + ".truncated")
-        os.replace(src, backup)
+        backup = damaged_copy_path(src)
+        backup.parent.mkdir(exist_ok=True)
+        if backup.exists():   # an earlier recovery's damaged copy: keep both
+            backup = backup.with_name(f"{backup.name}.{time.strftime('%Y%m%d_%H%M%S')}")
+        shutil.move(src, backup)
         os.replace(dst, src)
-        meta = src.parent / "metadata.yaml"
-        if src.name == f"{src.parent.name}_0.mcap":
-            meta.write_text(bm.metadata_yaml(node))
+        report.damaged_original = str(backup)
+        if in_bag_folder(src):
+            (src.parent / "metadata.yaml").write_text(bm.metadata_yaml(node))
     return report

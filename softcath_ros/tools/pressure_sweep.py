@@ -11,7 +11,6 @@ what the topics say, not a second computation. Reusable: ``SweepClient.run(press
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -21,7 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import topics
+from ..cli.common import bounded_int, finite_float, positive_float
+from ..core import json_output
 from ..core.units import PA_PER_BAR
+from ..graph import default_to_localhost_discovery
 
 
 @dataclass
@@ -162,17 +164,17 @@ def plot_backbones(points: list[SweepPoint | None], path: Path, title: str = "")
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="send a pressure sweep to a running model_node and show its poses")
-    ap.add_argument("--from", dest="start", type=float, default=0.0)
-    ap.add_argument("--to", dest="stop", type=float, default=0.35)
-    ap.add_argument("--steps", type=int, default=8)
+    ap.add_argument("--from", dest="start", type=finite_float, default=0.0)
+    ap.add_argument("--to", dest="stop", type=finite_float, default=0.35)
+    ap.add_argument("--steps", type=bounded_int(1, 10_000), default=8)
     ap.add_argument("--unit", choices=("bar", "Pa"), default="bar")
-    ap.add_argument("--channels", type=int, default=1, help="channels of the node's design")
-    ap.add_argument("--length", type=float, default=0.040,
+    ap.add_argument("--channels", type=bounded_int(1, 64), default=1, help="channels of the node's design")
+    ap.add_argument("--length", type=positive_float, default=0.040,
                     help="the node's design length in m, for R_C = l / theta (default 0.040: implemented_5mm)")
-    ap.add_argument("--channel", type=int, default=0, help="channel that is swept")
+    ap.add_argument("--channel", type=bounded_int(0, 63), default=0, help="channel that is swept")
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
     ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
-    ap.add_argument("--timeout", type=float, default=5.0, help="s to wait for each answer")
+    ap.add_argument("--timeout", type=positive_float, default=5.0, help="s to wait for each answer")
     args = ap.parse_args(argv)
     if args.steps < 1 or not 0 <= args.channel < args.channels:
         ap.error("need --steps >= 1 and 0 <= --channel < --channels")
@@ -181,6 +183,7 @@ def main(argv=None) -> int:
 
     import rclpy
 
+    default_to_localhost_discovery()
     rclpy.init()
     client = None
     try:
@@ -200,7 +203,7 @@ def main(argv=None) -> int:
     print_table(points, commands, args.length)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps([p.__dict__ if p else None for p in points], indent=1))
+        args.json.write_text(json_output.dumps([p.__dict__ if p else None for p in points], indent=1))
     if args.plot:
         print(f"backbone plot: {plot_backbones(points, args.plot)}")
     return 0 if all(p is not None for p in points) else 1

@@ -3,10 +3,10 @@ error from the ladder chart), NAME.json (all of it, machine-readable)."""
 from __future__ import annotations
 
 import csv
-import json
 import math
 from pathlib import Path
 
+from .. import json_output
 from ..errors import ModelError
 from ..units import PA_PER_BAR
 from .context import StudyContext, StudyResult
@@ -108,7 +108,7 @@ def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, ste
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         for r in result.rows:
-            w.writerow({k: json.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
+            w.writerow({k: json_output.dumps(v) if isinstance(v, (list, dict)) else v for k, v in r.items()})
     result.plot(files["png"])
     accuracy = rung_accuracy(ctx.rung, result.design, ctx.options, ctx.pressure, length)
     for name, text in result.extra_files.items():
@@ -118,5 +118,5 @@ def write_study(result: StudyResult, ctx: StudyContext, out_dir: str | Path, ste
     doc = {"study": result.name, "design": result.design, "rung": ctx.rung, "rung_options": ctx.options,
            "pressure_pa": ctx.pressure, "channel": ctx.channel, "rung_accuracy": accuracy,
            "findings": result.findings, "meta": result.meta, "rows": result.rows}
-    Path(files["json"]).write_text(json.dumps(doc, indent=2, default=str))
+    Path(files["json"]).write_text(json_output.dumps(doc, indent=2, default=str))
     return files

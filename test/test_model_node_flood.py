@@ -1,0 +1,89 @@
+"""model_node under a command flood faster than its rung: /diagnostics keeps coming while the rung
+solves, superseded commands are counted, and the answer is for the newest command, not a backlog."""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+pytestmark = pytest.mark.ros
+
+from domains import private_domain  # noqa: E402
+from softcath_ros import topics  # noqa: E402
+from softcath_ros.core.models.base import BendModel, BendState  # noqa: E402
+from softcath_ros.core.prediction import state_backbone  # noqa: E402
+
+SOLVE_S = 0.05      # the slow rung: 50 ms per command, about 20 answers/s
+
+
+class SlowRung(BendModel):
+    name = "slow"
+
+    def _evaluate_batch(self, pressures):
+        time.sleep(SOLVE_S)
+        p = np.asarray(pressures, float)[:, 0]
+        return BendState(np.stack([np.zeros_like(p), -p * 1e-3], axis=1), np.ones(len(p)), np.ones(len(p), bool))
+
+
+def test_flood_on_a_slow_rung_answers_the_newest_command_and_diagnostics_keep_coming(monkeypatch):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Float64MultiArray
+
+    from softcath_ros.nodes import model_node
+
+    monkeypatch.setattr(model_node, "make_model", lambda name, design, **kw: SlowRung(design))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=private_domain())
+    node = model_node.ModelNode(context=context, parameter_overrides=[
+        Parameter("diagnostics_period", value=0.1), Parameter("executor", value="single")])
+    probe = rclpy.create_node("flood_probe", context=context)
+    assert node._solver is not None, "a 50 ms rung must answer on the solve thread"
+    diagnostics, tips = [], []
+    probe.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
+                              lambda m: diagnostics.append((time.monotonic(), m)), 100)
+    probe.create_subscription(PoseStamped, topics.TIP_POSE, lambda m: tips.append(m), 1000)
+    pub = probe.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, 1000)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        deadline = time.monotonic() + 10.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        n, t0 = 400, time.monotonic()
+        for i in range(n):                       # 400 commands in about 1 s: 20 times what the rung answers
+            pub.publish(Float64MultiArray(data=[100.0 * (i + 1)]))
+            time.sleep(0.0025)
+        flood_end = time.monotonic()
+        last_pressure = 100.0 * n
+        # the newest command is answered soon after the flood, not after a backlog of 400 x 50 ms
+        while time.monotonic() < flood_end + 3.0:
+            if node.counters.accepted and node._pending is None and tips:
+                break
+            time.sleep(0.05)
+        time.sleep(3 * SOLVE_S)
+        took = time.monotonic() - t0
+        c = node.counters
+        assert c.accepted + c.superseded + c.rejected == n, vars(c)
+        assert c.superseded >= n // 2 and c.accepted < n // 2, vars(c)
+        positions, _ = state_backbone(SlowRung(node.design).evaluate([last_pressure]), node.length, node.n_points)
+        assert tips and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9), \
+            "the last answer must be for the newest command"
+        assert took < 5.0
+        # /diagnostics never went silent during the flood (period 0.1 s; allow a loaded machine 5x)
+        during = [t for t, _ in diagnostics if t0 <= t <= flood_end]
+        gaps = np.diff([t0] + during + [flood_end])
+        assert len(during) >= 3 and gaps.max() < 0.5, gaps
+        values = {kv.key: kv.value for _, m in diagnostics[-3:] for s in m.status for kv in s.values}
+        assert int(values["superseded"]) > 0
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
