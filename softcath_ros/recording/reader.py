@@ -65,25 +65,26 @@ def read_attachments(path) -> dict[str, bytes]:
 
 
 def recording_topics(path) -> dict[str, str]:
-    """Topic -> message type of every channel in the recording (from its summary, or a scan)."""
-    p = _open(path)
-    with open(p, "rb") as f:
-        reader = make_reader(f)
-        try:
-            summary = reader.get_summary()
-            if summary is not None:
-                return {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
-            f.seek(0)
-            from mcap.records import Channel, Schema
-            from mcap.stream_reader import StreamReader
+    """Topic -> message type of every channel in the recording: from its summary, or for a torn
+    file (no summary) from the readable prefix, as `recover` reads it."""
+    from mcap.records import Channel, Schema
 
-            schemas, out = {}, {}
-            for record in StreamReader(f, skip_magic=False).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record.name
-                elif isinstance(record, Channel):
-                    out[record.topic] = schemas.get(record.schema_id, "")
-            return out
-        except Exception as exc:  # noqa: BLE001 - torn or foreign files: say what to do
-            raise SoftcathError(f"{p}: cannot read its topics ({type(exc).__name__}: {exc}); "
-                                f"if the recorder was killed, run `softcath recover {p}` first") from None
+    from .recover import RecoveryReport, _records
+
+    p = _open(path)
+    try:
+        with open(p, "rb") as f:
+            summary = make_reader(f).get_summary()
+        if summary is not None:
+            return {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    except Exception:  # noqa: BLE001 - torn end or foreign file: scan the prefix below
+        pass
+    schemas, out = {}, {}
+    for record in _records(p, RecoveryReport(str(p), "")):
+        if isinstance(record, Schema):
+            schemas[record.id] = record.name
+        elif isinstance(record, Channel):
+            out[record.topic] = schemas.get(record.schema_id, "")
+    if not out:
+        raise SoftcathError(f"{p}: cannot read its topics (not an MCAP recording, or cut before its first chunk)")
+    return out
