@@ -7,7 +7,6 @@ import os
 import random
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,36 +14,14 @@ import numpy as np
 import pytest
 import yaml
 
+from bench_procs import procs, start as _start, summary as _summary  # noqa: F401 (procs: fixture)
 from domains import private_env
 from softcath_ros import topics
 from softcath_ros.graph import wait_ready
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-VENV_BIN = Path(sys.executable).parent
 STOP_WITHIN_S = 2.0   # the contract: the bench has stopped within 2 s of the rig's death
-
-
-@pytest.fixture
-def procs():
-    started = []
-    yield started
-    for p in started:
-        if p.poll() is None:
-            p.kill()
-        p.wait(timeout=10)
-
-
-def _start(procs, args, env, **kw):
-    p = subprocess.Popen([str(VENV_BIN / args[0]), *args[1:]], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True, **kw)
-    procs.append(p)
-    return p
-
-
-def _summary(output: str) -> dict:
-    line = [x for x in output.splitlines() if x.startswith("summary: ")][-1]
-    return json.loads(line[len("summary: "):])
 
 
 def _markers(path):

@@ -337,6 +337,10 @@ class BenchNode(Node):
                 self.state = "running"
                 self.publish_events(self.runner.start(t))
             elif state == "failed":
+                others = self.other_commanders()
+                if others:  # the likely reason the source did not follow
+                    return self.abort(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: "
+                                      f"{self.follow.message}", EXIT_FIGHT)
                 return self.abort(self.follow.message, EXIT_NO_RIG)
             else:
                 on = self.follow.commanding
@@ -381,7 +385,7 @@ class BenchNode(Node):
                                "pressure source follows a small command")
 
     def diagnostics(self):
-        others = self.other_commanders() if self.state == "running" else []
+        others = self.other_commanders() if self.state in ("checking", "running") else []
         if others:
             self.abort(f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
                        "stopped (the commands would fight)", EXIT_FIGHT)

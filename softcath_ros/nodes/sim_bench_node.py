@@ -77,10 +77,6 @@ class SimBenchNode(Node):
             self.legacy = (self.create_publisher(Float64MultiArray, topics.PRESSURE_MEASURED, 10),
                            self.create_publisher(Float64, topics.BENCH_ANGLE, 10),
                            self.create_publisher(Float64, topics.BENCH_FORCE, 10))
-            self.get_logger().warning(
-                f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
-                "(removed in the next release; set legacy_topics:=false to stop): read the stamped "
-                "topics of docs/rig.md instead")
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -97,6 +93,11 @@ class SimBenchNode(Node):
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
                                f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
+        if self.legacy is not None:
+            self.get_logger().warning(
+                f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
+                "(removed in the next release; set legacy_topics:=false to stop): read the stamped "
+                "topics of docs/rig.md instead")
 
     def on_command(self, msg):
         p = np.asarray(msg.data, dtype=float)
