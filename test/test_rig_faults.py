@@ -166,6 +166,18 @@ def test_no_rig_names_each_missing_topic(tmp_path, procs):
         assert f"{t}: no publisher" in err
 
 
+def _short_protocol(tmp_path, levels=(0.0, 10000.0, 20000.0), trials=1) -> Path:
+    """A few steps on the angle bench only: a run of a couple of seconds."""
+    path = tmp_path / "short.yaml"
+    path.write_text(yaml.safe_dump({
+        "name": "short", "design": "implemented_5mm", "drive": "channels", "channels": [0],
+        "staircase": {"levels": list(levels), "down": True}, "trials": trials, "dwell": 0.1,
+        "settle": {"tolerance": 1000.0, "max_offset": 3000.0, "hold": 0.05, "timeout": 2.0},
+        "samples_per_step": 2, "sample_period": 0.03,
+        "benches": [{"kind": "angle", "samples": [{"name": "a", "length": 0.02}]}]}))
+    return path
+
+
 @pytest.mark.timeout(240)
 def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs):
     from softcath_ros.bench.analysis import rows_from_recording
@@ -173,8 +185,8 @@ def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs
 
     env = private_env()
     _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false"], env)
-    run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", "quick", "--output-dir",
-                         str(tmp_path), "--json"], env)
+    run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(_short_protocol(tmp_path)),
+                         "--output-dir", str(tmp_path), "--json"], env)
     out = run.communicate(timeout=200)[0]
     assert run.returncode == 0, out
     result = json.loads(out[out.index("{"):])
@@ -182,4 +194,48 @@ def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs
     assert meta["softcath"]["simulated"] == "true" and meta["softcath"]["rig_topics"] == "stamped"
     assert meta["softcath_result"]["complete"] == "true"
     rows = rows_from_recording(result["recording"])
-    assert len(rows) == 28 * 2 and np.all(np.isfinite([r.angle for r in rows]))
+    assert len(rows) == 5 * 2 and np.all(np.isfinite([r.angle for r in rows]))
+
+
+@pytest.mark.timeout(180)
+def test_characterise_stops_the_bench_when_a_child_dies(tmp_path, procs):
+    """model_node is no rig (bench_node would not notice it): characterise stops the run itself."""
+    import psutil
+
+    run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path)],
+                 private_env())
+    wait_ready(run, timeout_s=150, mark="starting protocol")
+    kids = {c.name(): c for c in psutil.Process(run.pid).children(recursive=True)}
+    kids["model_node"].kill()
+    t0 = time.monotonic()
+    kids["bench_node"].wait(timeout=30)
+    took = time.monotonic() - t0
+    out = run.communicate(timeout=60)[0]
+    assert run.returncode == 5, out
+    assert took < STOP_WITHIN_S, f"bench_node stopped {took:.2f} s after model_node was killed"
+    assert "model_node exited (-9) during the run" in out and "Traceback" not in out
+
+
+@pytest.mark.timeout(180)
+def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
+    """The disk fills up after the protocol started (a tmpfs just above the recorder's 64 MiB
+    minimum, then filled to the last byte)."""
+    disk = tmp_path / "disk"
+    if not _mount_tmpfs(disk, "70m"):
+        pytest.skip("cannot mount a tmpfs here (needs root); the injected-ENOSPC test covers the writer")
+    try:
+        run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(disk)],
+                     private_env())
+        wait_ready(run, timeout_s=150, mark="step 8/28")
+        with open(disk / "filler", "wb", buffering=0) as f:
+            for block in (1 << 20, 1 << 12):
+                try:
+                    while True:
+                        f.write(b"\0" * block)
+                except OSError:
+                    pass
+        out = run.communicate(timeout=170)[0]
+        assert run.returncode == 6, out
+        assert "disk full" in out and "Traceback" not in out
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)

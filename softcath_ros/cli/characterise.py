@@ -226,14 +226,20 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                             f"(recording finalised; logs in {logs})")
     code = bench.returncode
     if code == 0 and summary and not died:
-        return _done(args, summary, design, t0, logs)
+        try:
+            return _done(args, summary, design, t0, logs)
+        except SoftcathError as exc:
+            if "disk full" in str(exc):
+                print(f"softcath characterise: error: {exc}", file=sys.stderr)
+                return EXIT_DISK_FULL
+            raise
     reason = (summary or {}).get("error") or (
         "bench_node stopped (recording finalised, incomplete)" if died and code == 130 else f"bench_node exited with {code}")
     if died:
         reason = f"{', '.join(died)} during the run; {reason}"
     if code in (0, 130) and died:
         code = EXIT_CHILD_DIED
-    if summary and summary.get("completed_steps"):
+    if summary and summary.get("completed_steps") and code != EXIT_DISK_FULL:  # a torn file needs recover first
         try:
             _done(args, summary, design, t0, logs, incomplete=True)
         except SoftcathError as exc:
@@ -269,7 +275,12 @@ def _watch_children(children, bench, died: list[str]) -> None:
 def _done(args, summary: dict, design, t0: float, logs: Path, incomplete: bool = False) -> int:
     from ..bench.report import write_report
 
-    report = write_report(summary["recording"], design, args.model)
+    try:
+        report = write_report(summary["recording"], design, args.model)
+    except OSError as exc:
+        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        raise SoftcathError(f"{'disk full' if full else 'cannot write'} writing the report beside "
+                            f"{summary['recording']} ({exc.strerror or exc})") from None
     elapsed = time.monotonic() - t0
     if args.json:
         json.dump({"recording": summary["recording"], "report": report["report"], "plots": report["plots"],
