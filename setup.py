@@ -42,6 +42,7 @@ setup(
             "ros-rclpy>=9.1",
             "ros-std-msgs>=5.5",
             "ros-geometry-msgs>=5.5",
+            "ros-sensor-msgs>=5.5",   # the rig contract: FluidPressure (docs/rig.md)
             "ros-diagnostic-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
         ],

@@ -11,8 +11,12 @@ TIP_POSE = "/softcath/tip_pose"                    # predicted tip pose in softc
 BACKBONE = "/softcath/backbone"                    # predicted backbone poses, base to tip
 BEND_CMD = "/softcath/bend_cmd"                    # desired curvature vector (x, y), 1/m
 TIP_TARGET = "/softcath/tip_target"                # desired tip position, m
-BENCH_ANGLE = "/softcath/bench/angle"              # measured bending angle, rad
-BENCH_FORCE = "/softcath/bench/force"              # measured blocking force, N
+BENCH_ANGLE = "/softcath/bench/angle"              # DEPRECATED (unstamped): measured bending angle, rad
+BENCH_FORCE = "/softcath/bench/force"              # DEPRECATED (unstamped): measured blocking force, N
+# The rig contract (docs/rig.md): stamped measurements from the standard message packages.
+PRESSURE_MEASURED_CHANNEL = "/softcath/pressure_measured/ch{channel}"  # one FluidPressure per channel, Pa
+BENCH_BEND_ANGLE = "/softcath/bench/bend_angle"    # measured bending angle (vector.x), rad
+BENCH_WRENCH = "/softcath/bench/wrench"            # scale reading (force.z), N, frame SCALE_FRAME_ID
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
 BENCH_RIG = "/softcath/bench/rig"                  # the rig announces itself (JSON, transient local)
 DIAGNOSTICS = "/diagnostics"
@@ -26,14 +30,39 @@ MESSAGE_TYPES = {
     TIP_TARGET: "geometry_msgs/msg/PointStamped",
     BENCH_ANGLE: "std_msgs/msg/Float64",
     BENCH_FORCE: "std_msgs/msg/Float64",
+    BENCH_BEND_ANGLE: "geometry_msgs/msg/Vector3Stamped",
+    BENCH_WRENCH: "geometry_msgs/msg/WrenchStamped",
     BENCH_STEP: "std_msgs/msg/String",
     BENCH_RIG: "std_msgs/msg/String",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
 
-# What bench_node records by default: every signal of a bench run.
-RECORDED = [PRESSURE_CMD, BEND_CMD, PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE, BENCH_STEP, BENCH_RIG,
-            TIP_POSE, BACKBONE, DIAGNOSTICS]
+FLUID_PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"
+
+
+def pressure_measured_topic(channel: int) -> str:
+    """The stamped measured-pressure topic of ``channel`` (0-based)."""
+    return PRESSURE_MEASURED_CHANNEL.format(channel=int(channel))
+
+
+def message_type(topic: str) -> str | None:
+    """The contract's message type of ``topic`` (per-channel pressure topics included), or None."""
+    if topic.startswith(PRESSURE_MEASURED + "/ch") and topic[len(PRESSURE_MEASURED) + 3:].isdigit():
+        return FLUID_PRESSURE_TYPE
+    return MESSAGE_TYPES.get(topic)
+
+
+def rig_topics(n_channels: int) -> list[str]:
+    """What a rig publishes under the contract: one pressure topic per channel, angle, scale."""
+    return [pressure_measured_topic(c) for c in range(n_channels)] + [BENCH_BEND_ANGLE, BENCH_WRENCH]
+
+
+# Published for one release beside the stamped topics, then removed (docs/rig.md "Deprecated").
+DEPRECATED_RIG_TOPICS = [PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE]
+
+# What bench_node records by default: every signal of a bench run (plus rig_topics(n) of the design).
+RECORDED = [PRESSURE_CMD, BEND_CMD, PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE, BENCH_BEND_ANGLE, BENCH_WRENCH,
+            BENCH_STEP, BENCH_RIG, TIP_POSE, BACKBONE, DIAGNOSTICS]
 
 # Node names (the executables share the module names: model_node, ...).
 MODEL_NODE = "softcath_model"
@@ -42,3 +71,4 @@ BENCH_NODE = "softcath_bench"
 SIM_BENCH_NODE = "softcath_sim_bench"
 
 FRAME_ID = "softcath_base"
+SCALE_FRAME_ID = "softcath_scale"   # the scale under the tip: z is its measuring axis

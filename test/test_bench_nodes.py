@@ -9,6 +9,7 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 
+from bench_procs import procs, start as _start, summary as _summary  # noqa: F401 (procs: fixture)
 from domains import private_env
 from softcath_ros import topics
 from softcath_ros.graph import wait_ready
@@ -16,35 +17,11 @@ from softcath_ros.graph import graph_env
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-VENV_BIN = Path(sys.executable).parent
-
 RUN_TIMEOUT_S = 180  # a protocol of ~20 s: generous for a loaded machine
 
 
 def _env():
     return private_env()
-
-
-@pytest.fixture
-def procs():
-    started = []
-    yield started
-    for p in started:
-        if p.poll() is None:
-            p.kill()
-        p.wait(timeout=10)
-
-
-def _start(procs, args, env, **kw):
-    p = subprocess.Popen([str(VENV_BIN / args[0]), *args[1:]], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True, **kw)
-    procs.append(p)
-    return p
-
-
-def _summary(output: str) -> dict:
-    line = [x for x in output.splitlines() if x.startswith("summary: ")][-1]
-    return json.loads(line[len("summary: "):])
 
 
 def test_quick_protocol_records_a_simulated_run(tmp_path, procs):

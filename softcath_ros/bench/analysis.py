@@ -1,7 +1,12 @@
 """From a bench recording to per-step statistics (docs/actuator.md "The bench").
 
 Each ``sample`` marker on the step topic is one reading: the latest measured
-pressures, angle and force received before the marker. On the force bench the scale
+pressures, angle and force received before the marker, if none of them is older than the
+recording's ``stale_after_s`` (a stale reading is never analysed as a fresh one: the sample is
+left out). Steps that started but never ended (the rig failed mid-run, the bench was killed)
+are left out too: the analysis uses the completed steps. The readings are the rig contract's
+stamped topics (docs/rig.md), or for older recordings the deprecated unstamped ones. On the
+force bench the scale
 reading at p = 0 of the same trial (its first loading step) is subtracted (tare).
 Per step (bench, drive, phase, level) the mean and standard deviation over trials and
 samples are reported for pressure, curvature, R_C = l / theta and force; loading and
@@ -20,10 +25,17 @@ from ..core.errors import SoftcathError
 
 DEFAULT_TOPICS = {
     "step": topics.BENCH_STEP,
+    "angle": topics.BENCH_BEND_ANGLE,
+    "force": topics.BENCH_WRENCH,
+}
+# Recordings made before the stamped rig contract (deprecated topics).
+LEGACY_TOPICS = {
+    "step": topics.BENCH_STEP,
     "pressure_measured": topics.PRESSURE_MEASURED,
     "angle": topics.BENCH_ANGLE,
     "force": topics.BENCH_FORCE,
 }
+DEFAULT_STALE_AFTER_S = 0.5  # bench_node's default, for recordings that do not say
 
 
 @dataclass
@@ -71,33 +83,54 @@ class StepStats:
         return float(np.max(self.pressure_mean))
 
 
-def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]]) -> list[SampleRow]:
+def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]],
+                     stale_after: float | None = None, skipped: list | None = None) -> list[SampleRow]:
     """``events``: (time ns, marker dict) in time order. ``streams``: name -> [(time ns, value)] for
-    'pressure_measured' (array), 'angle', 'force' (floats), each in time order."""
+    'pressure_measured' (array) or 'pressure_ch0', 'pressure_ch1', ... (floats, one per channel),
+    'angle', 'force' (floats), each in time order. With ``stale_after`` (s) a sample whose latest
+    reading of any stream is older than that is left out (and its marker appended to ``skipped``).
+    Samples of steps that started and never ended are left out."""
     idx = {k: 0 for k in streams}
     latest: dict[str, object] = {k: None for k in streams}
+    when: dict[str, int] = {k: 0 for k in streams}
+    channels = sorted((k for k in streams if k.startswith("pressure_ch")), key=lambda k: int(k[len("pressure_ch"):]))
     settled_by_step: dict[int, bool] = {}
+    started, ended = set(), set()
     rows: list[SampleRow] = []
     for t, ev in events:
         for k, seq in streams.items():
             while idx[k] < len(seq) and seq[idx[k]][0] <= t:
-                latest[k] = seq[idx[k]][1]
+                when[k], latest[k] = seq[idx[k]]
                 idx[k] += 1
-        if ev.get("event") == "settled":
+        kind = ev.get("event")
+        if kind == "step_start":
+            started.add(ev["step"])
+        elif kind == "step_end":
+            ended.add(ev["step"])
+        elif kind == "settled":
             settled_by_step[ev["step"]] = bool(ev.get("settled", True))
-        if ev.get("event") != "sample":
+        if kind != "sample":
             continue
-        if latest.get("pressure_measured") is None:
+        if channels:
+            pressure = None if any(latest[c] is None for c in channels) else [latest[c] for c in channels]
+        else:
+            pressure = latest.get("pressure_measured")
+        if pressure is None:
             continue  # nothing measured yet: not a reading
+        if stale_after is not None and any(latest[k] is not None and t - when[k] > stale_after * 1e9 for k in streams):
+            if skipped is not None:
+                skipped.append(ev)
+            continue  # a stale reading is not a reading
         rows.append(SampleRow(
             step=int(ev["step"]), bench=ev["bench"], sample_name=ev["sample_name"],
             length=float(ev["sample_length_m"]), trial=int(ev["trial"]), phase=ev["phase"], drive=ev["drive"],
             level=float(ev["level"]), pressure_cmd=np.asarray(ev["pressure_cmd_pa"], dtype=float),
-            pressure=np.asarray(latest["pressure_measured"], dtype=float),
+            pressure=np.asarray(pressure, dtype=float),
             angle=float(latest["angle"]) if latest.get("angle") is not None else math.nan,
             force=float(latest["force"]) if latest.get("force") is not None else math.nan,
             settled=settled_by_step.get(int(ev["step"]), True)))
-    return tare_forces(rows)
+    incomplete = started - ended
+    return tare_forces([r for r in rows if r.step not in incomplete])
 
 
 def tare_forces(rows: list[SampleRow]) -> list[SampleRow]:
@@ -116,28 +149,50 @@ def tare_forces(rows: list[SampleRow]) -> list[SampleRow]:
 
 
 def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[SampleRow]:
-    from ..recording.reader import iter_messages
+    """Sample rows of a bench recording: the stamped rig topics, or (a recording without them)
+    the deprecated unstamped ones; ``topics`` overrides names (keys as DEFAULT_TOPICS)."""
+    from .. import topics as names
+    from ..recording.reader import iter_messages, read_metadata, recording_topics
 
-    topics = {**DEFAULT_TOPICS, **(topics or {})}
-    by_topic = {v: k for k, v in topics.items()}
+    present = recording_topics(path)
+    channel_topics = sorted((t for t in present if names.message_type(t) == names.FLUID_PRESSURE_TYPE),
+                            key=lambda t: int(t.rsplit("ch", 1)[1]))
+    stamped = bool(channel_topics) and not (topics and "pressure_measured" in topics)
+    chosen = {**(DEFAULT_TOPICS if stamped else LEGACY_TOPICS), **(topics or {})}
+    if stamped:
+        chosen.update({f"pressure_ch{t.rsplit('ch', 1)[1]}": t for t in channel_topics})
+    by_topic = {v: k for k, v in chosen.items()}
     events: list[tuple[int, dict]] = []
-    streams: dict[str, list] = {"pressure_measured": [], "angle": [], "force": []}
+    streams: dict[str, list] = {k: [] for k in chosen if k != "step"}
     try:
-        for m in iter_messages(path, topics=list(topics.values())):
+        for m in iter_messages(path, topics=list(chosen.values())):
             kind = by_topic[m.topic]
+            msg = m.message
             if kind == "step":
-                ev = json.loads(m.message.data)
+                ev = json.loads(msg.data)
                 if not isinstance(ev, dict):
                     raise ValueError("a step marker is not a JSON object")
                 events.append((m.log_time_ns, ev))
             elif kind == "pressure_measured":
-                streams[kind].append((m.log_time_ns, np.asarray(m.message.data, dtype=float)))
+                streams[kind].append((m.log_time_ns, np.asarray(msg.data, dtype=float)))
+            elif kind.startswith("pressure_ch"):
+                streams[kind].append((m.log_time_ns, float(msg.fluid_pressure)))
+            elif hasattr(msg, "wrench"):
+                streams[kind].append((m.log_time_ns, float(msg.wrench.force.z)))
+            elif hasattr(msg, "vector"):
+                streams[kind].append((m.log_time_ns, float(msg.vector.x)))
             else:
-                streams[kind].append((m.log_time_ns, float(m.message.data)))
-        return rows_from_events(events, streams)
+                streams[kind].append((m.log_time_ns, float(msg.data)))
     except (ValueError, KeyError, TypeError, AttributeError) as exc:   # a recording not written by the bench
         raise SoftcathError(f"{path}: not a bench recording the report can read ({type(exc).__name__}: "
                             f"{str(exc)[:120]})") from None
+    meta = read_metadata(path).get("softcath", {})
+    try:
+        stale_after = float(meta.get("stale_after_s", DEFAULT_STALE_AFTER_S))
+    except ValueError:
+        stale_after = DEFAULT_STALE_AFTER_S
+    return rows_from_events(events, {k: v for k, v in streams.items() if v or k != "pressure_measured"},
+                            stale_after=stale_after)
 
 
 def summarise(rows: list[SampleRow], angle_resolution: float = math.radians(1.0)) -> list[StepStats]:

@@ -197,7 +197,9 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
                           band95=dict(zip(MODEL_QUANTITIES, half)))
             overlaid.append(f"{rung} calibrated")
     hyst = hysteresis(stats)
-    meta = read_metadata(path).get("softcath", {})
+    all_meta = read_metadata(path)
+    meta = all_meta.get("softcath", {})
+    result = all_meta.get("softcath_result")
     info = {"recording": str(path), "design": design.name,
             "simulated": meta.get("simulated", "unknown"),
             "protocol": meta.get("protocol", "unknown"),
@@ -205,6 +207,9 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
             "models overlaid": ", ".join(overlaid)}
     if meta.get("simulated") == "true":
         info["note"] = "simulated rig (sim_bench_node), not hardware"
+    if result is not None and result.get("complete") != "true":
+        info["incomplete"] = (f"{result.get('completed_steps', '?')} of {result.get('n_steps', '?')} steps completed "
+                              f"(only those are analysed): {result.get('reason', '')}")
     plots = plot(stats, out, "report")
     text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration)
     md = out / "report.md"

@@ -1,33 +1,67 @@
-"""`softcath characterise`: the main job. Brings up sim_bench_node, model_node (so the
-predicted /softcath/tip_pose and /softcath/backbone are recorded), allocation_node for
-protocols by bending direction, and bench_node, as separate processes on a private ROS
-domain; runs the default characterisation (0 -> 0.35 -> 0 bar, three trials, angle and
-blocking-force benches), then writes the report and prints where both are.
-Ctrl-C stops the run cleanly: bench_node finalises the recording first.
+"""`softcath characterise`: the main job. Runs a protocol on a rig and writes the recording and
+the report.
+
+Rigs (``--rig``, the table ``RIGS``; a new rig is one more entry with its own ``run``):
+- ``sim`` (default): starts sim_bench_node, model_node (so the predicted /softcath/tip_pose and
+  /softcath/backbone are recorded), allocation_node for protocols by bending direction, and
+  bench_node, as separate processes on a private ROS domain.
+- ``ros``: whatever publishes the rig contract (docs/rig.md) on the user's ROS_DOMAIN_ID (a real
+  rig, or sim_bench_node started by hand): the same graph without sim_bench_node; bench_node
+  waits ``--wait-timeout`` s for it and names each missing topic.
 
 allocation_node runs only for protocols by direction (bench_node sends /softcath/bend_cmd,
 allocation_node publishes /softcath/pressure_cmd). A per-channel protocol publishes
-/softcath/pressure_cmd itself and must be its only publisher: allocation_node publishes
-there too (at least while it ramps down after its watchdog), so the two would fight.
+/softcath/pressure_cmd itself and must be its only publisher.
+
+Faults (docs/rig.md "Exit codes"): bench_node's own failures pass through with its exit code and
+reason (3 no rig, 4 another commander, 5 rig lost mid-run, 6 disk full); after a failure mid-run
+the report is still written on the completed steps. A child that dies while the bench runs gets
+the bench stopped within 2 s (exit 5). SIGINT and SIGTERM stop bench_node first (it finalises the
+recording), then every other child; exit 130 (SIGINT) or 143 (SIGTERM).
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
+import signal
+import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
+from typing import Callable
 
 from ..bench.report import DEFAULT_OVERLAY
 from ..core.errors import SoftcathError
 from ..graph import NodeGraph, stop_process
 
+EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
+EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
+CHILD_GRACE_S = 1.0       # a dead child: bench_node gets this long to notice by itself, then is stopped
+
+
+class Stopped(Exception):
+    """SIGTERM (or SIGINT) arrived: stop the graph, finalise, exit 128 + signum."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@dataclass(frozen=True)
+class RigChoice:
+    help: str
+    run: Callable  # (args, protocol, design) -> exit code
+
 
 def register(sub) -> None:
-    p = sub.add_parser("characterise", help="run the bench characterisation on the simulated rig "
-                       "(nodes as separate processes) and write recording + report")
+    p = sub.add_parser("characterise", help="run a bench protocol on a rig (simulated by default) "
+                       "and write recording + report")
+    p.add_argument("--rig", default="sim", choices=sorted(RIGS),
+                   help="; ".join(f"{k}: {v.help}" for k, v in sorted(RIGS.items())) + " (default sim)")
     p.add_argument("--protocol", default="default", help="shipped protocol name or a path")
     p.add_argument("--design", default=None, help="design (default: the protocol's)")
     p.add_argument("--sim-model", default="surrogate", help="rung that plays the rig's truth (default: the section "
@@ -37,81 +71,234 @@ def register(sub) -> None:
     p.add_argument("--output-dir", default="runs", help="where the recording directory goes (default runs/)")
     p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
     p.add_argument("--timeout", type=float, default=170.0, help="give up after this many seconds")
+    p.add_argument("--wait-timeout", type=float, default=20.0,
+                   help="seconds bench_node waits for the rig's topics (default 20)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..bench.protocol import load_protocol
-    from ..bench.report import write_report
     from ..core.design import load_design
 
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
+    previous = signal.signal(signal.SIGTERM, _raise_stopped)
+    try:
+        return RIGS[args.rig].run(args, protocol, design)
+    except Stopped as exc:
+        return 128 + exc.signum
+    except KeyboardInterrupt:
+        return 128 + signal.SIGINT
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _raise_stopped(signum, frame):
+    raise Stopped(signum)
+
+
+def _run_sim(args, protocol, design) -> int:
+    return run_graph(args, protocol, design, rig_nodes=[("sim_bench_node", {"model": args.sim_model,
+                                                                              "legacy_topics": "false"})],
+                     private=True)
+
+
+def _run_ros(args, protocol, design) -> int:
+    return run_graph(args, protocol, design, rig_nodes=[], private=False)
+
+
+RIGS: dict[str, RigChoice] = {
+    "sim": RigChoice("the simulated rig (sim_bench_node) on a private ROS domain", _run_sim),
+    "ros": RigChoice("whatever publishes the rig contract (docs/rig.md) on $ROS_DOMAIN_ID", _run_ros),
+}
+
+
+def _domain(private: bool) -> int | None:
+    explicit = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if explicit and not (explicit.isdigit() and int(explicit) <= 232):
+        raise SoftcathError(f"ROS_DOMAIN_ID={explicit!r}: must be an integer 0..232"
+                            + (" (or unset for a private domain)" if private else ""))
+    if explicit:
+        return int(explicit)
+    return None if private else 0  # a ROS rig lives on the user's domain (ROS's default 0)
+
+
+class _Log:
+    """A child's log file; a full disk stops the logging (said once), not the run."""
+
+    def __init__(self, path: Path, say):
+        self.path, self.say, self.failed = path, say, False
+        try:
+            self.f = open(path, "w")
+        except OSError as exc:
+            self.f = None
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        if not self.failed:
+            self.failed = True
+            what = "disk full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else f"cannot write ({exc.strerror})"
+            self.say(f"[characterise] {what}: log {self.path} stops here")
+
+    def write(self, text: str) -> None:
+        if self.f is not None and not self.failed:
+            try:
+                self.f.write(text)
+                self.f.flush()
+            except OSError as exc:
+                self._fail(exc)
+
+    def close(self) -> None:
+        if self.f is not None:
+            try:
+                self.f.close()
+            except OSError as exc:
+                self._fail(exc)
+
+
+def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
+    """The ROS path shared by the rigs: helpers + bench_node on one domain, the bench's output
+    followed, children watched; the report at the end (also on the completed steps of a failed run)."""
     out_dir = Path(args.output_dir).resolve()
     name = f"bench_{protocol.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
     design_arg = design.source or design.name
-    helpers = [("sim_bench_node", {"design": design_arg, "model": args.sim_model}),
-               ("model_node", {"design": design_arg, "model": args.model[0]})]
+    helpers = [(node, {"design": design_arg, **params}) for node, params in rig_nodes]
+    helpers.append(("model_node", {"design": design_arg, "model": args.model[0]}))
     if protocol.drive == "direction":
         helpers.append(("allocation_node", {"design": design_arg, "model": args.model[0]}))
     # Not beside the recording: `softcath report runs/bench_default_*/` must match recordings only.
     logs = out_dir / "logs" / name
-    logs.mkdir(parents=True, exist_ok=True)
+    try:
+        logs.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SoftcathError(f"cannot create {logs}: {exc.strerror or exc}") from None
     t0 = time.monotonic()
     say = (lambda *a: None) if args.json else (lambda *a: print(*a, flush=True))
-    # A private domain unless told: another graph on ours could publish on our topics.
-    explicit = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if explicit and not (explicit.isdigit() and int(explicit) <= 232):
-        raise SoftcathError(f"ROS_DOMAIN_ID={explicit!r}: must be an integer 0..232 (or unset for a private domain)")
-    with NodeGraph(domain=int(explicit) if explicit else None, probe_s=0.0 if explicit else 1.0) as graph:
+    domain = _domain(private)
+    lines: list[str] = []
+    died: list[str] = []
+    stopped: list[int] = []
+    with NodeGraph(domain=domain, probe_s=1.0 if domain is None else 0.0) as graph:
+        if not private:  # a ROS rig may sit on another machine: an explicit discovery range wins
+            graph.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         bench = None
         timed_out: list[bool] = []
+        started = []
         try:
             for node, params in helpers:
-                log = open(logs / f"{node}.log", "w")
-                graph.start(node, params, stdout=log)
+                log = _Log(logs / f"{node}.log", say)
+                started.append((node, graph.start(node, params, stdout=log.f or subprocess.DEVNULL)))
                 log.close()
                 say(f"[characterise] started {node} (log {logs / (node + '.log')})")
             bench = graph.start("bench_node", {"protocol": args.protocol, "design": design_arg,
-                                               "model": args.model[0], "output_dir": out_dir, "name": name})
+                                               "model": args.model[0], "output_dir": out_dir, "name": name,
+                                               "wait_timeout": args.wait_timeout})
             watchdog = threading.Timer(args.timeout, lambda: (timed_out.append(True), stop_process(bench, 15.0)))
             watchdog.daemon = True
             watchdog.start()
-            say(f"[characterise] bench_node running protocol '{protocol.name}' on ROS_DOMAIN_ID={graph.domain}")
-            lines = []
-            with open(logs / "bench_node.log", "w") as blog:
+            watcher = threading.Thread(target=_watch_children, args=(started, bench, died), daemon=True)
+            watcher.start()
+            say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
+                f"ROS_DOMAIN_ID={graph.domain}")
+            blog = _Log(logs / "bench_node.log", say)
+            try:
                 for line in bench.stdout:
                     blog.write(line)
                     lines.append(line.rstrip())
                     if "[softcath_bench]" in line or line.startswith("recording:"):
                         say("  " + line.rstrip().split("]: ")[-1])
+            finally:
+                blog.close()
             bench.wait()
             watchdog.cancel()
-            if timed_out:
-                raise SoftcathError(f"characterisation took longer than {args.timeout:g} s; stopped "
-                                    f"(recording finalised; logs in {logs})")
-        except KeyboardInterrupt:
+        except (Stopped, KeyboardInterrupt) as exc:
+            stopped.append(exc.signum if isinstance(exc, Stopped) else int(signal.SIGINT))
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
                 stop_process(bench, 15.0)
+                for line in bench.stdout:
+                    lines.append(line.rstrip())
+        # leaving the graph stops every other child (SIGINT, then SIGKILL after a grace)
+    summary = _summary(lines)
+    if stopped:
+        sig = signal.Signals(stopped[0]).name
+        where = f"; recording {summary['recording']} (finalised, incomplete)" if summary else ""
+        print(f"softcath characterise: stopped by {sig}: every child stopped{where}", file=sys.stderr)
+        return 128 + stopped[0]
+    if timed_out:
+        raise SoftcathError(f"characterisation took longer than {args.timeout:g} s; stopped "
+                            f"(recording finalised; logs in {logs})")
+    code = bench.returncode
+    if code == 0 and summary and not died:
+        try:
+            return _done(args, summary, design, t0, logs)
+        except SoftcathError as exc:
+            if "disk full" in str(exc):
+                print(f"softcath characterise: error: {exc}", file=sys.stderr)
+                return EXIT_DISK_FULL
             raise
-    summary_lines = [x for x in lines if x.startswith("summary: ")]
-    if bench.returncode != 0 or not summary_lines:
-        tail = "\n".join(lines[-8:])
-        raise SoftcathError(f"bench_node failed (exit {bench.returncode}); logs in {logs}\n{tail}")
-    summary = json.loads(summary_lines[-1][len("summary: "):])
-    report = write_report(summary["recording"], design, args.model, cache=not args.no_cache)
+    reason = (summary or {}).get("error") or (
+        "bench_node stopped (recording finalised, incomplete)" if died and code == 130 else f"bench_node exited with {code}")
+    if died:
+        reason = f"{', '.join(died)} during the run; {reason}"
+    if code in (0, 130) and died:
+        code = EXIT_CHILD_DIED
+    if summary and summary.get("completed_steps") and code != EXIT_DISK_FULL:  # a torn file needs recover first
+        try:
+            _done(args, summary, design, t0, logs, incomplete=True)
+        except SoftcathError as exc:
+            say(f"[characterise] no report on the completed steps: {exc}")
+    elif not summary:
+        reason += f"; logs in {logs}\n" + "\n".join(lines[-8:])
+    print(f"softcath characterise: error: {reason}", file=sys.stderr)
+    return code if code in (3, 4, 5, 6) else 2
+
+
+def _summary(lines: list[str]) -> dict | None:
+    found = [x for x in lines if x.startswith("summary: ")]
+    return json.loads(found[-1][len("summary: "):]) if found else None
+
+
+def _watch_children(children, bench, died: list[str]) -> None:
+    """A helper that exits while bench_node runs: bench_node gets CHILD_GRACE_S to notice (a rig's
+    topics go stale), then it is stopped; ``died`` says who and how."""
+    while bench.poll() is None:
+        for node, proc in children:
+            code = proc.poll()
+            if code is not None:
+                died.append(f"{node} exited ({code})")
+                deadline = time.monotonic() + CHILD_GRACE_S
+                while bench.poll() is None and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                if bench.poll() is None:
+                    stop_process(bench, 15.0)
+                return
+        time.sleep(0.1)
+
+
+def _done(args, summary: dict, design, t0: float, logs: Path, incomplete: bool = False) -> int:
+    from ..bench.report import write_report
+
+    try:
+        report = write_report(summary["recording"], design, args.model, cache=not args.no_cache)
+    except OSError as exc:
+        full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+        raise SoftcathError(f"{'disk full' if full else 'cannot write'} writing the report beside "
+                            f"{summary['recording']} ({exc.strerror or exc})") from None
     elapsed = time.monotonic() - t0
     if args.json:
         json.dump({"recording": summary["recording"], "report": report["report"], "plots": report["plots"],
                    "messages": summary["messages"], "dropped": summary["dropped"], "elapsed_s": elapsed,
+                   "complete": summary.get("complete", True), "completed_steps": summary.get("completed_steps"),
                    "logs": str(logs)}, sys.stdout, indent=2)
         print()
     else:
-        print(f"[characterise] done in {elapsed:.0f} s: {summary['messages']} messages recorded, "
-              f"{summary['dropped']} dropped")
+        state = (f"stopped after {summary.get('completed_steps')} of {summary.get('n_steps')} steps" if incomplete
+                 else f"done in {elapsed:.0f} s")
+        print(f"[characterise] {state}: {summary['messages']} messages recorded, {summary['dropped']} dropped")
         print(f"recording: {summary['recording']}")
-        print(f"report:    {report['report']}")
+        print(f"report:    {report['report']}" + (" (completed steps only)" if incomplete else ""))
         for p in report["plots"]:
             print(f"plot:      {p}")
     return 0

@@ -12,12 +12,18 @@ stops with an error, exit code 4). A protocol by bending direction publishes the
 curvature on /softcath/bend_cmd and allocation_node, then the only publisher allowed,
 turns it into /softcath/pressure_cmd.
 
-It waits (up to ``wait_timeout`` s) for a rig: a publisher of /softcath/pressure_measured
-and a subscriber of /softcath/pressure_cmd (by direction also allocation_node: a
-subscriber of /softcath/bend_cmd that publishes /softcath/pressure_cmd). If that rig is
-sim_bench_node (its node is in the graph or it announced itself on /softcath/bench/rig),
-the recording is marked simulated. At the end it prints ``recording: PATH`` and a
-one-line summary.
+The rig contract (docs/rig.md): it waits (up to ``wait_timeout`` s) until every rig topic
+(/softcath/pressure_measured/ch<i>, /softcath/bench/bend_angle, /softcath/bench/wrench) is alive
+with fresh stamps and something listens to /softcath/pressure_cmd (by direction also
+allocation_node, whose /softcath/pressure_cmd must keep coming); a timeout names each missing
+topic (exit 3). A rig on the deprecated unstamped topics is accepted with a warning. Then the
+pressure source must follow a small test command (exit 3 if not). During the run a reading
+older than ``stale_after`` s is never used; when any rig topic (or allocation_node's command)
+goes stale the run stops: the "protocol_abort" marker, zero command for 0.5 s, the recording
+finalised and marked incomplete, exit 5. A failing recording (disk full) stops it likewise,
+exit 6. If the rig is sim_bench_node (its node is in the graph or it announced itself on
+/softcath/bench/rig), the recording is marked simulated. At the end it prints
+``recording: PATH`` and a one-line summary.
 
 The node spins on the EventsExecutor and writes in a background thread by default
 (``executor`` parameter; see nodes/recorder.py and benchmarks/recorder_throughput.py).
@@ -25,6 +31,7 @@ The node spins on the EventsExecutor and writes in a background thread by defaul
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from datetime import datetime
@@ -33,21 +40,33 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float64MultiArray, String
+from sensor_msgs.msg import FluidPressure
+from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
 from ..bench.protocol import ProtocolRunner, expand_steps, load_protocol
+from ..bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..recording import BagWriter
+from ..recording import BagWriter, RecordingError
 from .parameters import declare
 from .recorder import TopicRecorder
 from .runtime import EXECUTORS, run_node
 
 DEFAULT_TOPICS = topics.RECORDED
+
+# Exit codes (docs/rig.md): 0 done, 2 cannot start, 3 no rig or it failed the checks before the
+# first step, 4 another node commands the pressures, 5 the rig stopped answering mid-run,
+# 6 the recording failed (disk full), 130 interrupted (SIGINT/SIGTERM).
+EXIT_NO_RIG, EXIT_FIGHT, EXIT_RIG_LOST, EXIT_RECORDING, EXIT_INTERRUPTED = 3, 4, 5, 6, 130
+VENT_S = 0.5  # zero command this long at the end (and after an abort), so the last readings are recorded
+
+
+def _stamp_s(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
 class BenchNode(Node):
@@ -67,6 +86,12 @@ class BenchNode(Node):
         self.start_delay = p("start_delay", 1.0, "seconds between finding the rig and the first step",
                              minimum=0.0, maximum=60.0)
         min_free_mb = p("min_free_mb", 64, "stop recording below this much free disk, MiB", minimum=0)
+        stale_after = p("stale_after", 0.5, "a rig reading older than this (s) is stale: never used; "
+                        "mid-run the run stops", minimum=0.05, maximum=60.0)
+        self.follow_pressure = p("follow_test_pressure", 5000.0, "Pa, largest channel of the test command "
+                                 "the pressure source must follow before the first step", minimum=100.0)
+        self.follow_timeout = p("follow_timeout", 3.0, "s the pressure source gets to follow the test command",
+                                minimum=0.1, maximum=120.0)
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
         self.protocol = load_protocol(protocol_name)
         design_name = design_name or self.protocol.design
@@ -83,7 +108,8 @@ class BenchNode(Node):
         name = run_name or f"bench_{self.protocol.name}_{stamp}"
         self.writer = BagWriter(Path(output_dir) / name, flush_period_s=flush_period,
                                 min_free_bytes=min_free_mb << 20, background=True,
-                                custom_data={"protocol": self.protocol.name, "design": self.design.name})
+                                custom_data={"protocol": self.protocol.name, "design": self.design.name,
+                                             "stale_after_s": f"{stale_after:g}"})
         self.runner = ProtocolRunner(self.protocol, self.steps)
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.by_direction = self.protocol.drive == "direction"
@@ -93,13 +119,35 @@ class BenchNode(Node):
             self.pub_cmd = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, reliable)
         self.pub_step = self.create_publisher(String, topics.BENCH_STEP, reliable)
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
-        self.measured = None
+        # The rig's topics (docs/rig.md), and the deprecated unstamped ones for one release.
+        n = self.design.n_channels
+        extra = [topics.PRESSURE_CMD] if self.by_direction else []  # allocation_node keeps publishing
+        self.contract = RigMonitor(topics.rig_topics(n) + extra, stale_after)
+        self.legacy = RigMonitor(topics.DEPRECATED_RIG_TOPICS + extra, stale_after)
+        self.monitor: RigMonitor | None = None   # the one chosen when the rig is found
+        self.channel_pressures = np.full(n, np.nan)
+        self.legacy_pressures: np.ndarray | None = None
+        for c in range(n):
+            self.create_subscription(FluidPressure, topics.pressure_measured_topic(c),
+                                     partial(self.on_channel_pressure, c), 10)
+        self.create_subscription(Vector3Stamped, topics.BENCH_BEND_ANGLE,
+                                 partial(self.on_stamped, topics.BENCH_BEND_ANGLE), 10)
+        self.create_subscription(WrenchStamped, topics.BENCH_WRENCH, partial(self.on_stamped, topics.BENCH_WRENCH), 10)
+        self.create_subscription(Float64MultiArray, topics.PRESSURE_MEASURED, self.on_legacy_pressure, 10)
+        for t in (topics.BENCH_ANGLE, topics.BENCH_FORCE):
+            self.create_subscription(Float64, t, partial(self.on_legacy, t), 10)
+        if self.by_direction:
+            self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_allocator_command, 10)
+        test_pressures, self.follow_bend = follow_test_command(self.steps, self.follow_pressure)
+        self.follow = FollowCheck(test_pressures, timeout=self.follow_timeout)
+        self.pub_vent = None
+        self.completed_steps = 0
+        self.stop_reason = ""
         self.rig_info: dict | None = None
-        self.create_subscription(Float64MultiArray, topics.PRESSURE_MEASURED, self.on_measured, 10)
         self.create_subscription(String, topics.BENCH_RIG, self.on_rig,
                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.recorder = TopicRecorder(self, self.writer, list(record_topics),
+        self.recorder = TopicRecorder(self, self.writer, list(dict.fromkeys(list(record_topics) + topics.rig_topics(n))),
                                       message_info=self.executor_name != "events")
         self.state = "waiting"
         self.t0 = time.monotonic()
@@ -113,10 +161,42 @@ class BenchNode(Node):
                                f"{self.design.name}; recording to {self.writer.path}")
 
     # -------------------------------------------------------------- inputs
-    def on_measured(self, msg):
+    def clock_s(self) -> float:
+        """The ROS clock the rig's stamps are compared with, s."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def on_channel_pressure(self, channel: int, msg):
+        if math.isfinite(msg.fluid_pressure):
+            self.channel_pressures[channel] = msg.fluid_pressure
+            self.contract.seen(topics.pressure_measured_topic(channel), self.now(), _stamp_s(msg.header))
+
+    def on_stamped(self, topic: str, msg):
+        self.contract.seen(topic, self.now(), _stamp_s(msg.header))
+
+    def on_legacy_pressure(self, msg):
         p = np.asarray(msg.data, dtype=float)
         if p.shape == (self.design.n_channels,) and np.all(np.isfinite(p)):
-            self.measured = p
+            self.legacy_pressures = p
+            self.legacy.seen(topics.PRESSURE_MEASURED, self.now())
+
+    def on_legacy(self, topic: str, msg):
+        self.legacy.seen(topic, self.now())
+
+    def on_allocator_command(self, msg):
+        for m in (self.contract, self.legacy):
+            m.seen(topics.PRESSURE_CMD, self.now())
+
+    @property
+    def measured(self) -> np.ndarray | None:
+        """The measured pressures (Pa per channel) if every channel's reading is fresh, else None:
+        a stale reading is never used as a fresh one."""
+        if self.monitor is None:
+            return None
+        t, clock = self.now(), self.clock_s()
+        if self.monitor is self.legacy:
+            return self.legacy_pressures if self.legacy.alive(topics.PRESSURE_MEASURED, t) else None
+        chans = [topics.pressure_measured_topic(c) for c in range(self.design.n_channels)]
+        return self.channel_pressures.copy() if all(self.contract.alive(c, t, clock) for c in chans) else None
 
     def on_rig(self, msg):
         try:
@@ -136,15 +216,39 @@ class BenchNode(Node):
                 self.get_logger().info(f"step {ev['step'] + 1}/{len(self.steps)}: {ev['bench']} bench, "
                                        f"{ev['sample_name']}, {ev['drive']}, trial {ev['trial'] + 1}")
             if ev["event"] == "step_end":
-                self.writer.flush()
+                self.completed_steps += 1
+                try:
+                    self.writer.flush()
+                except RecordingError as exc:
+                    self.recorder.error = str(exc)
 
-    def rig_ready(self) -> bool:
-        rig = (self.count_publishers(topics.PRESSURE_MEASURED) > 0
-               and self.count_subscribers(topics.PRESSURE_CMD) > 0 and self.measured is not None)
-        if self.by_direction:  # allocation_node: listens to bend_cmd, publishes pressure_cmd
-            return rig and self.count_subscribers(topics.BEND_CMD) > 0 and \
-                self.count_publishers(topics.PRESSURE_CMD) > 0
-        return rig
+    def rig_problems(self) -> dict[str, str]:
+        """What keeps the rig from being ready, by topic (empty: ready). Chooses the contract's
+        topics, or the deprecated ones when nothing publishes the contract's."""
+        t, clock = self.now(), self.clock_s()
+        stamped = any(self.count_publishers(x) for x in topics.rig_topics(self.design.n_channels))
+        legacy_up = self.count_publishers(topics.PRESSURE_MEASURED) > 0
+        monitor = self.legacy if legacy_up and not stamped else self.contract
+        out = {}
+        for topic in monitor.topics:
+            if self.count_publishers(topic) == 0:
+                out[topic] = "no publisher"
+            else:
+                why = monitor.problem(topic, t, clock)
+                if why:
+                    out[topic] = why
+        if self.count_subscribers(topics.PRESSURE_CMD) == 0:
+            out[topics.PRESSURE_CMD] = "nothing subscribes (the rig's pressure source)"
+        if self.by_direction and self.count_subscribers(topics.BEND_CMD) == 0:
+            out[topics.BEND_CMD] = "nothing subscribes (allocation_node)"
+        if not out and self.monitor is None:
+            self.monitor = monitor
+            if monitor is self.legacy:
+                self.get_logger().warning(
+                    f"the rig publishes the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)}: "
+                    "accepted for this release (freshness by arrival time only); publish the stamped "
+                    "topics of docs/rig.md")
+        return out
 
     def other_commanders(self) -> list[str]:
         """Nodes publishing /softcath/pressure_cmd that should not: besides this node (per channel)
@@ -155,10 +259,31 @@ class BenchNode(Node):
                 if i.node_name != allowed]
 
     def fail(self, message: str, code: int) -> None:
+        """Stop before anything was commanded: no venting needed."""
         self.get_logger().error(message)
         self.error = message
+        self.stop_reason = message
         self.result = code
         self.state = "done"
+
+    def abort(self, message: str, code: int) -> None:
+        """Stop after commands were sent: the abort marker, then zero command for VENT_S, then done."""
+        if self.error is not None:
+            return
+        self.get_logger().error(message)
+        self.error = message
+        self.stop_reason = message
+        self.result = code
+        step = self.runner.step
+        self.pub_step.publish(String(data=json.dumps({
+            "event": "protocol_abort", "t": self.now(), "reason": message, "completed_steps": self.completed_steps,
+            "step": step.index if step else None})))
+        if self.by_direction and self.pub_vent is None:
+            # allocation_node may be the one that died: vent the rig directly too.
+            self.pub_vent = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD,
+                                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.state = "finishing"
+        self.t_end = self.now()
 
     def publish_command(self, pressures, bend) -> None:
         if self.by_direction:
@@ -170,20 +295,58 @@ class BenchNode(Node):
         else:
             self.pub_cmd.publish(Float64MultiArray(data=[float(x) for x in pressures]))
 
+    def vent(self) -> None:
+        zeros = np.zeros(self.design.n_channels)
+        self.publish_command(zeros, (0.0, 0.0))
+        if self.pub_vent is not None:
+            self.pub_vent.publish(Float64MultiArray(data=[0.0] * len(zeros)))
+
     def tick(self):
         t = self.now()
         if self.state == "waiting":
-            if self.rig_ready():
+            problems = self.rig_problems()
+            if not problems:
                 if self.t_ready is None:
                     self.t_ready = t  # let late discovery (subscriptions, recorder) settle
                 elif t - self.t_ready >= self.start_delay:
                     self.begin(t)
-            elif t > self.wait_timeout:
-                self.fail(f"no rig: nothing publishes {topics.PRESSURE_MEASURED} or listens to "
-                          f"{topics.PRESSURE_CMD} (start sim_bench_node or the hardware driver)"
-                          + ("; a protocol by direction also needs allocation_node" if self.by_direction
-                             else ""), 3)
+            else:
+                self.t_ready, self.monitor = None, None
+                if t > self.wait_timeout:
+                    self.fail(f"no rig after {self.wait_timeout:g} s: " + "; ".join(
+                        f"{k}: {v}" for k, v in problems.items()) + " (start sim_bench_node or the rig's driver; "
+                        "docs/rig.md)", EXIT_NO_RIG)
             return
+        if self.state in ("checking", "running"):
+            if self.recorder.error is not None:
+                return self.abort(f"recording failed: {self.recorder.error}; what was written is kept "
+                                  f"(softcath recover {self.writer.path})", EXIT_RECORDING)
+            stale = self.monitor.problems(t, None if self.monitor is self.legacy else self.clock_s())
+            if stale:
+                what = "; ".join(f"{k}: {v}" for k, v in stale.items())
+                if self.state == "checking":
+                    return self.abort(f"rig not ready for the first step: {what}", EXIT_NO_RIG)
+                return self.abort(f"the rig stopped answering at step {self.runner.step.index + 1}/"
+                                  f"{len(self.steps)} ({what}): stopped and vented; {self.completed_steps} "
+                                  "steps completed", EXIT_RIG_LOST)
+        if self.state == "checking":
+            state = self.follow.update(t, self.measured)
+            if state == "passed":
+                self.get_logger().info(f"the pressure source followed the test command "
+                                       f"({self.follow.rise.max():.0f} Pa rise); starting protocol")
+                self.state = "running"
+                self.publish_events(self.runner.start(t))
+            elif state == "failed":
+                others = self.other_commanders()
+                if others:  # the likely reason the source did not follow
+                    return self.abort(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: "
+                                      f"{self.follow.message}", EXIT_FIGHT)
+                return self.abort(self.follow.message, EXIT_NO_RIG)
+            else:
+                on = self.follow.commanding
+                self.publish_command(self.follow.test_pressures if on else np.zeros(self.design.n_channels),
+                                     self.follow_bend if on and self.follow_bend else (0.0, 0.0))
+                return
         if self.state == "running":
             self.publish_events(self.runner.update(t, self.measured))
             self.publish_command(self.runner.command, self.runner.bend_command)
@@ -191,8 +354,8 @@ class BenchNode(Node):
                 self.state = "finishing"
                 self.t_end = t
         elif self.state == "finishing":
-            self.publish_command(np.zeros(self.design.n_channels), (0.0, 0.0))
-            if t - self.t_end > 0.5:  # the last readings and markers reach the recorder
+            self.vent()
+            if t - self.t_end > VENT_S:  # the last readings and markers reach the recorder
                 self.state = "done"
 
     def begin(self, t: float):
@@ -201,28 +364,31 @@ class BenchNode(Node):
             return self.fail(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: " + (
                 "a protocol by direction needs allocation_node as its only publisher" if self.by_direction
                 else "a per-channel protocol must be its only publisher (stop allocation_node, or run a "
-                "protocol by direction through it)"), 4)
+                "protocol by direction through it)"), EXIT_FIGHT)
         simulated = topics.SIM_BENCH_NODE in self.get_node_names() or bool(self.rig_info and self.rig_info.get("simulated"))
         self.simulated = simulated
         self.writer.custom_data["simulated"] = str(simulated).lower()
         meta = {"simulated": str(simulated).lower(), "protocol": self.protocol.name,
                 "design": self.design.name, "design_hash": self.design.content_hash(),
                 "n_steps": str(len(self.steps)), "started": datetime.now().isoformat(timespec="seconds"),
-                "rig": json.dumps(self.rig_info) if self.rig_info else "unknown"}
+                "rig": json.dumps(self.rig_info) if self.rig_info else "unknown",
+                "stale_after_s": self.writer.custom_data["stale_after_s"],
+                "rig_topics": "deprecated unstamped" if self.monitor is self.legacy else "stamped"}
         self.writer.add_metadata("softcath", meta)
         self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
         import yaml
         self.writer.add_attachment("design.yaml", "application/yaml",
                                    yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
-        self.state = "running"
-        self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); starting protocol")
-        self.publish_events(self.runner.start(t))
+        self.state = "checking"
+        self.follow.start(t)
+        self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); testing that the "
+                               "pressure source follows a small command")
 
     def diagnostics(self):
-        others = self.other_commanders() if self.state == "running" else []
+        others = self.other_commanders() if self.state in ("checking", "running") else []
         if others:
-            self.fail(f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
-                      "stopped (the commands would fight)", 4)
+            self.abort(f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
+                       "stopped (the commands would fight)", EXIT_FIGHT)
         r = self.recorder
         level = DiagnosticStatus.OK if r.dropped == 0 and r.error is None else DiagnosticStatus.WARN
         step = self.runner.step
@@ -236,14 +402,30 @@ class BenchNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
-    def finalise(self) -> dict:
-        self.writer.close()
+    def finalise(self, interrupted: bool = False) -> dict:
+        """Mark the recording complete or not (metadata record and rosbag2 custom_data), close it.
+        A failing disk is said in one line; the chunks written so far stay recoverable."""
+        complete = self.state == "done" and self.error is None and self.runner.done and not interrupted
+        reason = "" if complete else (self.stop_reason or ("interrupted (SIGINT/SIGTERM)" if interrupted else
+                                                           "stopped before the protocol ended"))
+        result = {"complete": str(complete).lower(), "completed_steps": str(self.completed_steps),
+                  "n_steps": str(len(self.steps)), "reason": reason}
+        self.writer.custom_data.update(complete=result["complete"], completed_steps=result["completed_steps"])
+        try:
+            self.writer.add_metadata("softcath_result", result)
+            self.writer.close()
+        except (RecordingError, OSError) as exc:
+            msg = str(exc) if isinstance(exc, RecordingError) else f"closing {self.writer.path} failed: {exc}"
+            self.error = self.error or f"recording failed: {msg}"
+            self.result = self.result or EXIT_RECORDING
+            self.writer.abandon()
         return {"recording": str(self.writer.path), "messages": self.writer.message_count,
                 "dropped": self.recorder.dropped,
                 "lost_in_middleware": self.recorder.lost if self.recorder.counts_middleware_loss else None,
                 "write_failures": self.recorder.write_failures,
                 "per_topic": {k: v.message_count for k, v in self.writer.topics.items()},
                 "not_seen": list(self.recorder.pending), "state": self.state, "error": self.error,
+                "complete": complete, "completed_steps": self.completed_steps, "n_steps": len(self.steps),
                 "unsettled_steps": [k for k, ok in enumerate(self.runner.settled_flags) if not ok]}
 
     # -------------------------------------------------------------- the shared runtime's hooks
@@ -254,12 +436,16 @@ class BenchNode(Node):
 
     def finish(self) -> int:
         """Finalise the recording (also when interrupted), print where it is; the exit code."""
-        summary = self.finalise()
-        if self.state != "done":
+        # A signal during the venting after an abort keeps the abort's reason and code.
+        interrupted = self.state != "done" and self.error is None
+        summary = self.finalise(interrupted)
+        if interrupted:
             summary["state"] = "interrupted"
         print(f"recording: {summary['recording']}", flush=True)
         print("summary: " + json.dumps(summary), flush=True)
-        return 130 if summary["state"] == "interrupted" else self.result
+        if summary["error"]:
+            print(f"[ERROR] {summary['error']}", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED if interrupted else self.result
 
 
 def main(args=None) -> int:

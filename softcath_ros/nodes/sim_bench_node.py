@@ -1,11 +1,16 @@
 """sim_bench_node (node ``softcath_sim_bench``): the simulated bench, embedded default when no rig
-is attached. All physics is in ``softcath_ros.bench.sim_rig``; this node only wires it to topics.
+is attached. All physics is in ``softcath_ros.bench.sim_rig``; this node only wires it to topics,
+as the rig contract (docs/rig.md) says a rig must.
 
 Subscribes: /softcath/pressure_cmd (Float64MultiArray, Pa), /softcath/bench/step (String, JSON
 markers from bench_node: which bench and sample are mounted).
-Publishes at ``rate_hz``: /softcath/pressure_measured (Float64MultiArray, Pa),
-/softcath/bench/angle (Float64, rad), /softcath/bench/force (Float64, N), /diagnostics, and once
-(transient local) /softcath/bench/rig: JSON saying this rig is simulated, with its parameters.
+Publishes at ``rate_hz``, every reading stamped with the time it was taken:
+/softcath/pressure_measured/ch<i> (sensor_msgs/FluidPressure, gauge Pa, variance = gauge noise^2),
+/softcath/bench/bend_angle (geometry_msgs/Vector3Stamped, vector.x in rad), /softcath/bench/wrench
+(geometry_msgs/WrenchStamped, force.z in N, frame softcath_scale); with ``legacy_topics`` (for one
+release) also the deprecated unstamped /softcath/pressure_measured, /softcath/bench/angle and
+/softcath/bench/force; /diagnostics; and once (transient local) /softcath/bench/rig: JSON saying
+this rig is simulated, with its parameters.
 """
 from __future__ import annotations
 
@@ -18,8 +23,10 @@ from functools import partial
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
@@ -45,6 +52,9 @@ class SimBenchNode(Node):
         design_name = p("design", "implemented_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung that stands for the true actuator (default: the section rung's table)")
         rate_hz = p("rate_hz", 100.0, "publishing rate of the readings, Hz", minimum=1.0, maximum=10000.0)
+        self.command_timeout = p("command_timeout", 0.5, "no pressure command for this long (s): vent "
+                                 "(the rig contract's watchdog)", minimum=0.01, maximum=60.0)
+        legacy = p("legacy_topics", True, "also publish the deprecated unstamped reading topics (one release)")
         values = {}
         for name, default in asdict(RigParams()).items():
             lo, hi = RIG_RANGES.get(name, (0, None))
@@ -57,16 +67,25 @@ class SimBenchNode(Node):
         self.rejected = 0
         self.unanswered = 0   # readings not published: the truth rung refused the pressures (outside its table)
         self.command = np.zeros(design.n_channels)
-        self.pub_p = self.create_publisher(Float64MultiArray, topics.PRESSURE_MEASURED, 10)
-        self.pub_a = self.create_publisher(Float64, topics.BENCH_ANGLE, 10)
-        self.pub_f = self.create_publisher(Float64, topics.BENCH_FORCE, 10)
+        self.t_command = -math.inf
+        self.pub_pc = [self.create_publisher(FluidPressure, topics.pressure_measured_topic(c), 10)
+                       for c in range(design.n_channels)]
+        self.pub_angle = self.create_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
+        self.pub_wrench = self.create_publisher(WrenchStamped, topics.BENCH_WRENCH, 10)
+        self.pressure_variance = float(params.gauge_noise) ** 2  # Pa^2: the gauge's white noise
+        self.legacy = None
+        if legacy:
+            self.legacy = (self.create_publisher(Float64MultiArray, topics.PRESSURE_MEASURED, 10),
+                           self.create_publisher(Float64, topics.BENCH_ANGLE, 10),
+                           self.create_publisher(Float64, topics.BENCH_FORCE, 10))
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_rig = self.create_publisher(String, topics.BENCH_RIG, latched)
         self.pub_rig.publish(String(data=json.dumps({
             "simulated": True, "node": self.get_name(), "design": design.name,
-            "design_hash": design.content_hash(), "model": model.name, "rig": asdict(params)})))
+            "design_hash": design.content_hash(), "model": model.name, "rate_hz": rate_hz,
+            "rig": asdict(params)})))
         self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 10)
         self.create_subscription(String, topics.BENCH_STEP, self.on_step, 100)
         self.dt = 1.0 / rate_hz
@@ -75,6 +94,11 @@ class SimBenchNode(Node):
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
                                f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
+        if self.legacy is not None:
+            self.get_logger().warning(
+                f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
+                "(removed in the next release; set legacy_topics:=false to stop): read the stamped "
+                "topics of docs/rig.md instead")
 
     def on_command(self, msg):
         p = np.asarray(msg.data, dtype=float)
@@ -84,6 +108,7 @@ class SimBenchNode(Node):
                                    f"{self.command.size} finite values)", throttle_duration_sec=2.0)
             return
         self.command = p  # the regulator clamps to [0, max_pressure]
+        self.t_command = time.monotonic()
 
     def on_step(self, msg):
         try:
@@ -101,14 +126,34 @@ class SimBenchNode(Node):
         # timer fires late, and a fixed dt would slow the simulated rig down.
         now = time.monotonic()
         dt, self.t_last = min(now - self.t_last, 0.5), now
+        if now - self.t_command > self.command_timeout and np.any(self.command != 0):
+            self.command = np.zeros_like(self.command)  # the commander went silent: vent
+            self.get_logger().warning(f"no pressure command for {self.command_timeout:g} s: venting")
         self.rig.advance(dt, self.command)
         r = self.rig.read()
-        self.pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
+        stamp = self.get_clock().now().to_msg()  # when the reading was taken
+        for c, pub in enumerate(self.pub_pc):
+            m = FluidPressure(fluid_pressure=float(r.pressures[c]), variance=self.pressure_variance)
+            m.header.stamp, m.header.frame_id = stamp, topics.FRAME_ID
+            pub.publish(m)
         if not (math.isfinite(r.angle) and math.isfinite(r.force)):
             self.unanswered += 1     # never a made-up reading
+            if self.legacy is not None:
+                self.legacy[0].publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
             return
-        self.pub_a.publish(Float64(data=r.angle))
-        self.pub_f.publish(Float64(data=r.force))
+        a = Vector3Stamped()
+        a.header.stamp, a.header.frame_id = stamp, topics.FRAME_ID
+        a.vector.x = float(r.angle)
+        self.pub_angle.publish(a)
+        w = WrenchStamped()
+        w.header.stamp, w.header.frame_id = stamp, topics.SCALE_FRAME_ID
+        w.wrench.force.z = float(r.force)
+        self.pub_wrench.publish(w)
+        if self.legacy is not None:
+            pub_p, pub_a, pub_f = self.legacy
+            pub_p.publish(Float64MultiArray(data=[float(x) for x in r.pressures]))
+            pub_a.publish(Float64(data=r.angle))
+            pub_f.publish(Float64(data=r.force))
 
     def diagnostics(self):
         st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == self.unanswered == 0

@@ -79,3 +79,29 @@ def read_metadata(path) -> dict[str, dict[str, str]]:
 def read_attachments(path) -> dict[str, bytes]:
     with _reader(path, "attachments") as reader:
         return {a.name: a.data for a in reader.iter_attachments()}
+
+
+def recording_topics(path) -> dict[str, str]:
+    """Topic -> message type of every channel in the recording: from its summary, or for a torn
+    file (no summary) from the readable prefix, as `recover` reads it."""
+    from mcap.records import Channel, Schema
+
+    from .recover import RecoveryReport, _records
+
+    p = _open(path)
+    try:
+        with open(p, "rb") as f:
+            summary = make_reader(f).get_summary()
+        if summary is not None:
+            return {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    except Exception:  # noqa: BLE001 - torn end or foreign file: scan the prefix below
+        pass
+    schemas, out = {}, {}
+    for record in _records(p, RecoveryReport(str(p), "")):
+        if isinstance(record, Schema):
+            schemas[record.id] = record.name
+        elif isinstance(record, Channel):
+            out[record.topic] = schemas.get(record.schema_id, "")
+    if not out:
+        raise RecordingReadError(f"{p}: cannot read its topics (not an MCAP recording, or cut before its first chunk)")
+    return out

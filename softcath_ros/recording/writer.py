@@ -10,7 +10,9 @@ metadata ``offered_qos_profiles`` and ``topic_type_hash``); messages with log ti
 No data lost: the open chunk is closed and written (and fsynced) at least every
 ``flush_period_s`` and whenever ``flush()`` is called (the bench calls it at each
 step end), so a killed recorder loses at most the last period; ``recover`` rebuilds
-the rest. An unwritable path or a nearly full disk fails in the constructor.
+the rest. An unwritable path or a nearly full disk fails in the constructor; a disk that fills
+up later fails the write (or flush, or close) with a RecordingError that says "disk full", and
+``abandon()`` then lets go of the file as it is: everything flushed before is recoverable.
 
 ``background=True`` moves the writing to a writer thread: ``write`` only appends to a
 queue (a deque append, well under a microsecond), so the DDS callbacks that call it
@@ -21,6 +23,7 @@ beyond ``max_queued`` messages waiting, new ones are refused and counted there t
 """
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 import threading
@@ -41,6 +44,13 @@ LIBRARY = "softcath_ros recorder (python mcap)"
 
 class RecordingError(SoftcathError):
     pass
+
+
+def _write_failed(path, exc: OSError) -> RecordingError:
+    """One line for a failed write; ENOSPC/EDQUOT say "disk full" (what the user must fix)."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return RecordingError(f"disk full writing {path} ({exc.strerror or exc})")
+    return RecordingError(f"writing {path} failed: {exc.strerror or exc}")
 
 
 class BagWriter:
@@ -151,7 +161,7 @@ class BagWriter:
                 self._writer.add_message(channel_id=channel, log_time=log_time_ns, data=data,
                                          publish_time=log_time_ns if publish_time_ns is None else publish_time_ns)
             except OSError as exc:
-                raise RecordingError(f"writing {self.path} failed: {exc.strerror or exc}") from None
+                raise _write_failed(self.path, exc) from None
             self.topics[topic].message_count += 1
             self.message_count += 1
             self._t_min = log_time_ns if self._t_min is None else min(self._t_min, log_time_ns)
@@ -213,7 +223,7 @@ class BagWriter:
             self._writer.flush()
             self._sync()
         except OSError as exc:
-            raise RecordingError(f"writing {self.path} failed: {exc.strerror or exc}") from None
+            raise _write_failed(self.path, exc) from None
         self._last_flush = time.monotonic()
 
     def _sync(self) -> None:
@@ -239,7 +249,8 @@ class BagWriter:
                                self.message_count, self.custom_data, self.distro)
 
     def close(self) -> None:
-        """Write the rosbag2 metadata record and the summary; idempotent."""
+        """Write the rosbag2 metadata record and the summary; idempotent. RecordingError ("disk
+        full") if that cannot be written: call ``abandon()`` then."""
         if self._queue is not None and not self._closed:
             self._drain()
             self._stop = True
@@ -255,11 +266,26 @@ class BagWriter:
                 return
             self._closed = True
             node = self.bag_metadata()
-            self._writer.add_metadata("rosbag2", {"serialized_metadata": bm.dump(node)})
-            self._writer.finish()
-            self._sync()
+            try:
+                self._writer.add_metadata("rosbag2", {"serialized_metadata": bm.dump(node)})
+                self._writer.finish()
+                self._sync()
+                self._file.close()
+                (self.bag_dir / "metadata.yaml").write_text(bm.metadata_yaml(node))
+            except OSError as exc:
+                raise _write_failed(self.path, exc) from None
+
+    def abandon(self) -> None:
+        """After a failed close: stop the writer thread and let go of the file as it is (torn at
+        the end; `softcath recover` rebuilds what was flushed). Never raises."""
+        self._closed = True
+        self._stop = True
+        if self._queue is not None and self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        try:
             self._file.close()
-            (self.bag_dir / "metadata.yaml").write_text(bm.metadata_yaml(node))
+        except OSError:
+            pass  # the buffered tail cannot be written: the disk is full
 
     @property
     def closed(self) -> bool:

@@ -1,0 +1,241 @@
+"""Faults of a bench run with the nodes as processes (docs/rig.md): the rig killed at a random
+step, allocation_node killed during a direction protocol, SIGTERM to `softcath characterise`, a
+disk that fills up mid-run, a rig that is not there, and `characterise --rig ros` on a rig
+started by hand."""
+import json
+import os
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from bench_procs import procs, start as _start, summary as _summary  # noqa: F401 (procs: fixture)
+from domains import private_env
+from softcath_ros import topics
+from softcath_ros.graph import wait_ready
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+STOP_WITHIN_S = 2.0   # the contract: the bench has stopped within 2 s of the rig's death
+
+
+def _markers(path):
+    from softcath_ros.recording.reader import iter_messages
+
+    return [json.loads(m.message.data) for m in iter_messages(path, topics=[topics.BENCH_STEP])]
+
+
+def _kill_and_time(victim, bench):
+    victim.send_signal(signal.SIGKILL)
+    t0 = time.monotonic()
+    out = bench.communicate(timeout=30)[0]
+    return out, time.monotonic() - t0
+
+
+def test_rig_killed_at_a_random_step_stops_the_bench_and_keeps_every_completed_step(tmp_path, procs):
+    from softcath_ros.bench.analysis import rows_from_recording
+    from softcath_ros.bench.calibration import calibrate
+    from softcath_ros.bench.report import write_report
+    from softcath_ros.core.design import load_design
+    from softcath_ros.recording.reader import read_metadata
+
+    delay = random.Random().uniform(0.3, 4.0)   # a random step of the quick protocol (~8 s of steps)
+    env = private_env()
+    rig = _start(procs, ["sim_bench_node"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                           "-p", "name:=killed"], env)
+    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
+    time.sleep(delay)
+    rest, took = _kill_and_time(rig, bench)
+    out = before + rest
+    assert bench.returncode == 5, out
+    assert took < STOP_WITHIN_S, f"bench stopped {took:.2f} s after the rig was killed (delay {delay:.2f} s)"
+    s = _summary(out)
+    assert s["complete"] is False and "stopped answering" in s["error"]
+    assert topics.pressure_measured_topic(0) in s["error"]
+    path = tmp_path / "killed" / "killed_0.mcap"
+    result = read_metadata(path)["softcath_result"]
+    assert result["complete"] == "false" and int(result["completed_steps"]) == s["completed_steps"]
+    marks = _markers(path)
+    ended = {m["step"] for m in marks if m["event"] == "step_end"}
+    assert len(ended) == s["completed_steps"] and ended == set(range(s["completed_steps"]))  # none lost
+    assert marks[-1]["event"] == "protocol_abort"
+    rows = rows_from_recording(path)
+    assert {r.step for r in rows} == ended and len(rows) == 2 * len(ended)  # 2 samples per step
+    if rows:
+        rep = write_report(path, out_dir=tmp_path / "report")
+        assert "steps completed (only those are analysed)" in Path(rep["report"]).read_text()
+        assert calibrate(rows, load_design("implemented_5mm"), "closed_form") is not None
+
+
+def test_allocation_node_killed_during_a_direction_protocol_stops_and_vents(tmp_path, procs):
+    protocol = tmp_path / "dir.yaml"
+    protocol.write_text(yaml.safe_dump({
+        "name": "dir_fault", "design": "three_channel_5mm", "drive": "direction", "directions_deg": [60.0],
+        "staircase": {"levels": [0.0, 0.25, 0.5, 0.75, 1.0], "down": True}, "trials": 3, "dwell": 0.2,
+        "settle": {"tolerance": 1000.0, "max_offset": 3000.0, "hold": 0.1, "timeout": 3.0},
+        "samples_per_step": 2, "sample_period": 0.03,
+        "benches": [{"kind": "angle", "samples": [{"name": "a", "length": 0.02}]}]}))
+    env = private_env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
+    alloc = _start(procs, ["allocation_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={protocol}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=dir"], env)
+    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
+    time.sleep(1.5)   # mid-staircase: the rig holds pressure
+    rest, took = _kill_and_time(alloc, bench)
+    out = before + rest
+    assert bench.returncode == 5, out
+    assert took < STOP_WITHIN_S, f"bench stopped {took:.2f} s after allocation_node was killed"
+    assert topics.PRESSURE_CMD in _summary(out)["error"]
+    from softcath_ros.recording.reader import iter_messages
+
+    path = tmp_path / "dir" / "dir_0.mcap"
+    cmds = [m.message.data for m in iter_messages(path, topics=[topics.PRESSURE_CMD])]
+    assert list(cmds[-1]) == [0.0, 0.0, 0.0]        # bench_node vented the rig itself
+    peak = max(max(m.message.fluid_pressure for m in iter_messages(path, topics=[topics.pressure_measured_topic(c)]))
+               for c in range(3))
+    last = [list(iter_messages(path, topics=[topics.pressure_measured_topic(c)]))[-1].message.fluid_pressure
+            for c in range(3)]
+    assert peak > 10000.0 and max(last) < 3000.0     # held pressure before, vented (gauge error 2 kPa) at the end
+
+
+@pytest.mark.timeout(180)
+def test_sigterm_to_characterise_stops_every_child_and_finalises(tmp_path, procs):
+    import psutil
+
+    from softcath_ros.recording.reader import read_metadata
+
+    run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path)], private_env())
+    wait_ready(run, timeout_s=150, mark="step 8/28")
+    children = psutil.Process(run.pid).children(recursive=True)
+    assert {c.name() for c in children} >= {"sim_bench_node", "model_node", "bench_node"}
+    run.send_signal(signal.SIGTERM)
+    out = run.communicate(timeout=60)[0]
+    assert run.returncode == 143, out
+    assert "stopped by SIGTERM" in out and "Traceback" not in out
+    gone, alive = psutil.wait_procs(children, timeout=5)
+    assert not alive, [c.name() for c in alive]
+    bag = next(tmp_path.glob("bench_quick_*/*.mcap"))
+    result = read_metadata(bag)["softcath_result"]        # finalised: metadata readable
+    assert result["complete"] == "false" and "interrupted" in result["reason"]
+
+
+def _mount_tmpfs(where: Path, size: str) -> bool:
+    if os.geteuid() != 0:
+        return False
+    where.mkdir()
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
+                          capture_output=True).returncode == 0
+
+
+def test_disk_full_mid_run_says_so_and_keeps_a_recoverable_file(tmp_path, procs):
+    """A 1 MiB tmpfs, mostly filled: the recording runs out of space during the protocol."""
+    from softcath_ros.recording.recover import recover
+
+    disk = tmp_path / "disk"
+    if not _mount_tmpfs(disk, "1m"):
+        pytest.skip("cannot mount a tmpfs here (needs root); the injected-ENOSPC test covers the writer")
+    try:
+        (disk / "filler").write_bytes(b"\0" * (1024 * 1024 - 96 * 1024))   # leave ~96 KiB
+        env = private_env()
+        _start(procs, ["sim_bench_node"], env)
+        bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=default", "-p", f"output_dir:={disk}",
+                               "-p", "name:=full", "-p", "min_free_mb:=0"], env)
+        out = bench.communicate(timeout=180)[0]
+        assert bench.returncode == 6, out
+        assert "disk full" in _summary(out)["error"] and "Traceback" not in out
+        report = recover(disk / "full" / "full_0.mcap", tmp_path / "recovered.mcap")
+        assert report.per_topic.get(topics.BENCH_STEP, 0) > 0 and report.messages > 100
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def test_no_rig_names_each_missing_topic(tmp_path, procs):
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                           "-p", "wait_timeout:=1.0", "-p", "name:=none"], private_env())
+    out = bench.communicate(timeout=60)[0]
+    assert bench.returncode == 3, out
+    err = _summary(out)["error"]
+    for t in topics.rig_topics(1):
+        assert f"{t}: no publisher" in err
+
+
+def _short_protocol(tmp_path, levels=(0.0, 10000.0, 20000.0), trials=1) -> Path:
+    """A few steps on the angle bench only: a run of a couple of seconds."""
+    path = tmp_path / "short.yaml"
+    path.write_text(yaml.safe_dump({
+        "name": "short", "design": "implemented_5mm", "drive": "channels", "channels": [0],
+        "staircase": {"levels": list(levels), "down": True}, "trials": trials, "dwell": 0.1,
+        "settle": {"tolerance": 1000.0, "max_offset": 3000.0, "hold": 0.05, "timeout": 2.0},
+        "samples_per_step": 2, "sample_period": 0.03,
+        "benches": [{"kind": "angle", "samples": [{"name": "a", "length": 0.02}]}]}))
+    return path
+
+
+@pytest.mark.timeout(240)
+def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs):
+    from softcath_ros.bench.analysis import rows_from_recording
+    from softcath_ros.recording.reader import read_metadata
+
+    env = private_env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false"], env)
+    run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(_short_protocol(tmp_path)),
+                         "--output-dir", str(tmp_path), "--json"], env)
+    out = run.communicate(timeout=200)[0]
+    assert run.returncode == 0, out
+    result = json.loads(out[out.index("{"):])
+    meta = read_metadata(result["recording"])
+    assert meta["softcath"]["simulated"] == "true" and meta["softcath"]["rig_topics"] == "stamped"
+    assert meta["softcath_result"]["complete"] == "true"
+    rows = rows_from_recording(result["recording"])
+    assert len(rows) == 5 * 2 and np.all(np.isfinite([r.angle for r in rows]))
+
+
+@pytest.mark.timeout(180)
+def test_characterise_stops_the_bench_when_a_child_dies(tmp_path, procs):
+    """model_node is no rig (bench_node would not notice it): characterise stops the run itself."""
+    import psutil
+
+    run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path)],
+                 private_env())
+    wait_ready(run, timeout_s=150, mark="starting protocol")
+    kids = {c.name(): c for c in psutil.Process(run.pid).children(recursive=True)}
+    kids["model_node"].kill()
+    t0 = time.monotonic()
+    kids["bench_node"].wait(timeout=30)
+    took = time.monotonic() - t0
+    out = run.communicate(timeout=60)[0]
+    assert run.returncode == 5, out
+    assert took < STOP_WITHIN_S, f"bench_node stopped {took:.2f} s after model_node was killed"
+    assert "model_node exited (-9) during the run" in out and "Traceback" not in out
+
+
+@pytest.mark.timeout(180)
+def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
+    """The disk fills up after the protocol started (a tmpfs just above the recorder's 64 MiB
+    minimum, then filled to the last byte)."""
+    disk = tmp_path / "disk"
+    if not _mount_tmpfs(disk, "70m"):
+        pytest.skip("cannot mount a tmpfs here (needs root); the injected-ENOSPC test covers the writer")
+    try:
+        run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(disk)],
+                     private_env())
+        wait_ready(run, timeout_s=150, mark="step 8/28")
+        with open(disk / "filler", "wb", buffering=0) as f:
+            for block in (1 << 20, 1 << 12):
+                try:
+                    while True:
+                        f.write(b"\0" * block)
+                except OSError:
+                    pass
+        out = run.communicate(timeout=170)[0]
+        assert run.returncode == 6, out
+        assert "disk full" in out and "Traceback" not in out
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
