@@ -43,6 +43,9 @@ setup(
             "ros-std-msgs>=5.5",
             "ros-geometry-msgs>=5.5",
             "ros-diagnostic-msgs>=5.5",
+            # the live 3D view: body Marker and backbone Path (model_node)
+            "ros-visualization-msgs>=5.5",
+            "ros-nav-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
         ],
         "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",

@@ -82,6 +82,9 @@ def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tup
             while idx[k] < len(seq) and seq[idx[k]][0] <= t:
                 latest[k] = seq[idx[k]][1]
                 idx[k] += 1
+        if ev.get("event") == "retract":  # an entry taken back (manual bench undo): drop its readings
+            rows = [r for r in rows if r.step != int(ev["step"])]
+            continue
         if ev.get("event") == "settled":
             settled_by_step[ev["step"]] = bool(ev.get("settled", True))
         if ev.get("event") != "sample":

@@ -27,6 +27,9 @@ from ..graph import NodeGraph, stop_process
 def register(sub) -> None:
     p = sub.add_parser("characterise", help="run the bench characterisation on the simulated rig "
                        "(nodes as separate processes) and write recording + report")
+    p.add_argument("--rig", choices=("sim", "manual"), default="sim",
+                   help="sim: the simulated rig (default); manual: the operator types each reading "
+                   "at the terminal (no ROS graph; bench/manual.py)")
     p.add_argument("--protocol", default="default", help="shipped protocol name or a path")
     p.add_argument("--design", default=None, help="design (default: the protocol's)")
     p.add_argument("--sim-model", default="closed_form", help="rung that plays the rig's truth")
@@ -42,6 +45,8 @@ def run(args) -> int:
     from ..bench.report import write_report
     from ..core.design import load_design
 
+    if args.rig == "manual":
+        return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
     out_dir = Path(args.output_dir).resolve()
@@ -110,3 +115,26 @@ def run(args) -> int:
         for p in report["plots"]:
             print(f"plot:      {p}")
     return 0
+
+
+def run_manual(args) -> int:
+    """--rig manual: readings typed at the terminal (bench.manual), then the same report."""
+    from ..bench.manual import run_manual_bench
+    from ..bench.report import write_report
+
+    terminal = sys.stderr if args.json else sys.stdout  # --json keeps stdout for the answer
+    run = run_manual_bench(args.protocol, args.design, args.model[0], Path(args.output_dir).resolve(),
+                           say=lambda s: print(s, file=terminal, flush=True),
+                           prompt=lambda s: print(s, end="", file=terminal, flush=True))
+    report = write_report(run["recording"], run["design"], args.model) if run["readings"] else None
+    out = {k: run[k] for k in ("recording", "outcome", "n_steps", "readings", "skipped", "refused")}
+    out.update(report=report and report["report"], plots=report["plots"] if report else [])
+    if args.json:
+        json.dump(out, sys.stdout, indent=2)
+        print()
+    else:
+        print(f"[characterise] manual bench {run['outcome']}: {run['readings']} readings, {run['skipped']} "
+              f"skipped, {run['refused']} entries refused, of {run['n_steps']} steps")
+        print(f"recording: {run['recording']}")
+        print(f"report:    {out['report'] or '(no readings: none written)'}")
+    return 0 if run["outcome"] == "complete" else 1
