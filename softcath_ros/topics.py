@@ -15,6 +15,10 @@ BENCH_ANGLE = "/softcath/bench/angle"              # measured bending angle, rad
 BENCH_FORCE = "/softcath/bench/force"              # measured blocking force, N
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
 BENCH_RIG = "/softcath/bench/rig"                  # the rig announces itself (JSON, transient local)
+BODY_MARKER = "/softcath/body_marker"              # live 3D view: the body as a triangle list
+BACKBONE_PATH = "/softcath/backbone_path"          # live 3D view: the backbone as a path
+RADIUS_L_OVER_THETA = "/softcath/radius_l_over_theta"  # predicted R_C = l / theta, m
+TIP_MEASURED = "/softcath/tip_measured"            # measured tip pose in softcath_base (a tracker)
 DIAGNOSTICS = "/diagnostics"
 
 MESSAGE_TYPES = {
@@ -28,12 +32,16 @@ MESSAGE_TYPES = {
     BENCH_FORCE: "std_msgs/msg/Float64",
     BENCH_STEP: "std_msgs/msg/String",
     BENCH_RIG: "std_msgs/msg/String",
+    BODY_MARKER: "visualization_msgs/msg/Marker",
+    BACKBONE_PATH: "nav_msgs/msg/Path",
+    RADIUS_L_OVER_THETA: "std_msgs/msg/Float64",
+    TIP_MEASURED: "geometry_msgs/msg/PoseStamped",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
 
 # What bench_node records by default: every signal of a bench run.
 RECORDED = [PRESSURE_CMD, BEND_CMD, PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE, BENCH_STEP, BENCH_RIG,
-            TIP_POSE, BACKBONE, DIAGNOSTICS]
+            TIP_POSE, BACKBONE, BODY_MARKER, BACKBONE_PATH, RADIUS_L_OVER_THETA, TIP_MEASURED, DIAGNOSTICS]
 
 # Node names (the executables share the module names: model_node, ...).
 MODEL_NODE = "softcath_model"
