@@ -16,7 +16,8 @@ setup(
     # Shipped data (designs, scenes, protocols, node parameters, the ladder envelope, surrogate
     # tables) live in the package and are found by softcath_ros.resources from any install; the
     # node parameter files are also copied to share/ for `--params-file` in a ROS workspace.
-    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz"]},
+    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz",
+                                 "config/foxglove/*.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

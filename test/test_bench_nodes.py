@@ -177,6 +177,10 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     assert counts[topics.TIP_POSE] > 50 and counts[topics.BACKBONE] > 50
     assert counts[topics.PRESSURE_CMD] > 50 and topics.BEND_CMD not in counts  # no allocation_node
     assert "## Hysteresis" in Path(result["report"]).read_text()
+    # The Foxglove layout opens this recording: every topic it names is here with its type.
+    from layout_check import ONLY_WITH_A_TRACKER, check_recording
+    assert check_recording(result["recording"]) <= ONLY_WITH_A_TRACKER
+    assert counts[topics.BODY_MARKER] > 10 and counts[topics.BACKBONE_PATH] == counts[topics.BODY_MARKER]
 
 
 def test_a_domain_another_graph_uses_is_not_leased(procs):

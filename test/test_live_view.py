@@ -139,3 +139,28 @@ def test_display_rate_zero_turns_the_view_off(start_node):
     node = start_node("-p", "display_rate:=0.0")
     assert node.client.node.count_publishers(topics.BODY_MARKER) == 0
     assert node.client.send([10000.0]) is not None
+
+
+def test_foxglove_layout_names_the_view_and_the_plots():
+    import json
+
+    from layout_check import LAYOUT, layout_topics
+
+    layout = json.loads(LAYOUT.read_text())
+    named = layout_topics(layout)
+    assert {topics.BODY_MARKER, topics.BACKBONE_PATH, topics.TIP_POSE, topics.PRESSURE_CMD,
+            topics.PRESSURE_MEASURED, topics.RADIUS_L_OVER_THETA} <= named
+    assert named <= set(topics.MESSAGE_TYPES)   # every one a topic of the suite
+    three_d = [c for k, c in layout["configById"].items() if k.startswith("3D!")]
+    assert len(three_d) == 1 and three_d[0]["followTf"] == topics.FRAME_ID
+    # every panel of the layout tree is configured, and every configured panel is placed
+    placed = set()
+
+    def walk(node):
+        if isinstance(node, str):
+            placed.add(node)
+        else:
+            walk(node["first"])
+            walk(node["second"])
+    walk(layout["layout"])
+    assert placed == set(layout["configById"])
