@@ -70,18 +70,24 @@ class StepStats:
         return float(np.max(self.pressure_mean))
 
 
-def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]]) -> list[SampleRow]:
-    """``events``: (time ns, marker dict) in time order. ``streams``: name -> [(time ns, value)] for
-    'pressure_measured' (array), 'angle', 'force' (floats), each in time order."""
+def latest_at_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]]):
+    """For each event in time order: (time ns, marker, {stream: its latest value at or before it, or None})."""
     idx = {k: 0 for k in streams}
     latest: dict[str, object] = {k: None for k in streams}
-    settled_by_step: dict[int, bool] = {}
-    rows: list[SampleRow] = []
     for t, ev in events:
         for k, seq in streams.items():
             while idx[k] < len(seq) and seq[idx[k]][0] <= t:
                 latest[k] = seq[idx[k]][1]
                 idx[k] += 1
+        yield t, ev, latest
+
+
+def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]]) -> list[SampleRow]:
+    """``events``: (time ns, marker dict) in time order. ``streams``: name -> [(time ns, value)] for
+    'pressure_measured' (array), 'angle', 'force' (floats), each in time order."""
+    settled_by_step: dict[int, bool] = {}
+    rows: list[SampleRow] = []
+    for t, ev, latest in latest_at_events(events, streams):
         if ev.get("event") == "retract":  # an entry taken back (manual bench undo): drop its readings
             rows = [r for r in rows if r.step != int(ev["step"])]
             continue
