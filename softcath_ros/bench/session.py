@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 
 from .. import topics
+from ..core.errors import SoftcathError
 from ..recording import BagWriter
 from ..recording.encode import encode
 from .protocol import Protocol, Step
@@ -56,7 +57,7 @@ class BenchSession:
         self.writer.add_attachment("protocol.yaml", "application/yaml", protocol.to_yaml().encode())
         self.writer.add_attachment("design.yaml", "application/yaml",
                                    yaml.safe_dump(design.to_dict(), sort_keys=False).encode())
-        self._write(topics.BENCH_RIG, {"data": json.dumps({**rig, "simulated": False})})
+        self._write(topics.BENCH_RIG, json.dumps({**rig, "simulated": False}))
         self._marker({"event": "protocol_start", "protocol": protocol.name, "n_steps": len(steps)})
         self.writer.flush()
 
@@ -70,8 +71,10 @@ class BenchSession:
         self._last_ns = max(self._clock(), self._last_ns + 1)
         return self._last_ns
 
-    def _write(self, topic: str, message: dict, time_ns: int | None = None) -> None:
-        self.writer.write(topic, encode(topics.MESSAGE_TYPES[topic], message), time_ns or self._now())
+    def _write(self, topic: str, value, time_ns: int | None = None) -> None:
+        t = time_ns or self._now()
+        type_name = topics.MESSAGE_TYPES[topic]
+        self.writer.write(topic, encode(type_name, message_fields(type_name, value, t)), t)
 
     def _marker(self, event: dict, step: Step | None = None) -> None:
         t = self._now()
@@ -79,7 +82,7 @@ class BenchSession:
         if step is not None:
             ev.update(step.describe())
         ev.update({k: v for k, v in event.items() if k != "event"})
-        self._write(topics.BENCH_STEP, {"data": json.dumps(ev)}, t)
+        self._write(topics.BENCH_STEP, json.dumps(ev), t)
 
     # ------------------------------------------------------------------ entries
     def reading(self, step: Step, pressures_measured, *, angle: float | None = None,
@@ -89,12 +92,12 @@ class BenchSession:
         repeats the sample marker (imported data with several readings write one entry each)."""
         p = [float(x) for x in pressures_measured]
         self._marker({"event": "step_start", **extra}, step)
-        self._write(topics.PRESSURE_CMD, {"data": list(step.pressures)})
-        self._write(topics.PRESSURE_MEASURED, {"data": p})
+        self._write(topics.PRESSURE_CMD, list(step.pressures))
+        self._write(topics.PRESSURE_MEASURED, p)
         if angle is not None:
-            self._write(topics.BENCH_ANGLE, {"data": float(angle)})
+            self._write(topics.BENCH_ANGLE, float(angle))
         if force is not None:
-            self._write(topics.BENCH_FORCE, {"data": float(force)})
+            self._write(topics.BENCH_FORCE, float(force))
         self._marker({"event": "settled", "settled": True, "settle_time_s": 0.0}, step)
         for k in range(samples):
             self._marker({"event": "sample", "sample": k}, step)
@@ -127,6 +130,19 @@ class BenchSession:
         self.writer.add_metadata("softcath_end", {"complete": str(bool(complete)).lower(),
                                                   "entries": str(self.entries), "reason": reason})
         self.writer.close()
+
+
+def message_fields(type_name: str, value, time_ns: int) -> dict:
+    """The message of ``type_name`` carrying ``value`` (a string, a number or a list of numbers)
+    entered at ``time_ns``. Only the types the bench topics have; another type is an error here,
+    never a guess at its fields."""
+    if type_name == "std_msgs/msg/String":
+        return {"data": str(value)}
+    if type_name == "std_msgs/msg/Float64":
+        return {"data": float(value)}
+    if type_name == "std_msgs/msg/Float64MultiArray":
+        return {"data": [float(x) for x in value]}
+    raise SoftcathError(f"the manual bench cannot write {type_name} yet (bench/session.py message_fields)")
 
 
 def grams_to_newton(grams: float) -> float:

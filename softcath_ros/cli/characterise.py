@@ -5,6 +5,9 @@ domain; runs the default characterisation (0 -> 0.35 -> 0 bar, three trials, ang
 blocking-force benches), then writes the report and prints where both are.
 Ctrl-C stops the run cleanly: bench_node finalises the recording first.
 
+``--rig manual``: no ROS graph; the operator sets each step's pressure and types the
+reading at the terminal (bench/manual.py); same recording layout, same report.
+
 allocation_node runs only for protocols by direction (bench_node sends /softcath/bend_cmd,
 allocation_node publishes /softcath/pressure_cmd). A per-channel protocol publishes
 /softcath/pressure_cmd itself and must be its only publisher: allocation_node publishes
@@ -26,7 +29,7 @@ from ..graph import NodeGraph, stop_process
 
 def register(sub) -> None:
     p = sub.add_parser("characterise", help="run the bench characterisation on the simulated rig "
-                       "(nodes as separate processes) and write recording + report")
+                       "(nodes as separate processes) or by hand (--rig manual) and write recording + report")
     p.add_argument("--rig", choices=("sim", "manual"), default="sim",
                    help="sim: the simulated rig (default); manual: the operator types each reading "
                    "at the terminal (no ROS graph; bench/manual.py)")
