@@ -16,7 +16,8 @@ setup(
     # Shipped data (designs, scenes, protocols, node parameters, the ladder envelope, surrogate
     # tables) live in the package and are found by softcath_ros.resources from any install; the
     # node parameter files are also copied to share/ for `--params-file` in a ROS workspace.
-    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz"]},
+    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz",
+                                 "config/foxglove/*.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -44,6 +45,9 @@ setup(
             "ros-geometry-msgs>=5.5",
             "ros-sensor-msgs>=5.5",   # the rig contract: FluidPressure (docs/rig.md)
             "ros-diagnostic-msgs>=5.5",
+            # the live 3D view: body Marker and backbone Path (model_node)
+            "ros-visualization-msgs>=5.5",
+            "ros-nav-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
         ],
         "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",

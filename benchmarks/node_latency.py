@@ -9,7 +9,9 @@ configurations so a change in machine load hits all of them alike; the table rep
 medians over repeats.
 
 Targets (issue 2): 1 kHz sustained with zero lost poses (reliable QoS), p99 latency
-<= 2 ms, node under half a core.
+<= 2 ms, node under half a core. Issue 15: the live 3D view (on by default, 30 Hz) keeps
+these; ``default`` against ``view_off`` shows what it costs the node
+(benchmarks/live_view_cost.py times one frame alone).
 
 With ``--model`` (and ``--design``) the node runs that rung (its ``model``/``design``
 parameters); the probe drives channel 0 over 90% of the rung's own valid pressure range
@@ -20,6 +22,7 @@ timed and reported, not charged to the node's start-up in every run.
     .venv/bin/python benchmarks/node_latency.py                 # all configurations, 3 repeats, 10 s
     .venv/bin/python benchmarks/node_latency.py --configs default,single --repeats 1 --duration 3
     .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default,rt --repeats 3
+    .venv/bin/python benchmarks/node_latency.py --configs default,view_off,rt --name node_latency_view
 
 Writes benchmarks/results/<name>.{csv,json,png} through harness.write_results (name:
 ``--name``, default node_latency, node_latency_<model> for another rung). Ctrl-C stops cleanly.
@@ -46,7 +49,9 @@ from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
 CONFIGS = {
-    "default": ("events executor, preallocated CDR bytes, reliable keep-last 1000, 20 points", {}),
+    "default": ("events executor, preallocated CDR bytes, reliable keep-last 1000, 20 points, "
+                "live 3D view at 30 Hz", {}),
+    "view_off": ("as default, live 3D view off (display_rate 0)", {"display_rate": 0.0}),
     "single": ("SingleThreadedExecutor", {"executor": "single"}),
     "multi": ("MultiThreadedExecutor", {"executor": "multi"}),
     "reuse_msgs": ("preallocated message objects filled in place", {"message_preparation": "reuse"}),

@@ -19,6 +19,10 @@ BENCH_BEND_ANGLE = "/softcath/bench/bend_angle"    # measured bending angle (vec
 BENCH_WRENCH = "/softcath/bench/wrench"            # scale reading (force.z), N, frame SCALE_FRAME_ID
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
 BENCH_RIG = "/softcath/bench/rig"                  # the rig announces itself (JSON, transient local)
+BODY_MARKER = "/softcath/body_marker"              # live 3D view: the body as a triangle list
+BACKBONE_PATH = "/softcath/backbone_path"          # live 3D view: the backbone as a path
+RADIUS_L_OVER_THETA = "/softcath/radius_l_over_theta"  # predicted R_C = l / theta, m
+TIP_MEASURED = "/softcath/tip_measured"            # measured tip pose in softcath_base (a tracker)
 DIAGNOSTICS = "/diagnostics"
 
 MESSAGE_TYPES = {
@@ -34,6 +38,10 @@ MESSAGE_TYPES = {
     BENCH_WRENCH: "geometry_msgs/msg/WrenchStamped",
     BENCH_STEP: "std_msgs/msg/String",
     BENCH_RIG: "std_msgs/msg/String",
+    BODY_MARKER: "visualization_msgs/msg/Marker",
+    BACKBONE_PATH: "nav_msgs/msg/Path",
+    RADIUS_L_OVER_THETA: "std_msgs/msg/Float64",
+    TIP_MEASURED: "geometry_msgs/msg/PoseStamped",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
 
@@ -62,7 +70,8 @@ DEPRECATED_RIG_TOPICS = [PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE]
 
 # What bench_node records by default: every signal of a bench run (plus rig_topics(n) of the design).
 RECORDED = [PRESSURE_CMD, BEND_CMD, PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE, BENCH_BEND_ANGLE, BENCH_WRENCH,
-            BENCH_STEP, BENCH_RIG, TIP_POSE, BACKBONE, DIAGNOSTICS]
+            BENCH_STEP, BENCH_RIG, TIP_POSE, BACKBONE, BODY_MARKER, BACKBONE_PATH, RADIUS_L_OVER_THETA, TIP_MEASURED,
+            DIAGNOSTICS]
 
 # Node names (the executables share the module names: model_node, ...).
 MODEL_NODE = "softcath_model"

@@ -32,8 +32,9 @@ def run_offline(protocol, rig, dt=0.01, max_time=600.0):
     return events, streams
 
 
-def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True):
-    """Write an offline run as a bench recording would be written (same topics and types)."""
+def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True, extra=None):
+    """Write an offline run as a bench recording would be written (same topics and types).
+    ``extra``: topic -> [(time ns, CDR bytes)] of further topics (types from topics.MESSAGE_TYPES)."""
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64, Float64MultiArray, String
 
@@ -44,12 +45,17 @@ def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True):
             w.add_topic(topic, topics.MESSAGE_TYPES[topic])
         w.add_metadata("softcath", {"simulated": str(simulated).lower(), "protocol": "test"})
         w.add_attachment("design.yaml", "application/yaml", design_yaml.encode())
-        merged = [(t, "m", v) for t, v in streams["pressure_measured"]] + \
+        for topic in extra or {}:
+            w.add_topic(topic, topics.MESSAGE_TYPES[topic])
+        merged = [(t, ("x", topic), v) for topic, seq in (extra or {}).items() for t, v in seq] + \
+                 [(t, "m", v) for t, v in streams["pressure_measured"]] + \
                  [(t, "a", v) for t, v in streams["angle"]] + [(t, "f", v) for t, v in streams["force"]] + \
                  [(t, "e", ev) for t, ev in events]
         merged.sort(key=lambda x: x[0])
         for t, kind, v in merged:
-            if kind == "m":
+            if isinstance(kind, tuple):
+                w.write(kind[1], v, t)
+            elif kind == "m":
                 w.write(topics.PRESSURE_MEASURED, serialize_message(Float64MultiArray(data=list(map(float, v)))), t)
             elif kind == "a":
                 w.write(topics.BENCH_ANGLE, serialize_message(Float64(data=float(v))), t)

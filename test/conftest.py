@@ -55,3 +55,20 @@ def design_dict():
 def pytest_report_header(config):
     return (f"python {sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', 'unset')}, "
             f"cache {RUN_CACHE} (removed at the end)")
+
+
+@pytest.fixture
+def start_node():
+    """model_node processes on private domains with a client in this process (test_model_node.Running)."""
+    from test_model_node import Running
+
+    running = []
+
+    def start(*ros_args):
+        r = Running(*ros_args)
+        running.append(r)
+        return r
+
+    yield start
+    for r in running:
+        r.close()

@@ -158,6 +158,10 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     run_dir = Path(result["recording"]).parent
     assert [p.name for p in tmp_path.glob("bench_quick_*/")] == [run_dir.name]
     assert (tmp_path / "logs" / run_dir.name / "bench_node.log").is_file()
+    # The Foxglove layout opens this recording: every topic it names is here with its type.
+    from layout_check import ONLY_WITH_A_TRACKER, check_recording
+    assert check_recording(result["recording"]) <= ONLY_WITH_A_TRACKER
+    assert counts[topics.BODY_MARKER] > 10 and counts[topics.BACKBONE_PATH] == counts[topics.BODY_MARKER]
 
 
 def test_a_domain_another_graph_uses_is_not_leased(procs):

@@ -29,6 +29,8 @@ print(json.dumps({
     "designs": shipped_names("design"), "scenes": shipped_names("scene"),
     "auto": select_model(scene).rung,
     "checkout": str(checkout_root()),
+    "foxglove_layout": __import__("pathlib").Path(softcath_ros.__file__).with_name("config").joinpath(
+        "foxglove", "softcath.json").is_file(),
 }))
 """
 
@@ -62,6 +64,7 @@ def _check(found: dict, root: Path) -> None:
     assert {"implemented_5mm", "three_channel_5mm"} <= set(found["designs"])
     assert "free_bending_live" in found["scenes"]
     assert found["auto"]  # model: auto picked a rung from the shipped envelope and scene
+    assert found["foxglove_layout"]  # the Foxglove layout ships as package data
     # the benchmark results (softcath chart's default) exist only in a source checkout
     assert found["checkout"] == (str(REPO) if root == REPO else "None")
 

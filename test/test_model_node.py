@@ -94,18 +94,7 @@ class Running:
         rclpy.try_shutdown(context=self.context)
 
 
-@pytest.fixture
-def start_node():
-    running = []
-
-    def start(*ros_args):
-        r = Running(*ros_args)
-        running.append(r)
-        return r
-
-    yield start
-    for r in running:
-        r.close()
+# start_node: the fixture in conftest.py (shared with test_live_view.py).
 
 
 @pytest.mark.parametrize("preparation", ["serialized", "reuse"])

@@ -83,26 +83,40 @@ class StepStats:
         return float(np.max(self.pressure_mean))
 
 
+def latest_at_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]],
+                     when: dict[str, int] | None = None):
+    """For each event in time order: (time ns, marker, {stream: its latest value at or before it, or
+    None}). ``when``, if given, is kept up to date with each stream's latest time (ns)."""
+    idx = {k: 0 for k in streams}
+    latest: dict[str, object] = {k: None for k in streams}
+    when = {} if when is None else when
+    when.update({k: 0 for k in streams})
+    for t, ev in events:
+        for k, seq in streams.items():
+            while idx[k] < len(seq) and seq[idx[k]][0] <= t:
+                when[k], latest[k] = seq[idx[k]]
+                idx[k] += 1
+        yield t, ev, latest
+
+
 def rows_from_events(events: list[tuple[int, dict]], streams: dict[str, list[tuple[int, object]]],
                      stale_after: float | None = None, skipped: list | None = None) -> list[SampleRow]:
     """``events``: (time ns, marker dict) in time order. ``streams``: name -> [(time ns, value)] for
     'pressure_measured' (array) or 'pressure_ch0', 'pressure_ch1', ... (floats, one per channel),
     'angle', 'force' (floats), each in time order. With ``stale_after`` (s) a sample whose latest
     reading of any stream is older than that is left out (and its marker appended to ``skipped``).
-    Samples of steps that started and never ended are left out."""
-    idx = {k: 0 for k in streams}
-    latest: dict[str, object] = {k: None for k in streams}
-    when: dict[str, int] = {k: 0 for k in streams}
+    Samples of steps that started and never ended are left out, and so are those of an entry taken
+    back (a ``retract`` marker: the manual bench's undo)."""
+    when: dict[str, int] = {}
     channels = sorted((k for k in streams if k.startswith("pressure_ch")), key=lambda k: int(k[len("pressure_ch"):]))
     settled_by_step: dict[int, bool] = {}
     started, ended = set(), set()
     rows: list[SampleRow] = []
-    for t, ev in events:
-        for k, seq in streams.items():
-            while idx[k] < len(seq) and seq[idx[k]][0] <= t:
-                when[k], latest[k] = seq[idx[k]]
-                idx[k] += 1
+    for t, ev, latest in latest_at_events(events, streams, when):
         kind = ev.get("event")
+        if kind == "retract":
+            rows = [r for r in rows if r.step != int(ev["step"])]
+            continue
         if kind == "step_start":
             started.add(ev["step"])
         elif kind == "step_end":

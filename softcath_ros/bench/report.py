@@ -20,7 +20,7 @@ def _fmt(x: float, scale: float = 1.0, digits: int = 2) -> str:
 
 
 def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: list[Hysteresis],
-             plots: list[str], calibration: dict | None = None) -> str:
+             plots: list[str], calibration: dict | None = None, tips: list | None = None) -> str:
     labels = list(stats[0].model) if stats else []
     lines = [f"# {title}", ""]
     for k, v in info.items():
@@ -73,6 +73,9 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
         n_sig = sum(h.significant for h in hyst)
         lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
                   + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
+    if tips:
+        from .tip_compare import markdown_section
+        lines += markdown_section(tips)
     if calibration:
         c = calibration.to_dict()
         lines += ["## Calibration", "",
@@ -210,8 +213,10 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
     if result is not None and result.get("complete") != "true":
         info["incomplete"] = (f"{result.get('completed_steps', '?')} of {result.get('n_steps', '?')} steps completed "
                               f"(only those are analysed): {result.get('reason', '')}")
+    from .tip_compare import tips_from_recording
+    tips = tips_from_recording(path)
     plots = plot(stats, out, "report")
-    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration)
+    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration, tips)
     md = out / "report.md"
     md.write_text(text)
-    return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows}
+    return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows, "tips": tips}

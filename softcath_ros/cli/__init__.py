@@ -1,7 +1,8 @@
 """`softcath` command line (README.md, "Commands").
 
 Each subcommand is a module in this package with ``register(subparsers)``; the
-handler it sets as ``func`` returns the exit code. Add new ones to ``SUBCOMMANDS``.
+handler it sets as ``func`` returns the exit code. Add new ones to ``SUBCOMMANDS`` (module names; ``import_csv``
+registers ``softcath import``).
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from ..core.errors import SoftcathError
 
 SUBCOMMANDS = [
     "characterise",
+    "import_csv",
     "calibrate",
     "report",
     "recover",

@@ -9,6 +9,9 @@ Rigs (``--rig``, the table ``RIGS``; a new rig is one more entry with its own ``
   rig, or sim_bench_node started by hand): the same graph without sim_bench_node; bench_node
   waits ``--wait-timeout`` s for it and names each missing topic.
 
+``--rig manual``: no ROS graph; the operator sets each step's pressure and types the
+reading at the terminal (bench/manual.py); same recording layout, same report.
+
 allocation_node runs only for protocols by direction (bench_node sends /softcath/bend_cmd,
 allocation_node publishes /softcath/pressure_cmd). A per-channel protocol publishes
 /softcath/pressure_cmd itself and must be its only publisher.
@@ -81,6 +84,8 @@ def run(args) -> int:
     from ..bench.protocol import load_protocol
     from ..core.design import load_design
 
+    if args.rig == "manual":
+        return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
     previous = signal.signal(signal.SIGTERM, _raise_stopped)
@@ -111,6 +116,9 @@ def _run_ros(args, protocol, design) -> int:
 RIGS: dict[str, RigChoice] = {
     "sim": RigChoice("the simulated rig (sim_bench_node) on a private ROS domain", _run_sim),
     "ros": RigChoice("whatever publishes the rig contract (docs/rig.md) on $ROS_DOMAIN_ID", _run_ros),
+    # No ROS graph: run() hands it to run_manual before the graph's signal handling.
+    "manual": RigChoice("the operator types each reading at the terminal (no ROS graph; bench/manual.py)",
+                        lambda args, protocol, design: run_manual(args)),
 }
 
 
@@ -302,3 +310,26 @@ def _done(args, summary: dict, design, t0: float, logs: Path, incomplete: bool =
         for p in report["plots"]:
             print(f"plot:      {p}")
     return 0
+
+
+def run_manual(args) -> int:
+    """--rig manual: readings typed at the terminal (bench.manual), then the same report."""
+    from ..bench.manual import run_manual_bench
+    from ..bench.report import write_report
+
+    terminal = sys.stderr if args.json else sys.stdout  # --json keeps stdout for the answer
+    run = run_manual_bench(args.protocol, args.design, args.model[0], Path(args.output_dir).resolve(),
+                           say=lambda s: print(s, file=terminal, flush=True),
+                           prompt=lambda s: print(s, end="", file=terminal, flush=True))
+    report = write_report(run["recording"], run["design"], args.model) if run["readings"] else None
+    out = {k: run[k] for k in ("recording", "outcome", "n_steps", "readings", "skipped", "refused")}
+    out.update(report=report and report["report"], plots=report["plots"] if report else [])
+    if args.json:
+        json.dump(out, sys.stdout, indent=2)
+        print()
+    else:
+        print(f"[characterise] manual bench {run['outcome']}: {run['readings']} readings, {run['skipped']} "
+              f"skipped, {run['refused']} entries refused, of {run['n_steps']} steps")
+        print(f"recording: {run['recording']}")
+        print(f"report:    {out['report'] or '(no readings: none written)'}")
+    return 0 if run["outcome"] == "complete" else 1

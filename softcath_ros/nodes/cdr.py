@@ -56,3 +56,33 @@ class PoseStampedBuffer(_PoseBuffer):
 
     def __init__(self, frame_id: str):
         super().__init__(frame_id, 1, sequence=False)
+
+
+class MessageTemplate:
+    """A message of fixed layout, serialised once (by rclpy), whose stamp and numeric arrays are then
+    rewritten in place through numpy views: for messages too big to build field by field at
+    display rate (a Marker's triangle list). Fields are located by sentinel values put into the
+    template before serialising (``find``); the header must be the message's first field."""
+
+    def __init__(self, data: bytes):
+        if data[:4] != CDR_LE_HEADER:
+            raise ValueError("template is not little-endian plain CDR")
+        self._buf = bytearray(data)
+        self.stamp = np.frombuffer(self._buf, dtype="<u4", count=2, offset=len(CDR_LE_HEADER))
+
+    def find(self, sentinel: bytes) -> int:
+        """Offset of the one occurrence of ``sentinel``."""
+        i = self._buf.find(sentinel)
+        if i < 0 or self._buf.find(sentinel, i + 1) >= 0:
+            raise ValueError(f"sentinel {sentinel.hex()} found {'no' if i < 0 else 'more than one'} time(s)")
+        return i
+
+    def view(self, offset: int, dtype: str, shape) -> np.ndarray:
+        count = int(np.prod(shape))
+        return np.frombuffer(self._buf, dtype=dtype, count=count, offset=offset).reshape(shape)
+
+    def set_stamp(self, stamp_ns: int) -> None:
+        self.stamp[0], self.stamp[1] = divmod(stamp_ns, 1_000_000_000)
+
+    def to_bytes(self) -> bytes:
+        return bytes(self._buf)

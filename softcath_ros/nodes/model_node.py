@@ -18,6 +18,10 @@ wants the pose for the pressures it commands now, not for a backlog; answering a
 commands would only make every answer later. Commands the middleware drops before the node
 takes them (keep-last history overrun) are counted as ``lost`` from DDS message-lost events.
 
+At ``display_rate`` (default 30 Hz, independent of the pose stream) it also publishes the live
+3D view (nodes/live_view.py): the body as a Marker, the backbone as a Path, R_C; the tip on
+TF where tf2_ros exists.
+
 Latency: by default the two outputs are preallocated CDR buffers (nodes/cdr.py) of
 which only the stamp and the doubles are rewritten per command, and the EventsExecutor
 runs the callbacks; benchmarks/node_latency.py measures these and the alternatives.
@@ -87,6 +91,10 @@ class ModelNode(Node):
                                    minimum=0, maximum=99)
         diag_period = p("diagnostics_period", 1.0, "seconds between /diagnostics reports", minimum=1e-3,
                         maximum=3600.0)
+        display_rate = p("display_rate", 30.0, "Hz of the live 3D view (body marker, backbone path, R_C, TF); "
+                         "0 = off", minimum=0.0, maximum=1000.0)
+        body_sides = p("body_sides", 12, "vertices around the body tube of the 3D view", minimum=3, maximum=64)
+        tip_frame = p("tip_frame", "softcath_tip", "TF frame of the tip (broadcast where tf2_ros exists)")
 
         self.design = load_design(design_name)
         self.calibration = load_calibration(calibration_file) if calibration_file else None
@@ -138,6 +146,12 @@ class ModelNode(Node):
         self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
                                  self._on_command if self._solver is None else self._hand_over, qos,
                                  event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
+        self.view = None
+        if display_rate > 0:
+            from .live_view import LiveView
+
+            self.view = LiveView(self, self.design, self.n_points, display_rate, body_sides, tip_frame,
+                                 stream_qos(10, reliability))
         # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
         self.answer_load = AnswerLoad(time.monotonic())
         self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
@@ -266,6 +280,8 @@ class ModelNode(Node):
         if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
             return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
         c.accepted += 1
+        if self.view is not None:   # the display timer picks it up (a reference, no copy)
+            self.view.latest = (stamp_ns, positions, quats, check.pressures)
         if self.preparation == "serialized":
             self._publish_serialized(stamp_ns, positions, quats)
         else:

@@ -1,0 +1,166 @@
+"""The live 3D view: the body mesh (core), its CDR templates, and model_node publishing it."""
+import math
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from softcath_ros import topics
+from softcath_ros.core.body_mesh import HIGH_RGBA, LOW_RGBA, SILICONE_RGBA, BodyMesh, radius_l_over_theta
+from softcath_ros.core.design import load_design
+from softcath_ros.core.kinematics import backbone_poses
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+
+
+@pytest.mark.parametrize("design_name", ["implemented_5mm", "three_channel_5mm"])
+def test_body_mesh_is_a_tube_of_the_outer_diameter_coloured_by_channel_pressure(design_name):
+    design = load_design(design_name)
+    mesh = BodyMesh(design, 9, sides=16)
+    k = np.array([40.0, -15.0])
+    pos, quat = backbone_poses(k, design.length, 9)
+    v = mesh.vertices(pos, quat).reshape(9, 16, 3)
+    # every ring at the outer radius from its backbone point, in the plane normal to the tangent
+    np.testing.assert_allclose(np.linalg.norm(v - pos[:, None], axis=-1), design.outer_radius, rtol=1e-12)
+    tangent = np.gradient(pos, axis=0)   # finite differences: independent of the quaternion rotation
+    tangent[1:-1] = pos[2:] - pos[:-2]    # central: parallel to the arc's tangent at the middle point
+    tangent /= np.linalg.norm(tangent, axis=-1, keepdims=True)
+    assert np.abs(np.einsum("rsk,rk->rs", (v - pos[:, None])[1:-1], tangent[1:-1])).max() < 1e-12
+    n = design.n_channels
+    pressures = np.linspace(design.max_pressure, 0.0, n)
+    points, colours = mesh.triangle_list(pos, quat, pressures)
+    assert points.shape == (8 * 16 * 2 * 3, 3) and colours.shape == (len(points), 4)
+    # each channel's vertices face its centre, with its pressure's colour; the rest is silicone
+    ring = mesh.vertices(pos, quat)[:16] - pos[0]
+    for c, hole in enumerate(design.channels):
+        facing = ring[mesh.owner == c][:, :2]
+        centre = np.array(hole.center) / np.linalg.norm(hole.center)
+        assert (facing @ centre / design.outer_radius).min() > math.cos(math.radians(61))
+        f = pressures[c] / design.max_pressure
+        want = (1 - f) * LOW_RGBA + f * HIGH_RGBA
+        got = colours[mesh._vertex_owner == c]
+        np.testing.assert_allclose(got, np.broadcast_to(want, got.shape))
+    assert (mesh.owner == -1).any()
+    np.testing.assert_allclose(colours[mesh._vertex_owner == -1][0], SILICONE_RGBA)
+    # over the limit is shown as the limit, never beyond
+    _, over = mesh.triangle_list(pos, quat, np.full(n, 2 * design.max_pressure))
+    np.testing.assert_allclose(over[mesh._vertex_owner == 0][0], HIGH_RGBA)
+
+
+def test_radius_l_over_theta_from_the_tip_orientation():
+    k = np.array([25.0, 0.0])
+    _, quat = backbone_poses(k, 0.02, 2)
+    assert radius_l_over_theta(0.02, quat[-1]) == pytest.approx(1 / 25.0, rel=1e-9)  # constant curvature
+    assert radius_l_over_theta(0.02, [0.0, 0.0, 0.0, 1.0]) == math.inf
+
+
+def test_templates_deserialise_to_the_messages_they_stand_for():
+    from nav_msgs.msg import Path
+    from rclpy.serialization import deserialize_message
+    from visualization_msgs.msg import Marker
+
+    from softcath_ros.nodes.live_view import marker_template, path_template
+
+    rng = np.random.default_rng(1)
+    t, points, colours = marker_template("softcath_base", 30)
+    points[:] = rng.normal(size=(30, 3))
+    colours[:] = rng.uniform(size=(30, 4))
+    t.set_stamp(1_700_000_000_123_456_789)
+    m = deserialize_message(t.to_bytes(), Marker)
+    assert (m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id) == (1_700_000_000, 123_456_789,
+                                                                            "softcath_base")
+    assert m.type == Marker.TRIANGLE_LIST and m.action == Marker.ADD and m.pose.orientation.w == 1.0
+    np.testing.assert_array_equal([[p.x, p.y, p.z] for p in m.points], points)
+    np.testing.assert_array_equal([[c.r, c.g, c.b, c.a] for c in m.colors], colours)
+    t, poses, stamps = path_template("softcath_base", 5)
+    rows = rng.normal(size=(5, 7))
+    for view, stamp, row in zip(poses, stamps, rows):
+        view[:] = row
+        stamp[:] = (12, 34)
+    t.set_stamp(12_000_000_034)
+    msg = deserialize_message(t.to_bytes(), Path)
+    assert len(msg.poses) == 5 and msg.header.frame_id == "softcath_base"
+    for ps, row in zip(msg.poses, rows):
+        p, q = ps.pose.position, ps.pose.orientation
+        assert [p.x, p.y, p.z, q.x, q.y, q.z, q.w] == list(row)
+        assert (ps.header.stamp.sec, ps.header.stamp.nanosec, ps.header.frame_id) == (12, 34, "softcath_base")
+
+
+def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
+    """Commands at ~200 Hz; the view comes at the display rate (10 Hz here), from the latest pose."""
+    from nav_msgs.msg import Path
+    from std_msgs.msg import Float64
+    from visualization_msgs.msg import Marker
+
+    from softcath_ros.nodes.qos import stream_qos
+
+    pytest.importorskip("visualization_msgs")
+    with pytest.raises(ImportError):
+        import tf2_ros  # noqa: F401  (the pip install has none: this test is about that case)
+    node = start_node("-p", "display_rate:=10.0", "-p", "backbone_points:=8")
+    got = {"marker": [], "path": [], "radius": []}
+    n = node.client.node
+    qos = stream_qos(100)
+    n.create_subscription(Marker, topics.BODY_MARKER, got["marker"].append, qos)
+    n.create_subscription(Path, topics.BACKBONE_PATH, got["path"].append, qos)
+    n.create_subscription(Float64, topics.RADIUS_L_OVER_THETA, got["radius"].append, qos)
+    node.client.spin_until(lambda: False, 1.0)   # discovery of the new subscriptions
+    t0 = time.monotonic()
+    sent = 0
+    while time.monotonic() - t0 < 2.0:
+        node.client._pub.publish(node.client._msg_type(data=[20000.0]))
+        sent += 1
+        node.client.spin_until(lambda: False, 0.005)
+    last = node.client.send([30000.0])
+    assert last is not None
+    node.client.spin_until(lambda: got["path"] and got["path"][-1].poses[-1].pose.position.y ==
+                           pytest.approx(last.tip_position_m[1], abs=1e-15), 3.0)
+    elapsed = time.monotonic() - t0
+    n_markers, n_tips = len(got["marker"]), node.client.n_received
+    # At most the display rate (10 Hz), at least half of it on a loaded machine; not one per pose.
+    assert 0.5 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
+    assert n_tips > 2 * n_markers and sent > 2 * n_markers, (n_tips, sent, n_markers)
+    m = got["marker"][-1]
+    assert m.header.frame_id == topics.FRAME_ID and m.type == Marker.TRIANGLE_LIST
+    assert len(m.points) == 7 * 12 * 2 * 3 and len(m.colors) == len(m.points)
+    path = got["path"][-1]
+    np.testing.assert_allclose([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in path.poses],
+                               last.backbone_m, atol=1e-15)
+    want = radius_l_over_theta(load_design("implemented_5mm").length, last.tip_orientation_xyzw)
+    node.client.spin_until(lambda: got["radius"] and abs(got["radius"][-1].data - want) < 1e-9 * want, 2.0)
+    assert got["radius"][-1].data == pytest.approx(want, rel=1e-9)
+    code, err = node.stop(signal.SIGTERM)
+    assert code == 0 and "Traceback" not in err
+    assert "tf2_ros is not importable" in err
+
+
+def test_display_rate_zero_turns_the_view_off(start_node):
+    node = start_node("-p", "display_rate:=0.0")
+    assert node.client.node.count_publishers(topics.BODY_MARKER) == 0
+    assert node.client.send([10000.0]) is not None
+
+
+def test_foxglove_layout_names_the_view_and_the_plots():
+    import json
+
+    from layout_check import LAYOUT, layout_topics
+
+    layout = json.loads(LAYOUT.read_text())
+    named = layout_topics(layout)
+    assert {topics.BODY_MARKER, topics.BACKBONE_PATH, topics.TIP_POSE, topics.PRESSURE_CMD,
+            topics.PRESSURE_MEASURED, topics.RADIUS_L_OVER_THETA} <= named
+    assert named <= set(topics.MESSAGE_TYPES)   # every one a topic of the suite
+    three_d = [c for k, c in layout["configById"].items() if k.startswith("3D!")]
+    assert len(three_d) == 1 and three_d[0]["followTf"] == topics.FRAME_ID
+    # every panel of the layout tree is configured, and every configured panel is placed
+    placed = set()
+
+    def walk(node):
+        if isinstance(node, str):
+            placed.add(node)
+        else:
+            walk(node["first"])
+            walk(node["second"])
+    walk(layout["layout"])
+    assert placed == set(layout["configById"])
