@@ -26,8 +26,8 @@ TRAJECTORIES = ("step", "circle")
 SETTLE_TOLERANCE = 5e-4      # m: settled = within 0.5 mm
 CIRCLE_HZ = 0.2
 # Step targets: (direction deg, fraction of the true reach in that direction), one per hold.
-STEP_TARGETS = ((-90.0, 0.6), (90.0, 0.6), (0.0, 0.5))
-CIRCLE_FRACTION = 0.6        # of the smallest true reach over all directions
+STEP_TARGETS = ((-90.0, 0.85), (90.0, 0.85), (0.0, 0.7))
+CIRCLE_FRACTION = 0.9        # of the smallest true reach over all directions
 
 
 def steering_rig_params(**overrides) -> RigParams:

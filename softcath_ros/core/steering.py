@@ -7,12 +7,14 @@ core/kinematics, independent of the arc's length, so of the axial stretch). A ti
 into a bend error through that inverse, which is the model's kinematic Jacobian inverted
 exactly instead of linearised.
 
-    command = target_bend / gain + integral        (bend vector, rad)
+    command = (target_bend + integral) / gain      (bend vector, rad)
     pressures = Allocator.allocate_bend(command)   (the model's inverse, minimum pressure)
 
 - Feed-forward: the Allocator on the model rung (core/allocation.py), with a lead of
-  ``lead_time`` seconds on its pressures that cancels the known first-order lag of regulator
-  and actuator (so a moving target is not followed one lag behind).
+  ``lead_time`` seconds on its pressures (p + lead_time dp/dt) that cancels the known
+  first-order lag of regulator and actuator, so a moving target is not followed one lag
+  behind (aiming ahead on the target instead was measured worse: docs/steering.md). Steps
+  (a change above ``max_lead_step`` between two allocations) get no lead.
 - Feedback, mode ``integral``: integral action on the measured bend error (gain fixed at 1).
 - Mode ``adaptive``: the same integral, plus a recursive least-squares estimate (with
   forgetting) of the bending gain: measured bend = gain x the model's bend at the pressures
@@ -72,6 +74,7 @@ class SteeringParams:
     forgetting: float = 0.98            # RLS forgetting factor per accepted measurement
     gain_bounds: tuple = (0.2, 5.0)     # the adapted gain stays within these
     lead_time: float = 0.096            # s, lag cancelled on the feed-forward (regulator 80 ms + actuator 16 ms)
+    max_lead_step: float = 2000.0       # Pa: a larger change between two allocations is a step (no lead)
     plant_time_constant: float = 0.096  # s, first-order estimate of the actuator's pressure (adaptive regressor)
     max_pressure_rate: float = 2.0e5    # Pa/s
     command_timeout: float = 0.5        # s without a target: vent
@@ -178,9 +181,9 @@ class SteeringController:
         self._history: deque = deque()    # (time, estimated actuator pressures)
         self._t_prev: float | None = None
         self._pressures = np.zeros(n)       # last allocation, Pa
-        self._lead = np.zeros(n)            # lead term on it, Pa
         self._alloc_time: float | None = None
         self._stretch = 1.0
+        self._lead = np.zeros(n)            # lead term on the last allocation, Pa
         self.saturated = False
         self._rest_curvature = np.asarray(allocator.model.evaluate(np.zeros(n)).curvature, dtype=float)
 
@@ -283,13 +286,14 @@ class SteeringController:
                                          f"{prm.measurement_timeout:g} s)" if age > prm.measurement_timeout
                             else "re-acquiring the measurement")
 
-        ff = self.target_bend / self.gain
-        command = ff + self.integral
+        # The integral is in measured-bend units, divided by the gain like the target: the loop's
+        # bandwidth is then integral_gain whatever the plant's gain (in adaptive mode).
+        command = (self.target_bend + self.integral) / self.gain
         if self._alloc_time is None or now - self._alloc_time >= prm.allocation_period - 1e-9:
-            self._reallocate(command, ff, now)
+            self._reallocate(command, now)
         return self._emit(np.clip(self._pressures + self._lead, 0.0, self.max_pressure), dt, now)
 
-    def _reallocate(self, command: np.ndarray, ff: np.ndarray, now: float) -> None:
+    def _reallocate(self, command: np.ndarray, now: float) -> None:
         """New pressures for the bend ``command`` (one inverse through the model)."""
         prm = self.params
         result = self._allocate(command)
@@ -298,22 +302,24 @@ class SteeringController:
         if result.saturated:
             # Saturate along the target's direction; back-calculate the integral to that edge.
             result = self._allocate(u * math.hypot(*command))
-            edge = u * result.max_curvature * self.length * result.axial_stretch
+            edge = np.asarray(result.achieved_curvature, dtype=float) * self.length * result.axial_stretch
             if self.closed:
-                self.integral = edge - ff
+                self.integral = edge * self.gain - self.target_bend
         pressures = np.asarray(result.pressures, dtype=float)
         self._stretch = float(result.axial_stretch)
-        if prm.lead_time > 0 and self._alloc_time is not None and now > self._alloc_time:
-            self._lead = prm.lead_time * (pressures - self._pressures) / (now - self._alloc_time)
+        step = pressures - self._pressures
+        if prm.lead_time > 0 and self._alloc_time is not None and now > self._alloc_time and \
+                float(np.abs(step).max()) <= prm.max_lead_step:
+            self._lead = prm.lead_time * step / (now - self._alloc_time)
         else:
-            self._lead = np.zeros_like(pressures)
+            self._lead = np.zeros_like(pressures)   # a step: the rate limiter shapes it, no lead
         self._pressures, self._alloc_time = pressures, now
 
     def _allocate(self, bend):
         """Pressures for a bend vector (rad): its curvature on the last axial stretch (the integral
         absorbs the small change of stretch), one allocator call."""
         b = np.asarray(bend, dtype=float)
-        res = self.allocator.allocate(b / (self.length * self._stretch))
+        res = self.allocator.allocate(b / (self.length * self._stretch), start=self._pressures)
         if not res.converged or not res.reachable:
             raise SteeringError(f"allocation failed for bend {b.tolist()} rad: {res.message}")
         return res
