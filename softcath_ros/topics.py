@@ -11,6 +11,8 @@ TIP_POSE = "/softcath/tip_pose"                    # predicted tip pose in softc
 BACKBONE = "/softcath/backbone"                    # predicted backbone poses, base to tip
 BEND_CMD = "/softcath/bend_cmd"                    # desired curvature vector (x, y), 1/m
 TIP_TARGET = "/softcath/tip_target"                # desired tip position, m
+TIP_MEASURED = "/softcath/tip_measured"            # measured tip pose (camera / EM tracker), stamped when taken
+TIP_TRUE = "/softcath/bench/tip_true"              # simulated rig only: the true tip pose, for scoring
 BENCH_ANGLE = "/softcath/bench/angle"              # measured bending angle, rad
 BENCH_FORCE = "/softcath/bench/force"              # measured blocking force, N
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
@@ -24,6 +26,8 @@ MESSAGE_TYPES = {
     BACKBONE: "geometry_msgs/msg/PoseArray",
     BEND_CMD: "geometry_msgs/msg/Vector3Stamped",
     TIP_TARGET: "geometry_msgs/msg/PointStamped",
+    TIP_MEASURED: "geometry_msgs/msg/PoseStamped",
+    TIP_TRUE: "geometry_msgs/msg/PoseStamped",
     BENCH_ANGLE: "std_msgs/msg/Float64",
     BENCH_FORCE: "std_msgs/msg/Float64",
     BENCH_STEP: "std_msgs/msg/String",
@@ -40,5 +44,9 @@ MODEL_NODE = "softcath_model"
 ALLOCATION_NODE = "softcath_allocation"
 BENCH_NODE = "softcath_bench"
 SIM_BENCH_NODE = "softcath_sim_bench"
+STEER_NODE = "softcath_steer"
+STEER_DRIVER = "softcath_steer_driver"
+# What steer-sim records.
+STEERING_RECORDED = [TIP_TARGET, TIP_MEASURED, TIP_TRUE, PRESSURE_CMD, PRESSURE_MEASURED, DIAGNOSTICS]
 
 FRAME_ID = "softcath_base"

@@ -23,6 +23,7 @@ SUBCOMMANDS = [
     "chart",
     "envelope",
     "study",
+    "steer_sim",
 ]
 
 
