@@ -16,6 +16,9 @@ exactly instead of linearised.
   behind (aiming ahead on the target instead was measured worse: docs/steering.md). Steps
   (a change above ``max_lead_step`` between two allocations) get no lead.
 - Feedback, mode ``integral``: integral action on the measured bend error (gain fixed at 1).
+  Its gain is capped by the delay the loop sees (the measurements' age on arrival plus the
+  actuator's lag): gain <= delay_margin / delay, so a slower tracker slows the loop instead of
+  making it ring.
 - Mode ``adaptive``: the same integral, plus a recursive least-squares estimate (with
   forgetting) of the bending gain: measured bend = gain x the model's bend at the pressures
   the actuator had when the sample was taken (the controller's own first-order estimate of
@@ -70,7 +73,8 @@ class SteeringError(SoftcathError):
 @dataclass
 class SteeringParams:
     mode: str = "adaptive"
-    integral_gain: float = 8.0          # 1/s, on the bend error
+    integral_gain: float = 10.0         # 1/s, on the bend error (upper bound: see delay_margin)
+    delay_margin: float = 1.0           # integral gain <= this / (measurement age + plant_time_constant)
     forgetting: float = 0.98            # RLS forgetting factor per accepted measurement
     gain_bounds: tuple = (0.2, 5.0)     # the adapted gain stays within these
     lead_time: float = 0.096            # s, lag cancelled on the feed-forward (regulator 80 ms + actuator 16 ms)
@@ -177,6 +181,7 @@ class SteeringController:
         self._last_tip: np.ndarray | None = None
         self._consistent = 0
         self.measured_bend: np.ndarray | None = None
+        self.latency: float | None = None   # s, smoothed age of the accepted measurements on arrival
         self._p_est = np.zeros(n)
         self._history: deque = deque()    # (time, estimated actuator pressures)
         self._t_prev: float | None = None
@@ -231,12 +236,21 @@ class SteeringController:
             self.closed = True
         if prm.mode == "adaptive":
             self._adapt(bend, stamp)
+        age = now - stamp
+        self.latency = age if self.latency is None else 0.9 * self.latency + 0.1 * age
         if self.closed and not self.saturated:
-            self.integral = self.integral + prm.integral_gain * dt * (self.target_bend - bend)
+            self.integral = self.integral + self.integral_gain() * dt * (self.target_bend - bend)
             norm = math.hypot(*self.integral)
             if norm > prm.max_integral:
                 self.integral *= prm.max_integral / norm
         return "accepted"
+
+    def integral_gain(self) -> float:
+        """The integral gain in use (1/s): the set gain, lowered as the measurement's age grows so
+        the loop keeps its phase margin (crossover x total delay <= delay_margin rad)."""
+        prm = self.params
+        delay = (self.latency or 0.0) + prm.plant_time_constant
+        return min(prm.integral_gain, prm.delay_margin / delay) if delay > 0 else prm.integral_gain
 
     def _adapt(self, measured_bend: np.ndarray, stamp: float) -> None:
         """One RLS step on measured = gain x model bend at the estimated pressures at ``stamp``."""
