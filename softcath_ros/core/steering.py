@@ -170,7 +170,8 @@ class SteeringController:
         self.counters = MeasurementCounters()
         self.target_tip: np.ndarray | None = None
         self.target_bend = np.zeros(2)
-        self.integral = np.zeros(2)
+        self._frame = (1.0, 0.0)           # (cos, sin) of the target's direction
+        self.integral_local = np.zeros(2)  # rad, the integral in the target's frame (radial, tangential)
         self.gain = 1.0
         self._sxx = 1e-6    # RLS sums (rad^2): the ratio is the gain; a tiny prior avoids 0/0
         self._sxy = 1e-6
@@ -203,6 +204,9 @@ class SteeringController:
             raise SteeringError(f"tip target {p.tolist()} m: no bending arc ends there (on or behind the base)")
         self.target_tip = p
         self.target_bend = bend_of_tip(p)
+        theta = math.hypot(*self.target_bend)
+        if theta > 1e-4:   # below, the direction is noise: keep the frame
+            self._frame = (self.target_bend[0] / theta, self.target_bend[1] / theta)
         self.watchdog.feed(now)
 
     def on_measurement(self, tip, stamp: float, now: float) -> str:
@@ -239,11 +243,27 @@ class SteeringController:
         age = now - stamp
         self.latency = age if self.latency is None else 0.9 * self.latency + 0.1 * age
         if self.closed and not self.saturated:
-            self.integral = self.integral + self.integral_gain() * dt * (self.target_bend - bend)
-            norm = math.hypot(*self.integral)
-            if norm > prm.max_integral:
-                self.integral *= prm.max_integral / norm
+            local = self.integral_local + self.integral_gain() * dt * self._to_local(self.target_bend - bend)
+            norm = math.hypot(*local)
+            self.integral_local = local * (prm.max_integral / norm) if norm > prm.max_integral else local
         return "accepted"
+
+    @property
+    def integral(self) -> np.ndarray:
+        """The integral (rad) in softcath_base: kept in the target's frame, so on a target moving
+        round the axis the correction turns with it (the lag on a circle is a constant
+        tangential error there) instead of being integrated up anew at each direction."""
+        c, s = self._frame
+        r, t = self.integral_local
+        return np.array([c * r - s * t, s * r + c * t])
+
+    @integral.setter
+    def integral(self, world) -> None:
+        self.integral_local = self._to_local(np.asarray(world, dtype=float))
+
+    def _to_local(self, v: np.ndarray) -> np.ndarray:
+        c, s = self._frame
+        return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1]])
 
     def integral_gain(self) -> float:
         """The integral gain in use (1/s): the set gain, lowered as the measurement's age grows so
