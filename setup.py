@@ -72,6 +72,8 @@ setup(
             "bench_node = softcath_ros.nodes.bench_node:main",
             "sim_bench_node = softcath_ros.nodes.sim_bench_node:main",
             "allocation_node = softcath_ros.nodes.allocation_node:main",
+            "steer_node = softcath_ros.nodes.steer_node:main",
+            "steer_driver = softcath_ros.nodes.steer_driver:main",
         ],
     },
 )

@@ -17,6 +17,7 @@ BENCH_FORCE = "/softcath/bench/force"              # DEPRECATED (unstamped): mea
 PRESSURE_MEASURED_CHANNEL = "/softcath/pressure_measured/ch{channel}"  # one FluidPressure per channel, Pa
 BENCH_BEND_ANGLE = "/softcath/bench/bend_angle"    # measured bending angle (vector.x), rad
 BENCH_WRENCH = "/softcath/bench/wrench"            # scale reading (force.z), N, frame SCALE_FRAME_ID
+TIP_TRUE = "/softcath/bench/tip_true"              # simulated rig only: the true tip pose, for scoring
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
 BENCH_RIG = "/softcath/bench/rig"                  # the rig announces itself (JSON, transient local)
 BODY_MARKER = "/softcath/body_marker"              # live 3D view: the body as a triangle list
@@ -32,6 +33,8 @@ MESSAGE_TYPES = {
     BACKBONE: "geometry_msgs/msg/PoseArray",
     BEND_CMD: "geometry_msgs/msg/Vector3Stamped",
     TIP_TARGET: "geometry_msgs/msg/PointStamped",
+    TIP_MEASURED: "geometry_msgs/msg/PoseStamped",
+    TIP_TRUE: "geometry_msgs/msg/PoseStamped",
     BENCH_ANGLE: "std_msgs/msg/Float64",
     BENCH_FORCE: "std_msgs/msg/Float64",
     BENCH_BEND_ANGLE: "geometry_msgs/msg/Vector3Stamped",
@@ -41,7 +44,6 @@ MESSAGE_TYPES = {
     BODY_MARKER: "visualization_msgs/msg/Marker",
     BACKBONE_PATH: "nav_msgs/msg/Path",
     RADIUS_L_OVER_THETA: "std_msgs/msg/Float64",
-    TIP_MEASURED: "geometry_msgs/msg/PoseStamped",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
 }
 
@@ -78,6 +80,10 @@ MODEL_NODE = "softcath_model"
 ALLOCATION_NODE = "softcath_allocation"
 BENCH_NODE = "softcath_bench"
 SIM_BENCH_NODE = "softcath_sim_bench"
+STEER_NODE = "softcath_steer"
+STEER_DRIVER = "softcath_steer_driver"
+# What steer-sim records.
+STEERING_RECORDED = [TIP_TARGET, TIP_MEASURED, TIP_TRUE, PRESSURE_CMD, PRESSURE_MEASURED, DIAGNOSTICS]
 
 FRAME_ID = "softcath_base"
 SCALE_FRAME_ID = "softcath_scale"   # the scale under the tip: z is its measuring axis

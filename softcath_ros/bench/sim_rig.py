@@ -8,7 +8,10 @@
   through a play of width ``hysteresis_pressure`` (rate-independent backlash: up to half
   the width below it while loading, above it while unloading), so at equal pressure the
   unloading branch bends more.
-- Truth: a model rung (closed form by default). ``pressure_shift`` mimics the published
+- Actuator (off by default): the body follows the regulated pressure through a further
+  first-order lag (``actuator_time_constant``; 16 ms is a 10 Hz bandwidth).
+- Truth: a model rung (closed form by default), built by ``truth_model`` for the design with
+  its material scaled by ``material_scale`` (1.2: the body 20% stiffer than the model says). ``pressure_shift`` mimics the published
   gap between model and experiment (the model's curve lies on the experiment's when its
   input pressure is shifted by about 25%): the rig bends as the model does at
   (1 - pressure_shift) times the true pressure.
@@ -19,16 +22,22 @@
 - Force bench: blocking force (bench.blocking), read low by the same friction, plus a
   scale offset (tared by the analysis with the p = 0 reading) and noise. With the tip
   blocked the angle reads zero (plus noise); on the angle bench the scale reads its offset.
+- Tip tracker (``TipTracker``, a camera or an electromagnetic tracker): the true tip position
+  at ``rate_hz`` plus white noise, delivered ``latency`` seconds after it was taken, with a
+  fraction ``drop_fraction`` of the samples lost.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 from .blocking import BlockingForce
 from ..core.prediction import angle_per_length
+from ..core.kinematics import tip_pose_single
+from ..core.models import make_model
 from ..core.units import PA_PER_BAR
 
 
@@ -44,6 +53,8 @@ class RigParams:
     force_noise: float = 0.2e-3             # N, std of the scale
     scale_offset: float = 3.0e-3            # N, scale reading with nothing on it
     hysteresis_pressure: float = 0.0        # Pa, width of the play between true and bending pressure
+    actuator_time_constant: float = 0.0     # s, body's lag behind the regulated pressure (0: none)
+    material_scale: float = 1.0             # truth's Yeoh coefficients = the design's x this
     seed: int = 0
 
     @classmethod
@@ -62,13 +73,25 @@ class RigReading:
     force: float           # N
 
 
+def truth_model(rung: str, design, params: RigParams, **options):
+    """The rung that plays the true actuator: ``design`` with its material scaled by
+    ``params.material_scale`` (``options`` go to the rung)."""
+    from .calibration import scaled_design
+
+    if params.material_scale != 1.0:
+        design = scaled_design(design, params.material_scale)
+    return make_model(rung, design, **options)
+
+
 class SimulatedRig:
     def __init__(self, model, params: RigParams | None = None):
+        """``model``: the truth (``truth_model`` applies the material scale)."""
         self.model = model
         self.params = params or RigParams()
         self.rng = np.random.default_rng(self.params.seed)
         n = model.n_channels
         self.true_pressures = np.zeros(n)
+        self.actuated_pressures = np.zeros(n)  # after the actuator's lag
         self.bending_pressures = np.zeros(n)  # after the hysteresis play
         self.gauge_bias = self.rng.uniform(-self.params.gauge_error, self.params.gauge_error, n)
         self.force_model = BlockingForce(model)
@@ -89,15 +112,25 @@ class SimulatedRig:
         cmd = np.clip(np.asarray(command, dtype=float), 0.0, self.max_pressure)
         a = 1.0 - math.exp(-max(dt, 0.0) / self.params.regulator_time_constant)
         self.true_pressures = self.true_pressures + a * (cmd - self.true_pressures)
+        tau = self.params.actuator_time_constant
+        b = 1.0 if tau <= 0 else 1.0 - math.exp(-max(dt, 0.0) / tau)
+        self.actuated_pressures = self.actuated_pressures + b * (self.true_pressures - self.actuated_pressures)
         half = 0.5 * self.params.hysteresis_pressure
-        self.bending_pressures = np.clip(self.bending_pressures, self.true_pressures - half,
-                                         self.true_pressures + half)
+        self.bending_pressures = np.clip(self.bending_pressures, self.actuated_pressures - half,
+                                         self.actuated_pressures + half)
 
     def true_state(self):
         return self.model.evaluate(np.clip(self.bending_pressures, 0.0, None) * (1.0 - self.params.pressure_shift))
 
     def true_curvature(self) -> np.ndarray:
         return np.asarray(self.true_state().curvature, dtype=float)
+
+    def true_tip(self):
+        """True tip position (m) and quaternion (x, y, z, w) in softcath_base, for the mounted length."""
+        state = self.true_state()
+        kx, ky = (float(v) for v in state.curvature)
+        position, quat = tip_pose_single(kx, ky, self.length * float(state.axial_stretch))
+        return np.array(position), np.array(quat)
 
     def read(self) -> RigReading:
         p = self.params
@@ -114,3 +147,50 @@ class SimulatedRig:
         return RigReading(pressures=gauge,
                           angle=angle + float(self.rng.normal(0.0, p.angle_noise)),
                           force=force + p.scale_offset + float(self.rng.normal(0.0, p.force_noise)))
+
+
+@dataclass
+class TrackerParams:
+    rate_hz: float = 100.0      # samples per second
+    noise: float = 1.0e-4       # m, std per axis
+    latency: float = 0.05       # s from taking a sample to delivering it
+    drop_fraction: float = 0.2  # fraction of samples lost
+    seed: int = 1
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrackerParams":
+        known = {f.name for f in fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown tracker parameters {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**d)
+
+
+class TipTracker:
+    """Noisy, late, lossy samples of the true tip position (module docstring)."""
+
+    def __init__(self, params: TrackerParams | None = None):
+        self.params = params or TrackerParams()
+        if not 0.0 <= self.params.drop_fraction < 1.0:
+            raise ValueError(f"drop_fraction {self.params.drop_fraction} must lie in [0, 1)")
+        self.rng = np.random.default_rng(self.params.seed)
+        self.queue: deque = deque()   # (delivery time, stamp, position)
+        self.taken = 0
+        self.dropped = 0
+
+    def capture(self, now: float, tip) -> None:
+        """Take a sample of the true ``tip`` (m) at ``now`` (s)."""
+        self.taken += 1
+        if self.rng.random() < self.params.drop_fraction:
+            self.dropped += 1
+            return
+        noisy = np.asarray(tip, dtype=float) + self.rng.normal(0.0, self.params.noise, 3)
+        self.queue.append((now + self.params.latency, now, noisy))
+
+    def due(self, now: float) -> list[tuple[float, np.ndarray]]:
+        """Samples delivered by ``now``: (stamp, position) in the order taken."""
+        out = []
+        while self.queue and self.queue[0][0] <= now + 1e-12:
+            _, stamp, pos = self.queue.popleft()
+            out.append((stamp, pos))
+        return out

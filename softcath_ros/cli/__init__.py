@@ -26,6 +26,7 @@ SUBCOMMANDS = [
     "envelope",
     "study",
     "surrogate",
+    "steer_sim",
 ]
 
 

@@ -180,8 +180,13 @@ class Allocator:
         """Forget the active sector (hysteresis state)."""
         self._current = None
 
-    def allocate(self, curvature) -> Allocation:
-        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m."""
+    def allocate(self, curvature, start=None) -> Allocation:
+        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m.
+
+        ``start`` (Pa per channel, optional): a nearby earlier answer, where Newton starts
+        instead of the secant guess when it drives the same pair (a stream of small changes,
+        as from a feedback loop, then costs one or two iterations instead of five or six).
+        """
         kx, ky = float(curvature[0]), float(curvature[1])
         if not (math.isfinite(kx) and math.isfinite(ky)):
             raise AllocationError(f"curvature ({kx}, {ky}) 1/m is not finite")
@@ -200,7 +205,7 @@ class Allocator:
         ux, uy = math.cos(phi_s), math.sin(phi_s)
         if self.linear:
             return self._pair_linear(sector, (kx, ky), kappa, ux, uy)
-        return self._pair_nonlinear(sector, (kx, ky), kappa, ux, uy)
+        return self._pair_nonlinear(sector, (kx, ky), kappa, ux, uy, start)
 
     def allocate_bend(self, direction: float, angle: float, length: float | None = None) -> Allocation:
         """Pressures for bending angle ``angle`` (rad) towards ``direction`` (rad, atan2(ky, kx)).
@@ -364,10 +369,15 @@ class Allocator:
             raise ModelError(state.message or f"model '{self.model.name}' did not converge")
         return state
 
-    def _pair_nonlinear(self, s: _Sector, requested, kappa, ux, uy) -> Allocation:
+    def _pair_nonlinear(self, s: _Sector, requested, kappa, ux, uy, start=None) -> Allocation:
         target = np.array([kappa * ux, kappa * uy]) + self._rest_curvature
         i00, i01, i10, i11 = s.inv
         q = np.clip([(i00 * ux + i01 * uy) * kappa, (i10 * ux + i11 * uy) * kappa], 0.0, self.max_pressure)
+        if start is not None:
+            p0 = np.asarray(start, dtype=float)
+            others = [i for i in range(self.n_channels) if i not in (s.a, s.b)]
+            if p0.shape == (self.n_channels,) and np.all(np.isfinite(p0)) and not np.any(p0[others] > 0):
+                q = np.clip(p0[[s.a, s.b]], 0.0, self.max_pressure)
         try:
             q, (k, stretch), iterations, outside = self._newton(s, q, target)
         except ModelError as exc:

@@ -30,7 +30,7 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
-from ..bench.sim_rig import RigParams, SimulatedRig
+from ..bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.models import make_model
@@ -40,7 +40,7 @@ from .runtime import run_node
 # Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
 # would make the simulated readings meaningless.
 RIG_RANGES = {"regulator_time_constant": (1e-4, 10.0), "pressure_shift": (0.0, 0.99),
-              "friction_underread": (0.0, 0.99), "out_of_plane_tilt": (0.0, 1.5)}
+              "friction_underread": (0.0, 0.99), "out_of_plane_tilt": (0.0, 1.5), "material_scale": (0.05, 20.0)}
 
 
 class SimBenchNode(Node):
@@ -62,8 +62,9 @@ class SimBenchNode(Node):
                              minimum=lo, maximum=hi)
         params = RigParams(**values)
         design = load_design(design_name)
-        model = make_model(model_name, design)
+        model = truth_model(model_name, design, params)
         self.rig = SimulatedRig(model, params)
+        self._start_tracker(p)
         self.rejected = 0
         self.unanswered = 0   # readings not published: the truth rung refused the pressures (outside its table)
         self.command = np.zeros(design.n_channels)
@@ -99,6 +100,38 @@ class SimBenchNode(Node):
                 f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
                 "(removed in the next release; set legacy_topics:=false to stop): read the stamped "
                 "topics of docs/rig.md instead")
+
+    def _start_tracker(self, p) -> None:
+        """The tip tracker: /softcath/tip_measured (noisy, late, lossy) and the truth on /softcath/bench/tip_true."""
+        from geometry_msgs.msg import PoseStamped
+
+        values = {name: p(f"tracker_{name}", default, f"tip tracker: {name} (bench/sim_rig.py TrackerParams)",
+                          minimum=0.0, maximum=0.99 if name == "drop_fraction" else None)
+                  for name, default in asdict(TrackerParams()).items()}
+        if values["rate_hz"] <= 0:
+            raise SoftcathError("parameter tracker_rate_hz must be positive")
+        self.tracker = TipTracker(TrackerParams(**values))
+        self._pose_type = PoseStamped
+        self.pub_tip = self.create_publisher(PoseStamped, topics.TIP_MEASURED, 100)
+        self.pub_tip_true = self.create_publisher(PoseStamped, topics.TIP_TRUE, 100)
+        self.create_timer(1.0 / values["rate_hz"], self.tick_tracker)
+
+    def _pose(self, stamp_ns: int, position, quat):
+        msg = self._pose_type()
+        msg.header.frame_id = topics.FRAME_ID
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in position)
+        q = msg.pose.orientation
+        q.x, q.y, q.z, q.w = (float(v) for v in quat)
+        return msg
+
+    def tick_tracker(self):
+        now = self.get_clock().now().nanoseconds
+        position, quat = self.rig.true_tip()
+        self.pub_tip_true.publish(self._pose(now, position, quat))
+        self.tracker.capture(now * 1e-9, position)
+        for stamp, pos in self.tracker.due(now * 1e-9):
+            self.pub_tip.publish(self._pose(round(stamp * 1e9), pos, quat))
 
     def on_command(self, msg):
         p = np.asarray(msg.data, dtype=float)

@@ -1,0 +1,156 @@
+"""`softcath steer-sim`: closed-loop steering on the simulated rig, over DDS.
+
+Starts sim_bench_node (the rig: truth with the 25% pressure shift and material scale 1.2,
+a 10 Hz actuator, a tip tracker with noise, latency and drops), steer_node (the controller)
+and steer_driver (targets, recording, scoring) as separate processes on a private ROS
+domain; prints tip error RMS, steady-state error and settling time; writes the MCAP
+recording and a plot of the target, the DDS run's tip path and, for comparison, the other
+loop's path from the core simulation (bench/steering_sim.py, same scenario, no DDS).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+from ..core.errors import SoftcathError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("steer-sim", help="closed-loop steering on the simulated rig (nodes over DDS): "
+                       "tip errors, recording, plot")
+    p.add_argument("--design", default="three_channel_5mm", help="design name or file")
+    p.add_argument("--trajectory", choices=("step", "circle"), default="step")
+    p.add_argument("--duration", type=float, default=6.0, help="seconds of targets (default 6)")
+    p.add_argument("--open-loop", action="store_true", help="run the controller open loop (feed-forward only)")
+    p.add_argument("--mode", choices=("integral", "adaptive"), default="adaptive", help="feedback (closed loop)")
+    p.add_argument("--model", default="closed_form", help="rung of the controller and of the rig's truth")
+    p.add_argument("--max-pressure", type=float, default=None, help="pressure limit, Pa (default 30000)")
+    p.add_argument("--latency", type=float, default=0.05, help="tracker latency, s")
+    p.add_argument("--drop", type=float, default=0.2, help="fraction of tracker samples lost")
+    p.add_argument("--output-dir", default="runs", help="where the recording goes (default runs/)")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run)
+
+
+def _plot(series: dict, other, out: Path, title: str) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot(series["target"][:, 0] * 1e3, series["target"][:, 1] * 1e3, "k--", lw=1, label="target")
+    ax.plot(series["tip"][:, 0] * 1e3, series["tip"][:, 1] * 1e3, lw=1.2, label=series["label"])
+    ax.plot(other["tip"][:, 0] * 1e3, other["tip"][:, 1] * 1e3, lw=1, alpha=0.8, label=other["label"])
+    ax.set_xlabel("tip x, mm")
+    ax.set_ylabel("tip y, mm")
+    ax.set_aspect("equal")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return str(out)
+
+
+def _wait_logged(logs: dict, timeout_s: float) -> None:
+    """Until every node's log holds the ready line; SoftcathError naming a node that ended or stalled."""
+    from ..graph import READY_MARK
+
+    end = time.monotonic() + timeout_s
+    waiting = dict(logs)
+    while waiting:
+        for node, path in list(waiting.items()):
+            text = path.read_text(errors="replace")
+            if READY_MARK in text:
+                del waiting[node]
+            elif "cannot start" in text or "Traceback" in text:
+                raise SoftcathError(f"{node} did not start: {text.strip().splitlines()[-1]} (log {path})")
+        if time.monotonic() > end:
+            raise SoftcathError(f"{', '.join(waiting)} not ready after {timeout_s:g} s (logs {list(waiting.values())})")
+        time.sleep(0.1)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..bench.steering_sim import SteeringScenario, run_metrics, simulate, steering_rig_params
+    from ..bench.sim_rig import TrackerParams
+    from ..core.steering import STEERING_MAX_PRESSURE, SteeringParams
+    from ..graph import NodeGraph, stop_process
+
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        raise SoftcathError(f"--duration {args.duration} s must be positive")
+    if not 0 <= args.drop < 1 or not 0 <= args.latency < 10:
+        raise SoftcathError("--drop must lie in [0, 1) and --latency in [0, 10) s")
+    max_pressure = STEERING_MAX_PRESSURE if args.max_pressure is None else args.max_pressure
+    rig = steering_rig_params()
+    mode = "open_loop" if args.open_loop else args.mode
+    name = f"steer_{args.trajectory}_{mode}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
+    out_dir = Path(args.output_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag = out_dir / name
+    say = (lambda *a: None) if args.json else (lambda *a: print(*a, flush=True))
+    rig_params = {"design": args.design, "model": args.model, "pressure_shift": rig.pressure_shift,
+                  "material_scale": rig.material_scale, "actuator_time_constant": rig.actuator_time_constant,
+                  "tracker_latency": float(args.latency), "tracker_drop_fraction": float(args.drop)}
+    steer_params = {"design": args.design, "model": args.model, "mode": mode, "max_pressure": float(max_pressure)}
+    driver_params = {"design": args.design, "truth": args.model, "pressure_shift": rig.pressure_shift,
+                     "material_scale": rig.material_scale, "max_pressure": float(max_pressure),
+                     "trajectory": args.trajectory, "duration": float(args.duration), "output": str(bag)}
+    explicit = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    t0 = time.monotonic()
+    with NodeGraph(domain=int(explicit) if explicit.isdigit() else None) as graph:
+        logs = {}
+        for node, params in (("sim_bench_node", rig_params), ("steer_node", steer_params)):
+            logs[node] = out_dir / f"{name}_{node}.log"
+            with open(logs[node], "w") as log:
+                graph.start(node, params, stdout=log)
+        _wait_logged(logs, 120.0)
+        say(f"[steer-sim] rig and controller up on ROS_DOMAIN_ID={graph.domain}; driving {args.trajectory} "
+            f"for {args.duration:g} s ({mode})")
+        driver = graph.start("steer_driver", driver_params)
+        try:
+            text = driver.communicate(timeout=args.duration + 120.0)[0]
+        except BaseException:
+            stop_process(driver, 10.0)
+            raise
+    lines = [x for x in text.splitlines() if x.startswith("summary: ")]
+    if driver.returncode != 0 or not lines:
+        raise SoftcathError(f"steer_driver failed (exit {driver.returncode}): {text.strip().splitlines()[-3:]}")
+    summary = json.loads(lines[-1][len("summary: "):])
+    data = np.load(summary["series"])
+    # The other loop, from the core simulation of the same scenario, for the plot.
+    other_mode = "adaptive" if args.open_loop else "open_loop"
+    scenario = SteeringScenario(design=args.design, model=args.model, truth=args.model, max_pressure=max_pressure,
+                                rig=rig, tracker=TrackerParams(latency=args.latency, drop_fraction=args.drop),
+                                controller=SteeringParams(mode=other_mode if not args.open_loop else args.mode))
+    other = simulate(scenario, args.trajectory, args.duration)
+    plot = _plot({"target": data["target"], "tip": data["tip"], "label": f"{mode} (DDS run)"},
+                 {"tip": other.tip, "label": f"{scenario.controller.mode} (core simulation)"},
+                 bag / "tip_paths.png", f"{args.design}, {args.trajectory}, model {args.model}, "
+                 f"latency {args.latency * 1e3:g} ms, {args.drop:.0%} dropped")
+    m = summary["metrics"]
+    result = {"mode": mode, "trajectory": args.trajectory, "duration_s": args.duration, "model": args.model,
+              "tip_error_rms_mm": m["tip_error_rms_m"] * 1e3, "steady_state_error_mm": m["steady_state_error_m"] * 1e3,
+              "settling_time_s": m["settling_time_s"], "recording": summary["recording"], "plot": plot,
+              "series": summary["series"], "comparison": {"mode": scenario.controller.mode, "source": "core simulation",
+                                                          **{k: v for k, v in run_metrics(other, args.duration).items()
+                                                             if k in ("tip_error_rms_m", "steady_state_error_m",
+                                                                      "settling_time_s")}},
+              "elapsed_s": time.monotonic() - t0}
+    if args.json:
+        json.dump(result, sys.stdout, indent=2)
+        print()
+    else:
+        settle = result["settling_time_s"]
+        print(f"[steer-sim] {mode}: tip error RMS {result['tip_error_rms_mm']:.3f} mm, steady state "
+              f"{result['steady_state_error_mm']:.3f} mm" + ("" if settle is None else f", settling {settle:.2f} s"))
+        print(f"recording: {result['recording']}")
+        print(f"plot:      {plot}")
+    return 0

@@ -1,0 +1,122 @@
+"""steer_driver (softcath_steer_driver): drives and scores one steering run (`softcath steer-sim`).
+
+Waits until the simulated rig's true tip (/softcath/bench/tip_true) arrives, then publishes the
+trajectory's targets on /softcath/tip_target at ``target_rate`` for ``duration`` s, records the
+steering topics (topics.STEERING_RECORDED) to an MCAP bag, and scores the true tip against the
+target (bench/steering_sim.metrics). Ends by itself and prints ``summary: {json}`` with the
+metrics, the recording and the time series file (``<recording>/series.npz``).
+
+The targets lie on the true workspace: they are built from the same truth the rig plays
+(``truth_model``, pressure_shift, material_scale, max_pressure), as the core simulation does.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+
+from .. import topics
+from ..bench.sim_rig import RigParams, truth_model
+from ..bench.steering_sim import TRAJECTORIES, metrics, targets_for
+from ..core.design import load_design
+from ..core.errors import SoftcathError
+from ..core.steering import STEERING_MAX_PRESSURE, rung_options, steering_design
+from ..recording import BagWriter
+from .parameters import declare
+from .qos import stream_qos
+from .recorder import TopicRecorder
+from .runtime import run_node
+
+
+class SteerDriver(Node):
+    executor_name = "single"
+
+    def __init__(self, **kwargs):
+        super().__init__(topics.STEER_DRIVER, **kwargs)
+        p = partial(declare, self)
+        design = load_design(p("design", "three_channel_5mm", "design file or shipped design name"))
+        truth = p("truth", "closed_form", "rung the simulated rig plays (for targets on its workspace)")
+        shift = p("pressure_shift", 0.25, "the rig's pressure shift", minimum=0.0, maximum=0.99)
+        scale = p("material_scale", 1.2, "the rig's material scale", minimum=0.05, maximum=20.0)
+        max_pressure = p("max_pressure", STEERING_MAX_PRESSURE, "the controller's pressure limit, Pa", minimum=1.0)
+        self.kind = p("trajectory", "step", f"one of {TRAJECTORIES}", choices=TRAJECTORIES)
+        self.duration = p("duration", 6.0, "seconds of targets", minimum=0.1, maximum=3600.0)
+        rate = p("target_rate", 100.0, "tip_target rate, Hz", minimum=1.0, maximum=1000.0)
+        self.wait_timeout = p("wait_timeout", 60.0, "seconds to wait for the rig and the controller", minimum=0.1)
+        out = p("output", "runs/steer", "recording directory (MCAP bag)")
+        design = steering_design(design, max_pressure)
+        rig = RigParams(pressure_shift=shift, material_scale=scale)
+        self.path = targets_for(self.kind, self.duration, truth_model(truth, design, rig, **rung_options(truth)),
+                                (1.0 - shift) * design.max_pressure)
+        self.writer = BagWriter(Path(out), background=True, custom_data={"design": design.name,
+                                                                        "trajectory": self.kind})
+        self.recorder = TopicRecorder(self, self.writer, list(topics.STEERING_RECORDED), message_info=True)
+        qos = stream_qos(100)
+        self.pub = self.create_publisher(PointStamped, topics.TIP_TARGET, qos)
+        self.create_subscription(PoseStamped, topics.TIP_TRUE, self._on_true, 100)
+        self.t0: float | None = None
+        self.t_wait = time.monotonic()
+        self.state = "waiting"
+        self.samples: list[tuple] = []
+        self.create_timer(1.0 / rate, self._tick)
+
+    def _on_true(self, msg: PoseStamped) -> None:
+        if self.state == "waiting" and self.count_subscribers(topics.TIP_TARGET) > 0:
+            self.state, self.t0 = "running", time.monotonic()
+            self.get_logger().info(f"rig and controller found: {self.kind} for {self.duration:g} s")
+        if self.state != "running":
+            return
+        t = time.monotonic() - self.t0
+        q = msg.pose.position
+        self.samples.append((t, *self.path(t), q.x, q.y, q.z))
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if self.state == "waiting":
+            if now - self.t_wait > self.wait_timeout:
+                self.state = "failed"
+                self.get_logger().error(f"no rig/controller within {self.wait_timeout:g} s")
+            return
+        if self.state != "running":
+            return
+        t = now - self.t0
+        if t > self.duration:
+            self.state = "done"
+            return
+        msg = PointStamped()
+        msg.header.frame_id = topics.FRAME_ID
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in self.path(t))
+        self.pub.publish(msg)
+
+    @property
+    def finished(self) -> bool:
+        return self.state in ("done", "failed")
+
+    def finish(self) -> int:
+        self.writer.close()
+        summary = {"recording": str(self.writer.path), "messages": self.writer.message_count,
+                   "state": self.state if self.state in ("done", "failed") else "interrupted"}
+        if self.samples:
+            a = np.array(self.samples)
+            series = Path(self.writer.bag_dir) / "series.npz"
+            np.savez(series, t=a[:, 0], target=a[:, 1:4], tip=a[:, 4:7])
+            summary["series"] = str(series)
+            summary["metrics"] = metrics(a[:, 0], a[:, 1:4], a[:, 4:7], self.kind, self.duration,
+                                         self.path.switch_times)
+        print("summary: " + json.dumps(summary), flush=True)
+        return 0 if summary["state"] == "done" else (130 if summary["state"] == "interrupted" else 3)
+
+
+def main(args=None) -> int:
+    return run_node(SteerDriver, args, startup_errors=(SoftcathError, ValueError))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""Steering over DDS, every node its own process on a private domain (few, short runs):
+a step reaches the target within the settling target (softcath steer-sim, closed form rung);
+killing the tracker's publisher (sim_bench_node) makes steer_node fall back to open loop and
+say so on /diagnostics; the watchdog vents when the targets stop."""
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import PointStamped  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from domains import private_domain  # noqa: E402
+from softcath_ros import topics  # noqa: E402
+from softcath_ros.core.kinematics import tip_pose_single  # noqa: E402
+from softcath_ros.graph import NodeGraph, graph_env, stop_process  # noqa: E402
+
+SOFTCATH = Path(sys.executable).parent / "softcath"
+
+
+def test_steer_sim_step_settles_over_dds(tmp_path):
+    domain = private_domain()
+    env = {**graph_env(domain), "ROS_DOMAIN_ID": str(domain)}
+    res = subprocess.run([str(SOFTCATH), "steer-sim", "--trajectory", "step", "--duration", "3", "--json",
+                          "--output-dir", str(tmp_path)], env=env, capture_output=True, text=True, timeout=110)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = json.loads(res.stdout)
+    assert out["settling_time_s"] <= 1.0
+    assert out["steady_state_error_mm"] < 0.3
+    assert out["comparison"]["mode"] == "open_loop"
+    assert out["comparison"]["steady_state_error_m"] * 1e3 > out["steady_state_error_mm"]
+    assert Path(out["recording"]).exists() and Path(out["plot"]).exists()
+
+
+class Operator:
+    def __init__(self, domain):
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("steer_test_operator", context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.pressures = []
+        self.loop = None
+        self.node.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
+                                      lambda m: self.pressures.append(list(m.data)), 50)
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, 50)
+        self.pub = self.node.create_publisher(PointStamped, topics.TIP_TARGET, 10)
+
+    def _on_diag(self, msg):
+        for s in msg.status:
+            if s.name == f"{topics.STEER_NODE}: loop":
+                self.loop = {"level": s.level, "message": s.message, **{kv.key: kv.value for kv in s.values}}
+
+    def send(self, tip):
+        msg = PointStamped()
+        msg.header.frame_id = topics.FRAME_ID
+        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in tip)
+        self.pub.publish(msg)
+
+    def spin(self, seconds, until=None, tip=None):
+        end = time.monotonic() + seconds
+        next_send = 0.0
+        while time.monotonic() < end:
+            if tip is not None and time.monotonic() >= next_send:
+                self.send(tip)
+                next_send = time.monotonic() + 0.02
+            self.executor.spin_once(timeout_sec=0.005)
+            if until is not None and until():
+                return True
+        return until is None
+
+    def close(self):
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+def test_tracker_loss_falls_back_and_watchdog_vents():
+    domain = private_domain()
+    k = 0.1 / 0.04
+    tip = tip_pose_single(0.0, -k, 0.04)[0]
+    with NodeGraph(domain=domain) as graph:
+        rig = graph.start("sim_bench_node", {"design": "three_channel_5mm", "material_scale": 1.2,
+                                             "actuator_time_constant": 0.016})
+        steer = graph.start("steer_node", {"design": "three_channel_5mm", "command_timeout": 0.5,
+                                           "diagnostics_period": 0.5})
+        graph.wait_ready(rig, steer, timeout_s=60.0)
+        op = Operator(domain)
+        try:
+            assert op.spin(15.0, lambda: op.loop is not None and op.loop["state"] == "closed_loop", tip=tip), op.loop
+            stop_process(rig, 10.0)                                   # the tracker's publisher dies
+            t_kill = time.monotonic()
+            assert op.spin(5.0, lambda: op.loop["state"] == "open_loop", tip=tip), op.loop
+            assert time.monotonic() - t_kill < 1.5
+            assert op.loop["level"] == DiagnosticStatus.WARN and "no valid measurement" in op.loop["message"]
+            assert int(op.loop["measurements_fallbacks"]) == 1
+            assert max(op.pressures[-1]) > 0                          # still steering, open loop
+            # the targets stop: vent, ramped to zero
+            assert op.spin(5.0, lambda: op.loop["state"] == "vented"), op.loop
+            assert op.spin(3.0, lambda: op.pressures and max(op.pressures[-1]) == 0.0)
+        finally:
+            op.close()

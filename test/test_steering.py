@@ -1,0 +1,190 @@
+"""The steering controller's core without ROS (core/steering.py, bench/steering_sim.py, the tracker):
+convergence on a plant with a known mismatch, saturation along the target's direction,
+anti-windup after a long saturation, fallback on stale or jumping measurements, the watchdog.
+Closed form rung for model and truth (fast; its mismatch is a pure gain (1 - 0.25) / 1.2)."""
+import math
+
+import numpy as np
+import pytest
+
+from softcath_ros.bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
+from softcath_ros.bench.steering_sim import SteeringScenario, build, run_metrics, simulate, steering_rig_params
+from softcath_ros.core.allocation import Allocator
+from softcath_ros.core.design import load_design
+from softcath_ros.core.kinematics import tip_pose_single
+from softcath_ros.core.models import make_model
+from softcath_ros.core.steering import (SteeringController, SteeringError, SteeringParams, bend_of_tip,
+                                        steering_design)
+
+DESIGN = steering_design(load_design("three_channel_5mm"))
+
+
+@pytest.fixture(scope="module")
+def built():
+    return build(SteeringScenario())
+
+
+def _controller(**params):
+    return SteeringController(Allocator(make_model("closed_form", DESIGN)), SteeringParams(**params))
+
+
+def _tip_of_bend(theta, phi, length=DESIGN.length):
+    k = theta / length
+    return np.array(tip_pose_single(k * math.cos(phi), k * math.sin(phi), length)[0])
+
+
+def test_bend_of_tip_inverts_the_arc():
+    tip = _tip_of_bend(0.4, 1.1)
+    b = bend_of_tip(tip)
+    assert math.hypot(*b) == pytest.approx(0.4, rel=1e-12)
+    assert math.atan2(b[1], b[0]) == pytest.approx(1.1, rel=1e-12)
+    assert np.all(bend_of_tip([0.0, 0.0, 0.04]) == 0.0)
+
+
+@pytest.mark.parametrize("mode", ["integral", "adaptive"])
+def test_closed_loop_converges_on_a_plant_with_known_mismatch(built, mode):
+    """Truth: 25% pressure shift and material scale 1.2 (gain 0.625), 50 ms latency, 20% dropped."""
+    open_loop = run_metrics(simulate(SteeringScenario(controller=SteeringParams(mode="open_loop")), "step", 4.5,
+                                     built), 4.5)
+    run = simulate(SteeringScenario(controller=SteeringParams(mode=mode)), "step", 4.5, built)
+    closed = run_metrics(run, 4.5)
+    assert open_loop["steady_state_error_m"] > 4e-4          # the model's error, uncorrected
+    assert closed["steady_state_error_m"] < 0.1e-3           # feedback removes it
+    assert closed["settling_time_s"] <= 1.0
+    assert run.closed[-1]
+    if mode == "adaptive":   # on a linear rung shift and scale are one gain: (1 - 0.25) / 1.2
+        assert run.gain[-1] == pytest.approx(0.75 / 1.2, rel=0.03)
+
+
+def test_saturation_along_the_target_direction_and_within_max_pressure():
+    ctrl = _controller(mode="integral")
+    phi = math.radians(70.0)                  # between two channels' directions: a pair drives it
+    for i in range(400):                       # 2 s at 200 Hz, no measurement: open loop
+        ctrl.set_target(_tip_of_bend(1.2, phi), i * 0.005)   # far beyond reach at 0.3 bar
+        out = ctrl.step(i * 0.005)
+    assert out.saturated
+    assert np.all(out.pressures <= DESIGN.max_pressure) and np.all(out.pressures >= 0.0)
+    assert max(out.pressures) == pytest.approx(DESIGN.max_pressure)
+    b = ctrl.model_bend(out.pressures)
+    assert math.degrees(abs(math.atan2(b[1], b[0]) - phi)) < 0.5
+
+
+def test_rate_limit_on_every_step():
+    ctrl = _controller(mode="open_loop", max_pressure_rate=1.0e5)
+    prev = np.zeros(3)
+    for i in range(100):
+        ctrl.set_target(_tip_of_bend(0.2, -math.pi / 2), i * 0.005)
+        out = ctrl.step(i * 0.005)
+        assert np.max(np.abs(out.pressures - prev)) <= 1.0e5 * 0.005 + 1e-9
+        prev = out.pressures
+
+
+def _loop(ctrl, rig, tracker, t0, t1, target, dt=0.005):
+    """Run the controller against the rig from t0 to t1 (s); returns the last step."""
+    out = None
+    for i in range(int(round((t1 - t0) / dt))):
+        t = t0 + i * dt
+        tip, _ = rig.true_tip()
+        if i % 2 == 0:
+            tracker.capture(t, tip)
+        ctrl.set_target(target, t)
+        for stamp, pos in tracker.due(t):
+            ctrl.on_measurement(pos, stamp, t)
+        out = ctrl.step(t)
+        rig.advance(dt, out.pressures)
+    return out
+
+
+def test_anti_windup_after_a_long_saturation():
+    """5 s against an unreachable target, then a reachable one: the integral stayed bounded and
+    the tip settles as fast as from rest."""
+    params = steering_rig_params()
+    truth = truth_model("closed_form", DESIGN, params)
+    ctrl = _controller(mode="integral")
+    rig = SimulatedRig(truth, params)
+    tracker = TipTracker(TrackerParams(noise=0.0, drop_fraction=0.0))
+    far = _tip_of_bend(1.0, -math.pi / 2)
+    out = _loop(ctrl, rig, tracker, 0.0, 5.0, far)
+    assert out.saturated and out.state == "closed_loop"
+    assert math.hypot(*out.integral) < ctrl.params.max_integral      # back-calculated, not wound up
+    reach_true = Allocator(truth, max_pressure=0.75 * DESIGN.max_pressure).allocate_bend(-math.pi / 2, 9.0)
+    near = _tip_of_bend(0.7 * reach_true.extras["max_angle_rad"], -math.pi / 2)
+    _loop(ctrl, rig, tracker, 5.0, 6.0, near)
+    assert np.linalg.norm(rig.true_tip()[0] - near) < 0.5e-3        # settled within 1 s
+
+
+def test_fallback_on_stale_measurements_and_resume():
+    ctrl = _controller(mode="adaptive", measurement_timeout=0.2, resume_samples=3)
+    target = _tip_of_bend(0.1, -math.pi / 2)
+    ctrl.set_target(target, 0.0)
+    t = 0.0
+    for i in range(20):                            # 100 Hz samples, a little short of the target
+        t = i * 0.01
+        assert ctrl.on_measurement(target * [0.9, 0.9, 1.0], t - 0.05, t) == "accepted"
+        out = ctrl.step(t)
+    assert out.state == "closed_loop" and math.hypot(*out.integral) > 0
+    assert ctrl.on_measurement(target, t - 0.5, t) == "stale"          # older than the timeout
+    assert ctrl.on_measurement(target + [0.05, 0, 0], t + 0.01, t + 0.01) == "jump"   # 50 mm in 60 ms
+    for i in range(1, 40):                          # the tracker stops; targets keep coming
+        ctrl.set_target(target, t + i * 0.01)
+        out = ctrl.step(t + i * 0.01)
+    assert out.state == "open_loop" and "no valid measurement" in out.reason
+    assert np.all(out.integral == 0) and ctrl.counters.fallbacks == 1
+    assert out.gain != 1.0                          # the adapted gain is kept as a calibration
+    t += 0.4
+    states = []
+    for i in range(5):                              # the tracker comes back
+        ctrl.set_target(target, t + i * 0.01)
+        ctrl.on_measurement(target, t + i * 0.01 - 0.01, t + i * 0.01)
+        states.append(ctrl.step(t + i * 0.01).state)
+    assert states[0] == "open_loop" and states[-1] == "closed_loop"
+
+
+def test_watchdog_vents_when_targets_stop():
+    ctrl = _controller(mode="integral", command_timeout=0.3)
+    ctrl.set_target(_tip_of_bend(0.15, -math.pi / 2), 0.0)
+    for i in range(40):
+        out = ctrl.step(i * 0.005)
+    assert max(out.pressures) > 0
+    for i in range(40, 400):
+        out = ctrl.step(i * 0.005)
+    assert out.state == "vented" and np.all(out.pressures == 0.0)
+
+
+def test_bad_inputs_are_one_line_errors():
+    with pytest.raises(SteeringError):
+        SteeringParams(mode="pid")
+    with pytest.raises(SteeringError):
+        SteeringParams(forgetting=1.5)
+    ctrl = _controller()
+    with pytest.raises(SteeringError):
+        ctrl.set_target([float("nan"), 0.0, 0.04], 0.0)
+    assert ctrl.on_measurement([float("inf"), 0, 0], 0.0, 0.0) == "invalid"
+
+
+def test_tracker_latency_and_drops():
+    tracker = TipTracker(TrackerParams(latency=0.05, drop_fraction=0.2, noise=1e-4, seed=3))
+    got = []
+    for i in range(2000):
+        t = i * 0.01
+        tracker.capture(t, [0.0, 0.0, 0.04])
+        got += [(t, s, p) for s, p in tracker.due(t)]
+    assert abs(tracker.dropped / tracker.taken - 0.2) < 0.03
+    assert all(t - s == pytest.approx(0.05, abs=1e-9) for t, s, _ in got)
+    noise = np.std([p[2] for *_, p in got])
+    assert noise == pytest.approx(1e-4, rel=0.1)
+
+
+def test_rig_actuator_lag_and_material_scale():
+    design = load_design("three_channel_5mm")
+    stiff = SimulatedRig(truth_model("closed_form", design, RigParams(material_scale=1.2, pressure_shift=0.0)),
+                         RigParams(pressure_shift=0.0, actuator_time_constant=0.016))
+    soft = SimulatedRig(make_model("closed_form", design), RigParams(pressure_shift=0.0))
+    for rig in (stiff, soft):
+        rig.advance(10.0, [3e4, 0, 0])
+    ratio = np.hypot(*stiff.true_curvature()) / np.hypot(*soft.true_curvature())
+    assert ratio == pytest.approx(1 / 1.2, rel=0.02)      # closed form: gain ~ 1/modulus
+    rig = SimulatedRig(make_model("closed_form", design), RigParams(regulator_time_constant=1e-4,
+                                                                     actuator_time_constant=0.016))
+    rig.advance(0.016, [3e4, 0, 0])
+    assert rig.actuated_pressures[0] == pytest.approx(3e4 * (1 - math.exp(-1)), rel=0.01)
