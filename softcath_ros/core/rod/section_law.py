@@ -15,7 +15,7 @@ from ..design import Design
 from ..section_fe.moment import MomentTable
 from .law import TabulatedLaw
 
-LAW_VERSION = "section-moment-1"   # bump when the table's computation changes
+LAW_VERSION = "section-moment-2"   # bump when the table's computation changes (2: lumen contact)
 
 
 @dataclass(frozen=True)
