@@ -202,3 +202,118 @@ class WallContact:
         np.add.at(g[0], loc, gl)
         np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
         return Contribution(float(np.sum(k * w * b)), g, H)
+
+
+def _point_in_polygon(c, P) -> bool:
+    """True if the point c lies inside the closed polygon P (m, 2) (even-odd rule)."""
+    a, b = P, np.roll(P, -1, axis=0)
+    crosses = (a[:, 1] > c[1]) != (b[:, 1] > c[1])
+    x_at = a[:, 0] + (c[1] - a[:, 1]) * (b[:, 0] - a[:, 0]) / np.where(b[:, 1] == a[:, 1], 1.0, b[:, 1] - a[:, 1])
+    return bool(np.count_nonzero(crosses & (x_at > c[0])) % 2)
+
+
+class DeviceContact:
+    """Frictionless contact of a hole's wall with a rigid round device lying free in the hole.
+
+    The device's centre c is an unknown of its own (an extra node of the problem, not in any
+    element). Every wall segment j is kept from the device by
+
+        kappa sum_j L_j w(t_j) b((sqrt(s_j) - r)^2) + 1/2 k_c |c - c_wall|^2,
+
+    s_j the squared distance from c to the segment's line, t_j its foot, L_j the segment's
+    reference length, r the device radius, b and w the barrier and window of the wall's
+    self-contact. The weak spring k_c (CENTRING, units c1) to the wall's mean position only
+    removes the free device's indeterminate position while nothing touches it. The device's
+    centre leaving the wall polygon is inadmissible."""
+
+    CENTRING = 1e-4
+
+    def __init__(self, X, edges: np.ndarray, radius: float, distance: float, device_node: int, n_u: int):
+        self.ids = edges[:, :2].ravel()
+        m = len(self.ids)
+        self.m, self.n_u, self._X = m, n_u, X
+        self.r = float(radius)
+        self.d_hat = float(distance)
+        self.s_hat = self.d_hat ** 2
+        self.kappa = KAPPA_SCALE / self.d_hat ** 3
+        P = X[self.ids]
+        self.length = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+        self.mean_weights = 0.5 * (self.length + np.roll(self.length, 1))
+        self.mean_weights /= self.mean_weights.sum()
+        self.node = device_node
+        d = np.empty(2 * m + 2, dtype=np.int64)
+        d[0:2 * m:2], d[1:2 * m:2] = 2 * self.ids, 2 * self.ids + 1
+        d[2 * m:] = 2 * device_node, 2 * device_node + 1
+        self.dofs = d[None]
+
+    def _points(self, x):
+        u = x[:self.n_u].reshape(-1, 2)
+        return self._X[self.ids] + u[self.ids], self._X[self.node] + u[self.node]
+
+    def gaps(self, x) -> np.ndarray:
+        """Distance (/ R) from the device's surface to each wall segment (negative: overlap)."""
+        P, c = self._points(x)
+        return point_segment_distance(np.repeat(c[None], self.m, 0), P, np.roll(P, -1, axis=0)) - self.r
+
+    def _pairs(self, x):
+        P, c = self._points(x)
+        if not _point_in_polygon(c, P):
+            return None
+        s, t = line_distance2(np.repeat(c[None], self.m, 0), P, np.roll(P, -1, axis=0), derivatives=False)
+        near = (t > -WINDOW) & (t < 1 + WINDOW)
+        g = np.sqrt(s) - self.r
+        if np.any(g[near] <= 0):
+            return None
+        return P, c, np.flatnonzero(near & (g < self.d_hat))
+
+    def _spring(self, P, c):
+        off = c - self.mean_weights @ P
+        return 0.5 * self.CENTRING * float(off @ off), off
+
+    def energy(self, x, pressures) -> float:
+        got = self._pairs(x)
+        if got is None:
+            return np.inf
+        P, c, a = got
+        s, t = line_distance2(np.repeat(c[None], len(a), 0), P[a], P[(a + 1) % self.m], derivatives=False)
+        b = barrier((np.sqrt(s) - self.r) ** 2, self.s_hat)[0]
+        return float(self.kappa * np.sum(self.length[a] * window(t)[0] * b)) + self._spring(P, c)[0]
+
+    def assemble(self, x, pressures) -> Contribution:
+        got = self._pairs(x)
+        if got is None:
+            return INADMISSIBLE
+        P, c, a = got
+        m = self.m
+        nloc = 2 * m + 2
+        g = np.zeros((1, nloc))
+        H = np.zeros((1, nloc, nloc))
+        E, off = self._spring(P, c)
+        # the spring on c - sum_i mu_i x_i: gradient and (constant) Hessian
+        coef = np.concatenate([np.repeat(-self.mean_weights, 2), [1.0, 1.0]])   # d(off_comp)/d(local)
+        for comp in (0, 1):
+            sel = np.arange(comp, nloc, 2)
+            g[0, sel] += self.CENTRING * off[comp] * coef[sel]
+            H[0][np.ix_(sel, sel)] += self.CENTRING * np.outer(coef[sel], coef[sel])
+        if len(a):
+            s, t, ds, dt, d2s, d2t = line_distance2(np.repeat(c[None], len(a), 0), P[a], P[(a + 1) % m])
+            rs = np.sqrt(s)
+            q = (rs - self.r) ** 2
+            q1, q2 = 1 - self.r / rs, self.r / (2 * rs**3)       # dq/ds, d2q/ds2
+            b, b1, b2 = barrier(q, self.s_hat)
+            B1, B2 = b1 * q1, b2 * q1 * q1 + b1 * q2
+            w, w1, w2 = window(t)
+            k = self.kappa * self.length[a]
+            n3 = lambda v: (k * v)[:, None, None]                 # noqa: E731
+            gl = (k * w * B1)[:, None] * ds + (k * w1 * b)[:, None] * dt
+            Hl = (n3(w * B2) * ds[:, :, None] * ds[:, None, :] + n3(w * B1) * d2s
+                  + n3(w1 * B1) * (ds[:, :, None] * dt[:, None, :] + dt[:, :, None] * ds[:, None, :])
+                  + n3(w2 * b) * dt[:, :, None] * dt[:, None, :] + n3(w1 * b) * d2t)
+            loc = np.empty((len(a), 6), dtype=np.int64)
+            loc[:, 0:2] = [2 * m, 2 * m + 1]                      # z = (c, segment start, segment end)
+            loc[:, 2], loc[:, 3] = 2 * a, 2 * a + 1
+            loc[:, 4], loc[:, 5] = 2 * ((a + 1) % m), 2 * ((a + 1) % m) + 1
+            np.add.at(g[0], loc, gl)
+            np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
+            E += float(np.sum(k * w * b))
+        return Contribution(E, g, H)
