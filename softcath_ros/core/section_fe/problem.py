@@ -35,7 +35,7 @@ from .mesh import SectionMesh
 from .quadrature import NODAL_POINTS, NODAL_WEIGHTS, TRIANGLE_POINTS, TRIANGLE_WEIGHTS
 from .shape import p2_triangle
 from .terms import Contribution, Term
-from .terms.contact import DeviceContact, WallContact
+from .terms.contact import DeviceContact, WallContact, segments_cross
 from .terms.device import DeviceBending
 from .terms.fibre import Fibre
 from .terms.hoop import HoopRings
@@ -272,6 +272,24 @@ class SectionProblem:
 
         K = self.assemble(x, pressures)[2]
         return float(spla.eigsh(K.tocsc(), k=1, sigma=-1e-9, which="LM", return_eigenvectors=False)[0])
+
+    def crossed_walls(self, x) -> list[int]:
+        """Holes without contact or fill whose wall polygon (corner and midside nodes) crosses
+        itself at ``x``: walls that have passed through each other, which ``hole_gaps`` (opposite
+        walls only) does not see when a folded shoulder crosses locally."""
+        u = x[:self.n_u].reshape(-1, 2)
+        resisted = {i for i, _ in self.contact} | set(np.flatnonzero(self.filled_holes).tolist())
+        out = []
+        for i, edges in enumerate(self.mesh.hole_edges):
+            if i in resisted:
+                continue
+            ids = edges[:, :2].ravel()
+            m = len(ids)
+            a, b = np.triu_indices(m, k=2)
+            keep = (b - a) <= m - 2
+            if np.any(segments_cross(self.X[ids] + u[ids], a[keep], b[keep])):
+                out.append(i)
+        return out
 
     def contact_min_gap(self, x) -> float:
         """The smallest wall-to-wall distance (m) of the holes with contact (inf without contact;

@@ -105,7 +105,7 @@ def point_segment_distance(p, a, b):
     return np.linalg.norm(v - t[:, None] * e, axis=1)
 
 
-def _segments_cross(P, i, j):
+def segments_cross(P, i, j):
     """True where polygon segments i and j (vertex k to k + 1) properly intersect."""
     m = len(P)
     a, b = P[i], P[(i + 1) % m]
@@ -154,14 +154,14 @@ class WallContact:
         """The smallest distance (/ R) from a wall vertex to a wall segment not incident to it;
         negative if the wall polygon crosses itself."""
         P = self._points(x)
-        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+        if np.any(segments_cross(P, self.cross_i, self.cross_j)):
             return -1.0
         return float(point_segment_distance(*self._pair_points(P)).min())
 
     def _active(self, x):
         """(wall points, the pairs within the barrier's range) or None if inadmissible."""
         P = self._points(x)
-        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+        if np.any(segments_cross(P, self.cross_i, self.cross_j)):
             return None
         s, t = line_distance2(*self._pair_points(P), derivatives=False)
         near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
