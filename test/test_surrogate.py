@@ -27,8 +27,11 @@ def test_one_channel_within_half_percent_of_section(one_channel):
     m = one_channel
     assert m.error_bound["one_channel"]["rc_rel_max"] < RC_TOL
     lo, hi = m.pressure_range
-    assert 0.2e5 < hi < m.design.max_pressure   # the section rung stops before 0.5 bar: the table ends there
-    assert "did not converge" in m.meta["source_failure"]
+    # the table ends where the section rung stops, at most at the design limit (with lumen contact
+    # the section reaches 0.5 bar)
+    assert 0.2e5 < hi <= m.design.max_pressure
+    if hi < m.design.max_pressure:
+        assert "did not converge" in m.meta["source_failure"]
     # independent check at pressures off the grid and off the stored held-out points
     p = np.array([[0.37 * hi], [0.61 * hi], [0.93 * hi]])
     src = make_model("section", m.design)
