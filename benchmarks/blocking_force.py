@@ -1,6 +1,6 @@
 """Blocking force of the 17 mm sample against pressure: the rod rung with the section rung's
-moment-curvature law (empty lumen, and with the soft lumen fill that stands in for the lumen's
-self-contact), the former closed-form estimate, and the published experiment.
+moment-curvature law (with the lumen wall's self-contact, the default; optionally with the soft
+lumen fill, the former contact proxy), the former closed-form estimate, and the published experiment.
 
 - rod from section: ``make_model("rod", design[, lumen_fill=f])`` (law tabulated from the section
   rung D/20 and cached), the bench's scale as a frictionless plane through the tip at rest, no
@@ -12,10 +12,11 @@ self-contact), the former closed-form estimate, and the published experiment.
 - closed form, F = 3 EI kappa / (2 l) with the closed form's free curvature (the estimate
   bench/blocking.py used before the rod rung).
 - published: about 40 mN at 0.35 bar (experiment); the published FE matches the experiment when
-  its pressure is shifted by ~25%, so the model is also read at 0.35 / 1.25 = 0.28 bar.
+  its pressure is shifted by ~25%, so the model is also read at 0.35 / 1.25 = 0.28 bar and at
+  0.75 x 0.35 = 0.2625 bar.
 Timing: median over repeats of one rod evaluation (contact, and free), with the load average.
 
-    .venv/bin/python benchmarks/blocking_force.py [--repeats 50] [--fills 0.01 0.02]
+    .venv/bin/python benchmarks/blocking_force.py [--repeats 50] [--fills 0.02]
 
 Writes benchmarks/results/blocking_force.{json,csv,png}.
 """
@@ -38,7 +39,7 @@ from softcath_ros.core.units import PA_PER_BAR
 LENGTH = 0.017
 PUBLISHED = (0.35, 40e-3)          # bar, N (experiment)
 SHIFT = 1.25
-FILLS = (0.01, 0.02)               # lumen fill fractions compared with the empty lumen
+FILLS = ()                         # lumen fill fractions compared with lumen contact (the fill is a proxy)
 
 
 def closed_form_estimate(design, pressures):
@@ -64,7 +65,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=50)
     ap.add_argument("--fills", type=float, nargs="*", default=list(FILLS),
-                    help="lumen fill fractions to compare with the empty lumen")
+                    help="lumen fill fractions to compare with lumen contact")
     args = ap.parse_args(argv)
     design = load_design("implemented_5mm").with_length(LENGTH)
     pressures = np.round(np.arange(0.0, 0.45 + 1e-9, 0.0125) * PA_PER_BAR, 6)
@@ -100,8 +101,10 @@ def main(argv=None):
     per_variant = {name: {"law": r.law.source, "law_pressure_range_pa": list(r.law.pressure_range),
                           "law_build_or_load_s": b, "first_refused_bar": None if np.isfinite(f).all() else
                           float(pressures[np.argmin(np.isfinite(f))] / PA_PER_BAR),
-                          "rod_force_at_0.2_bar_mN": at(f, 0.2), "rod_force_at_0.28_bar_mN": at(f, 0.28),
+                          "rod_force_at_0.2_bar_mN": at(f, 0.2), "rod_force_at_0.2625_bar_mN": at(f, 0.2625),
+                          "rod_force_at_0.28_bar_mN": at(f, 0.28),
                           "rod_force_at_0.35_bar_mN": at(f, 0.35), "rod_force_at_0.45_bar_mN": at(f, 0.45),
+                          "limit_moment_over_l_at_0.2625_bar_mN": at(c, 0.2625),
                           "limit_moment_over_l_at_0.28_bar_mN": at(c, 0.28),
                           "limit_moment_over_l_at_0.35_bar_mN": at(c, 0.35),
                           "table_messages": r.law.table.messages}
@@ -112,7 +115,10 @@ def main(argv=None):
             "law_build_or_load_s": variants["section"][1], "rod_segments": rod.n_segments,
             "blocking_valid_up_to_bar": float(pressures[np.isfinite(f_empty)].max() / PA_PER_BAR),
             "published_experiment": {"pressure_bar": PUBLISHED[0], "force_mN": PUBLISHED[1] * 1e3},
+            "rod_force_at_0.2625_bar_mN": at(f_empty, 0.2625),
             "rod_force_at_0.28_bar_mN": at(f_empty, 0.28), "rod_force_at_0.35_bar_mN": at(f_empty, 0.35),
+            "limit_moment_over_l_at_0.2625_bar_mN": at(variants["section"][3], 0.2625),
+            "limit_moment_over_l_at_0.35_bar_mN": at(variants["section"][3], 0.35),
             "closed_form_estimate_at_0.35_bar_mN": float(f_cf[np.argmin(abs(pressures - 35000))] * 1e3),
             "variants": per_variant,
             "time_rod_contact_s": t_contact, "time_rod_free_s": t_free, "time_rod_evaluate_s": t_eval,
@@ -128,7 +134,7 @@ def main(argv=None):
         print(f"  {p / PA_PER_BAR:6.4f}  " + "  ".join(f"{v[2][i] * 1e3:6.2f} ({v[3][i] * 1e3:5.1f})"
                                                       for v in variants.values()) + f"  {f_cf[i] * 1e3:8.2f}")
     print("published ~40 mN at 0.35 bar (the published FE matches it at ~0.28 bar)")
-    print(f"rod evaluation (0.2 bar, empty lumen law): contact {t_contact * 1e3:.2f} ms, free {t_free * 1e3:.2f} ms, "
+    print(f"rod evaluation (0.2 bar, lumen contact law): contact {t_contact * 1e3:.2f} ms, free {t_free * 1e3:.2f} ms, "
           f"evaluate() {t_eval * 1e3:.2f} ms (median of {args.repeats}; load average {load_before[0]:.2f})")
 
 
@@ -140,15 +146,15 @@ def _plot(pressures, forces, ceilings, f_cf):
     bar = pressures / PA_PER_BAR
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for name, f in forces.items():
-        label = ("rod, law from section D/20, empty lumen"
+        label = ("rod, law from section D/20, lumen contact"
                  if name == "section" else f"rod, law from section D/20, lumen {name.replace('_', ' ')}")
         line, = ax.plot(bar, f * 1e3, "o-", ms=3 if name == "section" else 2, label=label)
-        if name != "section":
-            ax.plot(bar, ceilings[name] * 1e3, ":", color=line.get_color(), lw=1,
-                    label=f"  |M_lim| / l of that law (base at its limit moment; rod refuses beyond)")
+        ax.plot(bar, ceilings[name] * 1e3, ":", color=line.get_color(), lw=1,
+                label="  |M_lim| / l of that law (base at its limit moment; rod refuses beyond)")
     ax.plot(bar, f_cf * 1e3, "--", label="closed form, 3 EI kappa / (2 l) (former estimate)")
     ax.plot(*[PUBLISHED[0]], PUBLISHED[1] * 1e3, "k*", ms=12, label="published experiment (~40 mN)")
     ax.axvline(PUBLISHED[0] / SHIFT, color="grey", lw=0.8, ls=":", label="0.35 bar / 1.25 (FE pressure shift)")
+    ax.axvline(0.75 * PUBLISHED[0], color="grey", lw=0.8, ls="--", label="0.75 x 0.35 bar = 0.2625 bar")
     ax.set_xlabel("pressure [bar]")
     ax.set_ylabel("blocking force [mN]")
     ax.set_title("Blocking force, implemented design, 17 mm")

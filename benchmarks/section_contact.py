@@ -32,10 +32,11 @@ def radius_l_over_theta(k, lam) -> float:
 
 
 def sweep(design, ps, **options):
+    """(model, state, wall s, CPU s of this process) of one sweep with a fresh model."""
     model = make_model("section", design, **options)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     state = model.evaluate(ps)
-    return model, state, time.perf_counter() - t0
+    return model, state, time.perf_counter() - t0, time.process_time() - c0
 
 
 def main() -> None:
@@ -47,10 +48,11 @@ def main() -> None:
     rows, curves = [], {}
     for length in (0.040, 0.020):
         design = dataclasses.replace(base, length=length)
-        times = []
+        times, cpus = [], []
         for _ in range(args.repeats):
-            model, state, t = sweep(design, ps)
+            model, state, t, c = sweep(design, ps)
             times.append(t)
+            cpus.append(c)
         ok = state.converged
         gaps = [model.problem.contact_min_gap(model._states[(float(p),)]) for p in ps[ok, 0]]
         rc = [radius_l_over_theta(k, s) if c and p > 0 else None
@@ -58,7 +60,7 @@ def main() -> None:
         rows.append({"case": f"0-0.5 bar, 21 commands, {length * 1e3:.0f} mm, D/20", "mesh_division": 20,
                      "mesh_nodes": model.mesh.n_nodes, "pressure_bar": 0.5, "converged": int(ok.sum()),
                      "commands": len(ps), "median_sweep_s": statistics.median(times), "min_sweep_s": min(times),
-                     "max_sweep_s": max(times), "repeats": args.repeats,
+                     "max_sweep_s": max(times), "median_sweep_cpu_s": statistics.median(cpus), "repeats": args.repeats,
                      "R_C_l_over_theta_mm_at_0.35": rc[14] and rc[14] * 1e3,
                      "R_C_l_over_theta_mm_at_0.5": rc[20] and rc[20] * 1e3,
                      "min_wall_gap_um": 1e6 * min(gaps), "newton_iterations": int(state.diagnostics.newton_iterations.sum()),
@@ -67,12 +69,12 @@ def main() -> None:
                                             "radius_of_curvature_mm": [r and r * 1e3 for r in rc]}
         print(rows[-1])
     for n in MESH_DIVISIONS:
-        model, state, t = sweep(base, np.array([[0.35 * PA_PER_BAR]]), mesh_size=base.outer_diameter / n)
+        model, state, t, c = sweep(base, np.array([[0.35 * PA_PER_BAR]]), mesh_size=base.outer_diameter / n)
         ok = bool(state.converged[0])
         k = state.curvature[0]
         rows.append({"case": f"0.35 bar, D/{n}", "mesh_division": n, "mesh_nodes": model.mesh.n_nodes,
                      "pressure_bar": 0.35, "converged": int(ok), "commands": 1, "median_sweep_s": t,
-                     "min_sweep_s": t, "max_sweep_s": t, "repeats": 1,
+                     "min_sweep_s": t, "max_sweep_s": t, "median_sweep_cpu_s": c, "repeats": 1,
                      "R_C_l_over_theta_mm_at_0.35": radius_l_over_theta(k, state.axial_stretch[0]) * 1e3 if ok else None,
                      "R_C_l_over_theta_mm_at_0.5": None,
                      "min_wall_gap_um": 1e6 * model.problem.contact_min_gap(model._states[(0.35 * PA_PER_BAR,)]) if ok else None,

@@ -172,3 +172,40 @@ def test_without_contact_the_empty_lumen_stops_where_its_walls_touch(implemented
     d = implemented_design
     state = make_model("section", d, mesh_size=d.outer_diameter / 12, contact_distance=None).evaluate([0.35 * BAR])
     assert not state.converged and "lumen" in state.message
+
+
+def test_a_device_in_the_lumen_is_never_entered_by_the_wall(implemented_design, converged_states):
+    import dataclasses
+
+    from softcath_ros.core.design import Device
+
+    d = dataclasses.replace(implemented_design, device=Device(diameter=1.0e-3, bending_stiffness=2e-6))
+    model = make_model("section", d, mesh_size=d.outer_diameter / 12)
+    problem, term = model.problem, model.problem.device
+    assert term is not None and problem.device_node == problem.n_u // 2 - 1
+    # derivatives against finite differences with the device 5 um from the wall
+    x = problem.initial_state()
+    x[2 * problem.device_node + 1] = -(d.lumen.radius - 0.5e-3 - 5e-6) / problem.R
+    c = term.assemble(x, None)
+    assert c.energy > 0 and c.energy == pytest.approx(term.energy(x, None), rel=1e-12)
+    eps = 1e-7
+    for i in list(term.dofs[0][-2:]) + [2 * term.ids[term.m * 3 // 4] + 1]:
+        xp, xm = x.copy(), x.copy()
+        xp[i] += eps
+        xm[i] -= eps
+        k = int(np.flatnonzero(term.dofs[0] == i)[0])
+        assert c.gradient[0][k] == pytest.approx((term.energy(xp, None) - term.energy(xm, None)) / (2 * eps),
+                                                 rel=1e-5, abs=1e-9)
+        h_fd = (term.assemble(xp, None).gradient[0] - term.assemble(xm, None).gradient[0]) / (2 * eps)
+        np.testing.assert_allclose(c.hessian[0][:, k], h_fd, rtol=1e-4, atol=1e-5 * np.abs(h_fd).max())
+    # 0 -> 0.5 bar: the wall closes onto the device and never enters it
+    ps = np.linspace(0.0, 0.5 * BAR, 6)[:, None]
+    state = model.evaluate(ps)
+    assert state.converged.all(), state.message
+    gaps = [pr.device_min_gap(xs) for pr, xs in converged_states if pr is problem]
+    assert min(gaps) > 0
+    last = model._states[(0.5 * BAR,)]
+    assert problem.device_min_gap(last) < term.d_hat * problem.R       # in contact there
+    # measured (D/12): R_C 4.88 mm at 0.35 bar with the device against 3.53 mm without
+    bare = make_model("section", implemented_design, mesh_size=d.outer_diameter / 12).evaluate([0.5 * BAR])
+    assert _radius(state.curvature[-1], state.axial_stretch[-1]) > _radius(bare.curvature, bare.axial_stretch)

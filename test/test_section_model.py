@@ -173,13 +173,14 @@ def test_sweep_reports_the_lumen_closing_instead_of_numbers(implemented_design):
     ps = np.linspace(0.0, 0.35 * BAR, 15)[:, None]
     state = model.evaluate(ps)
     ok = state.converged
-    assert ok[:10].all()                                   # up to 0.225 bar at least
+    # without contact the lumen's folded shoulders cross each other from 0.222 bar (D/20): a stop
+    assert ok[:9].all()                                    # up to 0.2 bar at least
     assert not ok[-1]                                      # 0.35 bar: the lumen has closed
     assert np.all(np.diff(ok.astype(int)) <= 0)            # one boundary, nothing after it
     assert np.isnan(state.curvature[~ok]).all() and np.isfinite(state.curvature[ok]).all()
     # it stops where the lumen closes (walls touching, or Newton failing just before)
     assert "did not converge at p = " in state.message and "lumen" in state.message
-    assert ps[~ok][0, 0] > 0.25 * BAR
+    assert ps[~ok][0, 0] > 0.2 * BAR and "crosses itself" in state.message
     last = state.last_converged[-1]
     assert ps[ok][-1, 0] <= last["pressure"][0] < ps[~ok][0, 0]
     # curvature grows monotonically along the converged part of the sweep

@@ -27,8 +27,11 @@ def test_one_channel_within_half_percent_of_section(one_channel):
     m = one_channel
     assert m.error_bound["one_channel"]["rc_rel_max"] < RC_TOL
     lo, hi = m.pressure_range
-    assert 0.2e5 < hi < m.design.max_pressure   # the section rung stops before 0.5 bar: the table ends there
-    assert "did not converge" in m.meta["source_failure"]
+    # the table ends where the section rung stops, at most at the design limit (with lumen contact
+    # the section reaches 0.5 bar)
+    assert 0.2e5 < hi <= m.design.max_pressure
+    if hi < m.design.max_pressure:
+        assert "did not converge" in m.meta["source_failure"]
     # independent check at pressures off the grid and off the stored held-out points
     p = np.array([[0.37 * hi], [0.61 * hi], [0.93 * hi]])
     src = make_model("section", m.design)
@@ -44,7 +47,9 @@ def test_one_channel_refuses_outside_its_range(one_channel):
     st = m.evaluate(np.array([[0.5 * hi], [hi + 500.0], [-10.0]]))
     assert st.converged.tolist() == [True, False, False]
     assert np.isnan(st.curvature[1:]).all() and np.isfinite(st.curvature[0]).all()
-    assert "outside the table's pressure range" in st.message and "source failed" in st.message
+    assert "outside the table's pressure range" in st.message
+    # the source's failure is named when it ended the table (with lumen contact it reaches the design limit)
+    assert ("source failed" in st.message) == (hi < m.design.max_pressure)
 
 
 def test_table_cached_by_design_content(one_channel, tmp_path):
@@ -119,11 +124,14 @@ def test_predict_cli_with_surrogate(one_channel):
                        capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    ok, refused = out["results"]
-    assert out["model"] == "surrogate" and ok["converged"] and not refused["converged"]
+    ok, high = out["results"]
+    assert out["model"] == "surrogate" and ok["converged"]
     k = one_channel.evaluate([0.15e5]).curvature
     assert ok["curvature_per_m"] == pytest.approx(k.tolist())
-    assert "outside" in refused["reason"]
+    # 0.45 bar: answered within the table's range (with lumen contact it reaches 0.5 bar), else refused
+    assert high["converged"] == (0.45e5 <= one_channel.pressure_range[1])
+    if not high["converged"]:
+        assert "outside" in high["reason"]
 
 
 def test_latency_probe_drives_only_pressures_the_rung_answers(one_channel):
@@ -133,7 +141,7 @@ def test_latency_probe_drives_only_pressures_the_rung_answers(one_channel):
     from latency_probe import command_pressures, top_pressure
 
     m = one_channel
-    assert top_pressure(m) == m.pressure_range[1] < m.design.max_pressure
+    assert top_pressure(m) == m.pressure_range[1] <= m.design.max_pressure
     p = command_pressures(2000, 1, top_pressure(m))
     assert p.max() < m.pressure_range[1] and len(np.unique(p)) == 997
     assert m.evaluate(p).converged.all()

@@ -279,6 +279,13 @@ class SectionModel(BendModel):
                     corr.stop_reason = OUTSIDE_MODEL
                     corr.message = (f"the walls of the {name} touch (gap {gaps.min():.1%} of its diameter); "
                                     "self-contact is off (contact_distance None)")
+                elif self.problem.crossed_walls(corr.state):
+                    name = hole_names[self.problem.crossed_walls(corr.state)[0]]
+                    corr.converged = False
+                    corr.outside_domain = True
+                    corr.stop_reason = OUTSIDE_MODEL
+                    corr.message = (f"the wall of the {name} crosses itself (its folded shoulders pass through "
+                                    "each other); self-contact is off (contact_distance None)")
                 elif self._material_limit is not None:
                     i1 = self.problem.max_isochoric_i1(corr.state)
                     limit, stretch = self._material_limit

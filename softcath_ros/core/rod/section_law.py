@@ -15,7 +15,7 @@ from ..design import Design
 from ..section_fe.moment import MomentTable
 from .law import TabulatedLaw
 
-LAW_VERSION = "section-moment-1"   # bump when the table's computation changes
+LAW_VERSION = "section-moment-2"   # bump when the table's computation changes (2: lumen contact)
 
 
 @dataclass(frozen=True)
@@ -42,9 +42,9 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
     """``TabulatedLaw`` of the bare section (no device) of a one-channel ``design``.
 
     ``cache``: True (the project cache, core/cache.py), a cache root directory, or False.
-    ``section_settings`` are ``SectionSettings`` fields, e.g. ``lumen_fill=0.02``: a body bent back
-    against its pressure (a blocked tip) closes the empty lumen at 0.225-0.3 bar; the fill (a
-    self-contact proxy) carries the table to 0.45 bar (docs/models/rod.md)."""
+    ``section_settings`` are ``SectionSettings`` fields, e.g. ``contact_distance`` (the lumen wall's
+    self-contact, on by default) or ``lumen_fill=0.02`` (the former soft-solid proxy): a body bent
+    back against its pressure (a blocked tip) closes the lumen from 0.225 bar (docs/models/rod.md)."""
     from ..models.section import SectionModel
 
     body = replace(design, device=None, length=1.0)
@@ -60,6 +60,8 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
     mesh = f"section D/{design.outer_diameter / model.mesh.h:.0f}"
     if model.settings.lumen_fill is not None:
         mesh += f", lumen fill {model.settings.lumen_fill:g}"
+    elif model.problem.contact:
+        mesh += f", lumen contact {model.settings.contact_distance:g}"
     return TabulatedLaw(table, source=f"rod law from {mesh}")
 
 

@@ -29,12 +29,13 @@ import scipy.sparse as sp
 
 from ..design import Design
 from ..energy import isochoric_i1
+from ..errors import ModelError
 from .kinematics import N_GLOBAL, ElementRule, block_dofs, kinematics
 from .mesh import SectionMesh
 from .quadrature import NODAL_POINTS, NODAL_WEIGHTS, TRIANGLE_POINTS, TRIANGLE_WEIGHTS
 from .shape import p2_triangle
 from .terms import Contribution, Term
-from .terms.contact import WallContact
+from .terms.contact import DeviceContact, WallContact, segments_cross
 from .terms.device import DeviceBending
 from .terms.fibre import Fibre
 from .terms.hoop import HoopRings
@@ -72,6 +73,13 @@ class SectionProblem:
         self.fill = None if not has_fill else np.flatnonzero(~silicone)   # fill element indices
         self.filled_holes = np.isin(np.arange(len(mesh.hole_edges)), mesh.filled)
         X = mesh.nodes / R
+        # a device in an empty lumen with wall contact lies free in it: its centre is one more node
+        # (in no element), at the lumen's centre at rest
+        self.device_node = None
+        if (contact_distance is not None and design.device is not None and design.lumen is not None
+                and not self.filled_holes[design.n_channels]):
+            self.device_node = len(X)
+            X = np.vstack([X, np.asarray(design.lumen.center) / R])
         self.X = X
         nn = len(X)
         self.n_u = 2 * nn
@@ -106,12 +114,20 @@ class SectionProblem:
                          for i, edges in enumerate(mesh.hole_edges[:design.n_channels])]
         self.terms += self.channels
         self.contact: list[tuple[int, WallContact]] = []   # (hole index, its wall contact)
+        self.device = None                                  # the lumen wall's contact with the device
         if contact_distance is not None and design.lumen is not None:
             i = design.n_channels
             if not self.filled_holes[i]:
                 wall = WallContact(X, mesh.hole_edges[i], contact_distance * 2 * design.lumen.radius / R, self.n_u)
                 self.contact.append((i, wall))
                 self.terms.append(wall)
+                if self.device_node is not None:
+                    if design.device.diameter >= 2 * design.lumen.radius:
+                        raise ModelError(f"design '{design.name}': the device ({design.device.diameter} m) does "
+                                         f"not fit in the lumen ({2 * design.lumen.radius} m)")
+                    self.device = DeviceContact(X, mesh.hole_edges[i], 0.5 * design.device.diameter / R,
+                                                wall.d_hat, self.device_node, self.n_u)
+                    self.terms.append(self.device)
         if design.device is not None:
             self.terms.append(DeviceBending(design.device.bending_stiffness / (c_ref * R**4), self.i_glob))
 
@@ -128,6 +144,8 @@ class SectionProblem:
         self._rot_weights = self._w_node / r2
         # on a mirror-symmetric mesh both pins sit on the axis, so the gauge keeps the symmetry
         off_axis = 0.0 if not mesh.symmetric else np.where(X[:, 0] == 0.0, 0.0, np.inf)
+        if self.device_node is not None:        # the free device is no gauge node
+            off_axis = off_axis + np.where(np.arange(nn) == self.device_node, np.inf, 0.0)
         a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1) + off_axis))
         b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0]) - off_axis))
         self.pinned = np.array([2 * a, 2 * a + 1, 2 * b])
@@ -255,10 +273,32 @@ class SectionProblem:
         K = self.assemble(x, pressures)[2]
         return float(spla.eigsh(K.tocsc(), k=1, sigma=-1e-9, which="LM", return_eigenvectors=False)[0])
 
+    def crossed_walls(self, x) -> list[int]:
+        """Holes without contact or fill whose wall polygon (corner and midside nodes) crosses
+        itself at ``x``: walls that have passed through each other, which ``hole_gaps`` (opposite
+        walls only) does not see when a folded shoulder crosses locally."""
+        u = x[:self.n_u].reshape(-1, 2)
+        resisted = {i for i, _ in self.contact} | set(np.flatnonzero(self.filled_holes).tolist())
+        out = []
+        for i, edges in enumerate(self.mesh.hole_edges):
+            if i in resisted:
+                continue
+            ids = edges[:, :2].ravel()
+            m = len(ids)
+            a, b = np.triu_indices(m, k=2)
+            keep = (b - a) <= m - 2
+            if np.any(segments_cross(self.X[ids] + u[ids], a[keep], b[keep])):
+                out.append(i)
+        return out
+
     def contact_min_gap(self, x) -> float:
         """The smallest wall-to-wall distance (m) of the holes with contact (inf without contact;
         negative if a wall polygon crosses itself)."""
         return min((w.min_gap(x) * self.R for _, w in self.contact), default=np.inf)
+
+    def device_min_gap(self, x) -> float:
+        """The smallest distance (m) between the lumen wall and the device (inf without one)."""
+        return np.inf if self.device is None else float(self.device.gaps(x).min() * self.R)
 
     def hole_gaps(self, x) -> np.ndarray:
         """Per hole (channels, then lumen): the smallest distance between its deformed wall points

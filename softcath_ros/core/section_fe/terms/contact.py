@@ -105,7 +105,7 @@ def point_segment_distance(p, a, b):
     return np.linalg.norm(v - t[:, None] * e, axis=1)
 
 
-def _segments_cross(P, i, j):
+def segments_cross(P, i, j):
     """True where polygon segments i and j (vertex k to k + 1) properly intersect."""
     m = len(P)
     a, b = P[i], P[(i + 1) % m]
@@ -154,14 +154,14 @@ class WallContact:
         """The smallest distance (/ R) from a wall vertex to a wall segment not incident to it;
         negative if the wall polygon crosses itself."""
         P = self._points(x)
-        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+        if np.any(segments_cross(P, self.cross_i, self.cross_j)):
             return -1.0
         return float(point_segment_distance(*self._pair_points(P)).min())
 
     def _active(self, x):
         """(wall points, the pairs within the barrier's range) or None if inadmissible."""
         P = self._points(x)
-        if np.any(_segments_cross(P, self.cross_i, self.cross_j)):
+        if np.any(segments_cross(P, self.cross_i, self.cross_j)):
             return None
         s, t = line_distance2(*self._pair_points(P), derivatives=False)
         near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
@@ -202,3 +202,131 @@ class WallContact:
         np.add.at(g[0], loc, gl)
         np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
         return Contribution(float(np.sum(k * w * b)), g, H)
+
+
+def _point_in_polygon(c, P) -> bool:
+    """True if the point c lies inside the closed polygon P (m, 2) (even-odd rule)."""
+    a, b = P, np.roll(P, -1, axis=0)
+    crosses = (a[:, 1] > c[1]) != (b[:, 1] > c[1])
+    x_at = a[:, 0] + (c[1] - a[:, 1]) * (b[:, 0] - a[:, 0]) / np.where(b[:, 1] == a[:, 1], 1.0, b[:, 1] - a[:, 1])
+    return bool(np.count_nonzero(crosses & (x_at > c[0])) % 2)
+
+
+class DeviceContact:
+    """Frictionless contact of a hole's wall with a rigid round device lying free in the hole.
+
+    The device's centre c is an unknown of its own (an extra node of the problem, not in any
+    element). The wall is sampled at SAMPLES points per segment (q = (1 - t) a + t b,
+    t = 0, 1/SAMPLES, ...), and each is kept off the device by
+
+        kappa sum_q (L_j / SAMPLES) b((|q - c| - r)^2) + 1/2 k_c |c - c_wall|^2,
+
+    L_j the segment's reference length, r the device radius, b the barrier of the wall's
+    self-contact. Every term is smooth in (c, a, b), so Newton stays quadratic; a chord can dip
+    between two samples by at most L^2 / (8 r SAMPLES^2) (0.2 um for D/20 and a 1.2 mm device).
+    The weak spring k_c (CENTRING, units c1) to the wall's mean position holds the free device
+    where nothing touches it (its force is below 0.1 % of the pressure's on the wall). The
+    device's centre leaving the wall polygon is inadmissible."""
+
+    CENTRING = 1e-2
+    SAMPLES = 4
+
+    def __init__(self, X, edges: np.ndarray, radius: float, distance: float, device_node: int, n_u: int):
+        self.ids = edges[:, :2].ravel()
+        m = len(self.ids)
+        self.m, self.n_u, self._X = m, n_u, X
+        self.r = float(radius)
+        self.d_hat = float(distance)
+        self.s_hat = self.d_hat ** 2
+        self.kappa = KAPPA_SCALE / self.d_hat ** 3
+        P = X[self.ids]
+        length = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+        self.mean_weights = 0.5 * (length + np.roll(length, 1))
+        self.mean_weights /= self.mean_weights.sum()
+        k = self.SAMPLES
+        self.seg = np.repeat(np.arange(m), k)                   # sample -> segment
+        self.t = np.tile(np.arange(k) / k, m)                   # sample -> position on it
+        self.w = np.repeat(length / k, k)                       # sample -> wall length it stands for
+        self.node = device_node
+        d = np.empty(2 * m + 2, dtype=np.int64)
+        d[0:2 * m:2], d[1:2 * m:2] = 2 * self.ids, 2 * self.ids + 1
+        d[2 * m:] = 2 * device_node, 2 * device_node + 1
+        self.dofs = d[None]
+
+    def _points(self, x):
+        u = x[:self.n_u].reshape(-1, 2)
+        return self._X[self.ids] + u[self.ids], self._X[self.node] + u[self.node]
+
+    def _samples(self, P, c):
+        a, b = P[self.seg], P[(self.seg + 1) % self.m]
+        q = (1 - self.t)[:, None] * a + self.t[:, None] * b
+        return q - c
+
+    def gaps(self, x) -> np.ndarray:
+        """Distance (/ R) from the device's surface to each wall sample point (negative: overlap)."""
+        P, c = self._points(x)
+        return np.linalg.norm(self._samples(P, c), axis=1) - self.r
+
+    def _state(self, x):
+        P, c = self._points(x)
+        if not _point_in_polygon(c, P):
+            return None
+        v = self._samples(P, c)
+        g = np.linalg.norm(v, axis=1) - self.r
+        if np.any(g <= 0):
+            return None
+        return P, c, v, g, np.flatnonzero(g < self.d_hat)
+
+    def _spring(self, P, c):
+        off = c - self.mean_weights @ P
+        return 0.5 * self.CENTRING * float(off @ off), off
+
+    def energy(self, x, pressures) -> float:
+        got = self._state(x)
+        if got is None:
+            return np.inf
+        P, c, v, g, a = got
+        b = barrier(g[a] ** 2, self.s_hat)[0]
+        return float(self.kappa * np.sum(self.w[a] * b)) + self._spring(P, c)[0]
+
+    def assemble(self, x, pressures) -> Contribution:
+        got = self._state(x)
+        if got is None:
+            return INADMISSIBLE
+        P, c, v, g, a = got
+        m = self.m
+        nloc = 2 * m + 2
+        grad = np.zeros((1, nloc))
+        H = np.zeros((1, nloc, nloc))
+        E, off = self._spring(P, c)
+        coef = np.concatenate([np.repeat(-self.mean_weights, 2), [1.0, 1.0]])   # d(off_comp)/d(local)
+        for comp in (0, 1):
+            sel = np.arange(comp, nloc, 2)
+            grad[0, sel] += self.CENTRING * off[comp] * coef[sel]
+            H[0][np.ix_(sel, sel)] += self.CENTRING * np.outer(coef[sel], coef[sel])
+        if len(a):
+            va, ga, t = v[a], g[a], self.t[a]
+            rho = ga + self.r                                      # |q - c|
+            bb, b1, b2 = barrier(ga**2, self.s_hat)
+            # B(rho^2) = b((rho - r)^2): derivatives in s = rho^2
+            q1 = 1 - self.r / rho
+            q2 = self.r / (2 * rho**3)
+            B1, B2 = b1 * q1, b2 * q1 * q1 + b1 * q2
+            k = self.kappa * self.w[a]
+            # s = |v|^2, v = (1 - t) a + t b - c: ds = 2 J^T v, d2s = 2 J^T J, J = [-I, (1-t) I, t I]
+            coef3 = np.stack([-np.ones_like(t), 1 - t, t], 1)      # (n, 3): c, segment start, end
+            ds = 2 * (coef3[:, :, None] * va[:, None, :]).reshape(len(a), 6)
+            J = np.zeros((len(a), 2, 6))
+            for j in range(3):
+                J[:, 0, 2 * j] = J[:, 1, 2 * j + 1] = coef3[:, j]
+            d2s = 2 * np.einsum("nki,nkj->nij", J, J)
+            gl = (k * B1)[:, None] * ds
+            Hl = (k * B2)[:, None, None] * ds[:, :, None] * ds[:, None, :] + (k * B1)[:, None, None] * d2s
+            loc = np.empty((len(a), 6), dtype=np.int64)
+            loc[:, 0:2] = [2 * m, 2 * m + 1]
+            s0, s1 = self.seg[a], (self.seg[a] + 1) % m
+            loc[:, 2], loc[:, 3], loc[:, 4], loc[:, 5] = 2 * s0, 2 * s0 + 1, 2 * s1, 2 * s1 + 1
+            np.add.at(grad[0], loc, gl)
+            np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
+            E += float(np.sum(k * bb))
+        return Contribution(E, grad, H)
