@@ -247,3 +247,15 @@ def test_allocate_applies_a_calibration(implemented_design, tmp_path, capsys):
     calibrated = json.loads(capsys.readouterr().out)
     assert calibrated["model"] == "closed_form calibrated"
     assert calibrated["pressures_pa"][0] == pytest.approx(plain["pressures_pa"][0] / 0.8, rel=1e-9)
+
+
+def test_model_node_with_a_calibration_for_another_design_exits_2_with_one_line(implemented_design, tmp_path):
+    pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+    from domains import private_env
+
+    path = _calibration(implemented_design).save(tmp_path / "c.yaml")
+    proc = subprocess.run([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args",
+                           "-p", "design:=three_channel_5mm", "-p", f"calibration:={path}"],
+                          env=private_env(), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert "another design" in proc.stderr and "Traceback" not in proc.stderr
