@@ -195,6 +195,7 @@ def test_report_and_sweep_apply_a_calibration(truth_run, tmp_path, capsys):
     assert abs(calibrated["radius"] - top.radius_mean) < abs(top.model["closed_form"]["radius"] - top.radius_mean)
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "closed_form calibrated" in text and cal.recording_sha256[:12] in text
+    assert f"| {calibrated['radius'] * 1e3:.1f} ± {calibrated['radius_band95'] * 1e3:.1f} |" in text
     assert main(["report", str(path), "--calibration", str(out), "--out", str(tmp_path / "rep2"), "--no-cache"]) == 0
     # sweep takes it too, at another length (the calibration is of the section)
     capsys.readouterr()
