@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, parse_model_options
+from .common import PA_PER_BAR, add_option_argument, check_pressure_limits, parse_model_options
 
 
 def register(sub) -> None:
@@ -48,7 +48,6 @@ def run(args) -> int:
     from ..core.calibration_file import build_model, load_calibration
     from ..core.models import RUNGS, make_model, run_options
     from ..core.prediction import predict
-    from .predict import check_pressure_limits
 
     design = load_design(args.design)
     if args.length is not None:
