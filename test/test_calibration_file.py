@@ -195,6 +195,7 @@ def test_report_and_sweep_apply_a_calibration(truth_run, tmp_path, capsys):
     assert abs(calibrated["radius"] - top.radius_mean) < abs(top.model["closed_form"]["radius"] - top.radius_mean)
     text = (tmp_path / "rep" / "report.md").read_text()
     assert "closed_form calibrated" in text and cal.recording_sha256[:12] in text
+    assert f"| {calibrated['radius'] * 1e3:.1f} ± {calibrated['radius_band95'] * 1e3:.1f} |" in text
     assert main(["report", str(path), "--calibration", str(out), "--out", str(tmp_path / "rep2"), "--no-cache"]) == 0
     # sweep takes it too, at another length (the calibration is of the section)
     capsys.readouterr()
@@ -247,3 +248,15 @@ def test_allocate_applies_a_calibration(implemented_design, tmp_path, capsys):
     calibrated = json.loads(capsys.readouterr().out)
     assert calibrated["model"] == "closed_form calibrated"
     assert calibrated["pressures_pa"][0] == pytest.approx(plain["pressures_pa"][0] / 0.8, rel=1e-9)
+
+
+def test_model_node_with_a_calibration_for_another_design_exits_2_with_one_line(implemented_design, tmp_path):
+    pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
+    from domains import private_env
+
+    path = _calibration(implemented_design).save(tmp_path / "c.yaml")
+    proc = subprocess.run([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args",
+                           "-p", "design:=three_channel_5mm", "-p", f"calibration:={path}"],
+                          env=private_env(), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert "another design" in proc.stderr and "Traceback" not in proc.stderr

@@ -144,6 +144,11 @@ def test_documented_report_glob_matches_recordings_only(tmp_path, monkeypatch, c
     (runs / "logs" / "bench_default_20261201_110000").mkdir(parents=True)
     matched = sorted(str(p) + "/" for p in runs.glob("bench_default_*/"))
     assert len(matched) == 2
+    # a logs folder of the old layout beside them, written last, is passed over
+    (runs / "bench_default_20261201_110000_logs").mkdir()
+    (runs / "bench_default_20261201_110000_logs" / "bench_node.log").write_text("log")
+    matched = sorted(str(p) + "/" for p in runs.glob("bench_default_*/"))
+    assert len(matched) == 3
     assert main(["report", *matched]) == 0
     out = capsys.readouterr()
     assert "newest of 2" in out.err and "bench_default_20261201_110000" in out.err

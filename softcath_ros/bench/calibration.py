@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..core.calibration_file import scaled_design
+from ..core.calibration_file import CalibratedModel, scaled_design
 from ..core.errors import SoftcathError
 from ..core.prediction import angle_per_length
 from .analysis import SampleRow, summarise
@@ -88,8 +88,8 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
 
     def predict(x):
         shift, scale, offsets = x[0], x[1], x[2:]
-        model = make_model(rung, scaled_design(design, scale))
-        state = model.evaluate(pressures * (1.0 - shift))
+        model = CalibratedModel(make_model(rung, scaled_design(design, scale)), shift)
+        state = model.evaluate(pressures)
         k = np.atleast_2d(state.curvature)
         force = BlockingForce(model)
         f = np.array([force.from_curvature(k[i], lengths[i]) if not is_angle[i] else 0.0 for i in range(len(use))])

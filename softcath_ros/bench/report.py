@@ -19,6 +19,13 @@ def _fmt(x: float, scale: float = 1.0, digits: int = 2) -> str:
     return "—" if x is None or not np.isfinite(x) else f"{x * scale:.{digits}f}"
 
 
+def _model_cell(values: dict, quantity: str, scale: float, digits: int) -> str:
+    """A model's value, with its 95% band (calibrated overlays) as +- half-width."""
+    cell = _fmt(values[quantity], scale, digits)
+    half = values.get(f"{quantity}_band95")
+    return cell if half is None or not np.isfinite(half) else f"{cell} ± {_fmt(half, scale, digits)}"
+
+
 def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: list[Hysteresis],
              plots: list[str], calibration: dict | None = None, tips: list | None = None) -> str:
     labels = list(stats[0].model) if stats else []
@@ -48,10 +55,10 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
             if bench == "angle":
                 cells += [f"{_fmt(s.curvature_mean)} ± {_fmt(s.curvature_std)}",
                           f"{_fmt(s.radius_mean, 1e3, 1)} ± {_fmt(s.radius_std, 1e3, 1)}"]
-                cells += [_fmt(s.model[lb]["radius"], 1e3, 1) for lb in labels]
+                cells += [_model_cell(s.model[lb], "radius", 1e3, 1) for lb in labels]
             else:
                 cells += [f"{_fmt(s.force_mean, 1e3)} ± {_fmt(s.force_std, 1e3)}"]
-                cells += [_fmt(s.model[lb]["force"], 1e3) for lb in labels]
+                cells += [_model_cell(s.model[lb], "force", 1e3, 2) for lb in labels]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     if hyst:

@@ -99,3 +99,13 @@ def parse_model_options(rung: str, items: list[str]) -> dict:
         if kind == "float" and not math.isfinite(out[name]):
             raise SoftcathError(f"--option {name}={text}: must be finite")
     return out
+
+
+def check_pressure_limits(pressures: np.ndarray, design) -> None:
+    """Gauge pressures in [0, max_pressure] (the design's safety limit), else a one-line error."""
+    if np.any(pressures < 0):
+        raise SoftcathError("pressures are gauge pressures and must not be negative")
+    top = float(pressures.max()) if pressures.size else 0.0
+    if top > design.max_pressure:
+        raise SoftcathError(f"pressure {top:g} Pa ({top / PA_PER_BAR:g} bar) exceeds design '{design.name}' "
+                            f"max_pressure {design.max_pressure:g} Pa ({design.max_pressure / PA_PER_BAR:g} bar)")

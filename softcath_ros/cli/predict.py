@@ -14,7 +14,8 @@ import numpy as np
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, parse_model_options, parse_pressures, positive_float
+from .common import (PA_PER_BAR, add_option_argument, check_pressure_limits, parse_model_options, parse_pressures,
+                     positive_float)
 
 
 def register(sub) -> None:
@@ -85,16 +86,6 @@ def run(args) -> int:
             print(f"{ps:>18} {rc:>17} {format_mm(r.centreline_radius_m):>11} "
                   f"{math.degrees(r.bending_angle_rad):12.2f} {tip:>28}{force}")
     return 0 if all(r.converged for r in results) else 1
-
-
-def check_pressure_limits(pressures: np.ndarray, design) -> None:
-    """Gauge pressures in [0, max_pressure] (the design's safety limit), else a one-line error."""
-    if np.any(pressures < 0):
-        raise SoftcathError("pressures are gauge pressures and must not be negative")
-    top = float(pressures.max()) if pressures.size else 0.0
-    if top > design.max_pressure:
-        raise SoftcathError(f"pressure {top:g} Pa ({top / PA_PER_BAR:g} bar) exceeds design '{design.name}' "
-                            f"max_pressure {design.max_pressure:g} Pa ({design.max_pressure / PA_PER_BAR:g} bar)")
 
 
 BAND_FIELDS = ("radius_of_curvature_m", "centreline_radius_m", "bending_angle_rad")

@@ -47,6 +47,10 @@ def pick_recording(paths: list[str], command: str) -> Path:
             raise SoftcathError(f"{missing[0]}: no such recording")
         if len(candidates) == 1:
             return candidates[0]
+        # a folder without a recording (logs of runs made before they moved to runs/logs/) is no candidate
+        candidates = [p for p in candidates if p.is_file() or any(p.glob("*.mcap"))]
+        if not candidates:
+            raise SoftcathError(f"none of the {len(paths)} paths given holds a recording (.mcap)")
     newest = max(candidates, key=lambda p: p.stat().st_mtime)
     print(f"softcath {command}: using the newest of {len(candidates)} recording(s): {newest}", file=sys.stderr)
     return newest

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..core import json_output
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, add_option_argument, bounded_int, finite_float, parse_model_options, positive_float
+from .common import (PA_PER_BAR, add_option_argument, bounded_int, check_pressure_limits, finite_float,
+                     parse_model_options, positive_float)
 
 MAX_STEPS = 10_000   # a sweep's rows are held in memory and plotted
 
@@ -51,7 +52,6 @@ def run(args) -> int:
     from ..core.calibration_file import build_model, load_calibration
     from ..core.models import RUNGS, make_model, run_options
     from ..core.prediction import predict
-    from .predict import check_pressure_limits
 
     design = load_design(args.design)
     if args.length is not None:

@@ -207,19 +207,20 @@ def build_model(name: str, design, calibration: Calibration | None = None, **opt
         return make_model(name, design, **options)
     calibration.check_design(design)
     inner = make_model(name, scaled_design(design, calibration.material_scale), **options)
-    return CalibratedModel(inner, calibration)
+    return CalibratedModel(inner, calibration.pressure_shift, calibration)
 
 
 class CalibratedModel(BendModel):
     """A rung corrected by a calibration: evaluates ``inner`` (already on the scaled material) at
-    (1 - shift) times the commanded pressures. Declares what ``inner`` declares; a linear rung
-    stays linear (its gains scaled by 1 - shift)."""
+    (1 - ``pressure_shift``) times the commanded pressures. Declares what ``inner`` declares; a
+    linear rung stays linear (its gains scaled by 1 - shift). ``calibration``: where the shift came
+    from (None while a fit tries values)."""
 
-    def __init__(self, inner: BendModel, calibration: Calibration):
+    def __init__(self, inner: BendModel, pressure_shift: float, calibration: Calibration | None = None):
         super().__init__(inner.design)
         self.inner = inner
         self.calibration = calibration
-        self.factor = 1.0 - calibration.pressure_shift
+        self.factor = 1.0 - float(pressure_shift)
         self.name = f"{inner.name} calibrated"
         self.info = inner.info
         self.solver_version = inner.solver_version
