@@ -116,7 +116,8 @@ class Allocator:
                  hysteresis_deg: float = 0.2, direction_tolerance_deg: float = 0.5, rtol: float = 1e-6,
                  accept_rtol: float = 2e-3, max_iterations: int = 25, fd_step: float = 1e-4):
         """``max_pressure`` (Pa) may lower the design's limit (never raise it), e.g. to stay inside
-        the pressure range where a rung converges."""
+        the pressure range where a rung converges. The limit is also kept within the rung's own
+        ``pressure_range`` (a surrogate table ends where its source stopped converging)."""
         self.model = model
         self.design = model.design
         self.n_channels = model.n_channels
@@ -126,6 +127,7 @@ class Allocator:
                 raise AllocationError(f"max_pressure {max_pressure} Pa must be positive and at most the design's "
                                       f"{self.max_pressure:g} Pa")
             self.max_pressure = float(max_pressure)
+        self.max_pressure = min(self.max_pressure, float(model.pressure_range[1]))
         self.hysteresis = math.radians(hysteresis_deg)
         self.direction_tolerance = math.radians(direction_tolerance_deg)
         # Newton aims at rtol (relative curvature residual). A rung solved iteratively is only
@@ -417,13 +419,20 @@ class Allocator:
         scale = max(math.hypot(*(target - self._rest_curvature)), self.deadband)
         pushes = 0
         best = (math.inf, None, None)
+        q_ok = None    # the last point the model answered
         for it in range(1, self.max_iterations + 1):
-            ha = -h if q[0] + h > pmax else h
-            hb = -h if q[1] + h > pmax else h
-            batch = np.zeros((3, self.n_channels))
-            batch[:, s.a] = [q[0], q[0] + ha, q[0]]
-            batch[:, s.b] = [q[1], q[1], q[1] + hb]
-            states = self._eval(batch)
+            states, ha, hb = self._jacobian_batch(s, q, h, pmax)
+            if states is None:
+                # the rung does not answer here (a table ends where its source failed): beyond reach,
+                # or back half-way towards the last answered point
+                if q_ok is None or (allow_outside and pushes >= 2):
+                    if allow_outside:   # (the caller finds the boundary and its state)
+                        return (q if q_ok is None else q_ok), (np.full(2, np.nan), math.nan), it, True
+                    raise ModelError(f"model '{self.model.name}' does not answer near the requested bend")
+                pushes += 1
+                q = 0.5 * (q + q_ok)
+                continue
+            q_ok = q.copy()
             k = states.curvature
             r = k[0] - target
             residual = math.hypot(*r)
@@ -448,6 +457,41 @@ class Allocator:
         raise ModelError(f"Newton did not reach rtol {self.rtol} in {self.max_iterations} iterations "
                          f"(best relative residual {best[0] / scale:.2e})")
 
+    def _jacobian_batch(self, s: _Sector, q, h: float, pmax: float):
+        """The model at q and one finite-difference step along each active channel (stepping back
+        where forward is above pmax or unanswered); (states, ha, hb), or (None, .., ..) where the
+        model does not answer at q."""
+        ha = -h if q[0] + h > pmax else h
+        hb = -h if q[1] + h > pmax else h
+        for _ in range(2):
+            batch = np.zeros((3, self.n_channels))
+            batch[:, s.a] = [q[0], q[0] + ha, q[0]]
+            batch[:, s.b] = [q[1], q[1], q[1] + hb]
+            states = self.model.evaluate(batch)
+            ok = np.asarray(states.converged, dtype=bool)
+            if ok.all():
+                return states, ha, hb
+            if not ok[0]:
+                break
+            ha, hb = (-ha if not ok[1] else ha), (-hb if not ok[2] else hb)
+        return None, ha, hb
+
+    def _edge(self, s: _Sector, t: float) -> np.ndarray:
+        """Pair pressures of the farthest command the model answers on the ray (1 - t, t) from rest,
+        within the box (two batches of 64: to 1/4096 of the ray)."""
+        w = np.array([1.0 - t, t]) / max(1.0 - t, t)
+        lo, hi = 0.0, self.max_pressure
+        for _ in range(2):
+            scales = np.linspace(lo, hi, 65)[1:]
+            batch = np.zeros((len(scales), self.n_channels))
+            batch[:, s.a], batch[:, s.b] = scales * w[0], scales * w[1]
+            ok = np.asarray(self.model.evaluate(batch).converged, dtype=bool)
+            n = int(np.argmin(ok)) if not ok.all() else len(ok)
+            if n == len(ok):
+                return hi * w
+            lo, hi = (scales[n - 1] if n else lo), scales[n]
+        return lo * w
+
     def _boundary(self, s: _Sector, ux: float, uy: float):
         """Largest curvature along (ux, uy) in sector ``s``: the larger pressure at max_pressure.
 
@@ -467,6 +511,18 @@ class Allocator:
             kx, ky = state.curvature - self._rest_curvature
             return math.atan2(ux * ky - uy * kx, ux * kx + uy * ky)
 
+        corner = np.zeros(self.n_channels)
+        corner[s.a] = corner[s.b] = pmax
+        if not np.all(self.model.evaluate(corner).converged):
+            # the rung does not answer at the box's corner: the reachable set's edge is where it stops
+            # answering along each ray from rest; find the ray whose edge bends along the request
+            def g(t):
+                return signed_angle(curvature(*self._edge(s, t)))
+            t = brentq(g, 0.0, 1.0, xtol=1e-7, rtol=1e-12) if g(0.0) * g(1.0) < 0 else (0.0 if abs(g(0.0)) < abs(
+                g(1.0)) else 1.0)
+            q = self._edge(s, t)
+            k, stretch = self._point(curvature(*q))
+            return math.hypot(*k), q, (k, stretch), count[0]
         both = curvature(pmax, pmax)
         f_both = signed_angle(both)
         if f_both == 0.0:
