@@ -141,6 +141,8 @@ class Allocator:
 
         # a rung linear in pressure declares it (closed form): its gain inverts exactly
         self.linear = model.info.linear_gain
+        # a rung with pair tables declares their exact local Jacobian (the surrogate): one call per step
+        self._pair_jac = model.info.pair_jacobian and self.n_channels == 3
         self._stretch_per_pa = [float(v) for v in model.stretch_per_pa] if self.linear else None
         if self.linear:
             self._g = [[float(v) for v in row] for row in np.asarray(model.curvature_per_pa)]
@@ -421,8 +423,8 @@ class Allocator:
         best = (math.inf, None, None)
         q_ok = None    # the last point the model answered
         for it in range(1, self.max_iterations + 1):
-            states, ha, hb = self._jacobian_batch(s, q, h, pmax)
-            if states is None:
+            local = self._local(s, q, h, pmax)
+            if local is None:
                 # the rung does not answer here (a table ends where its source failed): beyond reach,
                 # or back half-way towards the last answered point
                 if q_ok is None or (allow_outside and pushes >= 2):
@@ -433,29 +435,47 @@ class Allocator:
                 q = 0.5 * (q + q_ok)
                 continue
             q_ok = q.copy()
-            k = states.curvature
-            r = k[0] - target
+            k, jac, point = local
+            r = k - target
             residual = math.hypot(*r)
             if residual <= self.rtol * scale:
-                return q, self._point(states, 0), it, False
+                return q, point, it, False
             if residual < best[0]:
-                best = (residual, q.copy(), self._point(states, 0))
-            jac = np.column_stack([(k[1] - k[0]) / ha, (k[2] - k[0]) / hb])
-            try:
-                dq = -np.linalg.solve(jac, r)
-            except np.linalg.LinAlgError:
-                raise ModelError("singular Jacobian of the two active channels") from None
+                best = (residual, q.copy(), point)
+            (j00, j01), (j10, j11) = jac.tolist()
+            det = j00 * j11 - j01 * j10
+            if not math.isfinite(det) or det == 0.0:
+                raise ModelError("singular Jacobian of the two active channels")
+            r0, r1 = float(r[0]), float(r[1])
+            dq = np.array([-(j11 * r0 - j01 * r1) / det, -(j00 * r1 - j10 * r0) / det])   # -J^-1 r
             trial = q + dq
             if np.any(trial > pmax * (1.0 + 1e-12)):
                 pushes += 1
                 at_top = np.isclose(q, pmax, rtol=0, atol=1e-9 * pmax) & (trial > pmax)
                 if allow_outside and (pushes >= 3 or np.any(at_top)):
-                    return q, self._point(states, 0), it, True
+                    return q, point, it, True
             q = np.clip(trial, 0.0, pmax)
         if best[0] <= self.accept_rtol * scale:
             return best[1], best[2], self.max_iterations, False
         raise ModelError(f"Newton did not reach rtol {self.rtol} in {self.max_iterations} iterations "
                          f"(best relative residual {best[0] / scale:.2e})")
+
+    def _local(self, s: _Sector, q, h: float, pmax: float):
+        """(curvature, 2 x 2 Jacobian over the pair's pressures, (pressure-induced curvature,
+        stretch)) at pair pressures q: from the rung's declared ``pair_jacobian`` or by finite
+        differences; None where the rung does not answer."""
+        if self._pair_jac:
+            got = self.model.pair_jacobian(s.a, s.b, float(q[0]), float(q[1]))
+            if got is None:
+                return None
+            k, stretch, da, db = got
+            k = np.array(k)
+            return k, np.array([[da[0], db[0]], [da[1], db[1]]]), (k - self._rest_curvature, float(stretch))
+        states, ha, hb = self._jacobian_batch(s, q, h, pmax)
+        if states is None:
+            return None
+        k = states.curvature
+        return k[0], np.column_stack([(k[1] - k[0]) / ha, (k[2] - k[0]) / hb]), self._point(states, 0)
 
     def _jacobian_batch(self, s: _Sector, q, h: float, pmax: float):
         """The model at q and one finite-difference step along each active channel (stepping back

@@ -111,7 +111,7 @@ class SurrogateModel(BendModel):
     solver_version = SURROGATE_VERSION
     info = RungInfo(
         summary="tables built offline from a higher rung (default section) for one design",
-        models=("free_bending", "device_stiffness"),
+        models=("free_bending", "device_stiffness"), pair_jacobian=True,
         options=options_of(SurrogateSettings, {
             "source": "the rung the table is built from (default section)",
             "source_options": "that rung's options (mesh_size, ...): part of the table's key",
@@ -645,6 +645,40 @@ class SurrogateModel(BendModel):
             ib = np.minimum((b / self._hf).astype(np.intp), self._nf - 1)
             ok &= self._cell_ok[pair, ia, ib]
         return k, lam, ok
+
+    def pair_jacobian(self, i: int, j: int, p_i: float, p_j: float):
+        """Channels i and j at p_i, p_j (Pa), the others at zero: (curvature [kx, ky], stretch,
+        dk/dp_i, dk/dp_j) from the same bilinear read-out as ``evaluate`` (its exact derivative
+        inside a cell), in plain floats; None where ``evaluate`` refuses the command."""
+        if self.kind == "one_channel":
+            raise ModelError("model 'surrogate': pair_jacobian needs a 3-channel table")
+        if (i + 1) % 3 == j:
+            r, a, b, swap = i, p_i, p_j, False
+        elif (j + 1) % 3 == i:
+            r, a, b, swap = j, p_j, p_i, True
+        else:
+            raise ModelError(f"model 'surrogate': channels {i}, {j} are not a pair")
+        if not (0.0 <= a <= self._pmax and 0.0 <= b <= self._pmax):
+            return None
+        n, hf = self._nf, self._hf
+        x, y = a / hf, b / hf
+        ia, ib = min(int(x), n - 1), min(int(y), n - 1)
+        pair = 0 if self._rotated else r
+        if not self._all_ok and not self._cell_ok[pair, ia, ib]:
+            return None
+        t, u = x - ia, y - ib
+        k0 = (pair * (n + 1) + ia) * (n + 1) + ib
+        f00, f01, f10, f11 = self._flat[[k0, k0 + 1, k0 + n + 1, k0 + n + 2]].tolist()
+        val = [(1 - t) * ((1 - u) * f00[c] + u * f01[c]) + t * ((1 - u) * f10[c] + u * f11[c]) for c in range(3)]
+        da = [((1 - u) * (f10[c] - f00[c]) + u * (f11[c] - f01[c])) / hf for c in range(2)]
+        db = [((1 - t) * (f01[c] - f00[c]) + t * (f11[c] - f10[c])) / hf for c in range(2)]
+        k = val[:2]
+        if self._rotated and r:
+            c, s = float(_COS[r]), float(_SIN[r])
+            k, da, db = ([c * v[0] - s * v[1], s * v[0] + c * v[1]] for v in (k, da, db))
+        if swap:
+            da, db = db, da
+        return k, val[2] + float(self._cs[0]) - 1.0 if len(self._cs) else val[2], da, db
 
     def _bilinear(self, pair: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 1 << 15) -> np.ndarray:
         n, f = self._nf, self._flat
