@@ -556,6 +556,8 @@ class SurrogateModel(BendModel):
             self._all_ok = bool(self._cell_ok.all())
             self._cp, self._cs = t["common_p"], t["common_stretch"]
             self._max_common = float(self.meta["max_common_pressure"])
+            self._stretch0 = float(np.interp(0.0, self._cp, self._cs)) if len(self._cp) else 1.0
+            self._rot = [(float(c), float(s)) for c, s in zip(_COS, _SIN)]
 
     def _fine_tables(self) -> tuple[np.ndarray, np.ndarray]:
         """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), and
@@ -596,6 +598,15 @@ class SurrogateModel(BendModel):
             ok = inside
             reason = "is outside the table's pressure range"
         else:
+            if n == 1 and inside[0]:   # one pair command (model_node): the read-out in plain floats
+                p0, p1, p2 = pressures[0].tolist()
+                zero = 0 if p0 == 0.0 else 1 if p1 == 0.0 else 2 if p2 == 0.0 else -1
+                got = None if zero < 0 else self.pair_jacobian((zero + 1) % 3, (zero + 2) % 3,
+                                                                (p0, p1, p2)[(zero + 1) % 3], (p0, p1, p2)[(zero + 2) % 3],
+                                                                derivatives=False)
+                if got is not None:
+                    return BendState(curvature=np.array([got[0]]), axial_stretch=np.array([got[1]]),
+                                     converged=np.ones(1, dtype=bool))
             k, lam, ok = self._three(pressures, inside)
             reason = "is outside the table's range (negative, above the range, or where the source failed)"
             first = np.flatnonzero(~ok)
@@ -646,7 +657,7 @@ class SurrogateModel(BendModel):
             ok &= self._cell_ok[pair, ia, ib]
         return k, lam, ok
 
-    def pair_jacobian(self, i: int, j: int, p_i: float, p_j: float):
+    def pair_jacobian(self, i: int, j: int, p_i: float, p_j: float, derivatives: bool = True):
         """Channels i and j at p_i, p_j (Pa), the others at zero: (curvature [kx, ky], stretch,
         dk/dp_i, dk/dp_j) from the same bilinear read-out as ``evaluate`` (its exact derivative
         inside a cell), in plain floats; None where ``evaluate`` refuses the command."""
@@ -670,15 +681,18 @@ class SurrogateModel(BendModel):
         k0 = (pair * (n + 1) + ia) * (n + 1) + ib
         f00, f01, f10, f11 = self._flat[[k0, k0 + 1, k0 + n + 1, k0 + n + 2]].tolist()
         val = [(1 - t) * ((1 - u) * f00[c] + u * f01[c]) + t * ((1 - u) * f10[c] + u * f11[c]) for c in range(3)]
-        da = [((1 - u) * (f10[c] - f00[c]) + u * (f11[c] - f01[c])) / hf for c in range(2)]
-        db = [((1 - t) * (f01[c] - f00[c]) + t * (f11[c] - f10[c])) / hf for c in range(2)]
+        if derivatives:
+            da = [((1 - u) * (f10[c] - f00[c]) + u * (f11[c] - f01[c])) / hf for c in range(2)]
+            db = [((1 - t) * (f01[c] - f00[c]) + t * (f11[c] - f10[c])) / hf for c in range(2)]
+        else:
+            da = db = [0.0, 0.0]
         k = val[:2]
         if self._rotated and r:
-            c, s = float(_COS[r]), float(_SIN[r])
+            c, s = self._rot[r]
             k, da, db = ([c * v[0] - s * v[1], s * v[0] + c * v[1]] for v in (k, da, db))
         if swap:
             da, db = db, da
-        return k, val[2] + float(self._cs[0]) - 1.0 if len(self._cs) else val[2], da, db
+        return k, val[2] + self._stretch0 - 1.0, da, db
 
     def _bilinear(self, pair: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 1 << 15) -> np.ndarray:
         n, f = self._nf, self._flat
