@@ -56,7 +56,7 @@ from .surrogate_build import direction_error_deg, rc_error
 from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-3"
+SURROGATE_VERSION = "surrogate-4"
 _KIND = "surrogate"   # the cache kind of the tables
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
@@ -481,7 +481,7 @@ class SurrogateModel(BendModel):
         from ..cache import _atomic_write
 
         path = Path(path)
-        _atomic_write(path, lambda f: np.savez(f, **self._arrays()))
+        _atomic_write(path, lambda f: np.savez_compressed(f, **self._arrays()))
         return path
 
     @staticmethod
@@ -540,15 +540,21 @@ class SurrogateModel(BendModel):
     def _prepare(self) -> None:
         t = self.table
         self._pmax = float(self.meta["max_pressure"])
+        # What a read-out needs is stored with the table (spline coefficients, the fine grid), so
+        # loading one imports no scipy (start-up time); it is computed once, when built.
         if self.kind == "one_channel":
-            from scipy.interpolate import CubicSpline
+            if "coeffs" not in t:
+                from scipy.interpolate import CubicSpline
 
-            self._spline = CubicSpline(t["p"], t["y"], axis=0)
-            # plain-float copies for the single-command path
-            self._breaks = t["p"].tolist()
-            self._coeffs = self._spline.c  # (4, m, 3)
+                t["coeffs"] = CubicSpline(t["p"], t["y"], axis=0).c    # (4, m, 3): highest power first
+            self._breaks_arr = t["p"]
+            self._breaks = t["p"].tolist()      # plain floats for the single-command path
+            self._coeffs = t["coeffs"]
         else:
-            tab, self._cell_ok = self._fine_tables()
+            if "fine_table" not in t:
+                tab, t["fine_ok"] = self._fine_tables()
+                t["fine_table"] = tab.astype(np.float32)   # half the file; 6e-8 relative, far below the error
+            tab, self._cell_ok = t["fine_table"].astype(np.float64), t["fine_ok"]
             self._nf = self.settings.fine_points - 1
             self._hf = self._pmax / self._nf
             self._flat = np.ascontiguousarray(tab.reshape(-1, 3))
@@ -593,7 +599,7 @@ class SurrogateModel(BendModel):
         if self.kind == "one_channel":
             if n == 1 and inside[0]:  # one command (model_node): the spline's polynomial in plain floats
                 return self._one_command(float(pressures[0, 0]))
-            y = self._spline(np.clip(pressures[:, 0], 0.0, self._pmax))
+            y = self._piecewise(np.clip(pressures[:, 0], 0.0, self._pmax))
             k, lam = y[:, :2], y[:, 2]
             ok = inside
             reason = "is outside the table's pressure range"
@@ -626,6 +632,13 @@ class SurrogateModel(BendModel):
         else:
             msg = ""
         return BendState(curvature=k, axial_stretch=lam, converged=ok, message=msg)
+
+    def _piecewise(self, p: np.ndarray) -> np.ndarray:
+        """The 1-channel cubic spline at pressures p (N,) -> (N, 3)."""
+        j = np.clip(np.searchsorted(self._breaks_arr, p, side="right") - 1, 0, len(self._breaks) - 2)
+        x = (p - self._breaks_arr[j])[:, None]
+        c = self._coeffs[:, j]                      # (4, N, 3)
+        return ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
 
     def _one_command(self, p: float) -> BendState:
         j = min(max(bisect_right(self._breaks, p) - 1, 0), len(self._breaks) - 2)
