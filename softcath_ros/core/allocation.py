@@ -177,12 +177,16 @@ class Allocator:
                 self._sectors.append(_Sector(int(a), int(b), float(self.channel_directions[a]), float(gap),
                                              tuple(float(v) for v in inv.ravel())))
         self._current: _Sector | None = None
+        # the last solution inside reach on the nonlinear path (sector, pair pressures, curvature
+        # vector): a stream of nearby requests starts Newton there (2-3 steps instead of ~6)
+        self._warm = None
 
     # ------------------------------------------------------------------ public API
 
     def reset(self) -> None:
-        """Forget the active sector (hysteresis state)."""
+        """Forget the active sector (hysteresis state) and the last solution."""
         self._current = None
+        self._warm = None
 
     def allocate(self, curvature) -> Allocation:
         """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m."""
@@ -372,10 +376,15 @@ class Allocator:
         target = np.array([kappa * ux, kappa * uy]) + self._rest_curvature
         i00, i01, i10, i11 = s.inv
         q = np.clip([(i00 * ux + i01 * uy) * kappa, (i10 * ux + i11 * uy) * kappa], 0.0, self.max_pressure)
+        warm = self._warm
+        if warm is not None and warm[0] is s and float(np.hypot(*(warm[2] - target))) < 0.05 * kappa:
+            q = warm[1]      # a request close to the last one: start from its answer
         try:
             q, (k, stretch), iterations, outside = self._newton(s, q, target)
         except ModelError as exc:
+            self._warm = None
             return self._failed(requested, (s.a, s.b), str(exc))
+        self._warm = None if outside else (s, q.copy(), target)
         if not outside:  # max_curvature is not computed here: it costs a boundary solve
             return self._result(self._full(s, q), requested, k, stretch, float("nan"), False, (s.a, s.b), iterations)
         # The solution leaves the pressure box: find the boundary along the same direction.
