@@ -6,9 +6,11 @@ is a fresh allocation) and records /softcath/pressure_cmd. Reports the received 
 the inter-arrival intervals (median, 99th percentile), how many commands the node
 counted (its /diagnostics), and the node's CPU share (psutil).
 
-    .venv/bin/python benchmarks/allocation_node_rate.py [--seconds 10] [--rate 1000]
+    .venv/bin/python benchmarks/allocation_node_rate.py [--seconds 10] [--rate 1000] [--model surrogate]
+        [--name allocation_node_rate]
 
-Writes benchmarks/results/allocation_node_rate.{json,csv,png}.
+``--model``: the node's rung (default: the node's default, the section rung's surrogate table).
+Writes benchmarks/results/<name>.{json,csv,png}.
 """
 from __future__ import annotations
 
@@ -54,6 +56,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--rate", type=float, default=1000.0, help="command and publish rate, Hz")
+    ap.add_argument("--model", default="surrogate", help="allocation_node's rung (parameter 'model')")
+    ap.add_argument("--name", default="allocation_node_rate", help="results stem under benchmarks/results/")
     args = ap.parse_args()
 
     import psutil
@@ -67,7 +71,7 @@ def main() -> None:
     exe = Path(sys.executable).parent / "allocation_node"
     node_proc = subprocess.Popen([str(exe), "--ros-args", "-p", f"publish_rate:={args.rate}",
                                   "-p", "max_pressure_rate:=1.0e7", "-p", "command_timeout:=0.5",
-                                  "-p", "diagnostics_period:=0.5"],
+                                  "-p", "diagnostics_period:=0.5", "-p", f"model:={args.model}"],
                                  env=env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=args.domain)
@@ -134,9 +138,9 @@ def main() -> None:
         except subprocess.TimeoutExpired:
             node_proc.kill()
 
-    callback_us = callback_cost_us(args.domain)
+    callback_us = callback_cost_us(args.domain, args.model)
     gaps = np.diff(arrivals) * 1e3
-    row = {"target_rate_hz": args.rate, "seconds": elapsed,
+    row = {"model": args.model, "target_rate_hz": args.rate, "seconds": elapsed,
            "commands_sent_per_s": sent_rate, "node_counted_commands_per_s": counted,
            "node_published_per_s": published_rate, "pressure_cmd_received_per_s": n_recv / elapsed,
            "interval_median_ms": float(np.median(gaps)), "interval_p99_ms": float(np.percentile(gaps, 99)),
@@ -145,24 +149,25 @@ def main() -> None:
            "sustains_target": bool(published_rate >= 0.95 * args.rate and counted >= 0.95 * sent_rate)}
     for k, v in row.items():
         print(f"{k:32s} {v:.3f}" if isinstance(v, float) else f"{k:32s} {v}")
-    write_results("allocation_node_rate", {"note": "shared 2-core machine under load; sender and receiver "
+    write_results(args.name, {"note": "shared 2-core machine under load; sender and receiver "
                                                    "share this process"}, [row])
-    plot(gaps, row, "allocation_node_rate")
-    print(f"results in {RESULTS}/allocation_node_rate.{{json,csv,png}}")
+    plot(gaps, row, args.name)
+    print(f"results in {RESULTS}/{args.name}.{{json,csv,png}}")
 
 
-def callback_cost_us(domain: int, calls: int = 20000) -> float:
+def callback_cost_us(domain: int, model: str, calls: int = 20000) -> float:
     """Median time of the node's own work per bend_cmd (check, allocate, rate limit, publish),
     measured in this process by calling the subscription callback directly: the part of the
     budget that is ours, apart from rclpy's executor and DDS."""
     import rclpy
     from geometry_msgs.msg import Vector3Stamped
+    from rclpy.parameter import Parameter
 
     from softcath_ros.nodes.allocation_node import AllocationNode
 
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=domain)
-    node = AllocationNode(context=ctx)
+    node = AllocationNode(context=ctx, parameter_overrides=[Parameter("model", value=model)])
     try:
         msgs = []
         for i in range(calls):
@@ -193,7 +198,7 @@ def plot(gaps_ms, row, name):
     ax.axvline(1e3 / row["target_rate_hz"], color="r", ls="--", label=f"{row['target_rate_hz']:g} Hz period")
     ax.set_xlabel("interval between /softcath/pressure_cmd messages, ms (clipped at 5)")
     ax.set_ylabel("count")
-    ax.set_title(f"allocation_node at {row['target_rate_hz']:g} Hz: published {row['node_published_per_s']:.0f}/s, "
+    ax.set_title(f"allocation_node ({row['model']}) at {row['target_rate_hz']:g} Hz: published {row['node_published_per_s']:.0f}/s, "
                  f"allocated {row['node_counted_commands_per_s']:.0f} cmd/s", fontsize=10)
     ax.legend()
     fig.tight_layout()

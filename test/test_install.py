@@ -28,6 +28,9 @@ print(json.dumps({
     "params": str(find("params", "model_node")),
     "designs": shipped_names("design"), "scenes": shipped_names("scene"),
     "auto": select_model(scene).rung,
+    "tables": shipped_names("surrogate_table"),
+    "default_rung_origin": __import__("softcath_ros.core.models", fromlist=["make_model"]).make_model(
+        "surrogate", load_design("three_channel_5mm"), build=False, cache=False).origin,
     "checkout": str(checkout_root()),
     "foxglove_layout": __import__("pathlib").Path(softcath_ros.__file__).with_name("config").joinpath(
         "foxglove", "softcath.json").is_file(),
@@ -65,6 +68,9 @@ def _check(found: dict, root: Path) -> None:
     assert "free_bending_live" in found["scenes"]
     assert found["auto"]  # model: auto picked a rung from the shipped envelope and scene
     assert found["foxglove_layout"]  # the Foxglove layout ships as package data
+    # the nodes' default rung finds its shipped table in every install route: nothing to build
+    assert {"implemented_5mm_section", "three_channel_5mm_section"} <= set(found["tables"])
+    assert found["default_rung_origin"] == "shipped"
     # the benchmark results (softcath chart's default) exist only in a source checkout
     assert found["checkout"] == (str(REPO) if root == REPO else "None")
 

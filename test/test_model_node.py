@@ -39,9 +39,9 @@ class Running:
     """A model_node process plus a client in this process on the same private domain."""
 
     def __init__(self, *ros_args: str):
-        """The node on the closed form unless ``ros_args`` name a model (its mechanics are checked
+        """The node on the closed form unless ``ros_args`` name a model or a params file (its mechanics are checked
         against the rung that answers every pressure; the default rung: test_model_node_surrogate.py)."""
-        if not any(a.startswith("model:=") for a in ros_args):
+        if not any(a.startswith("model:=") or a == "--params-file" for a in ros_args):
             ros_args = ("-p", "model:=closed_form", *ros_args)
         self.domain = private_domain()
         env = graph_env(self.domain)

@@ -31,3 +31,29 @@ def test_model_node_with_surrogate_and_auto_matches_core(params, rung):
         assert code == 0 and "Traceback" not in err, err
     finally:
         node.close()
+
+
+def test_default_model_node_runs_the_shipped_section_table_and_refuses_common_pressure():
+    """The shipped params file's model: the surrogate of the section rung, from the table shipped with
+    the package (nothing built at start-up; the test cache is empty); a 3-channel command with all
+    channels pressurised beyond the measured common-mode limit gets no pose and its reason on
+    /diagnostics."""
+    from softcath_ros.core.design import load_design
+    from softcath_ros.resources import find
+
+    node = Running("--params-file", str(find("params", "model_node")), "-p", "design:=three_channel_5mm")
+    try:
+        design = load_design("three_channel_5mm")
+        model = make_model("surrogate", design, build=False)
+        pt = node.client.send([12000.0, 5000.0, 0.0])
+        assert pt is not None, "no pose for a valid command"
+        r = predict(model, np.array([[12000.0, 5000.0, 0.0]]))[0]
+        np.testing.assert_allclose(pt.tip_position_m, r.tip_position_m, rtol=0, atol=1e-12)
+        assert node.client.send([12000.0, 15000.0, 6000.0], timeout_s=0.5) is None
+        diag = node.counters(model="surrogate", model_failed=1)
+        assert "common to all three channels" in diag["last_reason"]
+        code, err = node.stop(signal.SIGTERM)
+        assert code == 0 and "Traceback" not in err, err
+        assert "shipped table" in err and "building" not in err
+    finally:
+        node.close()

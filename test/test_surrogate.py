@@ -65,7 +65,7 @@ def test_table_cached_by_design_content(one_channel, tmp_path):
 
 @pytest.mark.parametrize("pairs", ["rotated", "each"])
 def test_three_channel_pairs_match_linear_source_exactly(tmp_path, pairs):
-    """With the closed form as source (linear, so the table is exact), the rotated pair table must
+    """With the closed form as source (linear, so the table is exact to its float32 storage), the rotated pair table must
     give the closed form's answer on every pair and, because a common pressure only stretches a
     linear symmetric body, for commands with all three channels pressurised too."""
     d = load_design("three_channel_5mm")
@@ -80,9 +80,9 @@ def test_three_channel_pairs_match_linear_source_exactly(tmp_path, pairs):
     p[200:250, 2] = 0.0            # the last 50 have all three > 0
     got, ref = m.evaluate(p), cf.evaluate(p)
     assert got.converged.all()
-    np.testing.assert_allclose(got.curvature, ref.curvature, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(got.axial_stretch, ref.axial_stretch, rtol=1e-12, atol=1e-12)
-    assert m.error_bound["common_mode"]["rc_rel_max"] < 1e-9
+    np.testing.assert_allclose(got.curvature, ref.curvature, rtol=1e-6, atol=1e-6)   # the fine grid is float32
+    np.testing.assert_allclose(got.axial_stretch, ref.axial_stretch, rtol=1e-7, atol=1e-7)
+    assert m.error_bound["common_mode"]["rc_rel_max"] < 1e-6
 
 
 @pytest.mark.slow

@@ -116,7 +116,8 @@ class Allocator:
                  hysteresis_deg: float = 0.2, direction_tolerance_deg: float = 0.5, rtol: float = 1e-6,
                  accept_rtol: float = 2e-3, max_iterations: int = 25, fd_step: float = 1e-4):
         """``max_pressure`` (Pa) may lower the design's limit (never raise it), e.g. to stay inside
-        the pressure range where a rung converges."""
+        the pressure range where a rung converges. The limit is also kept within the rung's own
+        ``pressure_range`` (a surrogate table ends where its source stopped converging)."""
         self.model = model
         self.design = model.design
         self.n_channels = model.n_channels
@@ -126,6 +127,7 @@ class Allocator:
                 raise AllocationError(f"max_pressure {max_pressure} Pa must be positive and at most the design's "
                                       f"{self.max_pressure:g} Pa")
             self.max_pressure = float(max_pressure)
+        self.max_pressure = min(self.max_pressure, float(model.pressure_range[1]))
         self.hysteresis = math.radians(hysteresis_deg)
         self.direction_tolerance = math.radians(direction_tolerance_deg)
         # Newton aims at rtol (relative curvature residual). A rung solved iteratively is only
@@ -139,6 +141,8 @@ class Allocator:
 
         # a rung linear in pressure declares it (closed form): its gain inverts exactly
         self.linear = model.info.linear_gain
+        # a rung with pair tables declares their exact local Jacobian (the surrogate): one call per step
+        self._pair_jac = model.info.pair_jacobian and self.n_channels == 3
         self._stretch_per_pa = [float(v) for v in model.stretch_per_pa] if self.linear else None
         if self.linear:
             self._g = [[float(v) for v in row] for row in np.asarray(model.curvature_per_pa)]
@@ -173,20 +177,19 @@ class Allocator:
                 self._sectors.append(_Sector(int(a), int(b), float(self.channel_directions[a]), float(gap),
                                              tuple(float(v) for v in inv.ravel())))
         self._current: _Sector | None = None
+        # the last solution inside reach on the nonlinear path (sector, pair pressures, curvature
+        # vector): a stream of nearby requests starts Newton there (2-3 steps instead of ~6)
+        self._warm = None
 
     # ------------------------------------------------------------------ public API
 
     def reset(self) -> None:
-        """Forget the active sector (hysteresis state)."""
+        """Forget the active sector (hysteresis state) and the last solution."""
         self._current = None
+        self._warm = None
 
-    def allocate(self, curvature, start=None) -> Allocation:
-        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m.
-
-        ``start`` (Pa per channel, optional): a nearby earlier answer, where Newton starts
-        instead of the secant guess when it drives the same pair (a stream of small changes,
-        as from a feedback loop, then costs one or two iterations instead of five or six).
-        """
+    def allocate(self, curvature) -> Allocation:
+        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m."""
         kx, ky = float(curvature[0]), float(curvature[1])
         if not (math.isfinite(kx) and math.isfinite(ky)):
             raise AllocationError(f"curvature ({kx}, {ky}) 1/m is not finite")
@@ -205,7 +208,7 @@ class Allocator:
         ux, uy = math.cos(phi_s), math.sin(phi_s)
         if self.linear:
             return self._pair_linear(sector, (kx, ky), kappa, ux, uy)
-        return self._pair_nonlinear(sector, (kx, ky), kappa, ux, uy, start)
+        return self._pair_nonlinear(sector, (kx, ky), kappa, ux, uy)
 
     def allocate_bend(self, direction: float, angle: float, length: float | None = None) -> Allocation:
         """Pressures for bending angle ``angle`` (rad) towards ``direction`` (rad, atan2(ky, kx)).
@@ -369,19 +372,19 @@ class Allocator:
             raise ModelError(state.message or f"model '{self.model.name}' did not converge")
         return state
 
-    def _pair_nonlinear(self, s: _Sector, requested, kappa, ux, uy, start=None) -> Allocation:
+    def _pair_nonlinear(self, s: _Sector, requested, kappa, ux, uy) -> Allocation:
         target = np.array([kappa * ux, kappa * uy]) + self._rest_curvature
         i00, i01, i10, i11 = s.inv
         q = np.clip([(i00 * ux + i01 * uy) * kappa, (i10 * ux + i11 * uy) * kappa], 0.0, self.max_pressure)
-        if start is not None:
-            p0 = np.asarray(start, dtype=float)
-            others = [i for i in range(self.n_channels) if i not in (s.a, s.b)]
-            if p0.shape == (self.n_channels,) and np.all(np.isfinite(p0)) and not np.any(p0[others] > 0):
-                q = np.clip(p0[[s.a, s.b]], 0.0, self.max_pressure)
+        warm = self._warm
+        if warm is not None and warm[0] is s and float(np.hypot(*(warm[2] - target))) < 0.05 * kappa:
+            q = warm[1]      # a request close to the last one: start from its answer
         try:
             q, (k, stretch), iterations, outside = self._newton(s, q, target)
         except ModelError as exc:
+            self._warm = None
             return self._failed(requested, (s.a, s.b), str(exc))
+        self._warm = None if outside else (s, q.copy(), target)
         if not outside:  # max_curvature is not computed here: it costs a boundary solve
             return self._result(self._full(s, q), requested, k, stretch, float("nan"), False, (s.a, s.b), iterations)
         # The solution leaves the pressure box: find the boundary along the same direction.
@@ -427,36 +430,96 @@ class Allocator:
         scale = max(math.hypot(*(target - self._rest_curvature)), self.deadband)
         pushes = 0
         best = (math.inf, None, None)
+        q_ok = None    # the last point the model answered
         for it in range(1, self.max_iterations + 1):
-            ha = -h if q[0] + h > pmax else h
-            hb = -h if q[1] + h > pmax else h
-            batch = np.zeros((3, self.n_channels))
-            batch[:, s.a] = [q[0], q[0] + ha, q[0]]
-            batch[:, s.b] = [q[1], q[1], q[1] + hb]
-            states = self._eval(batch)
-            k = states.curvature
-            r = k[0] - target
+            local = self._local(s, q, h, pmax)
+            if local is None:
+                # the rung does not answer here (a table ends where its source failed): beyond reach,
+                # or back half-way towards the last answered point
+                if q_ok is None or (allow_outside and pushes >= 2):
+                    if allow_outside:   # (the caller finds the boundary and its state)
+                        return (q if q_ok is None else q_ok), (np.full(2, np.nan), math.nan), it, True
+                    raise ModelError(f"model '{self.model.name}' does not answer near the requested bend")
+                pushes += 1
+                q = 0.5 * (q + q_ok)
+                continue
+            q_ok = q.copy()
+            k, jac, point = local
+            r = k - target
             residual = math.hypot(*r)
             if residual <= self.rtol * scale:
-                return q, self._point(states, 0), it, False
+                return q, point, it, False
             if residual < best[0]:
-                best = (residual, q.copy(), self._point(states, 0))
-            jac = np.column_stack([(k[1] - k[0]) / ha, (k[2] - k[0]) / hb])
-            try:
-                dq = -np.linalg.solve(jac, r)
-            except np.linalg.LinAlgError:
-                raise ModelError("singular Jacobian of the two active channels") from None
+                best = (residual, q.copy(), point)
+            (j00, j01), (j10, j11) = jac.tolist()
+            det = j00 * j11 - j01 * j10
+            if not math.isfinite(det) or det == 0.0:
+                raise ModelError("singular Jacobian of the two active channels")
+            r0, r1 = float(r[0]), float(r[1])
+            dq = np.array([-(j11 * r0 - j01 * r1) / det, -(j00 * r1 - j10 * r0) / det])   # -J^-1 r
             trial = q + dq
             if np.any(trial > pmax * (1.0 + 1e-12)):
                 pushes += 1
                 at_top = np.isclose(q, pmax, rtol=0, atol=1e-9 * pmax) & (trial > pmax)
                 if allow_outside and (pushes >= 3 or np.any(at_top)):
-                    return q, self._point(states, 0), it, True
+                    return q, point, it, True
             q = np.clip(trial, 0.0, pmax)
         if best[0] <= self.accept_rtol * scale:
             return best[1], best[2], self.max_iterations, False
         raise ModelError(f"Newton did not reach rtol {self.rtol} in {self.max_iterations} iterations "
                          f"(best relative residual {best[0] / scale:.2e})")
+
+    def _local(self, s: _Sector, q, h: float, pmax: float):
+        """(curvature, 2 x 2 Jacobian over the pair's pressures, (pressure-induced curvature,
+        stretch)) at pair pressures q: from the rung's declared ``pair_jacobian`` or by finite
+        differences; None where the rung does not answer."""
+        if self._pair_jac:
+            got = self.model.pair_jacobian(s.a, s.b, float(q[0]), float(q[1]))
+            if got is None:
+                return None
+            k, stretch, da, db = got
+            k = np.array(k)
+            return k, np.array([[da[0], db[0]], [da[1], db[1]]]), (k - self._rest_curvature, float(stretch))
+        states, ha, hb = self._jacobian_batch(s, q, h, pmax)
+        if states is None:
+            return None
+        k = states.curvature
+        return k[0], np.column_stack([(k[1] - k[0]) / ha, (k[2] - k[0]) / hb]), self._point(states, 0)
+
+    def _jacobian_batch(self, s: _Sector, q, h: float, pmax: float):
+        """The model at q and one finite-difference step along each active channel (stepping back
+        where forward is above pmax or unanswered); (states, ha, hb), or (None, .., ..) where the
+        model does not answer at q."""
+        ha = -h if q[0] + h > pmax else h
+        hb = -h if q[1] + h > pmax else h
+        for _ in range(2):
+            batch = np.zeros((3, self.n_channels))
+            batch[:, s.a] = [q[0], q[0] + ha, q[0]]
+            batch[:, s.b] = [q[1], q[1], q[1] + hb]
+            states = self.model.evaluate(batch)
+            ok = np.asarray(states.converged, dtype=bool)
+            if ok.all():
+                return states, ha, hb
+            if not ok[0]:
+                break
+            ha, hb = (-ha if not ok[1] else ha), (-hb if not ok[2] else hb)
+        return None, ha, hb
+
+    def _edge(self, s: _Sector, t: float) -> np.ndarray:
+        """Pair pressures of the farthest command the model answers on the ray (1 - t, t) from rest,
+        within the box (two batches of 64: to 1/4096 of the ray)."""
+        w = np.array([1.0 - t, t]) / max(1.0 - t, t)
+        lo, hi = 0.0, self.max_pressure
+        for _ in range(2):
+            scales = np.linspace(lo, hi, 65)[1:]
+            batch = np.zeros((len(scales), self.n_channels))
+            batch[:, s.a], batch[:, s.b] = scales * w[0], scales * w[1]
+            ok = np.asarray(self.model.evaluate(batch).converged, dtype=bool)
+            n = int(np.argmin(ok)) if not ok.all() else len(ok)
+            if n == len(ok):
+                return hi * w
+            lo, hi = (scales[n - 1] if n else lo), scales[n]
+        return lo * w
 
     def _boundary(self, s: _Sector, ux: float, uy: float):
         """Largest curvature along (ux, uy) in sector ``s``: the larger pressure at max_pressure.
@@ -477,6 +540,18 @@ class Allocator:
             kx, ky = state.curvature - self._rest_curvature
             return math.atan2(ux * ky - uy * kx, ux * kx + uy * ky)
 
+        corner = np.zeros(self.n_channels)
+        corner[s.a] = corner[s.b] = pmax
+        if not np.all(self.model.evaluate(corner).converged):
+            # the rung does not answer at the box's corner: the reachable set's edge is where it stops
+            # answering along each ray from rest; find the ray whose edge bends along the request
+            def g(t):
+                return signed_angle(curvature(*self._edge(s, t)))
+            t = brentq(g, 0.0, 1.0, xtol=1e-7, rtol=1e-12) if g(0.0) * g(1.0) < 0 else (0.0 if abs(g(0.0)) < abs(
+                g(1.0)) else 1.0)
+            q = self._edge(s, t)
+            k, stretch = self._point(curvature(*q))
+            return math.hypot(*k), q, (k, stretch), count[0]
         both = curvature(pmax, pmax)
         f_both = signed_angle(both)
         if f_both == 0.0:

@@ -353,7 +353,7 @@ class SteeringController:
         """Pressures for a bend vector (rad): its curvature on the last axial stretch (the integral
         absorbs the small change of stretch), one allocator call."""
         b = np.asarray(bend, dtype=float)
-        res = self.allocator.allocate(b / (self.length * self._stretch), start=self._pressures)
+        res = self.allocator.allocate(b / (self.length * self._stretch))
         if not res.converged or not res.reachable:
             raise SteeringError(f"allocation failed for bend {b.tolist()} rad: {res.message}")
         return res

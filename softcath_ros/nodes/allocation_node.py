@@ -80,8 +80,11 @@ class AllocationNode(Node):
         # requested direction instead of clipping channels one by one at the wire.
         self.design = replace(design, max_pressure=min(float(requested_max), design.max_pressure))
         self.max_pressure = self.design.max_pressure
+        # the rung on the design as shipped (a lowered limit would change its content hash, and a
+        # surrogate would build a table for it): the allocator gets the lowered limit instead
         calibration = load_calibration(calibration_file) if calibration_file else None
-        self.allocator = Allocator(build_model(model_name, self.design, calibration), hysteresis_deg=hysteresis)
+        self.allocator = Allocator(build_model(model_name, design, calibration), max_pressure=self.max_pressure,
+                                   hysteresis_deg=hysteresis)
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
                                   "tip_target farther than this from the base (m) is a fault and rejected",
                                   minimum=0.0)

@@ -75,7 +75,7 @@ class BenchNode(Node):
         p = partial(declare, self)
         protocol_name = p("protocol", "default", "protocol file or shipped protocol name")
         design_name = p("design", "", "design file or shipped design name (default: the protocol's)")
-        model_name = p("model", "closed_form", "model rung the allocator uses for a protocol by direction")
+        model_name = p("model", "surrogate", "model rung the allocator uses for a protocol by direction (as allocation_node)")
         output_dir = p("output_dir", "runs", "folder the recording is written under")
         run_name = p("name", "", "recording name (default: bench_<protocol>_<date>_<time>)")
         record_topics = p("record_topics", list(DEFAULT_TOPICS), "topics recorded to MCAP")

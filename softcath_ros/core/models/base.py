@@ -30,6 +30,9 @@ class RungInfo:
     models: tuple[str, ...] = ("free_bending",)   # scene features it models (FEATURES)
     linear_gain: bool = False        # linear in pressure: ``curvature_per_pa`` (2, C), ``stretch_per_pa`` (C,)
                                      # and the one-command fast path ``curvature_single(p)`` -> (k, stretch)
+    pair_jacobian: bool = False      # answers ``pair_jacobian(i, j, p_i, p_j)``: two active channels, the others at
+                                     # zero -> (curvature, stretch, dk/dp_i, dk/dp_j) in plain floats, or None
+                                     # where it refuses (the surrogate's pair tables; the allocator's Newton)
     solves_backbone: bool = False    # its own backbone and tip pose (BendState.backbone, .tip) replace the arc's,
                                      # and it answers ``solve(pressure, length, loads)`` (planar loads)
     options: tuple[Option, ...] = ()

@@ -56,7 +56,7 @@ from .surrogate_build import direction_error_deg, rc_error
 from ..units import PA_PER_BAR
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-3"
+SURROGATE_VERSION = "surrogate-4"
 _KIND = "surrogate"   # the cache kind of the tables
 _ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
 _COS, _SIN = np.cos(_ROT), np.sin(_ROT)
@@ -111,7 +111,7 @@ class SurrogateModel(BendModel):
     solver_version = SURROGATE_VERSION
     info = RungInfo(
         summary="tables built offline from a higher rung (default section) for one design",
-        models=("free_bending", "device_stiffness"),
+        models=("free_bending", "device_stiffness"), pair_jacobian=True,
         options=options_of(SurrogateSettings, {
             "source": "the rung the table is built from (default section)",
             "source_options": "that rung's options (mesh_size, ...): part of the table's key",
@@ -481,7 +481,7 @@ class SurrogateModel(BendModel):
         from ..cache import _atomic_write
 
         path = Path(path)
-        _atomic_write(path, lambda f: np.savez(f, **self._arrays()))
+        _atomic_write(path, lambda f: np.savez_compressed(f, **self._arrays()))
         return path
 
     @staticmethod
@@ -540,15 +540,21 @@ class SurrogateModel(BendModel):
     def _prepare(self) -> None:
         t = self.table
         self._pmax = float(self.meta["max_pressure"])
+        # What a read-out needs is stored with the table (spline coefficients, the fine grid), so
+        # loading one imports no scipy (start-up time); it is computed once, when built.
         if self.kind == "one_channel":
-            from scipy.interpolate import CubicSpline
+            if "coeffs" not in t:
+                from scipy.interpolate import CubicSpline
 
-            self._spline = CubicSpline(t["p"], t["y"], axis=0)
-            # plain-float copies for the single-command path
-            self._breaks = t["p"].tolist()
-            self._coeffs = self._spline.c  # (4, m, 3)
+                t["coeffs"] = CubicSpline(t["p"], t["y"], axis=0).c    # (4, m, 3): highest power first
+            self._breaks_arr = t["p"]
+            self._breaks = t["p"].tolist()      # plain floats for the single-command path
+            self._coeffs = t["coeffs"]
         else:
-            tab, self._cell_ok = self._fine_tables()
+            if "fine_table" not in t:
+                tab, t["fine_ok"] = self._fine_tables()
+                t["fine_table"] = tab.astype(np.float32)   # half the file; 6e-8 relative, far below the error
+            tab, self._cell_ok = t["fine_table"].astype(np.float64), t["fine_ok"]
             self._nf = self.settings.fine_points - 1
             self._hf = self._pmax / self._nf
             self._flat = np.ascontiguousarray(tab.reshape(-1, 3))
@@ -556,6 +562,8 @@ class SurrogateModel(BendModel):
             self._all_ok = bool(self._cell_ok.all())
             self._cp, self._cs = t["common_p"], t["common_stretch"]
             self._max_common = float(self.meta["max_common_pressure"])
+            self._stretch0 = float(np.interp(0.0, self._cp, self._cs)) if len(self._cp) else 1.0
+            self._rot = [(float(c), float(s)) for c, s in zip(_COS, _SIN)]
 
     def _fine_tables(self) -> tuple[np.ndarray, np.ndarray]:
         """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), and
@@ -591,11 +599,20 @@ class SurrogateModel(BendModel):
         if self.kind == "one_channel":
             if n == 1 and inside[0]:  # one command (model_node): the spline's polynomial in plain floats
                 return self._one_command(float(pressures[0, 0]))
-            y = self._spline(np.clip(pressures[:, 0], 0.0, self._pmax))
+            y = self._piecewise(np.clip(pressures[:, 0], 0.0, self._pmax))
             k, lam = y[:, :2], y[:, 2]
             ok = inside
             reason = "is outside the table's pressure range"
         else:
+            if n == 1 and inside[0]:   # one pair command (model_node): the read-out in plain floats
+                p0, p1, p2 = pressures[0].tolist()
+                zero = 0 if p0 == 0.0 else 1 if p1 == 0.0 else 2 if p2 == 0.0 else -1
+                got = None if zero < 0 else self.pair_jacobian((zero + 1) % 3, (zero + 2) % 3,
+                                                                (p0, p1, p2)[(zero + 1) % 3], (p0, p1, p2)[(zero + 2) % 3],
+                                                                derivatives=False)
+                if got is not None:
+                    return BendState(curvature=np.array([got[0]]), axial_stretch=np.array([got[1]]),
+                                     converged=np.ones(1, dtype=bool))
             k, lam, ok = self._three(pressures, inside)
             reason = "is outside the table's range (negative, above the range, or where the source failed)"
             first = np.flatnonzero(~ok)
@@ -615,6 +632,13 @@ class SurrogateModel(BendModel):
         else:
             msg = ""
         return BendState(curvature=k, axial_stretch=lam, converged=ok, message=msg)
+
+    def _piecewise(self, p: np.ndarray) -> np.ndarray:
+        """The 1-channel cubic spline at pressures p (N,) -> (N, 3)."""
+        j = np.clip(np.searchsorted(self._breaks_arr, p, side="right") - 1, 0, len(self._breaks) - 2)
+        x = (p - self._breaks_arr[j])[:, None]
+        c = self._coeffs[:, j]                      # (4, N, 3)
+        return ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
 
     def _one_command(self, p: float) -> BendState:
         j = min(max(bisect_right(self._breaks, p) - 1, 0), len(self._breaks) - 2)
@@ -645,6 +669,43 @@ class SurrogateModel(BendModel):
             ib = np.minimum((b / self._hf).astype(np.intp), self._nf - 1)
             ok &= self._cell_ok[pair, ia, ib]
         return k, lam, ok
+
+    def pair_jacobian(self, i: int, j: int, p_i: float, p_j: float, derivatives: bool = True):
+        """Channels i and j at p_i, p_j (Pa), the others at zero: (curvature [kx, ky], stretch,
+        dk/dp_i, dk/dp_j) from the same bilinear read-out as ``evaluate`` (its exact derivative
+        inside a cell), in plain floats; None where ``evaluate`` refuses the command."""
+        if self.kind == "one_channel":
+            raise ModelError("model 'surrogate': pair_jacobian needs a 3-channel table")
+        if (i + 1) % 3 == j:
+            r, a, b, swap = i, p_i, p_j, False
+        elif (j + 1) % 3 == i:
+            r, a, b, swap = j, p_j, p_i, True
+        else:
+            raise ModelError(f"model 'surrogate': channels {i}, {j} are not a pair")
+        if not (0.0 <= a <= self._pmax and 0.0 <= b <= self._pmax):
+            return None
+        n, hf = self._nf, self._hf
+        x, y = a / hf, b / hf
+        ia, ib = min(int(x), n - 1), min(int(y), n - 1)
+        pair = 0 if self._rotated else r
+        if not self._all_ok and not self._cell_ok[pair, ia, ib]:
+            return None
+        t, u = x - ia, y - ib
+        k0 = (pair * (n + 1) + ia) * (n + 1) + ib
+        f00, f01, f10, f11 = self._flat[[k0, k0 + 1, k0 + n + 1, k0 + n + 2]].tolist()
+        val = [(1 - t) * ((1 - u) * f00[c] + u * f01[c]) + t * ((1 - u) * f10[c] + u * f11[c]) for c in range(3)]
+        if derivatives:
+            da = [((1 - u) * (f10[c] - f00[c]) + u * (f11[c] - f01[c])) / hf for c in range(2)]
+            db = [((1 - t) * (f01[c] - f00[c]) + t * (f11[c] - f10[c])) / hf for c in range(2)]
+        else:
+            da = db = [0.0, 0.0]
+        k = val[:2]
+        if self._rotated and r:
+            c, s = self._rot[r]
+            k, da, db = ([c * v[0] - s * v[1], s * v[0] + c * v[1]] for v in (k, da, db))
+        if swap:
+            da, db = db, da
+        return k, val[2] + self._stretch0 - 1.0, da, db
 
     def _bilinear(self, pair: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 1 << 15) -> np.ndarray:
         n, f = self._nf, self._flat
