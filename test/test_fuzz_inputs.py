@@ -21,8 +21,10 @@ from softcath_ros.core.scene import scene_from_dict
 from softcath_ros.core.yaml_io import MAX_BYTES, load_yaml, load_yaml_file
 from softcath_ros.resources import find
 
-FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                        HealthCheck.too_slow])
+# Derandomised (the same cases every run, so a failure reproduces) and no example database in the
+# checkout; raise max_examples locally to search further.
+FUZZ = settings(max_examples=150, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 CALL_BUDGET_S = 5.0   # any single load or command; a hang or an expansion shows as a failure
 
 # Values a hostile file can hold: every YAML type, the edges of numbers, huge counts, path tricks.
@@ -187,7 +189,8 @@ NUMBER_TEXT = st.one_of(st.sampled_from(["nan", "inf", "-inf", "1e400", "0", "-1
                         st.floats(allow_nan=False, allow_infinity=False).map(repr))
 
 
-@settings(max_examples=120, deadline=None)
+@settings(max_examples=120, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(["predict", "sweep", "allocate"]), st.lists(NUMBER_TEXT, min_size=3, max_size=3))
 def test_cli_numbers_give_valid_output_or_one_line_exit_2(tmp_path_factory, command, numbers):
     a, b, c = numbers
@@ -208,6 +211,8 @@ def test_cli_numbers_give_valid_output_or_one_line_exit_2(tmp_path_factory, comm
     assert code in (0, 1), (argv, code, err)
     doc = json.loads(out, parse_constant=lambda name: pytest.fail(f"{name} in JSON output of {argv}"))
     assert _finite_numbers(doc)
+    if command == "predict":   # a converged answer has every number (none replaced by null)
+        assert all(None not in r["tip_position_m"] + r["curvature_per_m"] for r in doc["results"] if r["converged"])
     if command == "allocate":
         assert all(0 <= p <= load_design("three_channel_5mm").max_pressure for p in doc["pressures_pa"])
 
