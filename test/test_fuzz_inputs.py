@@ -225,3 +225,72 @@ def test_cli_on_files_that_are_not_recordings_is_one_line_exit_2(tmp_path, conte
     path.write_bytes(content)
     code, _, err = _cli([command, str(path)])
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
+PARAMS = load_yaml_file(find("params", "model_node"))
+
+
+@FUZZ
+@given(st.data())
+def test_params_files_are_checked_at_least_as_strictly_as_rcl(tmp_path_factory, data):
+    """A mutated params file is refused in one line by the runtime's check, or rcl accepts it
+    too (so no accepted file reaches rcl's multi-line RCLError)."""
+    import yaml as pyyaml
+
+    rclpy = pytest.importorskip("rclpy")
+    from softcath_ros.nodes.runtime import check_params_file
+
+    doc = _mutated(PARAMS, data)
+    path = tmp_path_factory.mktemp("params") / "p.yaml"
+    try:
+        path.write_text(pyyaml.safe_dump(doc))
+    except (pyyaml.YAMLError, ValueError, OverflowError):
+        return                                   # not representable as YAML text
+    try:
+        _timed(check_params_file, str(path))
+    except SoftcathError as exc:
+        return _one_line(exc)
+    context = rclpy.Context()
+    rclpy.init(context=context, args=["x", "--ros-args", "--params-file", str(path)])   # must not raise
+    rclpy.shutdown(context=context)
+
+
+@pytest.fixture(scope="module")
+def small_recording(tmp_path_factory):
+    from softcath_ros.recording import BagWriter
+
+    bag = tmp_path_factory.mktemp("rec") / "bench_fuzz"
+    with BagWriter(bag, custom_data={"protocol": "quick"}) as w:
+        w.add_topic("/softcath/bench/angle", "std_msgs/msg/Float64")
+        w.add_metadata("softcath", {"protocol": "quick", "design": "implemented_5mm", "simulated": "true"})
+        w.add_attachment("design.yaml", "application/yaml", b"name: [")
+        for i in range(200):
+            w.write("/softcath/bench/angle", b"\x00\x01\x00\x00" + float(i).hex().encode()[:8], log_time_ns=i + 1)
+            if i % 50 == 49:
+                w.flush()
+    return w.path.read_bytes()
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.data())
+def test_damaged_recordings_recover_or_fail_in_one_line(tmp_path_factory, small_recording, data):
+    """Cut, flipped or spliced bytes of a real recording: `recover` rebuilds it or says in one
+    line why not, and `report` on the result never tracebacks."""
+    blob = bytearray(small_recording)
+    for _ in range(data.draw(st.integers(0, 4))):
+        i = data.draw(st.integers(0, len(blob) - 1))
+        blob[i] = data.draw(st.integers(0, 255))
+    blob = bytes(blob[:data.draw(st.integers(0, len(blob)))])
+    folder = tmp_path_factory.mktemp("damaged") / "bench_fuzz"
+    folder.mkdir()
+    path = folder / "bench_fuzz_0.mcap"
+    path.write_bytes(blob)
+    for argv in (["recover", str(path), "--json"], ["report", str(folder), "--design", "implemented_5mm",
+                                                    "--out", str(folder.parent / "report")]):
+        code, out, err = _cli(argv)
+        assert "Traceback" not in err and code in (0, 2), (argv, code, err)
+        if code == 2:
+            assert len(err.strip().splitlines()) == 1, err
+        elif argv[0] == "recover":
+            assert _finite_numbers(json.loads(out))

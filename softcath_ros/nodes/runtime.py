@@ -125,6 +125,8 @@ def check_params_file(path: str) -> None:
         raise SoftcathError(f"params file {path}: must map node names to {{ros__parameters: {{...}}}}")
 
     def node_entry(value, where: str) -> None:
+        if not where or where.endswith("/"):
+            raise SoftcathError(f"params file {path}: an empty node name ('{where}')")
         if not isinstance(value, dict):
             raise SoftcathError(f"params file {path}: '{where}' must be a mapping with ros__parameters")
         if "ros__parameters" not in value:
@@ -145,9 +147,15 @@ def check_params_file(path: str) -> None:
             raise SoftcathError(f"params file {path}: '{where}' must be a mapping of parameter: value")
         for name, v in value.items():
             at = f"{where}.{name}"
+            if name is None or str(name) == "":
+                raise SoftcathError(f"params file {path}: '{where}' has a parameter without a name")
             if isinstance(v, dict):              # nested names: a.b: value
+                if not v:
+                    raise SoftcathError(f"params file {path}: '{at}' is an empty mapping, not a value")
                 parameters(v, at)
                 continue
+            if isinstance(v, list) and not v:
+                raise SoftcathError(f"params file {path}: '{at}' is an empty list (rcl cannot type it)")
             items = v if isinstance(v, list) else [v]
             for item in items:
                 if item is None or not isinstance(item, (bool, int, float, str)):
