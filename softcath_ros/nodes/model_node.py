@@ -8,15 +8,16 @@ read on entry to the callback). Bad commands are rejected or clamped per
 ``out_of_range`` (core.pressure_command), counted, warned about (throttled) and
 reported on /diagnostics; a model that does not converge publishes nothing.
 
-Commands faster than the rung: a rung that answers a command in under ``INLINE_ANSWER_S``
-(closed form, surrogate: ~10 us, timed at start-up) answers each command in the subscription
-callback, in order, where the latency is lowest. Every slower rung (rod, section, fe3d) answers
-on its own solve thread, newest command first: the callback only stores the command (so the executor,
-and with it /diagnostics, never waits for a solve), and a command that is still waiting when a
-newer one arrives is superseded (counted on /diagnostics) instead of queued. A steering loop
-wants the pose for the pressures it commands now, not for a backlog; answering a queue of stale
-commands would only make every answer later. Commands the middleware drops before the node
-takes them (keep-last history overrun) are counted as ``lost`` from DDS message-lost events.
+Commands faster than the rung: the newest command is answered, never a backlog; the older
+ones waiting are superseded (counted on /diagnostics). A rung that answers a command in under
+``INLINE_ANSWER_S`` (closed form, surrogate: ~10 us, timed at start-up) answers in the
+subscription callback, where the latency is lowest; after each answer the callback takes every
+command that arrived meanwhile from the subscription and answers only the newest, then returns
+(so timers run between). Every slower rung (rod, section, fe3d) answers on its own solve
+thread: the callback only stores the command (so the executor, and with it /diagnostics, never
+waits for a solve), and a command still waiting when a newer one arrives is superseded. A
+steering loop wants the pose for the pressures it commands now; answering a queue of stale
+commands would only make every answer later.
 
 Latency: by default the two outputs are preallocated CDR buffers (nodes/cdr.py) of
 which only the stamp and the doubles are rewritten per command, and the EventsExecutor
@@ -31,7 +32,6 @@ from functools import partial
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -132,9 +132,9 @@ class ModelNode(Node):
         if not self._answers_inline():
             self._solver = threading.Thread(target=self._solve_newest, name="model_node_solve", daemon=True)
             self._solver.start()
-        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
-                                 self._on_command if self._solver is None else self._hand_over, qos,
-                                 event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
+        self._command_sub = self.create_subscription(
+            Float64MultiArray, topics.PRESSURE_CMD, self._on_command_newest if self._solver is None else self._hand_over,
+            qos)
         # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
         self.answer_load = AnswerLoad(time.monotonic())
         self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
@@ -192,8 +192,27 @@ class ModelNode(Node):
                 return False
         return True
 
-    def _on_lost(self, info) -> None:
-        self.counters.lost = int(info.total_count)
+    def _on_command_newest(self, msg: Float64MultiArray) -> None:
+        """Subscription callback for a fast rung: answer ``msg``, then the newest of the commands
+        that arrived meanwhile (the others superseded), and return."""
+        self._on_command(msg)
+        newest = self._newest_waiting()
+        if newest is not None:
+            self._on_command(newest)
+
+    def _newest_waiting(self):
+        """Take every command waiting in the subscription; the newest, or None (the older count as
+        superseded). The executor finds nothing to take for their events and skips them."""
+        sub, newest = self._command_sub, None
+        with sub.handle:
+            while True:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    return newest
+                if newest is not None:
+                    self.counters.superseded += 1
+                    self.counters.last_reason = "command superseded by a newer one before it was answered"
+                newest = taken[0]
 
     def _hand_over(self, msg: Float64MultiArray) -> None:
         """Subscription callback for a solve thread: keep only the newest command."""
