@@ -1,6 +1,7 @@
-"""A bounded flood of hostile messages on every input topic of model_node and allocation_node
-(in-process, one executor): no callback raises, nothing non-finite is published, no published
+"""A bounded flood of hostile messages on every input topic of model_node, allocation_node and
+sim_bench_node (in-process, one executor): no callback raises, nothing non-finite is published, no published
 pressure leaves [0, max_pressure], and /diagnostics keeps reporting."""
+import json
 import math
 import threading
 import time
@@ -40,8 +41,11 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
     from rclpy.parameter import Parameter
     from std_msgs.msg import Float64MultiArray
 
+    from std_msgs.msg import Float64, String
+
     from softcath_ros.nodes.allocation_node import AllocationNode
     from softcath_ros.nodes.model_node import ModelNode
+    from softcath_ros.nodes.sim_bench_node import SimBenchNode
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain())
@@ -52,8 +56,14 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
     from_allocator = []            # what the allocator itself publishes (the probe publishes on pressure_cmd too)
     publish = alloc.pub.publish
     alloc.pub.publish = lambda msg: (from_allocator.append(list(msg.data)), publish(msg))
+    rig = SimBenchNode(context=context)
     probe = rclpy.create_node("hostile_probe", context=context)
-    outputs = {"tip": [], "backbone": [], "pressure": [], "diagnostics": []}
+    outputs = {"tip": [], "backbone": [], "pressure": [], "diagnostics": [], "measured": [], "angle": [],
+               "force": []}
+    probe.create_subscription(Float64MultiArray, topics.PRESSURE_MEASURED, outputs["measured"].append, 1000)
+    probe.create_subscription(Float64, topics.BENCH_ANGLE, outputs["angle"].append, 1000)
+    probe.create_subscription(Float64, topics.BENCH_FORCE, outputs["force"].append, 1000)
+    pub_s = probe.create_publisher(String, topics.BENCH_STEP, 100)
     probe.create_subscription(PoseStamped, topics.TIP_POSE, outputs["tip"].append, 1000)
     probe.create_subscription(PoseArray, topics.BACKBONE, outputs["backbone"].append, 1000)
     probe.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, outputs["pressure"].append, 1000)
@@ -63,7 +73,7 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
     pub_t = probe.create_publisher(PointStamped, topics.TIP_TARGET, 1000)
 
     executor = SingleThreadedExecutor(context=context)
-    for n in (model, alloc, probe):
+    for n in (model, alloc, rig, probe):
         executor.add_node(n)
     failures = []
 
@@ -90,6 +100,13 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
             k.header.frame_id = str(rng.choice([topics.FRAME_ID, topics.FRAME_ID, "", "world", "x" * 300]))
             k.vector.x, k.vector.y, k.vector.z = _hostile(rng, 3)
             pub_k.publish(k)
+            if i % 10 == 0:
+                length = _hostile(rng, 1)[0]
+                pub_s.publish(String(data=str(rng.choice([
+                    f'{{"event": "step_start", "bench": "angle", "sample_length_m": {json.dumps(length)}}}',
+                    '[1, 2]', '"step_start"', '{"event": "step_start"}', "not json", '{"event": "step_start", '
+                    '"bench": "laser", "sample_length_m": 0.02}', '{"event": "step_start", "bench": "force", '
+                    '"sample_length_m": null}']))))
             if i % 3 == 0:
                 t = PointStamped()
                 t.header.frame_id = topics.FRAME_ID
@@ -109,6 +126,11 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
             assert _finite([p.x, p.y, p.z, q.x, q.y, q.z, q.w])
         for bb in outputs["backbone"]:
             assert _finite([v for pose in bb.poses for v in (pose.position.x, pose.position.y, pose.position.z)])
+        assert outputs["measured"] and outputs["angle"] and outputs["force"]
+        rig_limit = rig.rig.max_pressure
+        for m in outputs["measured"]:
+            assert _finite(m.data) and all(-1e4 <= v <= rig_limit + 1e4 for v in m.data)   # + gauge error
+        assert _finite([m.data for m in outputs["angle"]] + [m.data for m in outputs["force"]])
         assert len(outputs["diagnostics"]) >= 2
         for msg in outputs["diagnostics"]:
             for s in msg.status:
@@ -116,7 +138,7 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
                     assert kv.value.lower() not in ("nan", "inf", "-inf"), (s.name, kv.key, kv.value)
     finally:
         executor.shutdown()
-        for n in (model, alloc, probe):
+        for n in (model, alloc, rig, probe):
             n.destroy_node()
         rclpy.try_shutdown(context=context)
 
