@@ -141,7 +141,8 @@ def load_calibration(path) -> dict:
 
     data = load_yaml_file(path)
     if not isinstance(data, dict):
-        raise SoftcathError(f"calibration {path}: must be a mapping (the .calibration.yaml `softcath calibrate` writes)")
+        raise SoftcathError(f"calibration {path}: must be a mapping (the .calibration.yaml that "
+                            "`softcath calibrate` writes)")
     rung = data.get("rung")
     if rung not in available_models():
         raise SoftcathError(f"calibration {path}: field 'rung' = {shown(rung)}: not one of {available_models()}")
