@@ -61,7 +61,8 @@ def diagnostics_summary(reports: list[dict]) -> dict:
     counters = [r for r in reports if not r["name"].endswith("(answer load)")]
 
     def values(key):
-        return [float(r["values"][key]) for r in load if key in r["values"]]
+        # "n/a": no answer in that report's window (no rate measured)
+        return [float(r["values"][key]) for r in load if r["values"].get(key, "n/a") != "n/a"]
 
     out = {"reports": len(load),
            "answer_load_warn_reports": sum(r["level"] != 0 for r in load),

@@ -87,3 +87,62 @@ def test_flood_on_a_slow_rung_answers_the_newest_command_and_diagnostics_keep_co
         node.destroy_node()
         probe.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_flood_on_the_closed_form_answers_the_newest_and_counts_the_rest():
+    """The inline path (closed form, events executor): a flood is not answered as a backlog; what
+    reached the node is answered or superseded, and the last answer is for the last command."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.experimental import EventsExecutor
+    from std_msgs.msg import Float64MultiArray
+
+    from softcath_ros.nodes.model_node import ModelNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=private_domain())
+    node = ModelNode(context=context)
+    probe = rclpy.create_node("flood_probe", context=context)
+    assert node._solver is None, "the closed form answers in the callback"
+    tips = []
+    probe.create_subscription(PoseStamped, topics.TIP_POSE, tips.append, 1000)
+    pub = probe.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, 1000)
+    executor = EventsExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    try:
+        deadline = time.monotonic() + 10.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        n = 5000
+        for i in range(n):
+            pub.publish(Float64MultiArray(data=[5.0 * (i + 1)]))   # up to 25 kPa, within the limit
+        deadline = time.monotonic() + 10.0
+        last = None
+        while time.monotonic() < deadline:
+            time.sleep(0.2)
+            c = node.counters
+            if c.accepted + c.superseded == last:
+                break                                   # settled: nothing more arriving
+            last = c.accepted + c.superseded
+        c = node.counters
+        assert c.rejected == 0 and c.superseded > 0 and c.accepted + c.superseded <= n, vars(c)
+        curvature, stretch = node._fast([5.0 * n])
+        from softcath_ros.core.kinematics import backbone_poses
+
+        positions, _ = backbone_poses(curvature, node.length * stretch, node.n_points)
+        assert tips and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9)
+    finally:
+        stop.set()
+        spinner.join(timeout=5.0)
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)

@@ -182,7 +182,8 @@ def protocol_from_dict(data) -> Protocol:
     channels = tuple(_list(data, "channels", [0]))
     if drive == "channels" and (not channels or not all(
             isinstance(c, int) and not isinstance(c, bool) and 0 <= c < MAX_LIST for c in channels)):
-        raise ProtocolError("channels", list(channels), f"must be a non-empty list of channel indices (0-{MAX_LIST - 1})")
+        raise ProtocolError("channels", list(channels),
+                            f"must be a non-empty list of channel indices (0-{MAX_LIST - 1})")
     directions = tuple(_num({f"directions_deg[{i}]": v}, f"directions_deg[{i}]")
                        for i, v in enumerate(_list(data, "directions_deg", [])))
     if drive == "direction" and not directions:

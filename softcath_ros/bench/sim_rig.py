@@ -103,8 +103,8 @@ class SimulatedRig:
         """Put a sample of ``length`` (m) on the ``bench`` ('angle' or 'force')."""
         if bench not in ("angle", "force"):
             raise ValueError(f"bench {bench!r}: expected 'angle' or 'force'")
-        if not (length > 0):
-            raise ValueError(f"sample length {length!r} m must be positive")
+        if not (isinstance(length, (int, float)) and 0 < length <= 10.0):   # 10 m: a protocol's bound
+            raise ValueError(f"sample length {length!r} m must be positive and finite (at most 10 m)")
         self.bench, self.length = bench, float(length)
 
     def advance(self, dt: float, command) -> None:

@@ -28,8 +28,8 @@ def register(sub) -> None:
                    help="fabrication minimum wall in m for channel-shift, area-ratio, miniaturise (default 0.2 mm)")
     p.add_argument("--max-stretch", type=positive_float, default=None,
                    help="optimise: largest principal stretch allowed in the silicone (default 2.0)")
-    p.add_argument("--workers", type=bounded_int(1, 256), default=None, help="local worker processes (default: one per CPU; "
-                                                             "1 solves in this process)")
+    p.add_argument("--workers", type=bounded_int(1, 256), default=None,
+                   help="local worker processes (default: one per CPU; 1 solves in this process)")
     p.add_argument("--scheduler", default=None,
                    help="address of a Dask distributed scheduler (tcp://host:8786) to run the cases on "
                         "(needs the 'cluster' extra)")

@@ -3,7 +3,8 @@
 ``finite_number``: a value from a file is a number only if it is an int or float (not a bool), fits
 a float and is finite; an integer too large for a float is not a number (``float()`` would raise).
 
-Names that end up in file and folder names (a design's or a protocol's ``name``) are refused, not rewritten, unless they are a plain file-name word: letters, digits and
+Names that end up in file and folder names (a design's or a protocol's ``name``) are refused,
+not rewritten, unless they are a plain file-name word: letters, digits and
 ``_ . -``, starting with a letter or digit, at most 100 characters. So ``../../x`` or ``a/b``
 can never send an output outside its folder, and the name in a file is the name on disk.
 """

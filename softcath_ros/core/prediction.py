@@ -52,14 +52,15 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
     elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)
-    if own_length and model.info.solves_backbone:
-        pos = np.asarray(state.tip.position, dtype=float)
-        quat = np.asarray(state.tip.orientation_xyzw, dtype=float)
-        angle = np.asarray(state.tip.angle, dtype=float)
-    else:
-        arc = length * state.axial_stretch
-        pos, quat = tip_pose(state.curvature, arc)
-        angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
+    with np.errstate(over="ignore", invalid="ignore"):   # overflow is caught below, per command
+        if own_length and model.info.solves_backbone:
+            pos = np.asarray(state.tip.position, dtype=float)
+            quat = np.asarray(state.tip.orientation_xyzw, dtype=float)
+            angle = np.asarray(state.tip.angle, dtype=float)
+        else:
+            arc = length * state.axial_stretch
+            pos, quat = tip_pose(state.curvature, arc)
+            angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.contact_force
     # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
     measured_rc = state.radius_l_over_theta if own_length else None
@@ -68,6 +69,10 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
         k = state.curvature[i]
         kappa = float(np.hypot(*k))
         theta = float(angle[i])
+        converged, reason = bool(state.converged[i]), "" if state.converged[i] else (state.message or "did not converge")
+        finite = np.isfinite(np.concatenate([k, [state.axial_stretch[i], angle[i]], pos[i], quat[i]])).all()
+        if converged and not finite:   # never report inf/nan as an answer
+            converged, reason = False, "non-finite result: the pressure or length is beyond what the rung can represent"
         out.append(Prediction(
             pressures_pa=[float(v) for v in p],
             curvature_per_m=[float(v) for v in k],
@@ -78,9 +83,9 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             bending_angle_rad=float(angle[i]),
             tip_position_m=[float(v) for v in pos[i]],
             tip_orientation_xyzw=[float(v) for v in quat[i]],
-            converged=bool(state.converged[i]),
+            converged=converged,
             solve_time_s=elapsed,
-            reason="" if state.converged[i] else (state.message or "did not converge"),
+            reason=reason,
             contact_force_n=None if contact is None else float(np.asarray(contact)[i])))
     return out
 

@@ -49,6 +49,7 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from .. import topics
 from ..bench.protocol import ProtocolRunner, expand_steps, load_protocol
 from ..bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
+from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..recording import BagWriter, RecordingError
@@ -105,6 +106,8 @@ class BenchNode(Node):
             allocator = Allocator(make_model(model_name, self.design))
         self.steps = expand_steps(self.protocol, self.design.n_channels, self.design.max_pressure, allocator)
         stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
+        if run_name and not is_file_name(run_name):   # it names the recording folder under output_dir
+            raise SoftcathError(f"parameter name = {run_name!r}: {NAME_RULE}")
         name = run_name or f"bench_{self.protocol.name}_{stamp}"
         self.writer = BagWriter(Path(output_dir) / name, flush_period_s=flush_period,
                                 min_free_bytes=min_free_mb << 20, background=True,

@@ -3,11 +3,12 @@
 A node keeps one ``InputCounters`` per input stream, bumps it per message (cheap:
 plain ints) and lets a ``DiagnosticsReporter`` timer publish the totals periodically.
 Level: OK while everything since the last report was accepted, WARN when something
-was clamped, rejected, failed in the model, superseded by a newer command before it was
-answered, or lost by the middleware since then.
+was clamped, rejected, failed in the model or superseded by a newer command before it was
+answered since then.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from .. import topics
@@ -20,17 +21,16 @@ class InputCounters:
     clamped: int = 0         # out of range, clamped into the limits and then used
     model_failed: int = 0    # valid input, but the model did not converge / gave non-finite numbers
     superseded: int = 0      # replaced by a newer command before it was answered (the newest is answered)
-    lost: int = 0            # dropped by the middleware before the node took them (DDS message-lost events)
     last_reason: str = ""    # why the most recent command was rejected, clamped or failed
     extra: dict = field(default_factory=dict)  # fixed key/values shown with the counters
 
     def problems(self) -> int:
-        return self.rejected + self.clamped + self.model_failed + self.superseded + self.lost
+        return self.rejected + self.clamped + self.model_failed + self.superseded
 
     def key_values(self) -> list[tuple[str, str]]:
         kv = [("accepted", str(self.accepted)), ("rejected", str(self.rejected)),
               ("clamped", str(self.clamped)), ("model_failed", str(self.model_failed)),
-              ("superseded", str(self.superseded)), ("lost", str(self.lost)),
+              ("superseded", str(self.superseded)),
               ("last_reason", self.last_reason)]
         return kv + [(k, str(v)) for k, v in self.extra.items()]
 
@@ -60,8 +60,8 @@ class DiagnosticsReporter:
         new_problems = c.problems() - self._problems_at_last_report
         self._problems_at_last_report = c.problems()
         if new_problems:
-            level, message = (DiagnosticStatus.WARN, f"{new_problems} command(s) rejected, clamped, failed, superseded "
-                              f"or lost: {c.last_reason}")
+            level, message = (DiagnosticStatus.WARN, f"{new_problems} command(s) rejected, clamped, failed or "
+                              f"superseded: {c.last_reason}")
         else:
             level, message = DiagnosticStatus.OK, "all commands since the last report accepted"
         status = DiagnosticStatus(level=level, name=self._name, message=message, hardware_id=self._hardware_id,
@@ -85,7 +85,8 @@ class DiagnosticsReporter:
         else:
             level, message = DiagnosticStatus.OK, f"keeping up: busy {r.busy_fraction:.0%} of the time"
         values = {"commands_per_s": f"{r.command_rate_hz:.1f}", "mean_answer_ms": f"{r.mean_answer_s * 1e3:.3f}",
-                  "max_rate_hz": f"{r.max_rate_hz:.1f}", "busy_fraction": f"{r.busy_fraction:.3f}",
+                  # no answer in the window: no rate measured (never 'inf' on the wire)
+                  "max_rate_hz": f"{r.max_rate_hz:.1f}" if math.isfinite(r.max_rate_hz) else "n/a", "busy_fraction": f"{r.busy_fraction:.3f}",
                   "behind": str(r.behind).lower()}
         return DiagnosticStatus(level=level, name=f"{self._name} (answer load)", message=message,
                                 hardware_id=self._hardware_id,

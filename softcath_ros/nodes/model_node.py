@@ -8,15 +8,16 @@ read on entry to the callback). Bad commands are rejected or clamped per
 ``out_of_range`` (core.pressure_command), counted, warned about (throttled) and
 reported on /diagnostics; a model that does not converge publishes nothing.
 
-Commands faster than the rung: a rung that answers a command in under ``INLINE_ANSWER_S``
-(closed form, surrogate: ~10 us, timed at start-up) answers each command in the subscription
-callback, in order, where the latency is lowest. Every slower rung (rod, section, fe3d) answers
-on its own solve thread, newest command first: the callback only stores the command (so the executor,
-and with it /diagnostics, never waits for a solve), and a command that is still waiting when a
-newer one arrives is superseded (counted on /diagnostics) instead of queued. A steering loop
-wants the pose for the pressures it commands now, not for a backlog; answering a queue of stale
-commands would only make every answer later. Commands the middleware drops before the node
-takes them (keep-last history overrun) are counted as ``lost`` from DDS message-lost events.
+Commands faster than the rung: the newest command is answered, never a backlog; the older
+ones waiting are superseded (counted on /diagnostics). A rung that answers a command in under
+``INLINE_ANSWER_S`` (closed form, surrogate: ~10 us, timed at start-up) answers in the
+subscription callback, where the latency is lowest; after each answer the callback takes every
+command that arrived meanwhile from the subscription and answers only the newest, then returns
+(so timers run between). Every slower rung (rod, section, fe3d) answers on its own solve
+thread: the callback only stores the command (so the executor, and with it /diagnostics, never
+waits for a solve), and a command still waiting when a newer one arrives is superseded. A
+steering loop wants the pose for the pressures it commands now; answering a queue of stale
+commands would only make every answer later.
 
 At ``display_rate`` (default 30 Hz, independent of the pose stream) it also publishes the live
 3D view (nodes/live_view.py): the body as a Marker, the backbone as a Path, R_C; the tip on
@@ -35,7 +36,6 @@ from functools import partial
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -135,7 +135,8 @@ class ModelNode(Node):
         self._tip_pub = self.create_publisher(PoseStamped, topics.TIP_POSE, qos)
         self._backbone_pub = self.create_publisher(PoseArray, topics.BACKBONE, qos)
         self._tip, self._backbone = self._new_messages()
-        # Rungs without the fast path solve on their own thread, newest command first (module docstring).
+        # Rungs slower than INLINE_ANSWER_S solve on their own thread; either way the newest command
+        # is answered (module docstring).
         self._pending = None                      # (msg, stamp_ns) waiting for the solve thread
         self._wake = threading.Condition()
         self._stopping = False
@@ -143,9 +144,9 @@ class ModelNode(Node):
         if not self._answers_inline():
             self._solver = threading.Thread(target=self._solve_newest, name="model_node_solve", daemon=True)
             self._solver.start()
-        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD,
-                                 self._on_command if self._solver is None else self._hand_over, qos,
-                                 event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_lost))
+        self._command_sub = self.create_subscription(
+            Float64MultiArray, topics.PRESSURE_CMD, self._on_command_newest if self._solver is None else self._hand_over,
+            qos)
         self.view = None
         if display_rate > 0:
             from .live_view import LiveView
@@ -160,7 +161,8 @@ class ModelNode(Node):
             f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
             f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
             f"executor={self.executor_name}, qos {reliability} depth {depth}, messages {self.preparation}, commands "
-            + ("answered in order" if self._solver is None else "answered newest first on the solve thread"))
+            + ("answered newest first in the callback" if self._solver is None
+               else "answered newest first on the solve thread"))
 
     def _make_model(self, model_name: str):
         """The rung, saying so when start-up waits for it: a surrogate whose table is neither shipped
@@ -203,15 +205,34 @@ class ModelNode(Node):
             t0 = time.perf_counter()
             try:
                 self.model.evaluate(probe)
-            except SoftcathError:
+            except Exception:  # noqa: BLE001 - a rung refusing the probe is timed as slow
                 return False
             best = min(best, time.perf_counter() - t0)
             if best > INLINE_ANSWER_S:
                 return False
         return True
 
-    def _on_lost(self, info) -> None:
-        self.counters.lost = int(info.total_count)
+    def _on_command_newest(self, msg: Float64MultiArray) -> None:
+        """Subscription callback for a fast rung: answer ``msg``, then the newest of the commands
+        that arrived meanwhile (the others superseded), and return."""
+        self._on_command(msg)
+        newest = self._newest_waiting()
+        if newest is not None:
+            self._on_command(newest)
+
+    def _newest_waiting(self):
+        """Take every command waiting in the subscription; the newest, or None (the older count as
+        superseded). The executor finds nothing to take for their events and skips them."""
+        sub, newest = self._command_sub, None
+        with sub.handle:
+            while True:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    return newest
+                if newest is not None:
+                    self.counters.superseded += 1
+                    self.counters.last_reason = "command superseded by a newer one before it was answered"
+                newest = taken[0]
 
     def _hand_over(self, msg: Float64MultiArray) -> None:
         """Subscription callback for a solve thread: keep only the newest command."""
@@ -236,6 +257,8 @@ class ModelNode(Node):
             try:
                 self._answer(msg, stamp_ns)
             except Exception as exc:  # noqa: BLE001 - the thread must outlive one bad solve
+                if self._stopping:    # the node was destroyed during a long solve: nothing to report to
+                    return
                 self._model_failed(f"model raised {type(exc).__name__}: {exc}")
             self.answer_load.record(time.perf_counter() - started)
 

@@ -21,7 +21,7 @@ import signal
 import sys
 from typing import Callable
 
-from ..core.errors import SoftcathError
+from ..core.errors import SoftcathError, shown
 
 EXECUTORS = ("events", "single", "multi")
 
@@ -106,7 +106,7 @@ def check_parameter_rules(argv: list[str]) -> None:
         rule = ros[i + 1] if i + 1 < len(ros) else ""
         name, sep, value = rule.partition(":=")
         if not sep or not name:
-            raise SoftcathError(f"-p {rule!r}: expected NAME:=VALUE")
+            raise SoftcathError(f"-p {shown(rule)}: expected NAME:=VALUE")
         load_yaml(value, f"-p {name}")
 
 
@@ -125,6 +125,8 @@ def check_params_file(path: str) -> None:
         raise SoftcathError(f"params file {path}: must map node names to {{ros__parameters: {{...}}}}")
 
     def node_entry(value, where: str) -> None:
+        if not where or where.endswith("/"):
+            raise SoftcathError(f"params file {path}: an empty node name ('{where}')")
         if not isinstance(value, dict):
             raise SoftcathError(f"params file {path}: '{where}' must be a mapping with ros__parameters")
         if "ros__parameters" not in value:
@@ -145,18 +147,24 @@ def check_params_file(path: str) -> None:
             raise SoftcathError(f"params file {path}: '{where}' must be a mapping of parameter: value")
         for name, v in value.items():
             at = f"{where}.{name}"
+            if name is None or str(name) == "":
+                raise SoftcathError(f"params file {path}: '{where}' has a parameter without a name")
             if isinstance(v, dict):              # nested names: a.b: value
+                if not v:
+                    raise SoftcathError(f"params file {path}: '{at}' is an empty mapping, not a value")
                 parameters(v, at)
                 continue
+            if isinstance(v, list) and not v:
+                raise SoftcathError(f"params file {path}: '{at}' is an empty list (rcl cannot type it)")
             items = v if isinstance(v, list) else [v]
             for item in items:
                 if item is None or not isinstance(item, (bool, int, float, str)):
-                    raise SoftcathError(f"params file {path}: '{at}' = {item!r}: a parameter is a bool, number, "
+                    raise SoftcathError(f"params file {path}: '{at}' = {shown(item)}: a parameter is a bool, number, "
                                         "string or a list of one kind")
                 if isinstance(item, int) and not isinstance(item, bool) and not INT64[0] <= item <= INT64[1]:
-                    raise SoftcathError(f"params file {path}: '{at}' = {item}: integer beyond 64 bits")
+                    raise SoftcathError(f"params file {path}: '{at}' = {shown(item)}: integer beyond 64 bits")
             if isinstance(v, list) and len({type(i) for i in v}) > 1:
-                raise SoftcathError(f"params file {path}: '{at}' = {v!r}: a list parameter holds one kind of value")
+                raise SoftcathError(f"params file {path}: '{at}' = {shown(v)}: a list parameter holds one kind of value")
 
     for key, value in data.items():
         node_entry(value, str(key))

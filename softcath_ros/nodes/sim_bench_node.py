@@ -39,8 +39,13 @@ from .runtime import run_node
 
 # Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
 # would make the simulated readings meaningless.
+# Upper bounds keep every reading finite (a finite but huge noise would overflow to inf).
 RIG_RANGES = {"regulator_time_constant": (1e-4, 10.0), "pressure_shift": (0.0, 0.99),
-              "friction_underread": (0.0, 0.99), "out_of_plane_tilt": (0.0, 1.5), "material_scale": (0.05, 20.0)}
+              "friction_underread": (0.0, 0.99), "out_of_plane_tilt": (0.0, 1.5),
+              "gauge_error": (0.0, 1e6), "gauge_noise": (0.0, 1e6), "hysteresis_pressure": (0.0, 1e6),   # Pa
+              "angle_noise": (0.0, 10.0),                                                             # rad
+              "force_noise": (0.0, 10.0), "scale_offset": (0.0, 10.0),                                # N
+              "seed": (0, 2**32 - 1), "material_scale": (0.05, 20.0)}
 
 
 class SimBenchNode(Node):
@@ -148,10 +153,10 @@ class SimBenchNode(Node):
             ev = json.loads(msg.data)
         except ValueError:
             return
-        if ev.get("event") == "step_start":
+        if isinstance(ev, dict) and ev.get("event") == "step_start":
             try:
                 self.rig.mount(ev["bench"], float(ev["sample_length_m"]))
-            except (KeyError, ValueError) as exc:
+            except (KeyError, ValueError, TypeError) as exc:
                 self.get_logger().warning(f"cannot mount sample from marker: {exc}")
 
     def tick(self):
