@@ -239,3 +239,23 @@ def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
         assert "disk full" in out and "Traceback" not in out
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def test_a_rig_on_the_deprecated_unstamped_topics_still_works(tmp_path, procs):
+    """sim_bench_node with its stamped topics remapped away: bench_node falls back to the old
+    topics with a warning; the analysis reads them from the recording."""
+    from softcath_ros.bench.analysis import rows_from_recording
+    from softcath_ros.recording.reader import read_metadata
+
+    env = private_env()
+    hide = [x for t in topics.rig_topics(1) for x in ("-r", f"{t}:=/hidden{t}")]
+    _start(procs, ["sim_bench_node", "--ros-args", *hide], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=old"], env)
+    out = bench.communicate(timeout=120)[0]
+    assert bench.returncode == 0, out
+    assert "deprecated unstamped" in out
+    path = tmp_path / "old" / "old_0.mcap"
+    assert read_metadata(path)["softcath"]["rig_topics"] == "deprecated unstamped"
+    rows = rows_from_recording(path)
+    assert len(rows) == 5 * 2 and max(r.pressure[0] for r in rows) > 15000.0
