@@ -106,7 +106,9 @@ def test_allocation_node_killed_during_a_direction_protocol_stops_and_vents(tmp_
 
 
 @pytest.mark.timeout(180)
-def test_sigterm_to_characterise_stops_every_child_and_finalises(tmp_path, procs):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_to_characterise_stops_every_child_and_finalises(tmp_path, procs, sig):
+    """The signal to characterise alone (not its process group, as a terminal's Ctrl-C would)."""
     import psutil
 
     from softcath_ros.recording.reader import read_metadata
@@ -115,10 +117,10 @@ def test_sigterm_to_characterise_stops_every_child_and_finalises(tmp_path, procs
     wait_ready(run, timeout_s=150, mark="step 8/28")
     children = psutil.Process(run.pid).children(recursive=True)
     assert {c.name() for c in children} >= {"sim_bench_node", "model_node", "bench_node"}
-    run.send_signal(signal.SIGTERM)
+    run.send_signal(sig)
     out = run.communicate(timeout=60)[0]
-    assert run.returncode == 143, out
-    assert "stopped by SIGTERM" in out and "Traceback" not in out
+    assert run.returncode == 128 + sig, out
+    assert f"stopped by {sig.name}" in out and "Traceback" not in out
     gone, alive = psutil.wait_procs(children, timeout=5)
     assert not alive, [c.name() for c in alive]
     bag = next(tmp_path.glob("bench_quick_*/*.mcap"))
