@@ -261,3 +261,30 @@ def test_a_rig_on_the_deprecated_unstamped_topics_still_works(tmp_path, procs):
     assert read_metadata(path)["softcath"]["rig_topics"] == "deprecated unstamped"
     rows = rows_from_recording(path)
     assert len(rows) == 5 * 2 and max(r.pressure[0] for r in rows) > 15000.0
+
+
+@pytest.mark.timeout(180)
+def test_bench_killed_the_rig_vents_and_characterise_says_recover(tmp_path, procs):
+    """The rig's watchdog (docs/rig.md): bench_node SIGKILLed, the pressure commands stop, the
+    simulated rig vents within its command_timeout; characterise names the dead bench."""
+    import psutil
+
+    env = private_env()
+    rig = _start(procs, ["sim_bench_node"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                           "-p", "name:=b"], env)
+    wait_ready(bench, timeout_s=120, mark="starting protocol")
+    bench.kill()
+    t0 = time.monotonic()
+    wait_ready(rig, timeout_s=10, mark="venting")
+    assert time.monotonic() - t0 < 0.5 + 0.5     # command_timeout 0.5 s, plus scheduling slack
+
+    run = _start(procs, ["softcath", "characterise", "--protocol", str(_short_protocol(tmp_path, trials=3)),
+                         "--output-dir", str(tmp_path / "c")], private_env())
+    wait_ready(run, timeout_s=150, mark="starting protocol")
+    [b] = [c for c in psutil.Process(run.pid).children(recursive=True) if c.name() == "bench_node"]
+    b.kill()
+    out = run.communicate(timeout=60)[0]
+    assert run.returncode == 5, out
+    assert "bench_node killed by SIGKILL during the run" in out and "softcath recover" in out
+    assert "Traceback" not in out

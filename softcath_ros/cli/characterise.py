@@ -233,19 +233,24 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                 print(f"softcath characterise: error: {exc}", file=sys.stderr)
                 return EXIT_DISK_FULL
             raise
-    reason = (summary or {}).get("error") or (
-        "bench_node stopped (recording finalised, incomplete)" if died and code == 130 else f"bench_node exited with {code}")
+    if code < 0 and not summary:  # bench_node itself killed: the rig vents by itself (docs/rig.md)
+        died.append(f"bench_node killed by {signal.Signals(-code).name}")
+        bags = sorted((out_dir / name).glob("*.mcap"))
+        reason = "the recording was not finalised" + (f": softcath recover {bags[0]}" if bags else "")
+    elif summary and summary.get("error"):
+        reason = summary["error"]
+    elif summary:
+        reason = "bench_node stopped (recording finalised, incomplete)"
+    else:
+        reason = f"bench_node exited with {code}; logs in {logs}\n" + "\n".join(lines[-8:])
     if died:
         reason = f"{', '.join(died)} during the run; {reason}"
-    if code in (0, 130) and died:
-        code = EXIT_CHILD_DIED
+        code = code if code in (3, 4, 5, 6) else EXIT_CHILD_DIED
     if summary and summary.get("completed_steps") and code != EXIT_DISK_FULL:  # a torn file needs recover first
         try:
             _done(args, summary, design, t0, logs, incomplete=True)
         except SoftcathError as exc:
             say(f"[characterise] no report on the completed steps: {exc}")
-    elif not summary:
-        reason += f"; logs in {logs}\n" + "\n".join(lines[-8:])
     print(f"softcath characterise: error: {reason}", file=sys.stderr)
     return code if code in (3, 4, 5, 6) else 2
 

@@ -275,7 +275,7 @@ class BenchNode(Node):
         self.state = "done"
 
     def abort(self, message: str, code: int) -> None:
-        """Stop after commands were sent: the abort marker, then zero command for VENT_S, then done."""
+        """Stop after commands were sent: the abort marker, then zero command for ABORT_VENT_S, then done."""
         if self.error is not None:
             return
         self.get_logger().error(message)
