@@ -39,7 +39,11 @@ from ..graph import NodeGraph, stop_process
 
 EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
 EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
-CHILD_GRACE_S = 1.0       # a dead child: bench_node gets this long to notice by itself, then is stopped
+# A child that dies: bench_node gets this long to notice by itself (a rig's topics go stale after
+# its lost_after, 1 s, then 0.3 s of venting), then is stopped. model_node is no part of the rig:
+# bench_node would never notice, so it is stopped at once.
+CHILD_GRACE_S = {"model_node": 0.0}
+RIG_CHILD_GRACE_S = 1.5
 
 
 class Stopped(Exception):
@@ -261,14 +265,14 @@ def _summary(lines: list[str]) -> dict | None:
 
 
 def _watch_children(children, bench, died: list[str]) -> None:
-    """A helper that exits while bench_node runs: bench_node gets CHILD_GRACE_S to notice (a rig's
-    topics go stale), then it is stopped; ``died`` says who and how."""
+    """A helper that exits while bench_node runs: bench_node gets its grace (CHILD_GRACE_S) to
+    notice, then it is stopped; ``died`` says who and how."""
     while bench.poll() is None:
         for node, proc in children:
             code = proc.poll()
             if code is not None:
                 died.append(f"{node} exited ({code})")
-                deadline = time.monotonic() + CHILD_GRACE_S
+                deadline = time.monotonic() + CHILD_GRACE_S.get(node, RIG_CHILD_GRACE_S)
                 while bench.poll() is None and time.monotonic() < deadline:
                     time.sleep(0.05)
                 if bench.poll() is None:
