@@ -83,7 +83,8 @@ def run(args) -> int:
 
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
-    previous = signal.signal(signal.SIGTERM, _raise_stopped)
+    main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
+    previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:
         return RIGS[args.rig].run(args, protocol, design)
     except Stopped as exc:
@@ -91,7 +92,8 @@ def run(args) -> int:
     except KeyboardInterrupt:
         return 128 + signal.SIGINT
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _raise_stopped(signum, frame):
@@ -213,7 +215,8 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
             watchdog.cancel()
         except (Stopped, KeyboardInterrupt) as exc:
             stopped.append(exc.signum if isinstance(exc, Stopped) else int(signal.SIGINT))
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
                 stop_process(bench, 15.0)
                 for line in bench.stdout:
