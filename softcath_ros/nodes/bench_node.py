@@ -387,11 +387,14 @@ class BenchNode(Node):
                 "rig": json.dumps(self.rig_info) if self.rig_info else "unknown",
                 "stale_after_s": self.writer.custom_data["stale_after_s"],
                 "rig_topics": "deprecated unstamped" if self.monitor is self.legacy else "stamped"}
-        self.writer.add_metadata("softcath", meta)
-        self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
         import yaml
-        self.writer.add_attachment("design.yaml", "application/yaml",
-                                   yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
+        try:
+            self.writer.add_metadata("softcath", meta)
+            self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
+            self.writer.add_attachment("design.yaml", "application/yaml",
+                                       yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
+        except RecordingError as exc:
+            return self.fail(f"recording failed: {exc}", EXIT_RECORDING)
         self.state = "checking"
         self.follow.start(t)
         self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); testing that the "
