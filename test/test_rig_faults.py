@@ -288,3 +288,16 @@ def test_bench_killed_the_rig_vents_and_characterise_says_recover(tmp_path, proc
     assert run.returncode == 5, out
     assert "bench_node killed by SIGKILL during the run" in out and "softcath recover" in out
     assert "Traceback" not in out
+
+
+def test_a_pressure_source_that_does_not_follow_is_refused_before_the_first_step(tmp_path, procs):
+    """A regulator with a 10 s time constant reaches 26 % of the test command in follow_timeout."""
+    env = private_env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "regulator_time_constant:=10.0"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=slow"], env)
+    out = bench.communicate(timeout=120)[0]
+    assert bench.returncode == 3, out
+    s = _summary(out)
+    assert "did not follow a test command within 3 s" in s["error"] and s["completed_steps"] == 0
+    assert "starting protocol" not in out
