@@ -25,6 +25,7 @@ def test_monitor_names_missing_stale_and_skewed_topics():
     assert "+4.10 s off this clock" in p["/c"]
     m.seen("/d", 10.1, 0.0)
     assert "stamp is zero" in m.problem("/d", 10.1, 100.1)
+    assert m.problem("/b", 10.1, 100.1, limit=2.0) is None   # the longer limit that ends a run
     m.seen("/e", 10.1)                  # unstamped: arrival only
     assert m.alive("/e", 10.5, 100.5) and not m.alive("/e", 10.7, 100.7)
     with pytest.raises(ValueError):

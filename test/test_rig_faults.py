@@ -106,7 +106,9 @@ def test_allocation_node_killed_during_a_direction_protocol_stops_and_vents(tmp_
 
 
 @pytest.mark.timeout(180)
-def test_sigterm_to_characterise_stops_every_child_and_finalises(tmp_path, procs):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_to_characterise_stops_every_child_and_finalises(tmp_path, procs, sig):
+    """The signal to characterise alone (not its process group, as a terminal's Ctrl-C would)."""
     import psutil
 
     from softcath_ros.recording.reader import read_metadata
@@ -115,10 +117,10 @@ def test_sigterm_to_characterise_stops_every_child_and_finalises(tmp_path, procs
     wait_ready(run, timeout_s=150, mark="step 8/28")
     children = psutil.Process(run.pid).children(recursive=True)
     assert {c.name() for c in children} >= {"sim_bench_node", "model_node", "bench_node"}
-    run.send_signal(signal.SIGTERM)
+    run.send_signal(sig)
     out = run.communicate(timeout=60)[0]
-    assert run.returncode == 143, out
-    assert "stopped by SIGTERM" in out and "Traceback" not in out
+    assert run.returncode == 128 + sig, out
+    assert f"stopped by {sig.name}" in out and "Traceback" not in out
     gone, alive = psutil.wait_procs(children, timeout=5)
     assert not alive, [c.name() for c in alive]
     bag = next(tmp_path.glob("bench_quick_*/*.mcap"))
@@ -239,3 +241,63 @@ def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
         assert "disk full" in out and "Traceback" not in out
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def test_a_rig_on_the_deprecated_unstamped_topics_still_works(tmp_path, procs):
+    """sim_bench_node with its stamped topics remapped away: bench_node falls back to the old
+    topics with a warning; the analysis reads them from the recording."""
+    from softcath_ros.bench.analysis import rows_from_recording
+    from softcath_ros.recording.reader import read_metadata
+
+    env = private_env()
+    hide = [x for t in topics.rig_topics(1) for x in ("-r", f"{t}:=/hidden{t}")]
+    _start(procs, ["sim_bench_node", "--ros-args", *hide], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=old"], env)
+    out = bench.communicate(timeout=120)[0]
+    assert bench.returncode == 0, out
+    assert "deprecated unstamped" in out
+    path = tmp_path / "old" / "old_0.mcap"
+    assert read_metadata(path)["softcath"]["rig_topics"] == "deprecated unstamped"
+    rows = rows_from_recording(path)
+    assert len(rows) == 5 * 2 and max(r.pressure[0] for r in rows) > 15000.0
+
+
+@pytest.mark.timeout(180)
+def test_bench_killed_the_rig_vents_and_characterise_says_recover(tmp_path, procs):
+    """The rig's watchdog (docs/rig.md): bench_node SIGKILLed, the pressure commands stop, the
+    simulated rig vents within its command_timeout; characterise names the dead bench."""
+    import psutil
+
+    env = private_env()
+    rig = _start(procs, ["sim_bench_node"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                           "-p", "name:=b"], env)
+    wait_ready(bench, timeout_s=120, mark="starting protocol")
+    bench.kill()
+    t0 = time.monotonic()
+    wait_ready(rig, timeout_s=10, mark="venting")
+    assert time.monotonic() - t0 < 0.5 + 0.5     # command_timeout 0.5 s, plus scheduling slack
+
+    run = _start(procs, ["softcath", "characterise", "--protocol", str(_short_protocol(tmp_path, trials=3)),
+                         "--output-dir", str(tmp_path / "c")], private_env())
+    wait_ready(run, timeout_s=150, mark="starting protocol")
+    [b] = [c for c in psutil.Process(run.pid).children(recursive=True) if c.name() == "bench_node"]
+    b.kill()
+    out = run.communicate(timeout=60)[0]
+    assert run.returncode == 5, out
+    assert "bench_node killed by SIGKILL during the run" in out and "softcath recover" in out
+    assert "Traceback" not in out
+
+
+def test_a_pressure_source_that_does_not_follow_is_refused_before_the_first_step(tmp_path, procs):
+    """A regulator with a 10 s time constant reaches 26 % of the test command in follow_timeout."""
+    env = private_env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "regulator_time_constant:=10.0"], env)
+    bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}", "-p",
+                           f"output_dir:={tmp_path}", "-p", "name:=slow"], env)
+    out = bench.communicate(timeout=120)[0]
+    assert bench.returncode == 3, out
+    s = _summary(out)
+    assert "did not follow a test command within 3 s" in s["error"] and s["completed_steps"] == 0
+    assert "starting protocol" not in out

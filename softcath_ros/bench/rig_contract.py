@@ -33,29 +33,32 @@ class RigMonitor:
         self._stamp[topic] = stamp_s
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
-    def problem(self, topic: str, now_s: float, clock_s: float | None = None) -> str | None:
-        """Why ``topic`` is not alive at ``now_s`` (monotonic) / ``clock_s`` (the stamps' clock), or None."""
+    def problem(self, topic: str, now_s: float, clock_s: float | None = None,
+                limit: float | None = None) -> str | None:
+        """Why ``topic`` is not alive at ``now_s`` (monotonic) / ``clock_s`` (the stamps' clock), or
+        None; ``limit`` (s) replaces ``stale_after`` (e.g. the longer silence that ends a run)."""
+        limit = self.stale_after if limit is None else limit
         arrival = self._arrival.get(topic)
         if arrival is None:
             return "no message yet"
         age = now_s - arrival
-        if age > self.stale_after:
-            return f"no message for {age:.2f} s (allowed {self.stale_after:g} s)"
+        if age > limit:
+            return f"no message for {age:.2f} s (allowed {limit:g} s)"
         stamp = self._stamp.get(topic)
         if stamp is not None and clock_s is not None:
             skew = clock_s - stamp
             if stamp == 0.0:
                 return "header stamp is zero (the rig must stamp each reading with the time it was taken)"
-            if abs(skew) > self.stale_after:
-                return (f"stamp {skew:+.2f} s off this clock (allowed {self.stale_after:g} s): a stale reading "
+            if abs(skew) > limit:
+                return (f"stamp {skew:+.2f} s off this clock (allowed {limit:g} s): a stale reading "
                         "or unsynchronised clocks")
         return None
 
-    def problems(self, now_s: float, clock_s: float | None = None) -> dict[str, str]:
+    def problems(self, now_s: float, clock_s: float | None = None, limit: float | None = None) -> dict[str, str]:
         """Every topic that is not alive, with the reason."""
         out = {}
         for t in self.topics:
-            why = self.problem(t, now_s, clock_s)
+            why = self.problem(t, now_s, clock_s, limit)
             if why is not None:
                 out[t] = why
         return out

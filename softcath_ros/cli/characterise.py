@@ -43,7 +43,11 @@ from ..graph import NodeGraph, stop_process
 
 EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
 EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
-CHILD_GRACE_S = 1.0       # a dead child: bench_node gets this long to notice by itself, then is stopped
+# A child that dies: bench_node gets this long to notice by itself (a rig's topics go stale after
+# its lost_after, 1 s, then 0.3 s of venting), then is stopped. model_node is no part of the rig:
+# bench_node would never notice, so it is stopped at once.
+CHILD_GRACE_S = {"model_node": 0.0}
+RIG_CHILD_GRACE_S = 1.5
 
 
 class Stopped(Exception):
@@ -88,7 +92,8 @@ def run(args) -> int:
         return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
-    previous = signal.signal(signal.SIGTERM, _raise_stopped)
+    main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
+    previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:
         return RIGS[args.rig].run(args, protocol, design)
     except Stopped as exc:
@@ -96,7 +101,8 @@ def run(args) -> int:
     except KeyboardInterrupt:
         return 128 + signal.SIGINT
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _raise_stopped(signum, frame):
@@ -222,7 +228,8 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
             watchdog.cancel()
         except (Stopped, KeyboardInterrupt) as exc:
             stopped.append(exc.signum if isinstance(exc, Stopped) else int(signal.SIGINT))
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
                 stop_process(bench, 15.0)
                 for line in bench.stdout:
@@ -246,19 +253,24 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                 print(f"softcath characterise: error: {exc}", file=sys.stderr)
                 return EXIT_DISK_FULL
             raise
-    reason = (summary or {}).get("error") or (
-        "bench_node stopped (recording finalised, incomplete)" if died and code == 130 else f"bench_node exited with {code}")
+    if code < 0 and not summary:  # bench_node itself killed: the rig vents by itself (docs/rig.md)
+        died.append(f"bench_node killed by {signal.Signals(-code).name}")
+        bags = sorted((out_dir / name).glob("*.mcap"))
+        reason = "the recording was not finalised" + (f": softcath recover {bags[0]}" if bags else "")
+    elif summary and summary.get("error"):
+        reason = summary["error"]
+    elif summary:
+        reason = "bench_node stopped (recording finalised, incomplete)"
+    else:
+        reason = f"bench_node exited with {code}; logs in {logs}\n" + "\n".join(lines[-8:])
     if died:
         reason = f"{', '.join(died)} during the run; {reason}"
-    if code in (0, 130) and died:
-        code = EXIT_CHILD_DIED
+        code = code if code in (3, 4, 5, 6) else EXIT_CHILD_DIED
     if summary and summary.get("completed_steps") and code != EXIT_DISK_FULL:  # a torn file needs recover first
         try:
             _done(args, summary, design, t0, logs, incomplete=True)
         except SoftcathError as exc:
             say(f"[characterise] no report on the completed steps: {exc}")
-    elif not summary:
-        reason += f"; logs in {logs}\n" + "\n".join(lines[-8:])
     print(f"softcath characterise: error: {reason}", file=sys.stderr)
     return code if code in (3, 4, 5, 6) else 2
 
@@ -269,14 +281,14 @@ def _summary(lines: list[str]) -> dict | None:
 
 
 def _watch_children(children, bench, died: list[str]) -> None:
-    """A helper that exits while bench_node runs: bench_node gets CHILD_GRACE_S to notice (a rig's
-    topics go stale), then it is stopped; ``died`` says who and how."""
+    """A helper that exits while bench_node runs: bench_node gets its grace (CHILD_GRACE_S) to
+    notice, then it is stopped; ``died`` says who and how."""
     while bench.poll() is None:
         for node, proc in children:
             code = proc.poll()
             if code is not None:
                 died.append(f"{node} exited ({code})")
-                deadline = time.monotonic() + CHILD_GRACE_S
+                deadline = time.monotonic() + CHILD_GRACE_S.get(node, RIG_CHILD_GRACE_S)
                 while bench.poll() is None and time.monotonic() < deadline:
                     time.sleep(0.05)
                 if bench.poll() is None:

@@ -19,8 +19,8 @@ allocation_node, whose /softcath/pressure_cmd must keep coming); a timeout names
 topic (exit 3). A rig on the deprecated unstamped topics is accepted with a warning. Then the
 pressure source must follow a small test command (exit 3 if not). During the run a reading
 older than ``stale_after`` s is never used; when any rig topic (or allocation_node's command)
-goes stale the run stops: the "protocol_abort" marker, zero command for 0.5 s, the recording
-finalised and marked incomplete, exit 5. A failing recording (disk full) stops it likewise,
+has been stale for ``lost_after`` s the run stops: the "protocol_abort" marker, zero command for
+0.3 s, the recording finalised and marked incomplete, exit 5. A failing recording (disk full) stops it likewise,
 exit 6. If the rig is sim_bench_node (its node is in the graph or it announced itself on
 /softcath/bench/rig), the recording is marked simulated. At the end it prints
 ``recording: PATH`` and a one-line summary.
@@ -63,7 +63,8 @@ DEFAULT_TOPICS = topics.RECORDED
 # first step, 4 another node commands the pressures, 5 the rig stopped answering mid-run,
 # 6 the recording failed (disk full), 130 interrupted (SIGINT/SIGTERM).
 EXIT_NO_RIG, EXIT_FIGHT, EXIT_RIG_LOST, EXIT_RECORDING, EXIT_INTERRUPTED = 3, 4, 5, 6, 130
-VENT_S = 0.5  # zero command this long at the end (and after an abort), so the last readings are recorded
+VENT_S = 0.5        # zero command this long at the end, so the last readings are recorded
+ABORT_VENT_S = 0.3  # after an abort: the rig is gone or failing; stop within 2 s of its death
 
 
 def _stamp_s(header) -> float:
@@ -87,8 +88,13 @@ class BenchNode(Node):
         self.start_delay = p("start_delay", 1.0, "seconds between finding the rig and the first step",
                              minimum=0.0, maximum=60.0)
         min_free_mb = p("min_free_mb", 64, "stop recording below this much free disk, MiB", minimum=0)
-        stale_after = p("stale_after", 0.5, "a rig reading older than this (s) is stale: never used; "
-                        "mid-run the run stops", minimum=0.05, maximum=60.0)
+        stale_after = p("stale_after", 0.5, "a rig reading older than this (s) is stale: never used, "
+                        "its rig topic is not ready", minimum=0.05, maximum=60.0)
+        self.lost_after = p("lost_after", 1.0, "a rig topic stale this long (s) mid-run: the run stops "
+                            "(at least stale_after)", minimum=0.05, maximum=60.0)
+        if self.lost_after < stale_after:
+            raise SoftcathError(f"parameter lost_after = {self.lost_after:g}: must be at least stale_after "
+                                f"= {stale_after:g}")
         self.follow_pressure = p("follow_test_pressure", 5000.0, "Pa, largest channel of the test command "
                                  "the pressure source must follow before the first step", minimum=100.0)
         self.follow_timeout = p("follow_timeout", 3.0, "s the pressure source gets to follow the test command",
@@ -155,6 +161,8 @@ class BenchNode(Node):
         self.state = "waiting"
         self.t0 = time.monotonic()
         self.t_ready: float | None = None
+        self.t_last_tick = 0.0
+        self.vent_s = VENT_S
         self.t_end: float | None = None
         self.result = 0
         self.error: str | None = None
@@ -270,7 +278,7 @@ class BenchNode(Node):
         self.state = "done"
 
     def abort(self, message: str, code: int) -> None:
-        """Stop after commands were sent: the abort marker, then zero command for VENT_S, then done."""
+        """Stop after commands were sent: the abort marker, then zero command for ABORT_VENT_S, then done."""
         if self.error is not None:
             return
         self.get_logger().error(message)
@@ -287,6 +295,7 @@ class BenchNode(Node):
                                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         self.state = "finishing"
         self.t_end = self.now()
+        self.vent_s = ABORT_VENT_S
 
     def publish_command(self, pressures, bend) -> None:
         if self.by_direction:
@@ -306,6 +315,9 @@ class BenchNode(Node):
 
     def tick(self):
         t = self.now()
+        # A tick long after the previous one: this process was not scheduled, and the readings that
+        # arrived meanwhile are still queued behind this timer. Judge freshness at the next tick.
+        starved, self.t_last_tick = t - self.t_last_tick > 0.25 * self.lost_after, t
         if self.state == "waiting":
             problems = self.rig_problems()
             if not problems:
@@ -324,7 +336,8 @@ class BenchNode(Node):
             if self.recorder.error is not None:
                 return self.abort(f"recording failed: {self.recorder.error}; what was written is kept "
                                   f"(softcath recover {self.writer.path})", EXIT_RECORDING)
-            stale = self.monitor.problems(t, None if self.monitor is self.legacy else self.clock_s())
+            stale = {} if starved else self.monitor.problems(
+                t, None if self.monitor is self.legacy else self.clock_s(), self.lost_after)
             if stale:
                 what = "; ".join(f"{k}: {v}" for k, v in stale.items())
                 if self.state == "checking":
@@ -358,7 +371,7 @@ class BenchNode(Node):
                 self.t_end = t
         elif self.state == "finishing":
             self.vent()
-            if t - self.t_end > VENT_S:  # the last readings and markers reach the recorder
+            if t - self.t_end > self.vent_s:  # the last readings and markers reach the recorder
                 self.state = "done"
 
     def begin(self, t: float):
@@ -377,11 +390,14 @@ class BenchNode(Node):
                 "rig": json.dumps(self.rig_info) if self.rig_info else "unknown",
                 "stale_after_s": self.writer.custom_data["stale_after_s"],
                 "rig_topics": "deprecated unstamped" if self.monitor is self.legacy else "stamped"}
-        self.writer.add_metadata("softcath", meta)
-        self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
         import yaml
-        self.writer.add_attachment("design.yaml", "application/yaml",
-                                   yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
+        try:
+            self.writer.add_metadata("softcath", meta)
+            self.writer.add_attachment("protocol.yaml", "application/yaml", self.protocol.to_yaml().encode())
+            self.writer.add_attachment("design.yaml", "application/yaml",
+                                       yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
+        except RecordingError as exc:
+            return self.fail(f"recording failed: {exc}", EXIT_RECORDING)
         self.state = "checking"
         self.follow.start(t)
         self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); testing that the "

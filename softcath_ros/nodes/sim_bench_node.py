@@ -73,7 +73,7 @@ class SimBenchNode(Node):
         self.rejected = 0
         self.unanswered = 0   # readings not published: the truth rung refused the pressures (outside its table)
         self.command = np.zeros(design.n_channels)
-        self.t_command = -math.inf
+        self.t_command, self.silent = -math.inf, False
         self.pub_pc = [self.create_publisher(FluidPressure, topics.pressure_measured_topic(c), 10)
                        for c in range(design.n_channels)]
         self.pub_angle = self.create_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
@@ -146,7 +146,7 @@ class SimBenchNode(Node):
                                    f"{self.command.size} finite values)", throttle_duration_sec=2.0)
             return
         self.command = p  # the regulator clamps to [0, max_pressure]
-        self.t_command = time.monotonic()
+        self.t_command, self.silent = time.monotonic(), False
 
     def on_step(self, msg):
         try:
@@ -164,9 +164,11 @@ class SimBenchNode(Node):
         # timer fires late, and a fixed dt would slow the simulated rig down.
         now = time.monotonic()
         dt, self.t_last = min(now - self.t_last, 0.5), now
-        if now - self.t_command > self.command_timeout and np.any(self.command != 0):
-            self.command = np.zeros_like(self.command)  # the commander went silent: vent
-            self.get_logger().warning(f"no pressure command for {self.command_timeout:g} s: venting")
+        if now - self.t_command > self.command_timeout and not self.silent:
+            self.silent = True  # the commander went silent: vent (said once per silence)
+            self.command = np.zeros_like(self.command)
+            if self.t_command > -math.inf:
+                self.get_logger().warning(f"no pressure command for {self.command_timeout:g} s: venting")
         self.rig.advance(dt, self.command)
         r = self.rig.read()
         stamp = self.get_clock().now().to_msg()  # when the reading was taken

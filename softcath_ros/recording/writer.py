@@ -234,13 +234,19 @@ class BagWriter:
     # ------------------------------------------------------------------ metadata and attachments
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         with self._lock:
-            self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+            try:
+                self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+            except OSError as exc:
+                raise _write_failed(self.path, exc) from None
 
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int | None = None) -> None:
         now = time.time_ns() if log_time_ns is None else log_time_ns
         with self._lock:
-            self._writer.add_attachment(create_time=now, log_time=now, name=name, media_type=media_type,
-                                        data=data)
+            try:
+                self._writer.add_attachment(create_time=now, log_time=now, name=name, media_type=media_type,
+                                            data=data)
+            except OSError as exc:
+                raise _write_failed(self.path, exc) from None
 
     # ------------------------------------------------------------------ closing
     def bag_metadata(self) -> dict:
