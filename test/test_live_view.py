@@ -109,7 +109,7 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     t0 = time.monotonic()
     sent = 0
     while time.monotonic() - t0 < 2.0:
-        node.client._pub.publish(node.client._msg_type(data=[20000.0]))
+        node.client._pub.publish(node.client._msg_type(data=[20000.0 + sent % 100]))   # each one new
         sent += 1
         node.client.spin_until(lambda: False, 0.005)
     last = node.client.send([30000.0])
@@ -133,6 +133,22 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     code, err = node.stop(signal.SIGTERM)
     assert code == 0 and "Traceback" not in err
     assert "tf2_ros is not importable" in err
+
+
+def test_a_repeated_command_is_drawn_once_a_second(start_node):
+    from visualization_msgs.msg import Marker
+
+    from softcath_ros.nodes.qos import stream_qos
+
+    node = start_node("-p", "display_rate:=20.0")
+    got = []
+    node.client.node.create_subscription(Marker, topics.BODY_MARKER, got.append, stream_qos(100))
+    node.client.spin_until(lambda: False, 1.0)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 2.5:
+        node.client._pub.publish(node.client._msg_type(data=[15000.0]))
+        node.client.spin_until(lambda: False, 0.01)
+    assert 2 <= len(got) <= 4, len(got)   # first one, then about one a second; not 20 Hz
 
 
 def test_display_rate_zero_turns_the_view_off(start_node):
