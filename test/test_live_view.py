@@ -151,6 +151,49 @@ def test_a_repeated_command_is_drawn_once_a_second(start_node):
     assert 2 <= len(got) <= 4, len(got)   # first one, then about one a second; not 20 Hz
 
 
+FAKE_TF2 = r"""
+import json, os
+
+
+class TransformBroadcaster:
+    def __init__(self, node):
+        self.out = os.environ["SOFTCATH_TEST_TF_OUT"]
+
+    def sendTransform(self, t):
+        tr, ro = t.transform.translation, t.transform.rotation
+        with open(self.out, "a") as f:
+            f.write(json.dumps({"parent": t.header.frame_id, "child": t.child_frame_id,
+                                "stamp": [t.header.stamp.sec, t.header.stamp.nanosec],
+                                "xyz": [tr.x, tr.y, tr.z], "q": [ro.x, ro.y, ro.z, ro.w]}) + "\n")
+"""
+
+
+def test_where_tf2_is_importable_the_tip_frame_is_broadcast(start_node, tmp_path):
+    """A test double for tf2_ros's TransformBroadcaster (the pip install has no tf2): the node's
+    broadcast path gives the tip pose under softcath_base, stamped like the pose."""
+    import json
+    import os
+
+    (tmp_path / "tf2_ros").mkdir()
+    (tmp_path / "tf2_ros" / "__init__.py").write_text(FAKE_TF2)
+    out = tmp_path / "tf.jsonl"
+    path = os.pathsep.join([str(tmp_path)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
+    node = start_node("-p", "tip_frame:=catheter_tip", "-p", "display_rate:=20.0",
+                      env_extra={"PYTHONPATH": path, "SOFTCATH_TEST_TF_OUT": str(out)})
+    pt = node.client.send([25000.0])
+    assert pt is not None
+    node.client.spin_until(lambda: out.is_file() and out.read_text().strip(), 3.0)
+    code, err = node.stop(signal.SIGTERM)
+    assert code == 0 and "tf2_ros is not importable" not in err
+    sent = [json.loads(line) for line in out.read_text().splitlines()]
+    assert sent, "no transform broadcast"
+    t = sent[-1]
+    assert (t["parent"], t["child"]) == (topics.FRAME_ID, "catheter_tip")
+    assert t["stamp"][0] * 1_000_000_000 + t["stamp"][1] == pt.stamp_ns
+    np.testing.assert_allclose(t["xyz"], pt.tip_position_m, atol=1e-15)
+    np.testing.assert_allclose(t["q"], pt.tip_orientation_xyzw, atol=1e-15)
+
+
 def test_display_rate_zero_turns_the_view_off(start_node):
     node = start_node("-p", "display_rate:=0.0")
     assert node.client.node.count_publishers(topics.BODY_MARKER) == 0

@@ -38,9 +38,9 @@ def expected_tip(pressure_pa: float):
 class Running:
     """A model_node process plus a client in this process on the same private domain."""
 
-    def __init__(self, *ros_args: str):
+    def __init__(self, *ros_args: str, env_extra: dict | None = None):
         self.domain = private_domain()
-        env = graph_env(self.domain)
+        env = {**graph_env(self.domain), **(env_extra or {})}
         self.proc = subprocess.Popen([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args],
                                      env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         from diagnostic_msgs.msg import DiagnosticArray
