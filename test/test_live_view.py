@@ -118,8 +118,8 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
                            pytest.approx(last.tip_position_m[1], abs=1e-15), 3.0)
     elapsed = time.monotonic() - t0
     n_markers, n_tips = len(got["marker"]), node.client.n_received
-    # At most the display rate (10 Hz), at least half of it on a loaded machine; not one per pose.
-    assert 0.5 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
+    # At most the display rate (10 Hz), at least a third of it on a loaded machine; not one per pose.
+    assert 0.3 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
     assert n_tips > 2 * n_markers and sent > 2 * n_markers, (n_tips, sent, n_markers)
     m = got["marker"][-1]
     assert m.header.frame_id == topics.FRAME_ID and m.type == Marker.TRIANGLE_LIST
