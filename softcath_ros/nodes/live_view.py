@@ -109,6 +109,8 @@ class LiveView:
         except ImportError:
             node.get_logger().info("tf2_ros is not importable (the pip install has no tf2 wheel): the tip "
                                    "frame is not broadcast on /tf; /softcath/tip_pose carries it")
+        except Exception as exc:  # noqa: BLE001 - a broken tf2 install must not take the model down
+            node.get_logger().warning(f"tf2_ros failed to load ({type(exc).__name__}: {exc}): no TF broadcast")
         else:
             self.tf = TransformBroadcaster(node)
         self.timer = node.create_timer(1.0 / rate_hz, self.show)
