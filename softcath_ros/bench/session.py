@@ -11,7 +11,6 @@ only): a ``retract`` marker tells the analysis to drop that step's readings.
 from __future__ import annotations
 
 import json
-import math
 import time
 from datetime import datetime
 from pathlib import Path
