@@ -64,8 +64,8 @@ def start_node():
 
     running = []
 
-    def start(*ros_args):
-        r = Running(*ros_args)
+    def start(*ros_args, env_extra=None):
+        r = Running(*ros_args, env_extra=env_extra)
         running.append(r)
         return r
 

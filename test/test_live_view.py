@@ -109,7 +109,7 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     t0 = time.monotonic()
     sent = 0
     while time.monotonic() - t0 < 2.0:
-        node.client._pub.publish(node.client._msg_type(data=[20000.0]))
+        node.client._pub.publish(node.client._msg_type(data=[20000.0 + sent % 100]))   # each one new
         sent += 1
         node.client.spin_until(lambda: False, 0.005)
     last = node.client.send([30000.0])
@@ -118,8 +118,8 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
                            pytest.approx(last.tip_position_m[1], abs=1e-15), 3.0)
     elapsed = time.monotonic() - t0
     n_markers, n_tips = len(got["marker"]), node.client.n_received
-    # At most the display rate (10 Hz), at least half of it on a loaded machine; not one per pose.
-    assert 0.5 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
+    # At most the display rate (10 Hz), at least a third of it on a loaded machine; not one per pose.
+    assert 0.3 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
     assert n_tips > 2 * n_markers and sent > 2 * n_markers, (n_tips, sent, n_markers)
     m = got["marker"][-1]
     assert m.header.frame_id == topics.FRAME_ID and m.type == Marker.TRIANGLE_LIST
@@ -133,6 +133,65 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     code, err = node.stop(signal.SIGTERM)
     assert code == 0 and "Traceback" not in err
     assert "tf2_ros is not importable" in err
+
+
+def test_a_repeated_command_is_drawn_once_a_second(start_node):
+    from visualization_msgs.msg import Marker
+
+    from softcath_ros.nodes.qos import stream_qos
+
+    node = start_node("-p", "display_rate:=20.0")
+    got = []
+    node.client.node.create_subscription(Marker, topics.BODY_MARKER, got.append, stream_qos(100))
+    node.client.spin_until(lambda: False, 1.0)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 2.5:
+        node.client._pub.publish(node.client._msg_type(data=[15000.0]))
+        node.client.spin_until(lambda: False, 0.01)
+    assert 2 <= len(got) <= 4, len(got)   # first one, then about one a second; not 20 Hz
+
+
+FAKE_TF2 = r"""
+import json, os
+
+
+class TransformBroadcaster:
+    def __init__(self, node):
+        self.out = os.environ["SOFTCATH_TEST_TF_OUT"]
+
+    def sendTransform(self, t):
+        tr, ro = t.transform.translation, t.transform.rotation
+        with open(self.out, "a") as f:
+            f.write(json.dumps({"parent": t.header.frame_id, "child": t.child_frame_id,
+                                "stamp": [t.header.stamp.sec, t.header.stamp.nanosec],
+                                "xyz": [tr.x, tr.y, tr.z], "q": [ro.x, ro.y, ro.z, ro.w]}) + "\n")
+"""
+
+
+def test_where_tf2_is_importable_the_tip_frame_is_broadcast(start_node, tmp_path):
+    """A test double for tf2_ros's TransformBroadcaster (the pip install has no tf2): the node's
+    broadcast path gives the tip pose under softcath_base, stamped like the pose."""
+    import json
+    import os
+
+    (tmp_path / "tf2_ros").mkdir()
+    (tmp_path / "tf2_ros" / "__init__.py").write_text(FAKE_TF2)
+    out = tmp_path / "tf.jsonl"
+    path = os.pathsep.join([str(tmp_path)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
+    node = start_node("-p", "tip_frame:=catheter_tip", "-p", "display_rate:=20.0",
+                      env_extra={"PYTHONPATH": path, "SOFTCATH_TEST_TF_OUT": str(out)})
+    pt = node.client.send([25000.0])
+    assert pt is not None
+    node.client.spin_until(lambda: out.is_file() and out.read_text().strip(), 3.0)
+    code, err = node.stop(signal.SIGTERM)
+    assert code == 0 and "tf2_ros is not importable" not in err
+    sent = [json.loads(line) for line in out.read_text().splitlines()]
+    assert sent, "no transform broadcast"
+    t = sent[-1]
+    assert (t["parent"], t["child"]) == (topics.FRAME_ID, "catheter_tip")
+    assert t["stamp"][0] * 1_000_000_000 + t["stamp"][1] == pt.stamp_ns
+    np.testing.assert_allclose(t["xyz"], pt.tip_position_m, atol=1e-15)
+    np.testing.assert_allclose(t["q"], pt.tip_orientation_xyzw, atol=1e-15)
 
 
 def test_display_rate_zero_turns_the_view_off(start_node):

@@ -2,7 +2,6 @@
 import json
 import math
 import os
-import re
 import signal
 import subprocess
 import sys
@@ -61,14 +60,17 @@ def report_form(text: str) -> list[str]:
 
 def test_entries_are_parsed_and_bad_ones_refused():
     mp = 35000.0
-    assert parse_entry("12.5", "angle", mp).value == 12.5
+    assert parse_entry("12.5", "angle", mp).values == (12.5,)
     e = parse_entry(" 7 @ 0.2 ", "force", mp)
-    assert (e.kind, e.value, e.gauge_bar) == ("reading", 7.0, 0.2)
+    assert (e.kind, e.values, e.gauge_bar) == ("reading", (7.0,), 0.2)
+    assert parse_entry("12 12.5, 13 @0.1", "angle", mp).values == (12.0, 12.5, 13.0)
     assert [parse_entry(x, "angle", mp).kind for x in ("u", "s", "q", "?")] == ["undo", "skip", "quit", "help"]
     for text, bench, words in (("abc", "angle", "not a number"), ("361", "angle", "outside 0-360"),
                                ("-0.1", "angle", "outside 0-360"), ("-2", "force", "negative"),
                                ("nan", "force", "not a number"), ("", "angle", "empty"),
-                               ("5 @ 0.5", "angle", "max_pressure"), ("5 @ x", "force", "not a number of bar")):
+                               ("5 @ 0.5", "angle", "max_pressure"), ("5 @ x", "force", "not a number of bar"),
+                               ("12 400", "angle", "outside 0-360"), ("3 -1", "force", "negative"),
+                               ("@ 0.1", "angle", "no reading")):
         msg = parse_entry(text, bench, mp)
         assert isinstance(msg, str) and words in msg, (text, msg)
 
@@ -104,6 +106,8 @@ def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, impleme
         lines.append(f"{v:g}")
         if i == 30:
             lines += ["u", f"{v:g} @ {s.pressures[0] / 1e5 + 0.002:.3f}"]  # undone, re-entered with the gauge
+        if i == 62:
+            lines += ["u", f"{v:g} {v + 0.5:g} {v + 1:g}"]                  # re-entered as three readings
     stdin = "\n".join(lines) + "\n"
     proc = subprocess.run(SOFTCATH + ["characterise", "--rig", "manual", "--output-dir", str(tmp_path), "--json"],
                           input=stdin, capture_output=True, text=True, timeout=100)
@@ -111,15 +115,19 @@ def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, impleme
     out = json.loads(proc.stdout)
     assert (out["outcome"], out["n_steps"], out["readings"], out["skipped"], out["refused"]) == \
         ("complete", 90, 90, 0, 4)
-    assert proc.stderr.count("refused:") == 4 and proc.stderr.count("undone: step") == 2
+    assert proc.stderr.count("refused:") == 4 and proc.stderr.count("undone: step") == 3
     # Every entry is in the recording, in order, with the value typed (the undone ones retracted).
     angles = [m.message.data for m in iter_messages(out["recording"], [topics.BENCH_ANGLE])]
     forces = [m.message.data for m in iter_messages(out["recording"], [topics.BENCH_FORCE])]
     markers = [json.loads(m.message.data) for m in iter_messages(out["recording"], [topics.BENCH_STEP])]
-    assert len(angles) + len(forces) == 92   # 90 + the two taken back
-    assert sum(e["event"] == "retract" for e in markers) == 2
+    assert len(angles) + len(forces) == 90 + 3 + 2   # 90 + the three taken back + step 63's two more
+    assert sum(e["event"] == "retract" for e in markers) == 3
     rows = rows_from_recording(out["recording"])
-    assert sorted(r.step for r in rows) == list(range(90))   # one reading per step, none undone left
+    # one reading per step (three for step 63), none of the undone ones left
+    assert sorted(r.step for r in rows) == sorted(list(range(90)) + [62, 62])
+    assert steps[62].bench == "force" and steps[60].bench == "force" and steps[60].level == 0   # its tare
+    assert [r.force for r in rows if r.step == 62] == \
+        pytest.approx([(values[62] + d - values[60]) * 1e-3 * STANDARD_GRAVITY for d in (0, 0.5, 1)], abs=1e-12)
     by_step = {r.step: r for r in rows}
     for s, v in zip(steps, values):
         r = by_step[s.index]

@@ -38,13 +38,13 @@ def expected_tip(pressure_pa: float):
 class Running:
     """A model_node process plus a client in this process on the same private domain."""
 
-    def __init__(self, *ros_args: str):
+    def __init__(self, *ros_args: str, env_extra: dict | None = None):
         """The node on the closed form unless ``ros_args`` name a model or a params file (its mechanics are checked
         against the rung that answers every pressure; the default rung: test_model_node_surrogate.py)."""
         if not any(a.startswith("model:=") or a == "--params-file" for a in ros_args):
             ros_args = ("-p", "model:=closed_form", *ros_args)
         self.domain = private_domain()
-        env = graph_env(self.domain)
+        env = {**graph_env(self.domain), **(env_extra or {})}
         self.proc = subprocess.Popen([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args],
                                      env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         from diagnostic_msgs.msg import DiagnosticArray

@@ -198,7 +198,8 @@ def import_csv(csv_path, design, output_dir, name: str | None = None) -> dict:
             for r in readings:
                 p = list(step.pressures)
                 p[r["channel"]] = r["measured_pa"]
-                session.reading(step, p, angle=r.get("angle_rad"), force=r.get("force_n"), csv_row=r["row"])
+                session.reading(step, p, [r["angle_rad"] if step.bench == "angle" else r["force_n"]],
+                                csv_row=r["row"])
         complete = True
     finally:
         session.close(complete, "imported" if complete else "import interrupted")

@@ -4,7 +4,8 @@ Readings as the published bench took them: the bending angle in degrees off the 
 paper (angle bench) and the scale in grams (force bench; the analysis subtracts the reading
 at 0 bar of the same trial, the tare, so type what the scale shows). A reading may carry the
 gauge pressure it was taken at, ``READING @ BAR`` (default: the commanded pressure, and the
-marker says so). Each entry is written and fsynced as it is made (bench.session), so Ctrl-C,
+marker says so). Several readings of the step on one line, separated by spaces, are its
+samples. Each entry is written and fsynced as it is made (bench.session), so Ctrl-C,
 a closed terminal or a crash loses nothing entered.
 
 At each prompt: a number, ``u`` (undo the last entry: that step is asked again), ``s``
@@ -24,7 +25,8 @@ from .protocol import Step
 from .session import BenchSession, grams_to_newton
 
 HELP = ("type the reading (angle bench: degrees 0-360; force bench: grams as the scale shows, "
-        "tare at 0 bar), optionally '@ BAR' with the gauge pressure; u = undo the last entry, "
+        "tare at 0 bar; several readings of the step separated by spaces), optionally '@ BAR' with "
+        "the gauge pressure; u = undo the last entry, "
         "s = skip this step, q = stop and save, ? = this help")
 
 
@@ -32,7 +34,7 @@ HELP = ("type the reading (angle bench: degrees 0-360; force bench: grams as the
 class Entry:
     """What the operator typed for a step: a value (deg or g), the gauge pressure (bar) or None."""
     kind: str                      # "reading" | "skip" | "undo" | "quit" | "help"
-    value: float | None = None
+    values: tuple[float, ...] = ()  # one or more readings of the step
     gauge_bar: float | None = None
 
 
@@ -50,14 +52,19 @@ def parse_entry(text: str, bench: str, max_pressure: float) -> Entry | str:
     if not t:
         return "empty entry: type the reading, or u / s / q (? for help)"
     reading, _, gauge = t.partition("@")
-    value = _number(reading)
     unit = "degrees" if bench == "angle" else "grams"
-    if value is None:
-        return f"'{text.strip()}' is not a number of {unit} (or u / s / q; ? for help)"
-    if bench == "angle" and not 0.0 <= value <= 360.0:
-        return f"angle {value:g} deg is outside 0-360 degrees"
-    if bench == "force" and value < 0:
-        return f"mass {value:g} g is negative: the scale is tared at 0 bar, type what it shows"
+    values = []
+    for word in reading.replace(",", " ").split():
+        value = _number(word)
+        if value is None:
+            return f"'{word}' is not a number of {unit} (or u / s / q; ? for help)"
+        if bench == "angle" and not 0.0 <= value <= 360.0:
+            return f"angle {value:g} deg is outside 0-360 degrees"
+        if bench == "force" and value < 0:
+            return f"mass {value:g} g is negative: the scale is tared at 0 bar, type what it shows"
+        values.append(value)
+    if not values:
+        return "no reading before '@': type the reading, then '@ BAR'"
     gauge_bar = None
     if gauge.strip():
         gauge_bar = _number(gauge)
@@ -66,7 +73,7 @@ def parse_entry(text: str, bench: str, max_pressure: float) -> Entry | str:
         if gauge_bar < 0 or gauge_bar * PA_PER_BAR > max_pressure * (1 + 1e-9):
             return (f"gauge pressure {gauge_bar:g} bar is outside [0, max_pressure "
                     f"{max_pressure / PA_PER_BAR:g} bar]: vent and set the step's pressure")
-    return Entry("reading", value, gauge_bar)
+    return Entry("reading", tuple(values), gauge_bar)
 
 
 def _number(text: str) -> float | None:
@@ -141,12 +148,10 @@ class ManualBench:
                 gauge = entry.gauge_bar
                 measured = list(step.pressures) if gauge is None else self._gauge_pressures(step, gauge)
                 source = "commanded" if gauge is None else "gauge"
-                if step.bench == "angle":
-                    self.session.reading(step, measured, angle=math.radians(entry.value),
-                                         typed=f"{entry.value:g} deg", pressure_source=source)
-                else:
-                    self.session.reading(step, measured, force=grams_to_newton(entry.value),
-                                         typed=f"{entry.value:g} g", pressure_source=source)
+                unit, convert = ("deg", math.radians) if step.bench == "angle" else ("g", grams_to_newton)
+                self.session.reading(step, measured, [convert(v) for v in entry.values],
+                                     typed=" ".join(f"{v:g}" for v in entry.values) + f" {unit}",
+                                     pressure_source=source)
                 self.done.append((i, "reading"))
                 i += 1
         return "complete"

@@ -11,7 +11,6 @@ only): a ``retract`` marker tells the analysis to drop that step's readings.
 from __future__ import annotations
 
 import json
-import math
 import time
 from datetime import datetime
 from pathlib import Path
@@ -85,21 +84,17 @@ class BenchSession:
         self._write(topics.BENCH_STEP, json.dumps(ev), t)
 
     # ------------------------------------------------------------------ entries
-    def reading(self, step: Step, pressures_measured, *, angle: float | None = None,
-                force: float | None = None, samples: int = 1, **extra) -> None:
-        """One step's reading: ``angle`` (rad) on the angle bench or ``force`` (N, untared scale
-        reading) on the force bench, at ``pressures_measured`` (Pa per channel). ``samples``
-        repeats the sample marker (imported data with several readings write one entry each)."""
-        p = [float(x) for x in pressures_measured]
+    def reading(self, step: Step, pressures_measured, values, **extra) -> None:
+        """One step's entry: its readings ``values`` (one or more; rad on the angle bench, N of
+        untared scale reading on the force bench), each followed by its sample marker, at
+        ``pressures_measured`` (Pa per channel). ``extra`` goes into the step_start marker."""
+        topic = topics.BENCH_ANGLE if step.bench == "angle" else topics.BENCH_FORCE
         self._marker({"event": "step_start", **extra}, step)
         self._write(topics.PRESSURE_CMD, list(step.pressures))
-        self._write(topics.PRESSURE_MEASURED, p)
-        if angle is not None:
-            self._write(topics.BENCH_ANGLE, float(angle))
-        if force is not None:
-            self._write(topics.BENCH_FORCE, float(force))
+        self._write(topics.PRESSURE_MEASURED, [float(x) for x in pressures_measured])
         self._marker({"event": "settled", "settled": True, "settle_time_s": 0.0}, step)
-        for k in range(samples):
+        for k, v in enumerate(values):
+            self._write(topic, float(v))
             self._marker({"event": "sample", "sample": k}, step)
         self._marker({"event": "step_end"}, step)
         self.entries += 1

@@ -47,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def command_names() -> list[str]:
+    """The subcommands as typed (a module may register another name: import_csv -> import)."""
+    parser = build_parser()
+    return [name for action in parser._subparsers._group_actions for name in action.choices]
+
+
 def main(argv: list[str] | None = None) -> int:
     from ..graph import default_to_localhost_discovery
 

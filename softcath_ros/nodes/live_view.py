@@ -1,7 +1,8 @@
 """model_node's live 3D view: the body as a Marker, the backbone as a Path, R_C, the tip on TF.
 
 At ``display_rate`` (a timer, independent of the pose stream) the latest accepted prediction
-is published, if there is a new one: ``/softcath/body_marker`` (visualization_msgs/Marker,
+is published, if there is a new one (a repeat of the shown command only once a second: a
+bench dwelling on a step does not fill its recording with identical 55 kB markers): ``/softcath/body_marker`` (visualization_msgs/Marker,
 TRIANGLE_LIST: a tube of the outer diameter along the backbone, channel surfaces coloured by
 pressure, core.body_mesh), ``/softcath/backbone_path`` (nav_msgs/Path) and
 ``/softcath/radius_l_over_theta`` (std_msgs/Float64, R_C = l / theta of the design length, m;
@@ -19,6 +20,7 @@ then no TF is broadcast, and the node says so once at start-up.
 from __future__ import annotations
 
 import struct
+import time
 
 import numpy as np
 from nav_msgs.msg import Path
@@ -96,6 +98,9 @@ class LiveView:
         self.pub_radius = node.create_publisher(Float64, topics.RADIUS_L_OVER_THETA, qos)
         self.latest = None        # (stamp ns, positions (n, 3), quats (n, 4), pressures (C,))
         self._shown = None
+        self._shown_pressures = None
+        self._t_published = 0.0
+        self.keepalive_s = 1.0
         self.published = 0
         self.tip_frame = tip_frame
         self.tf = None
@@ -104,6 +109,8 @@ class LiveView:
         except ImportError:
             node.get_logger().info("tf2_ros is not importable (the pip install has no tf2 wheel): the tip "
                                    "frame is not broadcast on /tf; /softcath/tip_pose carries it")
+        except Exception as exc:  # noqa: BLE001 - a broken tf2 install must not take the model down
+            node.get_logger().warning(f"tf2_ros failed to load ({type(exc).__name__}: {exc}): no TF broadcast")
         else:
             self.tf = TransformBroadcaster(node)
         self.timer = node.create_timer(1.0 / rate_hz, self.show)
@@ -114,6 +121,14 @@ class LiveView:
             return
         self._shown = latest
         stamp_ns, positions, quats, pressures = latest
+        # The same command again (a bench dwelling on a step): nothing new to draw; once a second
+        # anyway, so a viewer that joins late gets the body.
+        now = time.monotonic()
+        if self._shown_pressures is not None and np.array_equal(pressures, self._shown_pressures) and \
+                now - self._t_published < self.keepalive_s:
+            return
+        self._shown_pressures = np.array(pressures, copy=True)
+        self._t_published = now
         self.mesh.triangle_list(positions, quats, pressures, out_points=self._points, out_colours=self._colours)
         self._marker.set_stamp(stamp_ns)
         self.pub_marker.publish(self._marker.to_bytes())
