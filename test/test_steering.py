@@ -188,3 +188,13 @@ def test_rig_actuator_lag_and_material_scale():
                                                                      actuator_time_constant=0.016))
     rig.advance(0.016, [3e4, 0, 0])
     assert rig.actuated_pressures[0] == pytest.approx(3e4 * (1 - math.exp(-1)), rel=0.01)
+
+
+@pytest.mark.parametrize("argv, words", [(["--duration", "-1"], "--duration"), (["--drop", "1.5"], "--drop"),
+                                         (["--design", "no_such_design"], "no_such_design")])
+def test_steer_sim_bad_input_is_one_line_exit_2(argv, words, capsys):
+    from softcath_ros.cli import main
+
+    assert main(["steer-sim", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("softcath steer-sim: error:") and words in err[0]

@@ -88,7 +88,12 @@ def run(args) -> int:
         raise SoftcathError(f"--duration {args.duration} s must be positive")
     if not 0 <= args.drop < 1 or not 0 <= args.latency < 10:
         raise SoftcathError("--drop must lie in [0, 1) and --latency in [0, 10) s")
+    from ..core.design import load_design
+
+    load_design(args.design)   # a wrong name or file is one line here, not a node that fails to start
     max_pressure = STEERING_MAX_PRESSURE if args.max_pressure is None else args.max_pressure
+    if not (max_pressure > 0 and math.isfinite(max_pressure)):
+        raise SoftcathError(f"--max-pressure {max_pressure} Pa must be positive")
     rig = steering_rig_params()
     mode = "open_loop" if args.open_loop else args.mode
     name = f"steer_{args.trajectory}_{mode}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"

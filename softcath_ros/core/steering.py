@@ -13,7 +13,7 @@ exactly instead of linearised.
 - Feed-forward: the Allocator on the model rung (core/allocation.py), with a lead of
   ``lead_time`` seconds on its pressures (p + lead_time dp/dt) that cancels the known
   first-order lag of regulator and actuator, so a moving target is not followed one lag
-  behind (aiming ahead on the target instead was measured worse: docs/steering.md). Steps
+  behind. Steps
   (a change above ``max_lead_step`` between two allocations) get no lead.
 - Feedback, mode ``integral``: integral action on the measured bend error (gain fixed at 1).
   Its gain is capped by the delay the loop sees (the measurements' age on arrival plus the

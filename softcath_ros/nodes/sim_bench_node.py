@@ -113,9 +113,9 @@ class SimBenchNode(Node):
         values = {name: p(f"tracker_{name}", default, f"tip tracker: {name} (bench/sim_rig.py TrackerParams)",
                           minimum=0.0, maximum=0.99 if name == "drop_fraction" else None)
                   for name, default in asdict(TrackerParams()).items()}
-        if values["rate_hz"] <= 0:
-            raise SoftcathError("parameter tracker_rate_hz must be positive")
         self.tracker = TipTracker(TrackerParams(**values))
+        if values["rate_hz"] <= 0:   # no tracker
+            return
         self._pose_type = PoseStamped
         self.pub_tip = self.create_publisher(PoseStamped, topics.TIP_MEASURED, 100)
         self.pub_tip_true = self.create_publisher(PoseStamped, topics.TIP_TRUE, 100)
