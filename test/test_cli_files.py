@@ -59,13 +59,17 @@ def test_truncated_recording_is_one_line_that_points_to_recover(tmp_path, record
 
 def test_bad_calibrations_are_one_line(tmp_path, recording):
     missing = tmp_path / "missing.calibration.yaml"
-    assert_one_line_exit_2(cli("report", recording, "--calibration", missing, "--out", tmp_path / "r"), "cannot read")
-    for text, words in [("rung: [", "not valid YAML"), ("- 1\n", "must be a mapping"),
-                        ("rung: bogus\nmaterial_scale: 1\npressure_shift: 0\n", "'rung'"),
-                        ("rung: closed_form\nmaterial_scale: .nan\npressure_shift: 0\n", "'material_scale'"),
-                        ("rung: closed_form\nmaterial_scale: 1\npressure_shift: 1.5\n", "'pressure_shift'")]:
+    assert_one_line_exit_2(cli("report", recording, "--calibration", missing, "--out", tmp_path / "r"), "no such file")
+    good = tmp_path / "good.calibration.yaml"
+    assert cli("calibrate", recording, "--output", good)[0] == 0
+    fields = yaml.safe_load(good.read_text())
+    for text, words in [("rung: [", "not valid YAML"), ("- 1\n", "a mapping"), ("\xff\xfe", "not UTF-8"),
+                        (yaml.safe_dump({**fields, "material_scale": float("nan")}), "'material_scale'"),
+                        (yaml.safe_dump({**fields, "pressure_shift": 1.5}), "'pressure_shift'"),
+                        (yaml.safe_dump({**fields, "design_hash": "0" * 16}), "another design"),
+                        (yaml.safe_dump({**fields, "covariance": [[1, 2], [3]]}), "'covariance'")]:
         bad = tmp_path / "bad.calibration.yaml"
-        bad.write_text(text)
+        bad.write_bytes(text.encode("latin-1") if text.startswith("\xff") else text.encode())
         assert_one_line_exit_2(cli("report", recording, "--calibration", bad, "--out", tmp_path / "r"), words)
 
 
@@ -73,16 +77,16 @@ def test_unwritable_outputs_are_one_line(tmp_path, recording):
     a_file = tmp_path / "a_file"
     a_file.write_text("x")
     assert_one_line_exit_2(cli("report", recording, "--out", a_file / "sub"))
-    assert_one_line_exit_2(cli("calibrate", recording, "--output", tmp_path / "missing" / "d.yaml"))
+    assert_one_line_exit_2(cli("calibrate", recording, "--output", a_file / "sub" / "d.yaml"))
     assert_one_line_exit_2(cli("recover", recording, "--output", tmp_path / "missing" / "r.mcap"), "does not exist")
     assert_one_line_exit_2(cli("sweep", "--design", "implemented_5mm", "--to", "1000", "--no-plot",
                                "--out", a_file / "sub" / "s"))
 
 
 def test_report_and_calibrate_still_work_on_the_good_recording(tmp_path, recording):
-    code, err = cli("calibrate", recording, "--output", tmp_path / "cal.yaml")
-    assert code == 0, err
     cal = tmp_path / "cal.calibration.yaml"
+    code, err = cli("calibrate", recording, "--output", cal)
+    assert code == 0, err
     code, err = cli("report", recording, "--calibration", cal, "--out", tmp_path / "report")
     assert code == 0 and (tmp_path / "report" / "report.md").is_file(), err
 

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from .errors import SoftcathError
+from .errors import SoftcathError, shown
 from .models import BendModel, BendState, make_model
 
 SCHEMA_VERSION = 1
@@ -141,7 +141,7 @@ _OPTIONAL = {"fit_converged": bool, "message": str, "schema": int, "ci95": dict}
 def calibration_from_dict(data, source: str = "calibration") -> Calibration:
     """Validate a calibration mapping; every error names the field and the file."""
     def bad(field, value, why):
-        return CalibrationError(f"{source}: field '{field}' = {value!r}: {why}")
+        return CalibrationError(f"{source}: field '{field}' = {shown(value)}: {why}")
 
     if not isinstance(data, dict):
         raise CalibrationError(f"{source}: not a calibration file (expected a mapping of fields)")
@@ -187,17 +187,14 @@ def calibration_from_dict(data, source: str = "calibration") -> Calibration:
 
 
 def load_calibration(path) -> Calibration:
-    """Read and validate a calibration file."""
-    from .yaml_io import load_yaml
+    """Read (the bounded YAML reader: size, UTF-8, depth, no aliases, unique keys) and validate a
+    calibration file."""
+    from .yaml_io import load_yaml_file
 
-    p = Path(path)
-    if not p.is_file():
-        raise CalibrationError(f"calibration {path}: no such file")
-    try:
-        data = load_yaml(p.read_text())
-    except yaml.YAMLError as exc:
-        raise CalibrationError(f"calibration {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    return calibration_from_dict(data, source=f"calibration {path}")
+    source = f"calibration {path}"
+    if not Path(path).is_file():
+        raise CalibrationError(f"{source}: no such file")
+    return calibration_from_dict(load_yaml_file(path, source), source=source)
 
 
 def build_model(name: str, design, calibration: Calibration | None = None, **options) -> BendModel:

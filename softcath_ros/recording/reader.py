@@ -103,5 +103,6 @@ def recording_topics(path) -> dict[str, str]:
         elif isinstance(record, Channel):
             out[record.topic] = schemas.get(record.schema_id, "")
     if not out:
-        raise RecordingReadError(f"{p}: cannot read its topics (not an MCAP recording, or cut before its first chunk)")
+        raise RecordingReadError(f"{p}: cannot read its topics (not an MCAP recording, or cut before its first "
+                                 f"chunk); if the recorder was killed, try `softcath recover {p}`")
     return out
