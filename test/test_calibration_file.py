@@ -221,7 +221,8 @@ def test_model_node_applies_a_calibration_parameter(implemented_design, tmp_path
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain())
     try:
-        node = ModelNode(context=context, parameter_overrides=[Parameter("calibration", value=str(path))])
+        node = ModelNode(context=context, parameter_overrides=[Parameter("model", value="closed_form"),
+                                                               Parameter("calibration", value=str(path))])
         try:
             assert node.model.name == "closed_form calibrated"
             k, _ = node._fast(np.array([20000.0]))

@@ -35,11 +35,12 @@ def test_flood_on_a_slow_rung_answers_the_newest_command_and_diagnostics_keep_co
 
     from softcath_ros.nodes import model_node
 
-    monkeypatch.setattr(model_node, "make_model", lambda name, design, **kw: SlowRung(design))
+    monkeypatch.setattr(model_node, "build_model", lambda name, design, calibration=None, **kw: SlowRung(design))
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain())
     node = model_node.ModelNode(context=context, parameter_overrides=[
-        Parameter("diagnostics_period", value=0.1), Parameter("executor", value="single")])
+        Parameter("model", value="section"), Parameter("diagnostics_period", value=0.1),
+        Parameter("executor", value="single")])
     probe = rclpy.create_node("flood_probe", context=context)
     assert node._solver is not None, "a 50 ms rung must answer on the solve thread"
     diagnostics, tips = [], []
@@ -96,11 +97,13 @@ def test_flood_on_the_closed_form_answers_the_newest_and_counts_the_rest():
     from rclpy.experimental import EventsExecutor
     from std_msgs.msg import Float64MultiArray
 
+    from rclpy.parameter import Parameter
+
     from softcath_ros.nodes.model_node import ModelNode
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain())
-    node = ModelNode(context=context)
+    node = ModelNode(context=context, parameter_overrides=[Parameter("model", value="closed_form")])
     probe = rclpy.create_node("flood_probe", context=context)
     assert node._solver is None, "the closed form answers in the callback"
     tips = []

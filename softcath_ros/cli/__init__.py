@@ -57,7 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     from ..graph import default_to_localhost_discovery
 
     default_to_localhost_discovery()
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:   # --help (0), or a bad argument (2; its one line is printed)
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         return args.func(args)
     except SoftcathError as exc:
