@@ -38,6 +38,6 @@ def check_recording(recording) -> set[str]:
             missing.add(topic)
             continue
         assert topic in recorded, f"the layout names {topic}, the recording has no such topic"
-        assert recorded[topic] == topics.MESSAGE_TYPES[topic], (topic, recorded[topic])
+        assert recorded[topic] == topics.message_type(topic), (topic, recorded[topic])
         assert counts.get(topic, 0) > 0, f"{topic} recorded without messages"
     return missing
