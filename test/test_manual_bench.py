@@ -82,12 +82,27 @@ def test_encoded_messages_equal_rclpy_serialisation():
 
     from softcath_ros.recording.encode import encode
 
+    from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+    from sensor_msgs.msg import FluidPressure
+
+    from softcath_ros.bench.session import message_fields
+
     for cls, type_name, fields in ((Float64, "std_msgs/msg/Float64", {"data": 0.125}),
                                    (Float64MultiArray, "std_msgs/msg/Float64MultiArray", {"data": [1.0, 2.5]}),
                                    (String, "std_msgs/msg/String", {"data": '{"a": 1}'})):
         ours = encode(type_name, fields)
         assert len(ours) == len(serialize_message(cls(**fields)))
         assert deserialize_message(ours, cls) == cls(**fields)
+    # the stamped readings of the rig contract, as the manual bench writes them
+    t_ns = 1_700_000_000_123_456_789
+    for cls, type_name, value, read in (
+            (FluidPressure, "sensor_msgs/msg/FluidPressure", 31000.0, lambda m: m.fluid_pressure),
+            (Vector3Stamped, "geometry_msgs/msg/Vector3Stamped", 0.75, lambda m: m.vector.x),
+            (WrenchStamped, "geometry_msgs/msg/WrenchStamped", 0.04, lambda m: m.wrench.force.z)):
+        ours = encode(type_name, message_fields(type_name, value, t_ns))
+        back = deserialize_message(ours, cls)
+        assert read(back) == value and (back.header.stamp.sec, back.header.stamp.nanosec) == divmod(t_ns, 10**9)
+        assert len(ours) == len(serialize_message(back))
 
 
 def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, implemented_design):
@@ -117,8 +132,8 @@ def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, impleme
         ("complete", 90, 90, 0, 4)
     assert proc.stderr.count("refused:") == 4 and proc.stderr.count("undone: step") == 3
     # Every entry is in the recording, in order, with the value typed (the undone ones retracted).
-    angles = [m.message.data for m in iter_messages(out["recording"], [topics.BENCH_ANGLE])]
-    forces = [m.message.data for m in iter_messages(out["recording"], [topics.BENCH_FORCE])]
+    angles = [m.message.vector.x for m in iter_messages(out["recording"], [topics.BENCH_BEND_ANGLE])]
+    forces = [m.message.wrench.force.z for m in iter_messages(out["recording"], [topics.BENCH_WRENCH])]
     markers = [json.loads(m.message.data) for m in iter_messages(out["recording"], [topics.BENCH_STEP])]
     assert len(angles) + len(forces) == 90 + 3 + 2   # 90 + the three taken back + step 63's two more
     assert sum(e["event"] == "retract" for e in markers) == 3
@@ -137,7 +152,7 @@ def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, impleme
     assert by_step[50].force == pytest.approx((values[50] - values[45]) * 1e-3 * STANDARD_GRAVITY, abs=1e-9)
     meta = read_metadata(out["recording"])
     assert meta["softcath"]["simulated"] == "false" and json.loads(meta["softcath"]["rig"])["kind"] == "manual"
-    assert meta["softcath_end"]["complete"] == "true"
+    assert meta["softcath_result"]["complete"] == "true"
     # The report has the simulated report's form (the simulated one without drawing its plots again:
     # the manual run drew the same three).
     assert [Path(p).name for p in out["plots"]] == ["report_radius.png", "report_curvature.png", "report_force.png"]
@@ -170,7 +185,7 @@ def test_entries_survive_ctrl_c_and_a_crash(tmp_path, how):
     mcap = next(bag.glob("*.mcap"))
     if how == "interrupt":
         assert proc.returncode == 130
-        assert read_metadata(mcap)["softcath_end"]["complete"] == "false"
+        assert read_metadata(mcap)["softcath_result"]["complete"] == "false"
     else:
         assert proc.returncode == -signal.SIGKILL
         assert main(["recover", str(mcap)]) == 0

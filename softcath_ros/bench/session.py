@@ -18,13 +18,13 @@ from pathlib import Path
 from .. import topics
 from ..core.errors import SoftcathError
 from ..recording import BagWriter
-from ..recording.encode import encode
+from ..recording.encode import encode, stamp
 from .protocol import Protocol, Step
 
 STANDARD_GRAVITY = 9.80665  # m/s^2: a scale reading in grams -> N
-# Topics this writer fills; their types are the bench's (topics.MESSAGE_TYPES).
-WRITTEN = (topics.BENCH_STEP, topics.BENCH_RIG, topics.PRESSURE_CMD, topics.PRESSURE_MEASURED,
-           topics.BENCH_ANGLE, topics.BENCH_FORCE)
+# Topics this writer fills besides the rig contract's stamped readings (topics.rig_topics); their
+# types are the bench's (topics.message_type).
+WRITTEN = (topics.BENCH_STEP, topics.BENCH_RIG, topics.PRESSURE_CMD)
 
 
 def run_metadata(protocol: Protocol, design, n_steps: int, simulated: bool, rig: dict | None) -> dict[str, str]:
@@ -50,8 +50,8 @@ class BenchSession:
         self.writer = BagWriter(Path(bag_dir), flush_period_s=1.0,
                                 custom_data={"simulated": "false", "protocol": protocol.name,
                                              "design": design.name, "rig": rig.get("kind", "unknown")})
-        for topic in WRITTEN:
-            self.writer.add_topic(topic, topics.MESSAGE_TYPES[topic])
+        for topic in (*WRITTEN, *topics.rig_topics(design.n_channels)):
+            self.writer.add_topic(topic, topics.message_type(topic))
         self.writer.add_metadata("softcath", run_metadata(protocol, design, len(steps), False, rig))
         self.writer.add_attachment("protocol.yaml", "application/yaml", protocol.to_yaml().encode())
         self.writer.add_attachment("design.yaml", "application/yaml",
@@ -72,7 +72,7 @@ class BenchSession:
 
     def _write(self, topic: str, value, time_ns: int | None = None) -> None:
         t = time_ns or self._now()
-        type_name = topics.MESSAGE_TYPES[topic]
+        type_name = topics.message_type(topic)
         self.writer.write(topic, encode(type_name, message_fields(type_name, value, t)), t)
 
     def _marker(self, event: dict, step: Step | None = None) -> None:
@@ -88,10 +88,11 @@ class BenchSession:
         """One step's entry: its readings ``values`` (one or more; rad on the angle bench, N of
         untared scale reading on the force bench), each followed by its sample marker, at
         ``pressures_measured`` (Pa per channel). ``extra`` goes into the step_start marker."""
-        topic = topics.BENCH_ANGLE if step.bench == "angle" else topics.BENCH_FORCE
+        topic = topics.BENCH_BEND_ANGLE if step.bench == "angle" else topics.BENCH_WRENCH
         self._marker({"event": "step_start", **extra}, step)
         self._write(topics.PRESSURE_CMD, list(step.pressures))
-        self._write(topics.PRESSURE_MEASURED, [float(x) for x in pressures_measured])
+        for channel, p in enumerate(pressures_measured):
+            self._write(topics.pressure_measured_topic(channel), float(p))
         self._marker({"event": "settled", "settled": True, "settle_time_s": 0.0}, step)
         for k, v in enumerate(values):
             self._write(topic, float(v))
@@ -121,9 +122,10 @@ class BenchSession:
             return
         if complete:
             self._marker({"event": "protocol_end", "n_steps": len(self.steps), "unsettled_steps": []})
-        self.writer.custom_data["complete"] = str(bool(complete)).lower()
-        self.writer.add_metadata("softcath_end", {"complete": str(bool(complete)).lower(),
-                                                  "entries": str(self.entries), "reason": reason})
+        result = {"complete": str(bool(complete)).lower(), "completed_steps": str(self.entries),
+                  "n_steps": str(len(self.steps)), "reason": reason}   # as bench_node's record
+        self.writer.custom_data.update(complete=result["complete"], completed_steps=result["completed_steps"])
+        self.writer.add_metadata("softcath_result", result)
         self.writer.close()
 
 
@@ -137,6 +139,15 @@ def message_fields(type_name: str, value, time_ns: int) -> dict:
         return {"data": float(value)}
     if type_name == "std_msgs/msg/Float64MultiArray":
         return {"data": [float(x) for x in value]}
+    # the rig contract's stamped readings (docs/rig.md): stamped when entered
+    header = {"stamp": stamp(time_ns), "frame_id": topics.FRAME_ID}
+    if type_name == topics.FLUID_PRESSURE_TYPE:
+        return {"header": header, "fluid_pressure": float(value), "variance": 0.0}
+    if type_name == "geometry_msgs/msg/Vector3Stamped":
+        return {"header": header, "vector": {"x": float(value), "y": 0.0, "z": 0.0}}
+    if type_name == "geometry_msgs/msg/WrenchStamped":
+        return {"header": {**header, "frame_id": topics.SCALE_FRAME_ID},
+                "wrench": {"force": {"x": 0.0, "y": 0.0, "z": float(value)}, "torque": {"x": 0.0, "y": 0.0, "z": 0.0}}}
     raise SoftcathError(f"the manual bench cannot write {type_name} yet (bench/session.py message_fields)")
 
 
