@@ -271,3 +271,23 @@ def test_noisy_default_run_settles_every_step(implemented_design):
     settled = [e for _, e in events if e["event"] == "settled"]
     assert len(settled) == 90 and all(e["settled"] for e in settled)
     assert events[-1][0] / 1e9 < 75.0  # the default protocol's own duration (the main job must stay < 2 min)
+
+
+def test_default_truth_is_the_section_table_and_refuses_beyond_it():
+    """The simulated rig's default truth (the section rung's surrogate table, at (1 - shift) p) answers
+    inside the table; beyond it the reading is not finite, which sim_bench_node withholds (never a
+    made-up reading)."""
+    from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.models import make_model
+
+    model = make_model("surrogate", load_design("implemented_5mm"), build=False)
+    rig = SimulatedRig(model, RigParams(gauge_noise=0.0, angle_noise=0.0))
+    top = model.pressure_range[1]
+    rig.advance(10.0, [0.9 * top / (1 - rig.params.pressure_shift)])   # regulator settled
+    inside = rig.read()
+    k = model.evaluate([0.9 * top]).curvature
+    assert math.isfinite(inside.angle) and inside.angle == pytest.approx(
+        float(np.hypot(*np.ravel(k))) * rig.length * 0.95 * math.cos(rig.params.out_of_plane_tilt), rel=1e-6)
+    rig.advance(10.0, [1.1 * top / (1 - rig.params.pressure_shift)])
+    assert not math.isfinite(rig.read().angle)

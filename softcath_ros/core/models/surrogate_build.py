@@ -31,7 +31,6 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 import numpy as np
 
 from ..design import Design
-from ..errors import ModelError
 
 
 def default_workers() -> int:
