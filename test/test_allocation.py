@@ -334,12 +334,8 @@ def test_three_channel_design_loads_on_every_rung(three):
 @pytest.mark.slow
 def test_round_trip_section_rung(three, three_dict):
     """The Newton path on the real non-linear rung (section FE, seconds per evaluation): a few
-    requests across sectors, on and between channel directions, plus one saturation. The rung
-    stops where the lumen walls touch (about 0.5 bar on one channel of this design), so a limit
-    beyond that is refused with a message, not guessed; the round trip uses a 30 kPa limit."""
-    risky = dict(three_dict, limits={"max_pressure": 1.5e5})  # 1.5 bar: beyond the rung's convergence
-    with pytest.raises(Exception, match="lower max_pressure"):
-        Allocator(make_model("section", design_from_dict(risky)))
+    requests across sectors, on and between channel directions, plus one saturation; the round
+    trip uses a 30 kPa limit."""
     model = make_model("section", three)
     allocator = Allocator(model, max_pressure=30e3)
     assert np.degrees(allocator.channel_directions) == pytest.approx([270, 30, 150], abs=0.1)
@@ -357,6 +353,24 @@ def test_round_trip_section_rung(three, three_dict):
     assert sat.saturated and sat.pressures.max() == pytest.approx(30e3)
     back = model.evaluate(sat.pressures).curvature
     assert abs(math.degrees(math.atan2(back[1], back[0])) - 90.0) <= DIRECTION_TOL_DEG
+
+
+def test_a_limit_beyond_the_rungs_reach_is_lowered_to_it_and_said(three):
+    """The 3-channel table ends where the section rung stopped (a channel alone: about 0.48 bar, below
+    the design's 0.5 bar): the allocator allocates up to the largest pressure every channel alone
+    reaches on the rung, says so, and never commands beyond it."""
+    model = make_model("surrogate", three, build=False)
+    assert not model.evaluate(np.eye(3) * three.max_pressure).converged.any()
+    allocator = Allocator(model)
+    assert allocator.max_pressure < three.max_pressure and "answers each channel alone only up to" in \
+        allocator.limited_by_rung
+    assert model.evaluate(np.eye(3) * allocator.max_pressure).converged.all()
+    assert not model.evaluate(np.eye(3) * allocator.max_pressure * 1.001).converged.all()
+    for deg in range(0, 360, 15):
+        phi = math.radians(deg)
+        res = allocator.allocate(1e3 * np.array([math.cos(phi), math.sin(phi)]))   # far beyond reach
+        assert res.saturated and res.pressures.max() <= allocator.max_pressure
+        assert model.evaluate(res.pressures).converged
 
 
 # ---------------------------------------------------------------------------- command line

@@ -275,8 +275,8 @@ def test_noisy_default_run_settles_every_step(implemented_design):
 
 def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     """The simulated rig's default truth (the section rung's surrogate table, at (1 - shift) p) answers
-    inside the table; beyond it the reading is not finite, which sim_bench_node withholds (never a
-    made-up reading)."""
+    inside the table; beyond it (the 3-channel table ends where the section rung stopped, below the
+    design's limit) the reading is not finite, which sim_bench_node withholds (never a made-up reading)."""
     from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
     from softcath_ros.core.design import load_design
     from softcath_ros.core.models import make_model
@@ -284,10 +284,15 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     model = make_model("surrogate", load_design("implemented_5mm"), build=False)
     rig = SimulatedRig(model, RigParams(gauge_noise=0.0, angle_noise=0.0))
     top = model.pressure_range[1]
-    rig.advance(10.0, [0.9 * top / (1 - rig.params.pressure_shift)])   # regulator settled
+    rig.advance(10.0, [0.9 * top])   # regulator settled
     inside = rig.read()
-    k = model.evaluate([0.9 * top]).curvature
+    state = model.evaluate([0.9 * top * (1 - rig.params.pressure_shift)])
+    theta = float(np.hypot(*np.ravel(state.curvature))) * float(np.ravel(state.axial_stretch)[0]) * rig.length
     assert math.isfinite(inside.angle) and inside.angle == pytest.approx(
-        float(np.hypot(*np.ravel(k))) * rig.length * 0.95 * math.cos(rig.params.out_of_plane_tilt), rel=1e-6)
-    rig.advance(10.0, [1.1 * top / (1 - rig.params.pressure_shift)])
+        theta * 0.95 * math.cos(rig.params.out_of_plane_tilt), rel=1e-6)
+    three = make_model("surrogate", load_design("three_channel_5mm"), build=False)
+    alone = three.evaluate(np.eye(3) * three.design.max_pressure)
+    assert not alone.converged.any(), "the 3-channel table ends below 0.5 bar on a channel alone"
+    rig = SimulatedRig(three, RigParams(gauge_noise=0.0, angle_noise=0.0, pressure_shift=0.0))
+    rig.advance(10.0, [three.design.max_pressure, 0.0, 0.0])
     assert not math.isfinite(rig.read().angle)

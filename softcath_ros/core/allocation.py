@@ -137,7 +137,6 @@ class Allocator:
         self.rtol = rtol
         self.accept_rtol = accept_rtol
         self.max_iterations = max_iterations
-        self.fd_step = fd_step * self.max_pressure  # Pa, finite-difference step for the Jacobian
 
         # a rung linear in pressure declares it (closed form): its gain inverts exactly
         self.linear = model.info.linear_gain
@@ -147,12 +146,23 @@ class Allocator:
         if self.linear:
             self._g = [[float(v) for v in row] for row in np.asarray(model.curvature_per_pa)]
 
-        # Each channel alone at max_pressure: its bending direction and its reach.
+        # Each channel alone at max_pressure: its bending direction and its reach. Where the rung
+        # stops answering a channel alone below max_pressure (a table ends where its source failed),
+        # the allocator's limit is the largest pressure every channel alone reaches (said in
+        # ``limited_by_rung``), never a command the rung cannot answer.
         single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
+        self.limited_by_rung = ""
         if not np.all(single.converged):
-            raise ModelError(f"allocation needs model '{model.name}' at max_pressure {self.max_pressure:g} Pa on "
-                             f"each channel alone, but it did not converge ({single.message}); allocate with a "
-                             "lower max_pressure inside the rung's range")
+            reach = self._single_channel_reach(model)
+            if reach <= 0.05 * self.max_pressure:
+                raise ModelError(f"allocation needs model '{model.name}' at max_pressure {self.max_pressure:g} Pa on "
+                                 f"each channel alone, but it did not converge ({single.message}); allocate with a "
+                                 "lower max_pressure inside the rung's range")
+            self.limited_by_rung = (f"model '{model.name}' answers each channel alone only up to {reach:.0f} Pa "
+                                    f"(not {self.max_pressure:g} Pa): allocating up to {reach:.0f} Pa")
+            self.max_pressure = reach
+            single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
+        self.fd_step = fd_step * self.max_pressure  # Pa, finite-difference step for the Jacobian
         rest = model.evaluate(np.zeros(self.n_channels))
         self._rest_curvature = np.asarray(rest.curvature, dtype=float)
         self._rest_stretch = float(rest.axial_stretch)
@@ -180,6 +190,18 @@ class Allocator:
         # the last solution inside reach on the nonlinear path (sector, pair pressures, curvature
         # vector): a stream of nearby requests starts Newton there (2-3 steps instead of ~6)
         self._warm = None
+
+    def _single_channel_reach(self, model, iterations: int = 16) -> float:
+        """Largest pressure (Pa, to max_pressure / 2**iterations) at which the rung answers every
+        channel alone, by bisection from rest (which every rung answers)."""
+        lo, hi = 0.0, self.max_pressure
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            if np.all(model.evaluate(np.eye(self.n_channels) * mid).converged):
+                lo = mid
+            else:
+                hi = mid
+        return lo
 
     # ------------------------------------------------------------------ public API
 
@@ -540,11 +562,9 @@ class Allocator:
             kx, ky = state.curvature - self._rest_curvature
             return math.atan2(ux * ky - uy * kx, ux * kx + uy * ky)
 
-        corner = np.zeros(self.n_channels)
-        corner[s.a] = corner[s.b] = pmax
-        if not np.all(self.model.evaluate(corner).converged):
-            # the rung does not answer at the box's corner: the reachable set's edge is where it stops
-            # answering along each ray from rest; find the ray whose edge bends along the request
+        def along_rays():
+            # the rung does not answer somewhere on the box's edge: the reachable set's edge is where
+            # it stops answering along each ray from rest; find the ray whose edge bends along the request
             def g(t):
                 return signed_angle(curvature(*self._edge(s, t)))
             t = brentq(g, 0.0, 1.0, xtol=1e-7, rtol=1e-12) if g(0.0) * g(1.0) < 0 else (0.0 if abs(g(0.0)) < abs(
@@ -552,6 +572,11 @@ class Allocator:
             q = self._edge(s, t)
             k, stretch = self._point(curvature(*q))
             return math.hypot(*k), q, (k, stretch), count[0]
+
+        corner = np.zeros(self.n_channels)
+        corner[s.a] = corner[s.b] = pmax
+        if not np.all(self.model.evaluate(corner).converged):
+            return along_rays()
         both = curvature(pmax, pmax)
         f_both = signed_angle(both)
         if f_both == 0.0:
@@ -563,9 +588,12 @@ class Allocator:
             f = lambda t: signed_angle(curvature(pmax, t))  # noqa: E731
         else:
             f = lambda t: signed_angle(curvature(t, pmax))  # noqa: E731
-        t = brentq(f, 0.0, pmax, xtol=1e-10 * pmax, rtol=1e-12) if f(0.0) * f_both < 0 else 0.0
-        q = np.array([pmax, t]) if big_a else np.array([t, pmax])
-        k, stretch = self._point(curvature(*q))
+        try:
+            t = brentq(f, 0.0, pmax, xtol=1e-10 * pmax, rtol=1e-12) if f(0.0) * f_both < 0 else 0.0
+            q = np.array([pmax, t]) if big_a else np.array([t, pmax])
+            k, stretch = self._point(curvature(*q))
+        except ModelError:   # the corner answers but a point between it and a channel's end does not
+            return along_rays()
         return math.hypot(*k), q, (k, stretch), count[0]
 
     def _single(self, i: int, requested, kappa: float) -> Allocation:
