@@ -377,7 +377,8 @@ def test_a_limit_beyond_the_rungs_reach_is_lowered_to_it_and_said(three):
 
 
 def _cli(capsys, *argv):
-    code = cli_main(["allocate", *argv])
+    """The command line on the closed form (these tests check its mechanics against exact gains)."""
+    code = cli_main(["allocate", "--model", "closed_form", *argv])
     out = capsys.readouterr()
     return code, out.out, out.err
 

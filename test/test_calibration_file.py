@@ -158,7 +158,7 @@ def test_band95_matches_sampling_the_covariance(implemented_design):
 def test_calibrate_writes_the_file_and_predict_applies_it_with_a_band(truth_run, tmp_path):
     design, _, _, path = truth_run
     out = tmp_path / "cal.yaml"
-    r = softcath("calibrate", str(path), "--output", str(out), "--json")
+    r = softcath("calibrate", str(path), "--model", "closed_form", "--output", str(out), "--json")
     assert r.returncode == 0, r.stderr
     doc = yaml.safe_load(out.read_text())
     assert doc["design"] == "implemented_5mm" and doc["design_hash"] == section_hash(design)
@@ -166,8 +166,8 @@ def test_calibrate_writes_the_file_and_predict_applies_it_with_a_band(truth_run,
     assert abs(doc["pressure_shift"] - TRUE_SHIFT) < 0.05 and doc["rms_after"] < doc["rms_before"]
     cal = load_calibration(out)
     # predict: calibrated numbers with a 95% band around them
-    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "0.1", "0.3", "--unit", "bar",
-                 "--calibration", str(out), "--json")
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "0.1", "0.3",
+                 "--unit", "bar", "--calibration", str(out), "--json")
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["model"] == "closed_form calibrated" and res["calibration"]["pressure_shift"] == cal.pressure_shift
@@ -199,8 +199,8 @@ def test_report_and_sweep_apply_a_calibration(truth_run, tmp_path, capsys):
     assert main(["report", str(path), "--calibration", str(out), "--out", str(tmp_path / "rep2"), "--no-cache"]) == 0
     # sweep takes it too, at another length (the calibration is of the section)
     capsys.readouterr()
-    assert main(["sweep", "--design", "implemented_5mm", "--to", "0.3", "--unit", "bar", "--steps", "3",
-                 "--length", "0.02", "--calibration", str(out), "--no-plot", "--out", str(tmp_path / "sw"),
+    assert main(["sweep", "--design", "implemented_5mm", "--model", "closed_form", "--to", "0.3", "--unit", "bar",
+                 "--steps", "3", "--length", "0.02", "--calibration", str(out), "--no-plot", "--out", str(tmp_path / "sw"),
                  "--json"]) == 0
     doc = json.loads(capsys.readouterr().out.split("\nwrote")[0])
     assert doc["model"] == "closed_form calibrated"
@@ -242,7 +242,7 @@ def test_allocate_applies_a_calibration(implemented_design, tmp_path, capsys):
     from softcath_ros.cli import main
 
     path = _calibration(implemented_design, shift=0.2, scale=1.0).save(tmp_path / "c.yaml")
-    base = ["allocate", "--design", "implemented_5mm", "--curvature", "0,-10", "--json"]
+    base = ["allocate", "--design", "implemented_5mm", "--model", "closed_form", "--curvature", "0,-10", "--json"]
     assert main(base) == 0
     plain = json.loads(capsys.readouterr().out)
     assert main(base + ["--calibration", str(path)]) == 0

@@ -16,7 +16,8 @@ def softcath(*args):
 
 
 def test_predict_json_matches_model():
-    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "0", "0.2", "--unit", "bar", "--json")
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "0", "0.2", "--unit", "bar",
+                 "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["model"] == "closed_form" and out["design"] == "implemented_5mm"
@@ -35,7 +36,7 @@ def test_predict_json_matches_model():
 
 
 def test_predict_length_override_and_table():
-    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "20000", "--length", "0.02")
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "20000", "--length", "0.02")
     assert r.returncode == 0, r.stderr
     assert "length 20.0 mm" in r.stdout and "50.12" in r.stdout   # R_C does not depend on length
 
@@ -110,6 +111,24 @@ def test_rung_options_are_checked_against_the_declaration():
         parse_model_options("section", ["mesh_size=fine"])
     with pytest.raises(SoftcathError, match="cannot give"):
         parse_model_options("fe3d", ["mesh=x"])
-    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "10000", "--option", "tol=1")
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "10000", "--option",
+                 "tol=1")
     assert r.returncode == 2 and "model 'closed_form' has no such option" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_commands_default_to_the_accurate_rung():
+    """predict, sweep, allocate and calibrate run the section rung's shipped table unless told;
+    the closed form stays available by name."""
+    from softcath_ros.cli import build_parser
+
+    parser = build_parser()
+    for argv in (["predict", "--design", "d", "--pressure", "1"], ["sweep", "--design", "d", "--to", "1"],
+                 ["allocate", "--design", "d", "--curvature", "1,0"], ["calibrate"]):
+        assert parser.parse_args(argv).model == "surrogate", argv
+    r = softcath("predict", "--design", "implemented_5mm", "--pressure", "0.2", "--unit", "bar", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    state = make_model("surrogate", load_design("implemented_5mm"), build=False).evaluate([2e4])
+    assert doc["model"] == "surrogate"
+    assert doc["results"][0]["curvature_per_m"] == pytest.approx(list(np.ravel(state.curvature)), rel=1e-9)

@@ -12,17 +12,15 @@ import sys
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import PA_PER_BAR, bounded_int, finite_float, positive_float
+from .common import PA_PER_BAR, add_model_argument, bounded_int, finite_float, positive_float
 
 MAX_DIRECTIONS = 3600   # 0.1 deg apart; each direction is one bisection on the model
 
 
 def register(sub) -> None:
-    from ..core.models import available_models
-
     p = sub.add_parser("allocate", help="channel pressures for a desired bend (curvature, angle or tip point)")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
-    p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
+    add_model_argument(p, "model rung")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--curvature", metavar="KX,KY", help="curvature vector in softcath_base, 1/m")
     target.add_argument("--direction", type=finite_float, metavar="DEG",

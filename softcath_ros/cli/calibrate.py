@@ -6,16 +6,15 @@ import sys
 from pathlib import Path
 
 from ..core import json_output
+from .common import add_model_argument
 
 
 def register(sub) -> None:
-    from ..core.models import available_models
-
     p = sub.add_parser("calibrate", help="fit a model to a bench recording and write a calibration file")
     p.add_argument("file", nargs="*", help="the bench recording (.mcap or its bag directory); several: the newest "
                                            "(default: the newest under runs/)")
     p.add_argument("--design", default=None, help="design to calibrate (default: the one attached to the recording)")
-    p.add_argument("--model", default="closed_form", help=f"rung to fit: {', '.join(available_models())}")
+    add_model_argument(p, "rung to fit")
     p.add_argument("--output", default=None,
                    help="calibration file (default: <design>.calibration.yaml beside the recording)")
     p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")

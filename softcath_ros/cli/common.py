@@ -60,6 +60,18 @@ def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray
     return np.asarray(rows) * scale
 
 
+DEFAULT_RUNG = "surrogate"   # the section rung's shipped table: accurate and fast (the nodes' default too)
+
+
+def add_model_argument(parser, what: str = "model rung") -> None:
+    """``--model``, defaulting to the accurate rung; the closed form stays available by name."""
+    from ..core.models import available_models
+
+    parser.add_argument("--model", default=DEFAULT_RUNG,
+                        help=f"{what} (default {DEFAULT_RUNG}: the section rung's shipped table; closed_form: "
+                             f"fast, rough): {', '.join(available_models())}")
+
+
 def add_option_argument(parser) -> None:
     parser.add_argument("--option", action="append", default=[], metavar="NAME=VALUE",
                         help="a rung option (repeatable), e.g. mesh_size=0.0004; `softcath models` lists them")

@@ -14,16 +14,14 @@ import numpy as np
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import (PA_PER_BAR, add_option_argument, check_pressure_limits, parse_model_options, parse_pressures,
-                     positive_float)
+from .common import (PA_PER_BAR, add_model_argument, add_option_argument, check_pressure_limits, parse_model_options,
+                     parse_pressures, positive_float)
 
 
 def register(sub) -> None:
-    from ..core.models import available_models
-
     p = sub.add_parser("predict", help="predict bending for channel pressures")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
-    p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
+    add_model_argument(p, "model rung")
     p.add_argument("--pressure", required=True, nargs="+",
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")

@@ -18,18 +18,16 @@ import numpy as np
 
 from ..core import json_output
 from ..core.errors import SoftcathError
-from .common import (PA_PER_BAR, add_option_argument, bounded_int, check_pressure_limits, finite_float,
-                     parse_model_options, positive_float)
+from .common import (PA_PER_BAR, add_model_argument, add_option_argument, bounded_int, check_pressure_limits,
+                     finite_float, parse_model_options, positive_float)
 
 MAX_STEPS = 10_000   # a sweep's rows are held in memory and plotted
 
 
 def register(sub) -> None:
-    from ..core.models import available_models
-
     p = sub.add_parser("sweep", help="pressure sweep through a model: CSV, JSON and a plot")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
-    p.add_argument("--model", default="closed_form", help=f"model rung: {', '.join(available_models())}")
+    add_model_argument(p, "model rung")
     p.add_argument("--from", dest="p_from", type=finite_float, default=0.0, help="first pressure (default 0)")
     p.add_argument("--to", dest="p_to", type=finite_float, required=True, help="last pressure")
     p.add_argument("--steps", type=bounded_int(2, MAX_STEPS), default=11,
