@@ -59,8 +59,8 @@ MODES = ("integral", "adaptive", "open_loop")
 STEERING_MAX_PRESSURE = 3.0e4   # Pa
 # Rung options for steering: a surrogate table over the steering range, pair 0-1 rotated
 # (builds in about 15 s; measured error against the section rung in its error_bound).
-STEERING_RUNG_OPTIONS = {"surrogate": {"grid_points": 11, "pairs": "rotated", "held_out": 12,
-                                         "common_tolerance": 1e6}}
+STEERING_RUNG_OPTIONS = {"surrogate": {"pairs": "rotated", "common_tolerance": 1e6,
+                                         "common_direction_tolerance": 1e6}}
 # (common_tolerance: a rate-limited change of sector briefly has three channels pressurised;
 # the table answers those approximately instead of refusing: error_bound['common_mode'].)
 STATES = ("waiting", "closed_loop", "open_loop", "vented")
