@@ -198,3 +198,13 @@ def test_steer_sim_bad_input_is_one_line_exit_2(argv, words, capsys):
     assert main(["steer-sim", *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("softcath steer-sim: error:") and words in err[0]
+
+
+def test_steering_rung_options_are_the_rungs_own_settings():
+    """The options steering builds its surrogate with are settings the table builder has (a renamed
+    setting would only fail when a surrogate steering run starts)."""
+    from softcath_ros.core.models.surrogate import SurrogateSettings
+    from softcath_ros.core.steering import STEERING_RUNG_OPTIONS
+
+    settings = SurrogateSettings(**STEERING_RUNG_OPTIONS["surrogate"])
+    assert settings.pairs == "rotated" and settings.common_tolerance >= 1.0
