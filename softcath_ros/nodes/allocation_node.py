@@ -18,7 +18,7 @@ from dataclasses import replace
 from functools import partial
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped, Vector3Stamped
 from rclpy.exceptions import ParameterException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -32,7 +32,7 @@ from ..core.command_shaping import CommandWatchdog, RateLimiter, check_frame, ch
 from ..core.design import load_design
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
-from .diagnostics import DiagnosticsReporter, InputCounters
+from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare
 from .qos import RELIABILITIES, stream_qos
 from .runtime import EXECUTORS, run_node
@@ -218,11 +218,8 @@ class AllocationNode(Node):
             "max_pressure_pa": f"{self.max_pressure:g}",
             "messages_published": str(self.published),
         }
-        status = DiagnosticStatus(level=level, name=f"{NODE_NAME}: output", hardware_id=self.design.name,
-                                  message=message, values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag_pub.publish(msg)
+        publish_statuses(self, self.diag_pub,
+                         diagnostic_status(level, f"{NODE_NAME}: output", message, values, self.design.name))
 
 
 def main(args=None) -> int:

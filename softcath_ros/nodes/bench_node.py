@@ -39,7 +39,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -53,6 +53,7 @@ from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..recording import BagWriter, RecordingError
+from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare
 from .recorder import TopicRecorder
 from .runtime import EXECUTORS, run_node
@@ -411,15 +412,10 @@ class BenchNode(Node):
         r = self.recorder
         level = DiagnosticStatus.OK if r.dropped == 0 and r.error is None else DiagnosticStatus.WARN
         step = self.runner.step
-        st = DiagnosticStatus(level=level, name=topics.BENCH_NODE, message=f"{self.state}"
-                              + (f", step {step.index + 1}/{len(self.steps)}" if step else ""),
-                              values=[KeyValue(key="recording", value=str(self.writer.path)),
-                                      KeyValue(key="messages", value=str(self.writer.message_count)),
-                                      KeyValue(key="dropped", value=str(r.dropped)),
-                                      KeyValue(key="pending_topics", value=",".join(r.pending))])
-        msg = DiagnosticArray(status=[st])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
+        message = f"{self.state}" + (f", step {step.index + 1}/{len(self.steps)}" if step else "")
+        publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.BENCH_NODE, message, [
+            ("recording", self.writer.path), ("messages", self.writer.message_count), ("dropped", r.dropped),
+            ("pending_topics", ",".join(r.pending))]))
 
     def finalise(self, interrupted: bool = False) -> dict:
         """Mark the recording complete or not (metadata record and rosbag2 custom_data), close it.

@@ -14,6 +14,24 @@ from dataclasses import dataclass, field
 from .. import topics
 
 
+def diagnostic_status(level, name: str, message: str, values, hardware_id: str = ""):
+    """A DiagnosticStatus; ``values``: (key, text) pairs or a mapping of them."""
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    items = values.items() if isinstance(values, dict) else values
+    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
+                            values=[KeyValue(key=k, value=str(v)) for k, v in items])
+
+
+def publish_statuses(node, publisher, *statuses) -> None:
+    """One DiagnosticArray of ``statuses``, stamped with the node's clock now."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    msg = DiagnosticArray(status=list(statuses))
+    msg.header.stamp = node.get_clock().now().to_msg()
+    publisher.publish(msg)
+
+
 @dataclass
 class InputCounters:
     accepted: int = 0        # commands that produced a published result (clamped ones included)
@@ -54,7 +72,7 @@ class DiagnosticsReporter:
         self._timer = node.create_timer(period, self.publish)
 
     def publish(self) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from diagnostic_msgs.msg import DiagnosticStatus
 
         c = self._counters
         new_problems = c.problems() - self._problems_at_last_report
@@ -64,13 +82,9 @@ class DiagnosticsReporter:
                               f"superseded: {c.last_reason}")
         else:
             level, message = DiagnosticStatus.OK, "all commands since the last report accepted"
-        status = DiagnosticStatus(level=level, name=self._name, message=message, hardware_id=self._hardware_id,
-                                  values=[KeyValue(key=k, value=v) for k, v in c.key_values()])
-        msg = DiagnosticArray(status=[status])
-        if self._answer_load is not None:
-            msg.status.append(self._load_status())
-        msg.header.stamp = self._node.get_clock().now().to_msg()
-        self._pub.publish(msg)
+        status = diagnostic_status(level, self._name, message, c.key_values(), self._hardware_id)
+        extra = [self._load_status()] if self._answer_load is not None else []
+        publish_statuses(self._node, self._pub, status, *extra)
 
     def _load_status(self):
         import time

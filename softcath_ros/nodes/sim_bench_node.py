@@ -22,7 +22,7 @@ from dataclasses import asdict
 from functools import partial
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -33,7 +33,7 @@ from .. import topics
 from ..bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..core.models import make_model
+from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare
 from .runtime import run_node
 
@@ -196,20 +196,13 @@ class SimBenchNode(Node):
             pub_f.publish(Float64(data=r.force))
 
     def diagnostics(self):
-        st = DiagnosticStatus(level=DiagnosticStatus.OK if self.rejected == self.unanswered == 0
-                              else DiagnosticStatus.WARN,
-                              name=topics.SIM_BENCH_NODE, hardware_id="simulated",
-                              message="simulated rig running" + (f", {self.rejected} commands rejected"
-                                                                 if self.rejected else "")
-                              + (f", {self.unanswered} readings withheld (the truth rung refused the pressures)"
-                                 if self.unanswered else ""),
-                              values=[KeyValue(key="rejected_commands", value=str(self.rejected)),
-                                      KeyValue(key="withheld_readings", value=str(self.unanswered)),
-                                      KeyValue(key="bench", value=self.rig.bench),
-                                      KeyValue(key="sample_length_m", value=f"{self.rig.length:g}")])
-        msg = DiagnosticArray(status=[st])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
+        level = DiagnosticStatus.OK if self.rejected == self.unanswered == 0 else DiagnosticStatus.WARN
+        message = ("simulated rig running" + (f", {self.rejected} commands rejected" if self.rejected else "")
+                   + (f", {self.unanswered} readings withheld (the truth rung refused the pressures)"
+                      if self.unanswered else ""))
+        publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.SIM_BENCH_NODE, message, [
+            ("rejected_commands", self.rejected), ("withheld_readings", self.unanswered), ("bench", self.rig.bench),
+            ("sample_length_m", f"{self.rig.length:g}")], hardware_id="simulated"))
 
 def main(args=None) -> int:
     return run_node(SimBenchNode, args, startup_errors=(SoftcathError, ValueError))

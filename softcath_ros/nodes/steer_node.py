@@ -24,7 +24,7 @@ from dataclasses import asdict, fields
 from functools import partial
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
@@ -38,7 +38,7 @@ from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
 from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
                              make_steering_model, steering_design)
-from .diagnostics import DiagnosticsReporter, InputCounters
+from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare
 from .qos import stream_qos
 from .runtime import EXECUTORS, run_node
@@ -184,11 +184,8 @@ class SteerNode(Node):
                   "output_pa": ",".join(f"{v:.1f}" for v in c.limiter.output),
                   "max_pressure_pa": f"{self.max_pressure:g}", "messages_published": str(self.published),
                   **{f"measurements_{k}": str(v) for k, v in asdict(m).items()}}
-        status = DiagnosticStatus(level=level, name=f"{NODE_NAME}: loop", hardware_id=self.design.name,
-                                  message=message, values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag_pub.publish(msg)
+        publish_statuses(self, self.diag_pub,
+                         diagnostic_status(level, f"{NODE_NAME}: loop", message, values, self.design.name))
 
 
 def main(args=None) -> int:
