@@ -22,7 +22,21 @@ def _align(offset: int, n: int) -> int:
     return (offset + n - 1) // n * n
 
 
-class _PoseBuffer:
+class _StampedBuffer:
+    """A serialised message whose header stamp (its first field) is rewritten in place."""
+
+    def __init__(self, data: bytearray):
+        self._buf = data
+        self.stamp = np.frombuffer(self._buf, dtype="<u4", count=2, offset=len(CDR_LE_HEADER))
+
+    def set_stamp(self, stamp_ns: int) -> None:
+        self.stamp[0], self.stamp[1] = divmod(stamp_ns, 1_000_000_000)
+
+    def to_bytes(self) -> bytes:
+        return bytes(self._buf)
+
+
+class _PoseBuffer(_StampedBuffer):
     """Header + ``n`` poses; ``sequence``: poses are a sequence (PoseArray) or one field (PoseStamped)."""
 
     def __init__(self, frame_id: str, n: int, sequence: bool):
@@ -33,15 +47,8 @@ class _PoseBuffer:
             body += b"\0" * (_align(len(body), 4) - len(body)) + struct.pack("<I", n)
         body += b"\0" * (_align(len(body), 8) - len(body))  # CDR aligns relative to the body start
         data_offset = len(CDR_LE_HEADER) + len(body)
-        self._buf = bytearray(CDR_LE_HEADER + body + bytes(56 * n))
-        self.stamp = np.frombuffer(self._buf, dtype="<u4", count=2, offset=len(CDR_LE_HEADER))
+        super().__init__(bytearray(CDR_LE_HEADER + body + bytes(56 * n)))
         self.poses = np.frombuffer(self._buf, dtype="<f8", count=7 * n, offset=data_offset).reshape(n, 7)
-
-    def set_stamp(self, stamp_ns: int) -> None:
-        self.stamp[0], self.stamp[1] = divmod(stamp_ns, 1_000_000_000)
-
-    def to_bytes(self) -> bytes:
-        return bytes(self._buf)
 
 
 class PoseArrayBuffer(_PoseBuffer):
@@ -58,7 +65,7 @@ class PoseStampedBuffer(_PoseBuffer):
         super().__init__(frame_id, 1, sequence=False)
 
 
-class MessageTemplate:
+class MessageTemplate(_StampedBuffer):
     """A message of fixed layout, serialised once (by rclpy), whose stamp and numeric arrays are then
     rewritten in place through numpy views: for messages too big to build field by field at
     display rate (a Marker's triangle list). Fields are located by sentinel values put into the
@@ -67,8 +74,7 @@ class MessageTemplate:
     def __init__(self, data: bytes):
         if data[:4] != CDR_LE_HEADER:
             raise ValueError("template is not little-endian plain CDR")
-        self._buf = bytearray(data)
-        self.stamp = np.frombuffer(self._buf, dtype="<u4", count=2, offset=len(CDR_LE_HEADER))
+        super().__init__(bytearray(data))
 
     def find(self, sentinel: bytes) -> int:
         """Offset of the one occurrence of ``sentinel``."""
@@ -80,9 +86,3 @@ class MessageTemplate:
     def view(self, offset: int, dtype: str, shape) -> np.ndarray:
         count = int(np.prod(shape))
         return np.frombuffer(self._buf, dtype=dtype, count=count, offset=offset).reshape(shape)
-
-    def set_stamp(self, stamp_ns: int) -> None:
-        self.stamp[0], self.stamp[1] = divmod(stamp_ns, 1_000_000_000)
-
-    def to_bytes(self) -> bytes:
-        return bytes(self._buf)
