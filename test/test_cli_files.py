@@ -61,7 +61,7 @@ def test_bad_calibrations_are_one_line(tmp_path, recording):
     missing = tmp_path / "missing.calibration.yaml"
     assert_one_line_exit_2(cli("report", recording, "--calibration", missing, "--out", tmp_path / "r"), "no such file")
     good = tmp_path / "good.calibration.yaml"
-    assert cli("calibrate", recording, "--output", good)[0] == 0
+    assert cli("calibrate", recording, "--model", "closed_form", "--output", good)[0] == 0
     fields = yaml.safe_load(good.read_text())
     for text, words in [("rung: [", "not valid YAML"), ("- 1\n", "a mapping"), ("\xff\xfe", "not UTF-8"),
                         (yaml.safe_dump({**fields, "material_scale": float("nan")}), "'material_scale'"),
@@ -85,7 +85,7 @@ def test_unwritable_outputs_are_one_line(tmp_path, recording):
 
 def test_report_and_calibrate_still_work_on_the_good_recording(tmp_path, recording):
     cal = tmp_path / "cal.calibration.yaml"
-    code, err = cli("calibrate", recording, "--output", cal)
+    code, err = cli("calibrate", recording, "--model", "closed_form", "--output", cal)
     assert code == 0, err
     code, err = cli("report", recording, "--calibration", cal, "--out", tmp_path / "report")
     assert code == 0 and (tmp_path / "report" / "report.md").is_file(), err

@@ -214,7 +214,7 @@ def test_import_csv_to_report_and_calibrate(tmp_path, implemented_design):
     assert [r.force for r in rows if r.bench == "force" and r.level == 0 and r.phase == "loading"] == \
         pytest.approx([0.0] * protocol.trials, abs=1e-12)   # tared at 0 bar of each trial
     # calibrate (which writes the report, before and after) on the imported recording
-    assert main(["calibrate", str(bag), "--output", str(tmp_path / "c.calibration.yaml")]) == 0
+    assert main(["calibrate", str(bag), "--model", "closed_form", "--output", str(tmp_path / "c.calibration.yaml")]) == 0
     assert "Blocking-force bench" in (bag / "report.md").read_text()
     assert yaml.safe_load((tmp_path / "c.calibration.yaml").read_text())["material_scale"] == \
         pytest.approx(1.0, abs=0.1)

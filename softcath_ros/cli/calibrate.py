@@ -36,11 +36,12 @@ def run(args) -> int:
     design = load_design(args.design) if args.design else recording_design(path)
     if design is None:
         raise SoftcathError(f"{path} has no design attached; pass --design")
+    out = Path(args.output) if args.output else path.parent / f"{design.name}.calibration.yaml"
+    out.parent.mkdir(parents=True, exist_ok=True)   # an output that cannot be written fails before the fit
     result = calibrate(rows_from_recording(path), design, args.model)
     if not all(math.isfinite(v) for row in result.covariance for v in row):
         raise SoftcathError(f"{path}: shift and scale are not identifiable from this recording ({result.message})")
     calibration = from_fit(result, design, path)
-    out = Path(args.output) if args.output else path.parent / f"{design.name}.calibration.yaml"
     calibration.save(out)
     rep = write_report(path, design, [args.model], calibration, out_dir=path.parent, cache=not args.no_cache)
     if args.json:
