@@ -145,3 +145,40 @@ def test_a_node_started_without_the_variable_uses_localhost_discovery():
     env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert proc.stdout.split() == ["LOCALHOST", "2"], proc.stdout + proc.stderr
+
+
+NODE_CLASSES = {"allocation_node": "AllocationNode", "bench_node": "BenchNode", "model_node": "ModelNode",
+                "sim_bench_node": "SimBenchNode", "steer_node": "SteerNode"}
+
+
+@pytest.mark.parametrize("name", sorted(NODE_CLASSES))
+def test_shipped_params_files_set_only_parameters_their_node_declares(tmp_path, monkeypatch, name):
+    """rcl ignores a parameter a node does not declare: a misspelt key in a shipped file would
+    silently do nothing. Each file names its node, and every key is declared with that type."""
+    import importlib
+
+    from softcath_ros.core.yaml_io import load_yaml_file
+    from softcath_ros.resources import find, shipped_names
+
+    assert name in shipped_names("params")
+    path = find("params", name)
+    (node_key, body), = load_yaml_file(path).items()
+    wanted = body["ros__parameters"]
+    monkeypatch.chdir(tmp_path)                     # bench_node opens its recording under runs/
+    context = rclpy.Context()
+    rclpy.init(context=context, args=["--ros-args", "--params-file", str(path)])
+    module = importlib.import_module(f"softcath_ros.nodes.{name}")
+    node = getattr(module, NODE_CLASSES[name])(context=context)
+    try:
+        assert node.get_name() == node_key
+        undeclared = sorted(set(wanted) - set(node._parameters))
+        assert not undeclared, f"{path.name} sets undeclared parameters {undeclared}"
+        for key, value in wanted.items():
+            got = node.get_parameter(key).value
+            if isinstance(value, float) or isinstance(got, float):
+                assert got == pytest.approx(value), key
+            else:
+                assert got == value, key
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
