@@ -304,26 +304,14 @@ def _admissible(rod: _Rod, law: LawSlice, limit, th, R, its) -> None:
 
 
 def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
-    """The blocked state from one at a nearby pressure: clamped or hinged, as the guess was; switch
-    when the clamped base passes the limit moment or the hinge would open forwards."""
+    """The blocked state from one at a nearby pressure: clamped or hinged, as the guess was first;
+    the other when the clamped base passes the limit moment or the hinge would open forwards."""
     th0, R0 = np.array(guess.theta, dtype=float), float(guess.contact_force)
-    hinged = guess.hinge_moment is not None and limit is not None
-    its, why = 0, ""
-    for attempt in range(2):
-        if hinged:
-            th, R, ok, n_it, msg = rod.newton(th0, R0, hinge_moment=limit[0], free_phi=True, free_R=True,
-                                              gap_row=True)
-            its += n_it
-            if ok and th[0] > 1e-12 and attempt == 0:        # the hinge unloads: clamped again
-                th0 = th0.copy()
-                th0[0] = 0.0
-                hinged = False
-                continue
-            if ok:
-                _admissible(rod, law, limit, th, R, its)
-                return th, R, True, its
-            why = f"with the base hinged at its limit moment ({limit[0] * 1e3:.4g} mN m): {msg}"
-        else:
+    modes = ["clamped"] if limit is None else (
+        ["hinged", "clamped"] if guess.hinge_moment is not None else ["clamped", "hinged"])
+    its, reasons = 0, []
+    for mode in modes:
+        if mode == "clamped":
             start = th0.copy()
             start[0] = 0.0
             th, R, ok, n_it, msg = rod.newton(start, R0, free_R=True, gap_row=True)
@@ -331,13 +319,20 @@ def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
             if ok and R >= 0 and not _over(rod, th, R, limit):
                 _check(law, rod.geometry(th)[0], limit)
                 return th, R, False, its
-            if limit is None or attempt == 1:
-                why = msg or f"the contact pulls ({R:.3g} N)"
-                break
-            hinged = True                                  # past the limit moment: the base hinges
-        if attempt == 1:
-            break
-    raise _Stop(f"the blocked state does not continue: {why}", NUMERICAL_FAILURE, th0, R0, its)
+            reasons.append("clamped: " + (msg if not ok else f"the contact pulls ({R:.3g} N)" if R < 0
+                                          else "past the limit moment"))
+        else:
+            th, R, ok, n_it, msg = rod.newton(th0, R0, hinge_moment=limit[0], free_phi=True, free_R=True,
+                                              gap_row=True)
+            its += n_it
+            if ok and th[0] <= 1e-12 and R >= 0:
+                _admissible(rod, law, limit, th, R, its)
+                return th, R, True, its
+            reasons.append(f"hinged at {limit[0] * 1e3:.4g} mN m: " + (
+                msg if not ok else f"the hinge opens forwards ({th[0]:.3g} rad)" if th[0] > 0
+                else f"the contact pulls ({R:.3g} N)"))
+    raise _Stop("the blocked state does not continue from the last pressure (" + "; ".join(reasons) + ")",
+                NUMERICAL_FAILURE, th0, R0, its)
 
 
 __all__ = ["LawRangeError", "PlaneContact", "PlanarLoads", "RodSolution", "solve_rod"]
