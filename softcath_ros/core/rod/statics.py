@@ -220,6 +220,10 @@ def solve_rod(law: LawSlice, length: float, loads: PlanarLoads = PlanarLoads(), 
             return rod.solution(th, R, True, "", its, hinge_moment=m_lim if hinged else None)
         z = np.arange(n_segments + 1) * rod.h
         k_free = law.free_curvature()
+        if k_free is None and np.isfinite(law.kappa_hi):
+            # the tip carries no moment, so its segment is at the free curvature whatever the loads
+            raise LawRangeError(f"{law.source}: at p = {law.pressure / PA_PER_BAR:.4f} bar the free curvature is beyond "
+                                f"the moment-curvature table ({law.kappa_lo:.4g}..{law.kappa_hi:.4g} 1/m)")
         free = k_free * z if k_free is not None else np.zeros(n_segments + 1)
         start = free if guess is None else np.concatenate([[0.0], np.asarray(guess.theta, float)[1:]])
         th, _, ok, its, msg = rod.newton(start)
