@@ -206,7 +206,7 @@ def _plot(pressures, forces, ceilings, f_cf):
                  if name == "section" else f"rod, law from section D/20, lumen {name.replace('_', ' ')}")
         line, = ax.plot(bar, f * 1e3, "o-", ms=3 if name == "section" else 2, label=label)
         ax.plot(bar, ceilings[name] * 1e3, ":", color=line.get_color(), lw=1,
-                label="  |M_lim| / l of that law (base at its limit moment; rod refuses beyond)")
+                label="  |M_lim| / l of that law (the base hinge's moment over l)")
     ax.plot(bar, f_cf * 1e3, "--", label="closed form, 3 EI kappa / (2 l) (former estimate)")
     ax.plot(*[PUBLISHED[0]], PUBLISHED[1] * 1e3, "k*", ms=12, label="published experiment (~40 mN)")
     ax.axvline(PUBLISHED[0] / SHIFT, color="grey", lw=0.8, ls=":", label="0.35 bar / 1.25 (FE pressure shift)")
