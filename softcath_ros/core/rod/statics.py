@@ -135,7 +135,7 @@ class _Rod:
         tpG = np.einsum("ij,ij->i", tp, G)
         tG = np.einsum("ij,ij->i", t, G)
         A, B, h = self.A, self.B, self.h
-        F = B.T @ (m - 0.0) - A.T @ (ell * tpG)
+        F = B.T @ m - A.T @ (ell * tpG)
         J = (B.T * (S / h)) @ B + (A.T * (ell * tG)) @ A - (A.T * (dell * tpG / h)) @ B
         rows = np.arange(0 if hinge_moment is not None else 1, self.n + 1)
         cols = np.arange(0 if free_phi else 1, self.n + 1)
