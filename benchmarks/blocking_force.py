@@ -5,10 +5,12 @@ lumen fill, the former contact proxy), the former closed-form estimate, and the 
 - rod from section: ``make_model("rod", design[, lumen_fill=f])`` (law tabulated from the section
   rung D/20 and cached), the bench's scale as a frictionless plane through the tip at rest, no
   gravity (the bench tares at p = 0): ``bench.blocking.BlockingForce``. Fills: ``--fills``.
-- the limit-moment ceiling |M_lim(p)| / l per law: above ~0.25 bar the blocked body's base, bent
-  back, needs more moment than the section can carry (its M(kappa) saturates and falls: the
-  section flattens), so the rod's base would kink and the rod refuses; with the tip at x >= l
-  (measured 18.1-18.6 mm, the body stretches) no un-kinked blocked state carries more force.
+- the limit-moment ceiling |M_lim(p)| / l per law: from ~0.25 bar the blocked body's base, bent
+  back, reaches the most moment the section carries (its M(kappa) saturates and falls: the lumen
+  closes, the section flattens); the base then is a hinge at that moment (core/rod/statics.py) and
+  the force is |M_lim| over the tip's lever arm (x_tip >= l: the body stretches). Per pressure the
+  hinge's rotation, and the force if the rotation were spread over one diameter (the table's |M|
+  at phi / D, lower than its peak: how much the force depends on the hinge's length).
 - closed form, F = 3 EI kappa / (2 l) with the closed form's free curvature (the estimate
   bench/blocking.py used before the rod rung).
 - published: about 40 mN at 0.35 bar (experiment); the published FE matches the experiment when
@@ -61,6 +63,45 @@ def ceiling(law, pressures):
     return out
 
 
+def crossing(pressures, f, force):
+    """The pressure (bar) where the force first reaches ``force`` (N), linearly between samples."""
+    ok = np.isfinite(f)
+    above = np.flatnonzero(ok & (f >= force))
+    if not len(above) or above[0] == 0:
+        return None
+    i = above[0]
+    return float(np.interp(force, f[i - 1:i + 1], pressures[i - 1:i + 1]) / PA_PER_BAR)
+
+
+def blocked(rod, pressures, diameter):
+    """Blocking force (N) per pressure (NaN where refused), and per pressure the base hinge: its
+    rotation (rad), its moment (N m) and the force if the hinge's rotation were spread over one
+    diameter (kappa = phi / D, where the table's |M| is lower than at its peak: the sensitivity of
+    the force to the hinge's length), plus the stop message where refused."""
+    f = np.full(len(pressures), np.nan)
+    hinge = []
+    for i, p in enumerate(pressures):
+        row = {"rotation_rad": None, "moment_Nm": None, "force_if_spread_over_D_mN": None, "stop": ""}
+        try:
+            sol = rod.solve(float(p), LENGTH, bench_contact(LENGTH))
+        except LawRangeError as exc:
+            row["stop"] = f"{exc} [{exc.stop_reason}]"
+            hinge.append(row)
+            continue
+        if sol.converged:
+            f[i] = sol.contact_force
+            if sol.hinge_moment is not None:
+                sl = rod.law.at(float(p))
+                k_spread = max(sol.hinge_rotation / diameter, sl.kappa_lo)
+                ratio = abs(float(sl.moment(k_spread))) / abs(sol.hinge_moment) if k_spread < sl.limit_moment_if_peaked()[1] else 1.0
+                row.update(rotation_rad=sol.hinge_rotation, moment_Nm=sol.hinge_moment,
+                           force_if_spread_over_D_mN=sol.contact_force * ratio * 1e3)
+        else:
+            row["stop"] = f"{sol.message} [{sol.stop_reason}]"
+        hinge.append(row)
+    return f, hinge
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=50)
@@ -75,9 +116,8 @@ def main(argv=None):
         t0 = time.perf_counter()
         rod = make_model("rod", design, progress=True, **({} if fill is None else {"lumen_fill": fill}))
         build_s = time.perf_counter() - t0
-        force = BlockingForce(rod)
-        f = np.array([force(np.array([p]), LENGTH) for p in pressures])
-        variants["section" if fill is None else f"fill_{fill:g}"] = (rod, build_s, f, ceiling(rod.law, pressures))
+        f, hinge = blocked(rod, pressures, design.outer_diameter)
+        variants["section" if fill is None else f"fill_{fill:g}"] = (rod, build_s, f, ceiling(rod.law, pressures), hinge)
     f_cf = closed_form_estimate(design, pressures)
     rod = variants["section"][0]
     load_before = os.getloadavg()
@@ -88,11 +128,21 @@ def main(argv=None):
     rows = []
     for i, p in enumerate(pressures):
         row = {"pressure_bar": p / PA_PER_BAR}
-        for name, (_, _, f, c) in variants.items():
+        for name, (_, _, f, c, hg) in variants.items():
             row[f"force_rod_{name}_mN"] = f[i] * 1e3 if np.isfinite(f[i]) else None
             row[f"limit_moment_over_l_{name}_mN"] = c[i] * 1e3 if np.isfinite(c[i]) else None
+            row[f"hinge_rotation_{name}_rad"] = hg[i]["rotation_rad"]
+            row[f"hinge_moment_{name}_mNm"] = None if hg[i]["moment_Nm"] is None else hg[i]["moment_Nm"] * 1e3
+            row[f"force_if_hinge_spread_over_D_{name}_mN"] = hg[i]["force_if_spread_over_D_mN"]
+            row[f"stop_{name}"] = hg[i]["stop"]
         row["force_closed_form_estimate_mN"] = f_cf[i] * 1e3
         rows.append(row)
+
+    def rel(v):
+        return None if v is None else v / (PUBLISHED[1] * 1e3) - 1.0
+
+    def hinge_at(rows_, bar, key="force_if_spread_over_D_mN"):
+        return rows_[int(np.argmin(abs(pressures - bar * PA_PER_BAR)))][key]
 
     def at(f, bar):
         v = f[np.argmin(abs(pressures - bar * PA_PER_BAR))]
@@ -108,7 +158,7 @@ def main(argv=None):
                           "limit_moment_over_l_at_0.28_bar_mN": at(c, 0.28),
                           "limit_moment_over_l_at_0.35_bar_mN": at(c, 0.35),
                           "table_messages": r.law.table.messages}
-                   for name, (r, b, f, c) in variants.items()}
+                   for name, (r, b, f, c, _) in variants.items()}
     f_empty = variants["section"][2]
     meta = {"design": design.name, "length_m": LENGTH, "law": rod.law.source,
             "law_pressure_range_pa": list(rod.law.pressure_range),
@@ -119,6 +169,11 @@ def main(argv=None):
             "rod_force_at_0.28_bar_mN": at(f_empty, 0.28), "rod_force_at_0.35_bar_mN": at(f_empty, 0.35),
             "limit_moment_over_l_at_0.2625_bar_mN": at(variants["section"][3], 0.2625),
             "limit_moment_over_l_at_0.35_bar_mN": at(variants["section"][3], 0.35),
+            "pressure_for_published_force_bar": crossing(pressures, f_empty, PUBLISHED[1]),
+            "rod_vs_published_at_0.35_bar": rel(at(f_empty, 0.35)), "rod_vs_published_at_0.2625_bar": rel(at(f_empty, 0.2625)),
+            "force_if_hinge_spread_over_D_at_0.2625_bar_mN": hinge_at(variants["section"][4], 0.2625),
+            "force_if_hinge_spread_over_D_at_0.35_bar_mN": hinge_at(variants["section"][4], 0.35),
+            "hinge_rotation_at_0.35_bar_rad": hinge_at(variants["section"][4], 0.35, "rotation_rad"),
             "closed_form_estimate_at_0.35_bar_mN": float(f_cf[np.argmin(abs(pressures - 35000))] * 1e3),
             "variants": per_variant,
             "time_rod_contact_s": t_contact, "time_rod_free_s": t_free, "time_rod_evaluate_s": t_eval,
@@ -129,10 +184,11 @@ def main(argv=None):
         print(f"{name}: {v['law']}, table 0..{v['law_pressure_range_pa'][1] / PA_PER_BAR:.3f} bar "
               f"({v['law_build_or_load_s']:.1f} s to build or load); first refused: {v['first_refused_bar']} bar")
     print("  p [bar]  " + "  ".join(f"{n:>12}" for n in variants) + "  (rod blocking force [mN]; in brackets "
-          "|M_lim| / l [mN])  closed form [mN]")
+          "|M_lim| / l [mN])  closed form [mN]  base hinge [rad]")
     for i, p in enumerate(pressures):
         print(f"  {p / PA_PER_BAR:6.4f}  " + "  ".join(f"{v[2][i] * 1e3:6.2f} ({v[3][i] * 1e3:5.1f})"
-                                                      for v in variants.values()) + f"  {f_cf[i] * 1e3:8.2f}")
+                                                      for v in variants.values()) + f"  {f_cf[i] * 1e3:8.2f}"
+              + "  " + "  ".join(f"{v[4][i]['rotation_rad'] or 0.0:+.4f}" for v in variants.values()))
     print("published ~40 mN at 0.35 bar (the published FE matches it at ~0.28 bar)")
     print(f"rod evaluation (0.2 bar, lumen contact law): contact {t_contact * 1e3:.2f} ms, free {t_free * 1e3:.2f} ms, "
           f"evaluate() {t_eval * 1e3:.2f} ms (median of {args.repeats}; load average {load_before[0]:.2f})")
@@ -150,7 +206,7 @@ def _plot(pressures, forces, ceilings, f_cf):
                  if name == "section" else f"rod, law from section D/20, lumen {name.replace('_', ' ')}")
         line, = ax.plot(bar, f * 1e3, "o-", ms=3 if name == "section" else 2, label=label)
         ax.plot(bar, ceilings[name] * 1e3, ":", color=line.get_color(), lw=1,
-                label="  |M_lim| / l of that law (base at its limit moment; rod refuses beyond)")
+                label="  |M_lim| / l of that law (the base hinge's moment over l)")
     ax.plot(bar, f_cf * 1e3, "--", label="closed form, 3 EI kappa / (2 l) (former estimate)")
     ax.plot(*[PUBLISHED[0]], PUBLISHED[1] * 1e3, "k*", ms=12, label="published experiment (~40 mN)")
     ax.axvline(PUBLISHED[0] / SHIFT, color="grey", lw=0.8, ls=":", label="0.35 bar / 1.25 (FE pressure shift)")

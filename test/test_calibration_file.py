@@ -261,3 +261,52 @@ def test_model_node_with_a_calibration_for_another_design_exits_2_with_one_line(
                           env=private_env(), capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert "another design" in proc.stderr and "Traceback" not in proc.stderr
+
+
+# --------------------------------------------------------------------------- a material scale is a pressure scale
+
+@pytest.mark.parametrize("rung, options, tol", [("closed_form", {}, 1e-10), ("section", {"mesh_size": 0.005 / 8}, 1e-5)])
+def test_material_scale_is_exactly_the_pressure_divided_by_it(rung, options, tol):
+    """Every modulus x m scales the whole potential: the rung on the design read at (1 - s) p / m is
+    the rung rebuilt on the scaled design at (1 - s) p (section: to its Newton tolerance)."""
+    design = load_design("implemented_5mm").with_length(0.02)
+    shift, m = 0.1, 1.3
+    fast = CalibratedModel(make_model(rung, design, **options), shift, material_scale=m)
+    rebuilt = CalibratedModel(make_model(rung, scaled_design(design, m), **options), shift)
+    p = np.array([[10000.0], [20000.0]])
+    a, b = fast.evaluate(p), rebuilt.evaluate(p)
+    assert a.converged.all() and b.converged.all()
+    np.testing.assert_allclose(a.curvature, b.curvature, rtol=tol, atol=1e-12)
+    np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=tol)
+    # a force from the moduli (the blocking force through EI) scales with them
+    np.testing.assert_allclose(BlockingForce(fast).from_curvature(a.curvature, 0.017),
+                               BlockingForce(rebuilt).from_curvature(b.curvature, 0.017), rtol=tol)
+    # the scale is not a silicone-only change: the fibre, the rings (and a device) scale too
+    sd = scaled_design(design, m)
+    assert sd.limiting_fibre.material.c1 == pytest.approx(m * design.limiting_fibre.material.c1)
+    assert sd.reinforcement.youngs_modulus == pytest.approx(m * design.reinforcement.youngs_modulus)
+    assert sd.material.bulk_modulus == pytest.approx(m * design.material.bulk_modulus)
+
+
+def test_fit_by_scaled_pressures_agrees_with_rebuilding_the_rung(truth_run):
+    design, _, rows, _ = truth_run
+    rows = rows[::3]                      # both benches still in (fewer readings: a fast test)
+    assert {r.bench for r in rows} == {"angle", "force"}
+    fast = calibrate(rows, design, "closed_form")
+    slow = calibrate(rows, design, "closed_form", rebuild=True)
+    assert fast.pressure_shift == pytest.approx(slow.pressure_shift, abs=1e-6)
+    assert fast.material_scale == pytest.approx(slow.material_scale, abs=1e-6)
+    assert fast.ci95["material_scale"] == pytest.approx(slow.ci95["material_scale"], rel=1e-3)
+
+
+def test_a_rung_with_loads_is_built_on_the_scaled_design():
+    from softcath_ros.core.calibration_file import pressure_only
+
+    assert pressure_only("surrogate") and pressure_only("section") and not pressure_only("rod")
+    design = load_design("implemented_5mm")
+    with pytest.raises(ValueError, match="scaled design"):
+        CalibratedModel(make_model("rod", design, source="closed_form"), 0.1, material_scale=1.2)
+    cal = _calibration(design, scale=1.2)
+    rod = build_model("rod", design, cal, source="closed_form")
+    assert rod.factor == pytest.approx(0.8) and rod.inner.design.material.c1 == pytest.approx(1.2 * design.material.c1)
+    assert build_model("closed_form", design, cal).factor == pytest.approx(0.8 / 1.2)

@@ -32,9 +32,9 @@ def free_rod(design):
 
 
 def _rod(design, base, **loads):
-    """A rod with loads sharing ``base``'s law (the table is built once per module)."""
+    """A rod with loads sharing ``base``'s law (a rod or a law: the table is built once per module)."""
     rod = make_model("rod", design, source="closed_form", **loads)
-    rod.law = base.law
+    rod.law = getattr(base, "law", base)
     return rod
 
 
@@ -164,3 +164,53 @@ def test_blocking_capacity_at_035_bar_with_fill_is_positive_and_above_02_bar(des
     m_lim, k_lim = filled_rod.law.at(35000.0).limit_moment()
     assert m_lim < 0 and k_lim <= 0
     assert abs(m_lim) / L > f02 > 0          # D/20: 54 mN at 0.35 bar vs 30.7 mN at 0.2 bar
+
+
+# --------------------------------------------------------------------------- blocking to 0.35 bar: the base hinge
+
+BLOCK_GRID = LawGrid(kappa_min=-150.0, kappa_max=300.0, kappa_step=25.0, pressure_max=35000.0, pressure_step=8750.0)
+
+
+@pytest.fixture(scope="module")
+def blocking_law(design):
+    """A coarse lumen-contact law over the blocking bench's range (D/6, 5 pressures to 0.35 bar)."""
+    return make_model("rod", design, grid=BLOCK_GRID, cache=False, mesh_size=0.005 / 6).law
+
+
+def test_blocked_rod_converges_at_035_bar_with_its_base_hinged_at_the_limit_moment(design, blocking_law):
+    from softcath_ros.bench.blocking import bench_contact
+
+    rod = _rod(design, blocking_law)
+    sols = {p: rod.solve(p, L, bench_contact(L)) for p in (17500.0, 26250.0, 35000.0)}
+    assert all(s.converged for s in sols.values()), [s.message for s in sols.values()]
+    f = {p: s.contact_force for p, s in sols.items()}
+    assert np.isfinite(list(f.values())).all() and 0 < f[17500.0] < f[26250.0] < f[35000.0]
+    hi = sols[35000.0]
+    m_lim, k_lim = blocking_law.at(35000.0).limit_moment_if_peaked()
+    # at 0.35 bar the base is a hinge at the section's limit moment, bent back (D/20: -0.82 rad) ...
+    assert hi.hinge_moment == pytest.approx(m_lim) and hi.hinge_rotation < -0.1
+    # ... so the force is that moment over the tip's lever arm (statics of the frictionless scale) ...
+    assert hi.contact_force == pytest.approx(abs(m_lim) / hi.positions[-1, 0], rel=0.03)
+    # ... the tip is on the scale and no segment is past the limit curvature
+    assert abs(hi.positions[-1, 1]) < 1e-9 and hi.kappa.min() >= k_lim - 1e-9
+    # below the limit the base stays clamped (D/20: to 0.2375 bar)
+    assert sols[17500.0].hinge_moment is None and sols[17500.0].hinge_rotation == 0.0
+
+
+def test_blocked_rod_without_a_known_capacity_stops_with_a_named_reason(design, blocking_law):
+    """A table that ends before the section's moment peaks bent back cannot say what the base
+    carries: the rod refuses with the reason named, never a number."""
+    import dataclasses
+
+    from softcath_ros.core.continuation import OUTSIDE_MODEL
+    from softcath_ros.core.rod.law import TabulatedLaw
+    from softcath_ros.core.rod.loads import TipPlaneContact
+
+    t = blocking_law.table
+    moment = t.moment.copy()
+    moment[t.curvatures < -30.0] = np.nan            # the held section "stopped" at -30 1/m
+    short = TabulatedLaw(dataclasses.replace(t, moment=moment), source="short law")
+    rod = _rod(design, short, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
+    st = rod.evaluate(np.array([[35000.0]]))
+    assert not st.converged[0] and np.isnan(st.contact_force[0])
+    assert "before the section's moment peaks" in st.message and f"[{OUTSIDE_MODEL}]" in st.message

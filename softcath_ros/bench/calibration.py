@@ -3,7 +3,9 @@
 Parameters (both dimensionless):
 - ``pressure_shift`` s: the model is evaluated at (1 - s) times the measured pressure
   (the published FE-to-experiment gap is s ~ 0.25);
-- ``material_scale`` m: every Yeoh coefficient of the body multiplied by m.
+- ``material_scale`` m: every modulus of the design multiplied by m (``scaled_design``); for a rung
+  that answers shapes for pressures alone this is its pressures divided by m, exactly, so the fit
+  builds the rung (a surrogate's table) once (core/calibration_file.py says why).
 Residuals: every sample's bending angle per sample length theta / l (angle bench; the model's is
 |k| x axial stretch) and tared blocking force (force
 bench), each divided by its step's spread (floored at the reading noise) so the two
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..core.calibration_file import CalibratedModel, scaled_design
+from ..core.calibration_file import CalibratedModel, pressure_only, scaled_design
 from ..core.errors import SoftcathError
 from ..core.prediction import angle_per_length
 from .analysis import SampleRow, summarise
@@ -70,8 +72,10 @@ def _residual_setup(rows: list[SampleRow], curvature_floor: float, force_floor: 
 
 def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
               curvature_floor: float = 0.5, force_floor: float = 0.3e-3,
-              x0=(0.0, 1.0)) -> CalibrationResult:
-    """Fit (pressure_shift, material_scale) to ``rows``. Floors: 1/m and N (reading noise)."""
+              x0=(0.0, 1.0), rebuild: bool = False) -> CalibrationResult:
+    """Fit (pressure_shift, material_scale) to ``rows``. Floors: 1/m and N (reading noise).
+    ``rebuild``: build the rung on every scaled design the fit tries, even where scaling its
+    pressures is exact (the former way; tests and benchmarks/calibration_speed.py compare the two)."""
     from ..core.models import make_model
 
     use, meas, sigma = _residual_setup(rows, curvature_floor, force_floor)
@@ -86,9 +90,14 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
     else:
         note = ""
 
+    # a material scale is the pressure divided by it (core/calibration_file.py): one model for every
+    # value the fit tries; a rung with loads is built on each scaled design
+    base = make_model(rung, design) if pressure_only(rung) and not rebuild else None
+
     def predict(x):
         shift, scale, offsets = x[0], x[1], x[2:]
-        model = CalibratedModel(make_model(rung, scaled_design(design, scale)), shift)
+        model = (CalibratedModel(base, shift, material_scale=scale) if base is not None
+                 else CalibratedModel(make_model(rung, scaled_design(design, scale)), shift))
         state = model.evaluate(pressures)
         k = np.atleast_2d(state.curvature)
         force = BlockingForce(model)

@@ -54,7 +54,7 @@ class RigParams:
     scale_offset: float = 3.0e-3            # N, scale reading with nothing on it
     hysteresis_pressure: float = 0.0        # Pa, width of the play between true and bending pressure
     actuator_time_constant: float = 0.0     # s, body's lag behind the regulated pressure (0: none)
-    material_scale: float = 1.0             # truth's Yeoh coefficients = the design's x this
+    material_scale: float = 1.0             # truth's moduli = the design's x this (scaled_design)
     seed: int = 0
 
     @classmethod

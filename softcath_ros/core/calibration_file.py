@@ -2,15 +2,22 @@
 
 A calibration says how the model must be corrected to match one actuator (docs/calibration.md):
 - ``pressure_shift`` s: the rung is evaluated at (1 - s) times the commanded pressure;
-- ``material_scale`` m: every Yeoh coefficient of the body multiplied by m;
+- ``material_scale`` m: every modulus of the design multiplied by m (the silicone's Yeoh coefficients
+  and bulk modulus, the fibre's, the rings', a device's bending stiffness: ``scaled_design``);
 - their 2x2 covariance (from the fit), so predictions carry a 95% band.
 It is tied to one design by ``section_hash``: the design's content hash over every field but the
 length and the pressure limit (a calibration is of the section and material, fitted on samples of
 any length, and holds for any length and lowered limit); applied to another design it is refused.
 
 ``build_model(name, design, calibration)`` is the one way to get a calibrated rung: the rung
-``name`` built on the design with the scaled material, wrapped in ``CalibratedModel`` that shifts
-the pressures. The safety limit stays the design's ``max_pressure`` on the commanded pressure.
+``name`` wrapped in ``CalibratedModel``, which evaluates it at (1 - s) p / m. Why p / m: every
+elastic term of the potential (silicone, fibre, rings, the lumen's contact barrier and fill, whose
+moduli are set relative to the silicone's, a device) is linear in the moduli and the pressure's
+work is linear in p, so Pi(u; p, m) = m Pi(u; p / m, 1): the same equilibria, the same stability,
+the same shapes; forces scale by m. So a rung that answers shapes for pressures alone (no tip
+loads, gravity or contact: ``pressure_only``) is built once on the design itself (a surrogate: its
+own table, no new table per scale) and read at p / m; a rung with loads (the rod) is built on the
+scaled design. The safety limit stays the design's ``max_pressure`` on the commanded pressure.
 """
 from __future__ import annotations
 
@@ -37,9 +44,28 @@ class CalibrationError(SoftcathError):
     """A calibration file is malformed, or was made for another design."""
 
 
+def _scaled_material(material, m: float):
+    return replace(material.scaled(m), bulk_modulus=material.bulk_modulus * m)
+
+
 def scaled_design(design, material_scale: float):
-    """``design`` with the body's Yeoh coefficients multiplied by ``material_scale``."""
-    return replace(design, material=design.material.scaled(material_scale))
+    """``design`` with every modulus multiplied by ``material_scale``: the silicone's Yeoh
+    coefficients and bulk modulus, the limiting fibre's, the rings' Young's modulus and a device's
+    bending stiffness (so the potential scales as a whole: module docstring)."""
+    m = float(material_scale)
+    fibre, rings, device = design.limiting_fibre, design.reinforcement, design.device
+    return replace(design, material=_scaled_material(design.material, m),
+                   limiting_fibre=None if fibre is None else replace(fibre, material=_scaled_material(fibre.material, m)),
+                   reinforcement=None if rings is None else replace(rings, youngs_modulus=rings.youngs_modulus * m),
+                   device=None if device is None else replace(device, bending_stiffness=device.bending_stiffness * m))
+
+
+def pressure_only(name: str) -> bool:
+    """Rung ``name`` answers the shape for pressures alone (no tip loads, gravity or contact), so a
+    material scale m is exactly its pressures divided by m."""
+    from .models import RUNGS, rung_info
+
+    return name in RUNGS and not {"tip_load", "contact", "gravity"} & set(rung_info(name).models)
 
 
 def section_hash(design) -> str:
@@ -114,7 +140,7 @@ class Calibration:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         header = ("# softcath calibration (docs/calibration.md): the rung is evaluated at (1 - pressure_shift) p\n"
-                  "# on the design with every Yeoh coefficient x material_scale\n")
+                  "# on the design with every modulus x material_scale\n")
         path.write_text(header + yaml.safe_dump(self.to_dict(), sort_keys=False))
         return path
 
@@ -203,21 +229,33 @@ def build_model(name: str, design, calibration: Calibration | None = None, **opt
     if calibration is None:
         return make_model(name, design, **options)
     calibration.check_design(design)
-    inner = make_model(name, scaled_design(design, calibration.material_scale), **options)
+    m = calibration.material_scale
+    if pressure_only(name):
+        return CalibratedModel(make_model(name, design, **options), calibration.pressure_shift, calibration,
+                               material_scale=m)
+    inner = make_model(name, scaled_design(design, m), **options)
     return CalibratedModel(inner, calibration.pressure_shift, calibration)
 
 
 class CalibratedModel(BendModel):
-    """A rung corrected by a calibration: evaluates ``inner`` (already on the scaled material) at
-    (1 - ``pressure_shift``) times the commanded pressures. Declares what ``inner`` declares; a
-    linear rung stays linear (its gains scaled by 1 - shift). ``calibration``: where the shift came
-    from (None while a fit tries values)."""
+    """A rung corrected by a calibration: evaluates ``inner`` at (1 - ``pressure_shift``) /
+    ``material_scale`` times the commanded pressures. ``inner`` is either already on the scaled
+    design (``material_scale`` 1, any rung) or on the design itself with the scale applied here
+    (``material_scale`` m: exact for a ``pressure_only`` rung, whose answers are shapes; the model's
+    ``design`` is then the scaled one, so what is computed from its moduli, a blocking force from
+    EI, scales as it should). Declares what ``inner`` declares; a linear rung stays linear (its
+    gains scaled by the factor). ``calibration``: where the values came from (None while a fit
+    tries values)."""
 
-    def __init__(self, inner: BendModel, pressure_shift: float, calibration: Calibration | None = None):
-        super().__init__(inner.design)
+    def __init__(self, inner: BendModel, pressure_shift: float, calibration: Calibration | None = None,
+                 material_scale: float = 1.0):
+        m = float(material_scale)
+        if m != 1.0 and not pressure_only(inner.name):
+            raise ValueError(f"rung '{inner.name}' takes loads: build it on the scaled design instead")
+        super().__init__(inner.design if m == 1.0 else scaled_design(inner.design, m))
         self.inner = inner
         self.calibration = calibration
-        self.factor = 1.0 - float(pressure_shift)
+        self.factor = (1.0 - float(pressure_shift)) / m
         self.name = f"{inner.name} calibrated"
         self.info = inner.info
         self.solver_version = inner.solver_version

@@ -33,9 +33,11 @@ from ..rod.section_law import LAW_VERSION, LawGrid, section_law
 from ..rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..section_properties import transformed_section
 from ..options import Option
+from ..units import PA_PER_BAR
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 _PLANE_TOL = 1e-9
+CONTACT_STEP = 1250.0   # Pa: the pressure ramp of a body in contact (half the law's table step)
 
 
 class RodModel(BendModel):
@@ -137,10 +139,33 @@ class RodModel(BendModel):
 
     # ------------------------------------------------------------------ evaluation
     def solve(self, pressure: float, length: float | None = None, loads: PlanarLoads | None = None):
-        """The rod solution (``RodSolution``) at one pressure (Pa); raises LawRangeError outside the law."""
+        """The rod solution (``RodSolution``) at one pressure (Pa); raises LawRangeError outside the law.
+
+        With a contact plane the pressure is ramped from 0 in steps of at most ``CONTACT_STEP``, each
+        solve starting from the last: the bench's path (the tip on the plane from p = 0), not another
+        equilibrium of the same pressure (a body curled past the plane and pressed back)."""
         length = self.design.length if length is None else float(length)
-        sl = self.law.at(float(pressure), extra_stiffness=self.device_stiffness)
-        return solve_rod(sl, length, self.planar if loads is None else loads, self.n_segments)
+        loads = self.planar if loads is None else loads
+        p = float(pressure)
+        if loads.contact is None or p <= 0:
+            return solve_rod(self._slice(p), length, loads, self.n_segments)
+        sol, done, step = None, 0.0, CONTACT_STEP
+        while done < p:
+            target = min(p, done + step)
+            if p - target < 0.1 * step:
+                target = p
+            trial = solve_rod(self._slice(target), length, loads, self.n_segments, guess=sol)
+            if trial.converged:
+                sol, done = trial, target
+            elif step > CONTACT_STEP / 16:
+                step /= 2
+            else:
+                trial.message = f"at p = {target / PA_PER_BAR:.5g} bar on the ramp from 0: {trial.message}"
+                return trial
+        return sol
+
+    def _slice(self, pressure: float):
+        return self.law.at(pressure, extra_stiffness=self.device_stiffness)
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
         n = len(pressures)
@@ -157,10 +182,10 @@ class RodModel(BendModel):
             try:
                 sol = self.solve(p)
             except LawRangeError as exc:
-                messages.append(f"rod model: command p = {p:.6g} Pa: {exc}")
+                messages.append(f"rod model: command p = {p:.6g} Pa: {exc} [{exc.stop_reason}]")
                 continue
             if not sol.converged:
-                messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message}")
+                messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message} [{sol.stop_reason}]")
                 continue
             th = sol.theta[-1]
             curvature[i] = e * th / sol.arc_length

@@ -14,12 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from ..continuation import OUTSIDE_MODEL
 from ..errors import ModelError
 from ..units import PA_PER_BAR
 
 
 class LawRangeError(ModelError):
     """A pressure or curvature outside the range a moment-curvature law was built on."""
+
+    stop_reason = OUTSIDE_MODEL
 
 
 @dataclass
@@ -69,6 +72,29 @@ class LawSlice:
         m = np.asarray(self.moment(k), dtype=float)
         i = int(np.argmax(np.abs(m)))
         return float(m[i]), float(k[i])
+
+    def limit_moment_if_peaked(self, n: int = 401, drop: float = 2e-3) -> tuple[float, float] | None:
+        """The moment the section carries at most bent back, where that is a genuine peak: (M, kappa).
+
+        Bent back against its pressure the held section's |M| rises, may dip where the lumen closes
+        (a snap under a growing moment, after which the lumen's contact stiffens it again), and then
+        falls (the section flattens; the held section soon stops converging). The limit is the
+        largest |M| on the table's negative side if |M| falls by more than ``drop`` (relative)
+        beyond it; otherwise, if |M| is still rising where the table ends, the first peak (before a
+        dip), which the section is known to pass: a lower bound of its capacity. None when there is
+        no peak before the table ends, when |M| falls from kappa = 0 on, or for a linear law."""
+        if not np.isfinite(self.kappa_lo):
+            return None
+        k = np.linspace(min(0.0, self.kappa_hi), self.kappa_lo, n)
+        m = np.abs(np.asarray(self.moment(k), dtype=float))
+        i = int(np.argmax(m))
+        if 0 < i and m[i:].min() < m[i] * (1 - drop):
+            return float(self.moment(k[i])), float(k[i])
+        fell = np.flatnonzero(m < np.maximum.accumulate(m) * (1 - drop))
+        if not len(fell):
+            return None
+        i = int(np.argmax(m[:fell[0]]))
+        return (float(self.moment(k[i])), float(k[i])) if i > 0 else None
 
     def free_curvature(self) -> float | None:
         """The curvature with zero moment (the free body), None if it is outside the range."""
