@@ -124,6 +124,7 @@ def test_calibration_for_another_design_is_refused(implemented_design, tmp_path)
     ({"material_scale": 0.0}, "material_scale"),
     ({"colour": "red"}, "unknown field"),
     ({"schema": 7}, "schema"),
+    ({"schema": 1}, "re-run softcath calibrate"),      # schema 1 scaled the silicone only
 ])
 def test_malformed_calibration_files_are_refused_naming_the_field(implemented_design, patch, fragment):
     d = _calibration(implemented_design).to_dict()

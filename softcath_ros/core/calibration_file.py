@@ -34,7 +34,7 @@ import yaml
 from .errors import SoftcathError, shown
 from .models import BendModel, BendState, make_model
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2            # 2: material_scale multiplies every modulus (1: the silicone's only)
 Z95 = 1.959963984540054       # two-sided 95% quantile of the normal distribution
 SHIFT_RANGE = (-0.9, 0.9)     # what the fit may return (bench/calibration.py bounds)
 SCALE_RANGE = (0.05, 20.0)
@@ -192,6 +192,9 @@ def calibration_from_dict(data, source: str = "calibration") -> Calibration:
         elif not isinstance(v, kind):
             raise bad(key, v, f"must be a {kind.__name__}")
         out[key] = v
+    if out.get("schema", SCHEMA_VERSION) == 1:
+        raise bad("schema", 1, "its material_scale scaled the silicone only (this softcath scales every "
+                  "modulus): re-run softcath calibrate on its recording")
     if out.get("schema", SCHEMA_VERSION) != SCHEMA_VERSION:
         raise bad("schema", out["schema"], f"this softcath reads schema {SCHEMA_VERSION}")
     if not SHIFT_RANGE[0] <= out["pressure_shift"] <= SHIFT_RANGE[1]:
