@@ -105,3 +105,10 @@ def test_envelope_from_the_rows_drives_selection(rows):
     with pytest.raises(ModelError, match="rod: valid over 0..20000 Pa only with contact"):
         select_model(scene_from_dict(raw), doc)
     assert select_model(scene_from_dict({**raw, "pressure_range": [0.0, 20000.0]}), doc).rung == "rod"
+
+
+def test_a_point_beyond_the_references_ramp_boundary_is_no_reference():
+    """The section rung answered the case's last point but its ramp to max_pressure stopped before it
+    (another branch): that point has no reference, so no error is recorded there."""
+    results = {"section D/20": {**FAKE["section D/20"], "boundary_pa": 30000.0}}
+    assert ladder.reference_labels(results) == ["section D/20"] * 3 + [None]

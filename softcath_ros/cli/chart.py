@@ -146,11 +146,11 @@ def draw(rows: list[dict], path: str) -> str:
     plt = _pyplot()
     colours = _colours(rows)
     cases = list(dict.fromkeys(r["case"] for r in rows))
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(17, 5.2))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(18, 6))
     # speed against accuracy: per setting and family, the worst error over the family's cases
     for family in dict.fromkeys(r["family"] for r in rows):
         fam = [r for r in rows if r["family"] == family]
-        refs = sorted({r["reference"] for r in fam})
+        refs = sorted({r["reference"] for r in fam if r["reference"]})
         for s in dict.fromkeys(r["setting"] for r in fam):
             rs = [r for r in fam if r["setting"] == s]
             err = _worst(rs, "rc_rel_error")
@@ -194,10 +194,10 @@ def draw(rows: list[dict], path: str) -> str:
                 a3.scatter([rs[0]["contact_boundary_pa"] / PA_PER_BAR], [y], color=f"C{j % 10}", marker="s",
                            facecolors="none")
     a3.set_yticks(range(len(settings)), settings, fontsize=7)
-    a3.set_xlabel("[bar]  x: stops beyond it on a ramp to max_pressure; >: reaches max_pressure (fe3d: the case's top);\n"
-                  "bar: R_C error within 5 % of the point's reference up to there; square: stops with the tip on "
-                  "the bench's scale", fontsize=7)
-    a3.set_title("failure boundaries per case: where each rung stops, and where its error leaves 5 %", fontsize=9)
+    a3.set_xlabel("pressure [bar]\nx: stops beyond it on a ramp to max_pressure; >: reaches max_pressure\n"
+                  "(fe3d: the case's top); bar: R_C error within 5 % up to there;\n"
+                  "square: stops with the tip on the bench's scale", fontsize=7)
+    a3.set_title("failure boundaries per case:\nwhere each rung stops, where its error leaves 5 %", fontsize=9)
     handles, labels = a3.get_legend_handles_labels()
     uniq = dict(zip(labels, handles))
     a3.legend(uniq.values(), uniq.keys(), fontsize=6)

@@ -182,12 +182,16 @@ def stop_reason(message: str) -> str:
 
 def reference_labels(results: dict) -> list:
     """Per point of a case the setting used as its reference: fe3d where it converged there, else
-    the section rung's default (with lumen contact) where it converged, else None."""
+    the section rung's default (with lumen contact) where it converged, else None. A point beyond the
+    setting's failure boundary (a ramp to max_pressure stopped before it: the point may sit on another
+    branch) is no reference."""
     n = len(next(iter(results.values()))["predictions"])
     labels = []
     for i in range(n):
-        label = next((lab for lab in (FE3D[0], SECTION_REFERENCE)
-                      if lab in results and results[lab]["predictions"][i]["converged"]), None)
+        label = next((lab for lab in (FE3D[0], SECTION_REFERENCE) if lab in results
+                      and results[lab]["predictions"][i]["converged"]
+                      and max(results[lab]["predictions"][i]["pressures_pa"]) <= results[lab]["boundary_pa"]),
+                     None)
         labels.append(label)
     return labels
 
@@ -260,7 +264,8 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
                          "pressures_pa": " ".join(f"{v:g}" for v in p["pressures_pa"]),
                          "s_per_eval": res["s_per_eval"], "converged": p["converged"], "reference": ref or "",
                          "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
-                         "stop_reason": res["stop_reason"], "contact_boundary_pa": res.get("contact_boundary_pa"),
+                         "stop_reason": res["stop_reason"], "stop_message": res["first_failure"][:200],
+                         "contact_boundary_pa": res.get("contact_boundary_pa"),
                          **bounds,
                          "rc_m": p["radius_of_curvature_m"], "centreline_radius_m": p["centreline_radius_m"], **err})
     ref_label = " / ".join(dict.fromkeys(r for r in refs if r))
