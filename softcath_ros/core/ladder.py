@@ -7,7 +7,8 @@ Cases (``CASES``), 0.05..0.5 bar in steps of 0.05 bar (the design limit, max_pre
 - family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel
   (on a channel), by two channels at equal pressure (between two) and by a pair at 2:1 (off
   every mirror plane); the pressure is the largest channel's. fe3d needs a full model there, so
-  it runs on these cases only when asked for (``fe3d_three_channel``).
+  it runs on these cases only when asked for (``fe3d_three_channel``); a case it was run on before
+  (in the cache, same solver version) uses that result.
 
 The reference is chosen per point (the row's ``reference``): fe3d at its default mesh (mesh_size
 1.0, threads=1) where it converged at that pressure, else the section rung with lumen contact at
@@ -96,7 +97,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
     design = load_design(case.design).with_length(case.length)
     pressures = case.pressures
-    key_parts = [design.content_hash(), rung, rung_class(rung).solver_version, options, pressures.tolist()]
+    key_parts = _key_parts(case, rung, options)
     hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
     if hit is not None:
         if "contact_boundary_pa" not in hit:
@@ -146,6 +147,16 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
            "predictions": [p.to_json() for p in preds], "contact_boundary_pa": contact_boundary(case, rung, options)}
     cache.save_json("ladder", LADDER_VERSION, key_parts, out, rung)
     return out
+
+
+def _key_parts(case: Case, rung: str, options: dict) -> list:
+    design = load_design(case.design).with_length(case.length)
+    return [design.content_hash(), rung, rung_class(rung).solver_version, options, case.pressures.tolist()]
+
+
+def is_cached(case: Case, rung: str, options: dict) -> bool:
+    """Whether the rung's result on the case is in the cache (measured before, same solver version)."""
+    return cache.load_json("ladder", LADDER_VERSION, _key_parts(case, rung, options), rung) is not None
 
 
 def contact_boundary(case: Case, rung: str, options: dict):
@@ -231,7 +242,9 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
         if rung not in RUNGS:
             say(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
             continue
-        if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel)):
+        # fe3d on the 3-channel cases (a full model) when asked for, or when measured before (cached)
+        if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel
+                                            and not is_cached(case, rung, options))):
             continue
         t0, load0 = time.perf_counter(), os.getloadavg()[0]
         try:
