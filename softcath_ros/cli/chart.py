@@ -254,13 +254,15 @@ def draw_directions(rows: list[dict], path: str) -> str:
                     ys.append(w * scale)
             if xs:
                 ax.plot(xs, ys, _style(s), color=colours[s], label=s)
-    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})" for c in cases]
+    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})\nref. "
+              + "\n+ ".join(dict.fromkeys(r["reference"] for r in rows if r["case"] == c and r["reference"]))
+              for c in cases]
     for ax, (_, _, name) in zip(axes, keys):
         ax.set_xticks(range(len(cases)), labels, fontsize=7)
         ax.set_yscale("log")
         ax.set_ylabel(f"worst {name} over the case's pressures")
     axes[2].set_ylim(bottom=1e-3)   # the one-channel direction is exact to ~1e-13 deg for every rung
-    refs = sorted({r["reference"] for r in rows})
+    refs = sorted({r["reference"] for r in rows if r["reference"]})
     pressures = sorted({r["pressure_pa"] / PA_PER_BAR for r in rows})
     axes[0].legend(fontsize=7)
     fig.suptitle(f"3-channel design: error against bending direction, {', '.join(f'{p:g}' for p in pressures)} bar "
