@@ -52,3 +52,23 @@ def test_chart_without_results_says_so_in_one_line():
     with pytest.raises(SoftcathError, match="--csv: no committed results outside a source checkout") as exc:
         load_rows(None)
     assert "\n" not in str(exc.value)
+
+
+def test_chart_marks_each_points_reference(tmp_path):
+    """A case whose reference changes with pressure (fe3d where it converged, the section rung above)
+    is drawn, and the legend of markers names both references."""
+    from softcath_ros.cli.chart import _reference_legend, _reference_marker
+
+    rows = [r for r in _rows() if r["case"] == "1ch 40mm"]
+    for r in rows:
+        if r["pressure_pa"] == 20000.0:
+            r["reference"] = "section D/20"
+    path = tmp_path / "mixed.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    written = draw_all(load_rows(str(path)), tmp_path / "mixed.png")
+    assert all(p.stat().st_size > 1000 for p in written if p.suffix == ".png")
+    assert _reference_legend(rows) == "filled circle: fe3d mesh 1.0, open diamond: section D/20"
+    assert _reference_marker("") == "x"

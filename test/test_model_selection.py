@@ -181,16 +181,35 @@ def test_selection_judges_the_error_over_the_scenes_pressures():
         select_model(scene(pressure_range=[0.0, 22000.0]), env)       # brackets 0.25 bar: 11% > 5%
 
 
+def test_a_scene_at_045_bar_picks_a_rung_whose_envelope_covers_it():
+    """The envelope is measured over 0-0.5 bar with lumen contact: a scene to 0.45 bar gets a rung whose
+    measured range and measured pressures reach 0.45 bar; every rung that stops below is refused for it."""
+    from softcath_ros.core.model_selection import measured_envelope
+
+    env = load_envelope()
+    high = scene(pressure_range=[0.0, 45000.0], required_accuracy=0.15, required_rate=100.0)
+    sel = select_model(high, env)
+    measured = measured_envelope(env["rungs"][sel.rung], high)
+    assert measured["valid_pressure_pa"][1] >= 45000.0
+    assert max(measured["measured_pressures_pa"]) >= 45000.0
+    assert [p for p, e in measured["error_rc_rel_by_pressure_pa"] if p == 45000.0 and e is not None]
+    short = [n for n, r in env["rungs"].items()
+             if measured_envelope(r, high) and measured_envelope(r, high)["valid_pressure_pa"][1] < 45000.0]
+    assert "fe3d" in short      # without contact fe3d stops at 0.25 bar
+    assert all(re.search(r"valid over 0..\d+ Pa only", sel.rejected[n]) for n in short)
+
+
 @pytest.mark.slow
 def test_envelope_command_writes_what_selection_reads(tmp_path, monkeypatch):
-    """`softcath envelope` on one case and three settings (the section rung's default D/20, its reference D/40):
+    """`softcath envelope` on one case and three settings (closed form, section D/12 and the section rung's
+    default D/20, the reference without fe3d):
     the file has the shipped envelope's layout and drives selection by measured error and cost."""
     from softcath_ros.cli import main as softcath
 
     monkeypatch.setenv("SOFTCATH_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "envelope.yaml"
     code = softcath(["envelope", "--out", str(out), "--results", str(tmp_path / "rows"), "--no-fe3d",
-                     "--cases", "1ch 40mm", "--settings", "closed_form", "section D/20", "section D/40"])
+                     "--cases", "1ch 40mm", "--settings", "closed_form", "section D/12", "section D/20"])
     assert code == 0 and (tmp_path / "rows.csv").is_file()
     meta = __import__("json").loads((tmp_path / "rows.json").read_text())["meta"]
     assert meta["load_average_before"] and meta["load_average_after"] and "numpy" in meta["packages"]

@@ -18,7 +18,16 @@ from ..resources import checkout_root
 
 NUMBERS = ("pressure_pa", "s_per_eval", "boundary_pa", "rc_rel_error", "tip_error_mm", "direction_error_deg",
            "length_m", "rc_m")
+# numbers written by later versions of the ladder (read when present)
+OPTIONAL_NUMBERS = ("centreline_radius_m", "contact_boundary_pa", "accurate_to_pa_2pct", "accurate_to_pa_5pct",
+                    "accurate_to_pa_10pct")
 MARKERS = {"length": "o", "direction": "^"}
+# the marker of a point by its reference (the row's column reference)
+REFERENCE_MARKERS = {"fe3d": "o", "section": "D"}
+
+
+def _reference_marker(reference: str) -> str:
+    return REFERENCE_MARKERS.get((reference or "").split(" ")[0], "x")
 
 
 def register(sub) -> None:
@@ -50,7 +59,7 @@ def load_rows(path: str | None) -> list[dict]:
     if missing:
         raise SoftcathError(f"--csv {path}: columns {missing} missing; re-run benchmarks/ladder_chart.py")
     for r in rows:
-        for k in NUMBERS:
+        for k in NUMBERS + tuple(k for k in OPTIONAL_NUMBERS if k in r):
             r[k] = _float(r[k])
         r["converged"] = r["converged"] == "True"
         r["fails_beyond"] = r["fails_beyond"] == "True"
@@ -112,15 +121,36 @@ def _worst(rs: list[dict], key: str):
     return max(vals) if vals else None
 
 
+def _plot_by_reference(ax, rs: list[dict], key: str, scale: float, colour: str, label: str) -> None:
+    """A setting's line over pressure, each point marked by the reference it was measured against
+    (filled circle: fe3d; open diamond: the section rung with contact)."""
+    pts = [(r["pressure_pa"] / PA_PER_BAR, r[key] * scale, r["reference"]) for r in rs if r[key]]
+    if not pts:
+        return
+    ax.plot([p[0] for p in pts], [p[1] for p in pts], "--" if label.startswith("surrogate") else "-",
+            color=colour, label=label)
+    for ref in dict.fromkeys(p[2] for p in pts):
+        mine = [p for p in pts if p[2] == ref]
+        filled = _reference_marker(ref) == "o"
+        ax.scatter([p[0] for p in mine], [p[1] for p in mine], marker=_reference_marker(ref), s=22,
+                   color=colour, facecolors=colour if filled else "none")
+
+
+def _reference_legend(rows: list[dict]) -> str:
+    refs = dict.fromkeys(r["reference"] for r in rows if r["reference"])
+    names = {"o": "filled circle", "D": "open diamond", "x": "x"}
+    return ", ".join(f"{names[_reference_marker(r)]}: {r}" for r in refs)
+
+
 def draw(rows: list[dict], path: str) -> str:
     plt = _pyplot()
     colours = _colours(rows)
     cases = list(dict.fromkeys(r["case"] for r in rows))
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(17, 5.2))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(18, 6))
     # speed against accuracy: per setting and family, the worst error over the family's cases
     for family in dict.fromkeys(r["family"] for r in rows):
         fam = [r for r in rows if r["family"] == family]
-        refs = sorted({r["reference"] for r in fam})
+        refs = sorted({r["reference"] for r in fam if r["reference"]})
         for s in dict.fromkeys(r["setting"] for r in fam):
             rs = [r for r in fam if r["setting"] == s]
             err = _worst(rs, "rc_rel_error")
@@ -139,14 +169,13 @@ def draw(rows: list[dict], path: str) -> str:
     # error against pressure on the first case
     first = [r for r in rows if r["case"] == cases[0]]
     for s in dict.fromkeys(r["setting"] for r in first):
-        pts = [(r["pressure_pa"] / PA_PER_BAR, r["rc_rel_error"] * 100) for r in first
-               if r["setting"] == s and r["rc_rel_error"] and r["setting"] != r["reference"]]
-        if pts:
-            a2.plot(*zip(*pts), _style(s), color=colours[s], label=s)
+        mine = [r for r in first if r["setting"] == s and r["rc_rel_error"] and r["setting"] != r["reference"]]
+        _plot_by_reference(a2, mine, "rc_rel_error", 100, colours[s], s)
     a2.set_yscale("log")
     a2.set_xlabel("pressure [bar]")
-    a2.set_ylabel("R_C error [%]")
-    a2.set_title(f"error against pressure: {cases[0]} (reference: {first[0]['reference']})", fontsize=9)
+    a2.set_ylabel("R_C = l / theta error [%]")
+    a2.set_title(f"error against pressure: {cases[0]}\n(marker: the point's reference, "
+                 f"{_reference_legend(first)})", fontsize=9)
     a2.legend(fontsize=7)
     # failure boundary per setting and case
     settings = list(dict.fromkeys(r["setting"] for r in rows))
@@ -158,9 +187,17 @@ def draw(rows: list[dict], path: str) -> str:
             y = i + (j - (len(cases) - 1) / 2) * 0.8 / max(len(cases), 1)
             a3.scatter([rs[0]["boundary_pa"] / PA_PER_BAR], [y], color=f"C{j % 10}",
                        marker="x" if rs[0]["fails_beyond"] else ">", label=case if i == 0 or s == settings[0] else None)
+            within = rs[0].get("accurate_to_pa_5pct")
+            if within is not None:   # the accuracy boundary: a bar from 0 to where the error leaves 5 %
+                a3.plot([0.0, within / PA_PER_BAR], [y, y], "-", color=f"C{j % 10}", lw=2.5, alpha=0.5)
+            if rs[0].get("contact_boundary_pa") is not None:
+                a3.scatter([rs[0]["contact_boundary_pa"] / PA_PER_BAR], [y], color=f"C{j % 10}", marker="s",
+                           facecolors="none")
     a3.set_yticks(range(len(settings)), settings, fontsize=7)
-    a3.set_xlabel("last pressure reached on a ramp [bar]\n(x: fails beyond it; >: reached the end of its ramp, max_pressure; fe3d: the case's top)")
-    a3.set_title("failure boundary per case", fontsize=9)
+    a3.set_xlabel("pressure [bar]\nx: stops beyond it on a ramp to max_pressure; >: reaches max_pressure\n"
+                  "(fe3d: the case's top); bar: R_C error within 5 % up to there;\n"
+                  "square: stops with the tip on the bench's scale", fontsize=7)
+    a3.set_title("failure boundaries per case:\nwhere each rung stops, where its error leaves 5 %", fontsize=9)
     handles, labels = a3.get_legend_handles_labels()
     uniq = dict(zip(labels, handles))
     a3.legend(uniq.values(), uniq.keys(), fontsize=6)
@@ -173,26 +210,28 @@ def draw_lengths(rows: list[dict], path: str) -> str:
     colours = _colours(rows)
     cases = sorted(dict.fromkeys(r["case"] for r in rows), key=lambda c: -next(
         r["length_m"] for r in rows if r["case"] == c))
-    fig, axes = plt.subplots(2, len(cases), figsize=(5 * len(cases), 7.5), squeeze=False)
+    fig, axes = plt.subplots(3, len(cases), figsize=(5 * len(cases), 11), squeeze=False)
     for j, case in enumerate(cases):
         rs = [r for r in rows if r["case"] == case]
         for s in dict.fromkeys(r["setting"] for r in rs):
             mine = [r for r in rs if r["setting"] == s and r["setting"] != r["reference"]]
-            for ax, key, scale in ((axes[0, j], "rc_rel_error", 100), (axes[1, j], "tip_error_mm", 1)):
-                pts = [(r["pressure_pa"] / PA_PER_BAR, r[key] * scale) for r in mine if r[key]]
-                if pts:
-                    ax.plot(*zip(*pts), _style(s), color=colours[s], label=s)
+            _plot_by_reference(axes[0, j], mine, "rc_rel_error", 100, colours[s], s)
+            _plot_by_reference(axes[1, j], mine, "tip_error_mm", 1, colours[s], s)
+            _plot_by_reference(axes[2, j], [r for r in rs if r["setting"] == s], "rc_m", 1e3, colours[s], s)
             failed = [r["pressure_pa"] / PA_PER_BAR for r in rs if r["setting"] == s and not r["converged"]]
             if failed:
                 axes[0, j].scatter(failed, [100.0] * len(failed), marker="x", color=colours[s])
-        axes[0, j].set_title(f"{case}: {rs[0]['length_m'] * 1e3:g} mm (reference {rs[0]['reference']})", fontsize=9)
+        axes[0, j].set_title(f"{case}: {rs[0]['length_m'] * 1e3:g} mm\n(marker: the point's reference, "
+                             f"{_reference_legend(rs)})", fontsize=8)
         axes[0, j].set_yscale("log")
         axes[1, j].set_yscale("log")
-        axes[0, j].set_ylabel("R_C error [%] (x at 100: did not converge)")
+        axes[2, j].set_yscale("log")
+        axes[0, j].set_ylabel("R_C = l / theta error [%] (x at 100: did not converge)")
         axes[1, j].set_ylabel("tip position error [mm]")
-        axes[1, j].set_xlabel("pressure [bar]")
+        axes[2, j].set_ylabel("R_C = l / theta [mm]")
+        axes[2, j].set_xlabel("pressure [bar]")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("1-channel design: error against pressure per length", fontsize=10)
+    fig.suptitle("1-channel design: error against pressure per length, 0-0.5 bar, with lumen contact", fontsize=10)
     return _save(plt, fig, path)
 
 
@@ -215,13 +254,15 @@ def draw_directions(rows: list[dict], path: str) -> str:
                     ys.append(w * scale)
             if xs:
                 ax.plot(xs, ys, _style(s), color=colours[s], label=s)
-    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})" for c in cases]
+    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})\nref. "
+              + "\n+ ".join(dict.fromkeys(r["reference"] for r in rows if r["case"] == c and r["reference"]))
+              for c in cases]
     for ax, (_, _, name) in zip(axes, keys):
         ax.set_xticks(range(len(cases)), labels, fontsize=7)
         ax.set_yscale("log")
         ax.set_ylabel(f"worst {name} over the case's pressures")
     axes[2].set_ylim(bottom=1e-3)   # the one-channel direction is exact to ~1e-13 deg for every rung
-    refs = sorted({r["reference"] for r in rows})
+    refs = sorted({r["reference"] for r in rows if r["reference"]})
     pressures = sorted({r["pressure_pa"] / PA_PER_BAR for r in rows})
     axes[0].legend(fontsize=7)
     fig.suptitle(f"3-channel design: error against bending direction, {', '.join(f'{p:g}' for p in pressures)} bar "

@@ -1,30 +1,37 @@
 """The model ladder measured: every rung on the same cases against a reference rung, and the
 envelope that model selection (``model: auto``) reads.
 
-Cases (``CASES``), pressures inside the rungs' ranges (the section rung and the 1-channel
-surrogate end at 0.275 bar on the implemented design):
+Cases (``CASES``), 0.05..0.5 bar in steps of 0.05 bar (the design limit, max_pressure):
 - family ``length``: the 1-channel design (implemented_5mm) at 40 mm, 20 mm and 17 mm (the
-  blocking-force sample), 0.05..0.25 bar. Reference: fe3d at its default mesh (mesh_size 1.0,
-  half model, threads=1) where it converges at >= 3 of the pressures, else section D/40.
-- family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel,
-  by two channels at equal pressure and by a non-symmetric pair (2:1), 0.1..0.3 bar. fe3d
-  needs a full model there (> 15 min per direction), so the reference is the section rung's
-  finest mesh (D/40) unless fe3d is asked for on those cases.
+  blocking-force sample).
+- family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel
+  (on a channel), by two channels at equal pressure (between two) and by a pair at 2:1 (off
+  every mirror plane); the pressure is the largest channel's. fe3d needs a full model there, so
+  it runs on these cases only when asked for (``fe3d_three_channel``); a case it was run on before
+  (in the cache, same solver version) uses that result.
+
+The reference is chosen per point (the row's ``reference``): fe3d at its default mesh (mesh_size
+1.0, threads=1) where it converged at that pressure, else the section rung with lumen contact at
+its default mesh (D/20, ``SECTION_REFERENCE``), else none (no errors at that point).
 
 Settings (``SETTINGS``): closed_form, surrogate (its table of section D/20), section at D/12,
-D/20 and D/40, rod and fe3d. Per case and pressure each records the relative error in
-R_C = l / theta against the reference, the tip position error (mm) and the bending-direction error
+D/20 and D/40, rod and fe3d. Per case and pressure each records R_C = l / theta, its relative
+error against the point's reference, the tip position error (mm) and the bending-direction error
 (degrees); per case its time per evaluation (single commands for the table rungs; a cold sweep
-divided by its commands for the solvers) and its failure boundary (the last pressure reached on
-a ramp along the case's direction up to the design's max_pressure; fe3d: the case's own ramp).
+divided by its commands for the solvers) and its failure boundaries: where it stops (the last
+pressure reached on a ramp along the case's direction up to the design's max_pressure, fe3d: the
+case's own ramp, and the stop's named reason) and, per tolerance in ``TOLERANCES``, the last
+measured pressure up to which its R_C error stays within it.
 Results are cached per rung and case (the cache store, core/cache.py, kind ``ladder``, keyed by
 the design's content hash, rung, its declared solver version, options and pressures), so
-re-running only redraws.
+re-running only redraws, and a rung whose solver version changes (fe3d with contact) is the only
+one measured again.
 """
 from __future__ import annotations
 
 import math
 import os
+import re
 import statistics
 import time
 from dataclasses import dataclass
@@ -33,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cache
+from .continuation import LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL
 from .design import load_design
 from .errors import ModelError
 from .models import RUNGS, make_model, rung_class, rung_info
@@ -54,15 +62,14 @@ class Case:
         return np.outer(self.magnitudes_pa, self.direction)
 
 
-ONE_CH = (5000.0, 10000.0, 15000.0, 20000.0, 25000.0)
-THREE_CH = (10000.0, 20000.0, 30000.0)
+PRESSURES_PA = tuple(5000.0 * i for i in range(1, 11))   # 0.05 .. 0.5 bar
 CASES = [
-    Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), ONE_CH),
-    Case("1ch 20mm", "length", "implemented_5mm", 0.020, (1.0,), ONE_CH),
-    Case("1ch 17mm", "length", "implemented_5mm", 0.017, (1.0,), ONE_CH),
-    Case("3ch one channel", "direction", "three_channel_5mm", 0.040, (1.0, 0.0, 0.0), THREE_CH),
-    Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), THREE_CH),
-    Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), THREE_CH),
+    Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), PRESSURES_PA),
+    Case("1ch 20mm", "length", "implemented_5mm", 0.020, (1.0,), PRESSURES_PA),
+    Case("1ch 17mm", "length", "implemented_5mm", 0.017, (1.0,), PRESSURES_PA),
+    Case("3ch one channel", "direction", "three_channel_5mm", 0.040, (1.0, 0.0, 0.0), PRESSURES_PA),
+    Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), PRESSURES_PA),
+    Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), PRESSURES_PA),
 ]
 FE3D = ("fe3d mesh 1.0", "fe3d", {"mesh_size": 1.0, "threads": 1}, True)
 # (label, rung, options, is a solver: timed as a cold sweep)
@@ -78,17 +85,24 @@ SETTINGS = [
 # the setting of each rung a scene runs (its default), recorded in the envelope
 DEFAULT_SETTING = {"closed_form": "closed_form", "surrogate": "surrogate (of section D/20)",
                    "section": "section D/20", "rod": "rod", "fe3d": FE3D[0]}
-SECTION_REFERENCE = "section D/40"
-LADDER_VERSION = "ladder-2"   # bump when what a cached row records changes
+SECTION_REFERENCE = "section D/20"   # the section rung with lumen contact at its default mesh
+# R_C error tolerances at which the accuracy boundary is recorded (accurate_to_pa_<n>pct)
+TOLERANCES = (0.02, 0.05, 0.10)
+# the stop reasons a rung names in its message (core/continuation.py); others are "unnamed"
+STOP_REASONS = (LIMIT_POINT, MATERIAL_RANGE, OUTSIDE_MODEL, NUMERICAL_FAILURE)
+LADDER_VERSION = "ladder-3"   # bump when what a cached row records changes (3: R_C = l / theta, 0-0.5 bar)
 
 
 def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
     """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
     design = load_design(case.design).with_length(case.length)
     pressures = case.pressures
-    key_parts = [design.content_hash(), rung, rung_class(rung).solver_version, options, pressures.tolist()]
+    key_parts = _key_parts(case, rung, options)
     hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
     if hit is not None:
+        if "contact_boundary_pa" not in hit:
+            hit["contact_boundary_pa"] = contact_boundary(case, rung, options)
+            cache.save_json("ladder", LADDER_VERSION, key_parts, hit, rung)
         return hit
     opts = dict(options)
     if rung == "section":
@@ -99,10 +113,11 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     preds = predict(model, pressures)
     sweep = time.perf_counter() - t0
     if rung == "fe3d":
-        # minutes per sweep: its own cache is kept, and the cost is the ramp's recorded wall time
-        times = [float(t) for t in model.evaluate(pressures).diagnostics.time_s if np.isfinite(t)]
-        total = max(times) if times == sorted(times) else sum(times)
-        per_eval = (total or sweep) / len(pressures)
+        # minutes per sweep: its own cache is kept, and the cost is the ramp's wall time to its last
+        # converged point over the points it reached (not evaluated again: a failed point would ramp again)
+        reached = [pt for ramp in model.last_ramps for pt in ramp.points if pt.load > 0]
+        per_eval = (sum(max(pt.wall_time for pt in ramp.points) for ramp in model.last_ramps if ramp.points)
+                    / len(reached)) if reached else sweep / len(pressures)
     elif solver:
         per_eval = sweep / len(pressures)
     else:
@@ -121,18 +136,90 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
         boundary = float(case.magnitudes_pa[n_ok - 1]) if n_ok else 0.0
         beyond = not all(ok)
         first_failure = next((p.reason for p in preds if not p.converged), "")
+        stop = stop_reason(first_failure)
     else:
-        mags = np.linspace(0.0, design.max_pressure, 41)
-        st = make_model(rung, design, **opts).evaluate(np.outer(mags, case.direction))
-        n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
-        boundary, beyond = float(mags[max(n_ok - 1, 0)]), n_ok < len(mags)
-        first_failure = st.message.split("; ")[0] if beyond else ""
-    out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
+        boundary, beyond, message = ramp_boundary(make_model(rung, design, **opts), case.direction)
+        first_failure = message.split("; ")[0] if beyond else ""
+        stop = stop_reason(message) if beyond else ""
+    out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary, "stop_reason": stop,
            "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
            "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
-           "predictions": [p.to_json() for p in preds]}
+           "predictions": [p.to_json() for p in preds], "contact_boundary_pa": contact_boundary(case, rung, options)}
     cache.save_json("ladder", LADDER_VERSION, key_parts, out, rung)
     return out
+
+
+def _key_parts(case: Case, rung: str, options: dict) -> list:
+    design = load_design(case.design).with_length(case.length)
+    return [design.content_hash(), rung, rung_class(rung).solver_version, options, case.pressures.tolist()]
+
+
+def is_cached(case: Case, rung: str, options: dict) -> bool:
+    """Whether the rung's result on the case is in the cache (measured before, same solver version)."""
+    return cache.load_json("ladder", LADDER_VERSION, _key_parts(case, rung, options), rung) is not None
+
+
+def contact_boundary(case: Case, rung: str, options: dict):
+    """For a rung that models contact, on a 1-channel case: the last pressure reached on a ramp to
+    max_pressure with the tip on the blocking-force bench's scale (the loads of the shipped scene
+    blocking_force_bench at the case's length), which is where a contact scene's range ends; else None."""
+    if "contact" not in rung_info(rung).models or case.family != "length":
+        return None
+    from .scene import load_scene
+
+    design = load_design(case.design).with_length(case.length)
+    model = make_model(rung, design, loads=load_scene("blocking_force_bench").loads, **options)
+    return ramp_boundary(model, case.direction)[0]
+
+
+def ramp_boundary(model, direction) -> tuple[float, bool, str]:
+    """A ramp of 41 commands along ``direction`` from 0 to the design's max_pressure: the last pressure
+    reached, whether it failed beyond it, and the rung's message."""
+    mags = np.linspace(0.0, model.design.max_pressure, 41)
+    st = model.evaluate(np.outer(mags, direction))
+    n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
+    return float(mags[max(n_ok - 1, 0)]), n_ok < len(mags), st.message
+
+
+def stop_reason(message: str) -> str:
+    """The named reason (core/continuation.py) a failure message gives; "unnamed" if it names none."""
+    if not message:
+        return ""
+    tagged = re.search(r"\[stop: ([^\]]+)\]", message)
+    if tagged:
+        return tagged.group(1)
+    return next((name for name in STOP_REASONS if name in message), "unnamed")
+
+
+def reference_labels(results: dict) -> list:
+    """Per point of a case the setting used as its reference: fe3d where it converged there, else
+    the section rung's default (with lumen contact) where it converged, else None. A point beyond the
+    setting's failure boundary (a ramp to max_pressure stopped before it: the point may sit on another
+    branch) is no reference."""
+    n = len(next(iter(results.values()))["predictions"])
+    labels = []
+    for i in range(n):
+        label = next((lab for lab in (FE3D[0], SECTION_REFERENCE) if lab in results
+                      and results[lab]["predictions"][i]["converged"]
+                      and max(results[lab]["predictions"][i]["pressures_pa"]) <= results[lab]["boundary_pa"]),
+                     None)
+        labels.append(label)
+    return labels
+
+
+def accurate_to(errs: list, pressures: list, tolerance: float) -> float:
+    """The last of ``pressures`` (ascending) up to which every error is known and <= ``tolerance``
+    (0.0 if the first is not)."""
+    reached = 0.0
+    for p, e in zip(pressures, errs):
+        if e is None or e > tolerance:
+            break
+        reached = p
+    return reached
+
+
+def tolerance_key(tolerance: float) -> str:
+    return f"accurate_to_pa_{tolerance * 100:g}pct"
 
 
 def errors(p: dict, r: dict) -> dict:
@@ -155,7 +242,9 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
         if rung not in RUNGS:
             say(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
             continue
-        if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel)):
+        # fe3d on the 3-channel cases (a full model) when asked for, or when measured before (cached)
+        if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel
+                                            and not is_cached(case, rung, options))):
             continue
         t0, load0 = time.perf_counter(), os.getloadavg()[0]
         try:
@@ -169,22 +258,31 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
             say(f"    boundary {results[label]['boundary_pa'] / PA_PER_BAR:.4f} bar: {results[label]['first_failure']}")
     if not results:
         raise ModelError(f"case {case.name}: no rung answered")
-    ref_label = FE3D[0]
-    if ref_label not in results or sum(p["converged"] for p in results[ref_label]["predictions"]) < 3:
-        ref_label = SECTION_REFERENCE
-    if ref_label not in results:
-        raise ModelError(f"case {case.name}: the reference ({FE3D[0]} or {SECTION_REFERENCE}) was not run")
-    ref = results[ref_label]["predictions"]
+    refs = reference_labels(results)
+    if not any(refs):
+        raise ModelError(f"case {case.name}: no reference ({FE3D[0]} or {SECTION_REFERENCE}) converged at any "
+                         "pressure (was it run?)")
     rows = []
     for label, res in results.items():
-        for p, r in zip(res["predictions"], ref):
+        errs = [errors(p, results[ref]["predictions"][i]) if ref else errors(p, {"converged": False})
+                for i, (p, ref) in enumerate(zip(res["predictions"], refs))]
+        mags = [max(p["pressures_pa"]) for p in res["predictions"]]
+        # a point where the setting is its own reference measures nothing (but fe3d's, the top rung's)
+        measured = [None if ref == label and label != FE3D[0] else e["rc_rel_error"] for e, ref in zip(errs, refs)]
+        bounds = {tolerance_key(tol): accurate_to(measured, mags, tol) for tol in TOLERANCES}
+        for p, ref, err in zip(res["predictions"], refs, errs):
             rows.append({"case": case.name, "family": case.family, "design": case.design, "length_m": case.length,
                          "direction": " ".join(f"{v:g}" for v in case.direction),
                          "setting": label, "rung": res["rung"], "pressure_pa": max(p["pressures_pa"]),
                          "pressures_pa": " ".join(f"{v:g}" for v in p["pressures_pa"]),
-                         "s_per_eval": res["s_per_eval"], "converged": p["converged"], "reference": ref_label,
+                         "s_per_eval": res["s_per_eval"], "load_1min": (res.get("loadavg_1min") or [None])[0],
+                         "converged": p["converged"], "reference": ref or "",
                          "boundary_pa": res["boundary_pa"], "fails_beyond": res["fails_beyond"],
-                         "rc_m": p["radius_of_curvature_m"], **errors(p, r)})
+                         "stop_reason": res["stop_reason"], "stop_message": res["first_failure"][:200],
+                         "contact_boundary_pa": res.get("contact_boundary_pa"),
+                         **bounds,
+                         "rc_m": p["radius_of_curvature_m"], "centreline_radius_m": p["centreline_radius_m"], **err})
+    ref_label = " / ".join(dict.fromkeys(r for r in refs if r))
     return rows, ref_label
 
 
@@ -195,42 +293,60 @@ def report(rows: list[dict], say=print) -> None:
 
     for case in dict.fromkeys(r["case"] for r in rows):
         rs = [r for r in rows if r["case"] == case]
-        say(f"{case} (reference {rs[0]['reference']}):")
+        refs = {}
+        for r in rs:
+            refs.setdefault(r["reference"] or "none", []).append(f"{r['pressure_pa'] / PA_PER_BAR:g}")
+        say(f"{case} (reference: " + "; ".join(f"{k} at {', '.join(dict.fromkeys(v))} bar" for k, v in refs.items())
+            + "):")
         for label in dict.fromkeys(r["setting"] for r in rs):
             s = [r for r in rs if r["setting"] == label]
             say(f"  {label:28s} {s[0]['s_per_eval'] * 1e6:14.2f} us/eval  R_C error max "
                   f"{worst(r['rc_rel_error'] for r in s):8.2%}  tip {worst(r['tip_error_mm'] for r in s):6.2f} mm  "
                   f"direction {worst(r['direction_error_deg'] for r in s):6.2f} deg  "
-                  f"boundary {s[0]['boundary_pa'] / PA_PER_BAR:.3f} bar")
+                  f"stops {s[0]['boundary_pa'] / PA_PER_BAR:.4f} bar ({s[0]['stop_reason'] or 'reached max_pressure'})"
+                  f"  within 5 % to {s[0][tolerance_key(0.05)] / PA_PER_BAR:.2f} bar")
 
 
 def _envelope(rs: list[dict]) -> dict | None:
     """One rung's measured envelope over rows of one setting (one or more cases)."""
     if not rs:
         return None
-    is_ref = all(r["setting"] == r["reference"] for r in rs)
     inside = [r for r in rs if r["pressure_pa"] <= r["boundary_pa"]]
 
-    def worst(key):
-        vals = [r[key] for r in inside if r[key] is not None]
-        return (0.0 if is_ref else max(vals)) if vals or is_ref else None
+    def err(r, key):
+        # a point's reference has no error against itself: taken as 0, so a scene asking for more
+        # accuracy than any rung has gets the reference
+        return 0.0 if r["setting"] == r["reference"] else r[key]
 
+    def worst(key, rows=inside):
+        vals = [err(r, key) for r in rows if err(r, key) is not None]
+        return max(vals) if vals else None
+
+    pressures = sorted({float(r["pressure_pa"]) for r in inside})
     return {
-        # the reference has no error against itself: taken as 0, so a scene asking for more accuracy
-        # than any rung has gets the reference
         "error_rc_rel_max": worst("rc_rel_error"),
         "error_tip_mm_max": worst("tip_error_mm"),
         "error_direction_deg_max": worst("direction_error_deg"),
-        "reference": sorted({r["reference"] for r in rs}),
+        "reference": sorted({r["reference"] for r in inside if r["reference"]}),
         "cost_s_per_eval": max(float(r["s_per_eval"]) for r in rs),
         "valid_pressure_pa": [0.0, min(float(r["boundary_pa"]) for r in rs)],
-        "measured_pressures_pa": sorted({float(r["pressure_pa"]) for r in inside}),
+        # a rung that models contact: the range with the tip on the bench's scale (blocked), which
+        # selection uses for a scene with contact
+        **({"valid_pressure_pa_with_contact": [0.0, min(float(r["contact_boundary_pa"]) for r in rs)]}
+           if all(r.get("contact_boundary_pa") not in (None, "") for r in rs) else {}),
+        "stop_reasons": sorted({r["stop_reason"] for r in rs if r.get("stop_reason")}),
+        # per tolerance the lowest over the cases of the last pressure within it (see run_case)
+        "accurate_to_pa": {f"{tol:g}": min(float(r[tolerance_key(tol)]) for r in rs) for tol in TOLERANCES
+                           if all(tolerance_key(tol) in r for r in rs)},
+        "measured_pressures_pa": pressures,
         # per measured pressure the worst R_C error over the cases there: selection judges a scene by
         # the pressures it needs, not by errors near the rung's limit it never reaches
-        "error_rc_rel_by_pressure_pa": [
-            [p, 0.0 if is_ref else max((r["rc_rel_error"] for r in inside if r["pressure_pa"] == p
-                                        and r["rc_rel_error"] is not None), default=None)]
-            for p in sorted({float(r["pressure_pa"]) for r in inside})],
+        "error_rc_rel_by_pressure_pa": [[p, worst("rc_rel_error", [r for r in inside if r["pressure_pa"] == p])]
+                                        for p in pressures],
+        # and against what: fe3d where it converged, else the section rung with contact
+        "reference_by_pressure_pa": [[p, " / ".join(sorted({r["reference"] for r in inside
+                                                            if r["pressure_pa"] == p and r["reference"]}))]
+                                     for p in pressures],
         "cases": list(dict.fromkeys(r["case"] for r in rs))}
 
 
@@ -257,10 +373,12 @@ def envelope_document(rows: list[dict], measured: str) -> dict:
     return {"reference": " / ".join(refs), "measured": measured,
            "loadavg": list(os.getloadavg()),
            "note": "written by `softcath envelope`; read by core/model_selection.py (model: auto). "
-                   "Errors are relative R_C errors (and tip mm, direction degrees) against each case's reference "
-                   "over the measured pressures inside each rung's valid range; per design the worst over its cases, "
-                   "per length (by_length) that length's cases. Costs are seconds per evaluation on a shared "
-                   "2-core machine.",
+                   "Errors are relative errors in R_C = l / theta (and tip mm, direction degrees) against each "
+                   "point's reference (fe3d where it converged, else the section rung with lumen contact at its "
+                   "default mesh) over the measured pressures inside each rung's valid range; per design the worst "
+                   "over its cases, per length (by_length) that length's cases. accurate_to_pa: per R_C tolerance "
+                   "the last measured pressure up to which the error stays within it (a point where the rung is "
+                   "its own reference does not count). Costs are seconds per evaluation on a shared 2-core machine.",
            "rungs": rungs}
 
 

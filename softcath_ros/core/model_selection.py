@@ -51,9 +51,12 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
         if measured is None:
             rejected[name] = f"no measured envelope for design '{design}'"
             continue
-        v_lo, v_hi = measured["valid_pressure_pa"]
+        # a scene with contact: the range the rung was measured to hold with the tip on a plane
+        blocked = "contact" in scene.features and "valid_pressure_pa_with_contact" in measured
+        v_lo, v_hi = measured["valid_pressure_pa_with_contact" if blocked else "valid_pressure_pa"]
         if lo < v_lo or hi > v_hi:
-            rejected[name] = (f"valid over {v_lo:g}..{v_hi:g} Pa only, the scene needs {lo:g}..{hi:g} Pa")
+            rejected[name] = (f"valid over {v_lo:g}..{v_hi:g} Pa only{' with contact' if blocked else ''}, "
+                              f"the scene needs {lo:g}..{hi:g} Pa")
             continue
         err = error_over(measured, hi)
         if err is None or err > scene.required_accuracy:

@@ -44,11 +44,15 @@ def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | 
     lo, hi = m["valid_pressure_pa"]
     ref = m.get("reference") or env.get("reference")
     ref = " + ".join(ref) if isinstance(ref, list) else ref
-    note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {ref} on {measured_on} "
-            f"over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar (ladder chart setting '{entry.get('setting')}')")
+    if ref == entry.get("setting"):   # the rung's own setting is the reference there (no fe3d on that design)
+        note = (f"the ladder's reference itself on {measured_on} over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar "
+                f"(ladder chart setting '{ref}': fe3d was not run there), so its error is not measured")
+    else:
+        note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {ref} on {measured_on} "
+                f"over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar (ladder chart setting '{entry.get('setting')}')")
     out = {}
     at = _at_pressure(m, pressure)
-    if at is not None:
+    if at is not None and ref != entry.get("setting"):
         out["error_rc_rel_at_pressure"] = at[1]
         note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}"
         by_length = m.get("by_length") or {}

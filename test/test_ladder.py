@@ -1,0 +1,114 @@
+"""The ladder's bookkeeping (core/ladder.py), without solving: the reference chosen per point (fe3d
+where it converged, else the section rung with contact), errors against that point's reference,
+the accuracy boundary per tolerance, the named stop reason, and the envelope built from the rows."""
+import pytest
+
+from softcath_ros.core import ladder
+from softcath_ros.core.continuation import LIMIT_POINT, NUMERICAL_FAILURE
+from softcath_ros.core.errors import ModelError
+from softcath_ros.core.model_selection import select_model
+from softcath_ros.core.scene import scene_from_dict
+
+CASE = ladder.Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), (10000.0, 20000.0, 30000.0, 40000.0))
+
+
+def _pred(p, rc, converged=True):
+    return {"pressures_pa": [p], "converged": converged, "curvature_per_m": [0.0, -1.0 / rc] if converged else None,
+            "radius_of_curvature_m": rc if converged else None, "centreline_radius_m": rc if converged else None,
+            "tip_position_m": [0.0, -rc / 10, 0.04] if converged else None}
+
+
+COST = {"fe3d": 30.0, "section": 0.2, "surrogate": 1e-5, "rod": 1e-3}
+
+
+def _result(rung, rcs, converged=(True,) * 4, boundary=40000.0, stop="", contact=None):
+    return {"rung": rung, "s_per_eval": COST[rung], "boundary_pa": boundary, "stop_reason": stop, "fails_beyond": bool(stop),
+            "first_failure": "", "contact_boundary_pa": contact,
+            "predictions": [_pred(p, rc, ok) for p, rc, ok in zip(CASE.magnitudes_pa, rcs, converged)]}
+
+
+FAKE = {  # fe3d converges at the first two points only, as fe3d without contact stops at 0.252 bar
+    "fe3d mesh 1.0": _result("fe3d", [0.10, 0.05, 1, 1], (True, True, False, False), 20000.0, NUMERICAL_FAILURE),
+    "section D/20": _result("section", [0.11, 0.055, 0.03, 0.02]),
+    "surrogate (of section D/20)": _result("surrogate", [0.11, 0.055, 0.0303, 0.0202]),
+    "rod": _result("rod", [0.11, 0.055, 0.03, 0.02], boundary=30000.0, stop=ladder.stop_reason("x"),
+                   contact=20000.0),
+}
+SETTINGS = [(label, res["rung"], {}, True) for label, res in FAKE.items()]
+
+
+@pytest.fixture
+def rows(monkeypatch):
+    monkeypatch.setattr(ladder, "run_rung", lambda case, rung, options, solver, refresh=False:
+                        next(r for r in FAKE.values() if r["rung"] == rung))
+    rows, label = ladder.run_case(CASE, SETTINGS, say=lambda *a, **k: None)
+    assert label == "fe3d mesh 1.0 / section D/20"
+    return rows
+
+
+def _of(rows, setting):
+    return [r for r in rows if r["setting"] == setting]
+
+
+def test_reference_per_point_and_errors_against_it(rows):
+    section = _of(rows, "section D/20")
+    assert [r["reference"] for r in section] == ["fe3d mesh 1.0"] * 2 + ["section D/20"] * 2
+    assert section[0]["rc_rel_error"] == pytest.approx(0.10) and section[1]["rc_rel_error"] == pytest.approx(0.10)
+    assert section[2]["rc_rel_error"] == 0.0        # its own reference there
+    surrogate = _of(rows, "surrogate (of section D/20)")
+    assert surrogate[2]["rc_rel_error"] == pytest.approx(0.01) and surrogate[3]["rc_rel_error"] == pytest.approx(0.01)
+    fe3d = _of(rows, "fe3d mesh 1.0")
+    assert [r["rc_rel_error"] for r in fe3d] == [0.0, 0.0, None, None]
+
+
+def test_accuracy_boundary_per_tolerance(rows):
+    sur = _of(rows, "surrogate (of section D/20)")[0]
+    # 10 % error against fe3d at the first points: within 10 % to the end, within 5 % nowhere
+    assert sur["accurate_to_pa_10pct"] == 40000.0 and sur["accurate_to_pa_5pct"] == 0.0
+    # the section rung is not measured where it is its own reference: its boundary ends at fe3d's last point
+    assert _of(rows, "section D/20")[0]["accurate_to_pa_10pct"] == 20000.0
+    assert _of(rows, "fe3d mesh 1.0")[0]["accurate_to_pa_2pct"] == 20000.0
+    assert ladder.accurate_to([0.01, None, 0.01], [1.0, 2.0, 3.0], 0.05) == 1.0
+
+
+def test_stop_reasons_are_named():
+    assert ladder.stop_reason("") == ""
+    assert ladder.stop_reason(f"did not converge at p = 0.27 bar [stop: {NUMERICAL_FAILURE}]") == NUMERICAL_FAILURE
+    assert ladder.stop_reason(f"...; {LIMIT_POINT} at p = 0.4 bar: the tangent's ...") == LIMIT_POINT
+    assert ladder.stop_reason("rod Newton did not converge in 40 iterations") == "unnamed"
+
+
+def test_no_reference_is_refused(monkeypatch):
+    monkeypatch.setattr(ladder, "run_rung", lambda case, rung, options, solver, refresh=False: FAKE["rod"])
+    with pytest.raises(ModelError, match="no reference"):
+        ladder.run_case(CASE, [("rod", "rod", {}, True)], say=lambda *a, **k: None)
+
+
+def test_envelope_from_the_rows_drives_selection(rows):
+    doc = ladder.envelope_document(rows, "now")
+    sur = doc["rungs"]["surrogate"]["designs"]["implemented_5mm"]
+    assert sur["valid_pressure_pa"] == [0.0, 40000.0] and sur["accurate_to_pa"]["0.1"] == 40000.0
+    assert sur["reference_by_pressure_pa"][0] == [10000.0, "fe3d mesh 1.0"]
+    assert sur["reference_by_pressure_pa"][-1] == [40000.0, "section D/20"]
+    fe3d = doc["rungs"]["fe3d"]["designs"]["implemented_5mm"]
+    assert fe3d["valid_pressure_pa"] == [0.0, 20000.0] and fe3d["stop_reasons"] == [NUMERICAL_FAILURE]
+    rod = doc["rungs"]["rod"]["designs"]["implemented_5mm"]
+    assert rod["valid_pressure_pa_with_contact"] == [0.0, 20000.0]
+    # free bending to 0.35 bar at 15 %: the surrogate (cheapest, range to 0.4 bar, 10 % worst)
+    free = scene_from_dict({"name": "t", "design": "implemented_5mm", "pressure_range": [0.0, 35000.0],
+                            "required_accuracy": 0.15, "required_rate": 0.5})
+    assert select_model(free, doc).rung == "surrogate"
+    # a contact scene only the rod models, judged by its range with the tip on the plane
+    raw = {"name": "b", "design": "implemented_5mm", "pressure_range": [0.0, 25000.0], "required_accuracy": 0.2,
+           "required_rate": 0.5, "loads": {"contact": {"kind": "tip_plane", "normal": [0, 1, 0],
+                                                        "point": "rest_tip"}}}
+    with pytest.raises(ModelError, match="rod: valid over 0..20000 Pa only with contact"):
+        select_model(scene_from_dict(raw), doc)
+    assert select_model(scene_from_dict({**raw, "pressure_range": [0.0, 20000.0]}), doc).rung == "rod"
+
+
+def test_a_point_beyond_the_references_ramp_boundary_is_no_reference():
+    """The section rung answered the case's last point but its ramp to max_pressure stopped before it
+    (another branch): that point has no reference, so no error is recorded there."""
+    results = {"section D/20": {**FAKE["section D/20"], "boundary_pa": 30000.0}}
+    assert ladder.reference_labels(results) == ["section D/20"] * 3 + [None]
