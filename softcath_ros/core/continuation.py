@@ -144,3 +144,77 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
         result.points.append(RampPoint(load=target, state=state, iterations=last.iterations if landed else 0,
                                        info=last.info if landed else {}))
     return result
+
+
+# ---------------------------------------------------------------------------------- arc length
+@dataclass
+class ArcControl:
+    """Pseudo-arc-length steps past a limit point (units of the caller's arc norm)."""
+
+    initial_step: float
+    min_step: float
+    max_step: float
+    max_steps: int = 60              # arc steps before giving up on the load recovering
+    recover: float = 1e-9            # the load must exceed the limit load by this (relative) to count as passed
+    target_iterations: int = 4
+
+
+@dataclass
+class ArcResult:
+    passed: bool                     # True: the path came back above the limit load (a snap, passed)
+    state: Any                       # the last converged state on the path
+    load: float                      # and its load
+    limit_load: float                # the largest load before the path turned back (the limit point)
+    lowest_load: float               # the smallest load on the path after it turned
+    steps: int = 0
+    iterations: int = 0
+    message: str = ""                # why the arc stopped when it did not pass
+
+
+def arc_length(corrector: Callable[[Any, float, Any, float], Correction], state0, load0: float,
+               control: ArcControl, floor: float | None = None) -> ArcResult:
+    """Follow the equilibrium path by pseudo-arc length from ``state0`` (converged at ``load0``,
+    just below a limit point of the load-controlled path) until the load exceeds the limit load
+    again on a rising branch (the limit point is passed: a snap), or until the path falls below
+    ``floor`` or ``max_steps`` pass without that (the limit point is the end of the branch).
+
+    ``corrector(state, load, previous_state, ds)`` takes one arc step of length ``ds`` from the
+    converged ``state`` (it keeps its own tangent and its orientation) and returns a Correction
+    whose ``info["load"]`` is the load at the new state."""
+    state, load = state0, load0
+    ds = control.initial_step
+    peak, lowest, turned = load0, load0, False
+    result = ArcResult(False, state0, load0, load0, load0)
+    previous = None
+    while result.steps < control.max_steps:
+        corr = corrector(state, load, previous, ds)
+        result.iterations += corr.iterations
+        if not corr.converged:
+            if ds * 0.5 < control.min_step:
+                result.message = f"the arc-length corrector failed ({corr.message})"
+                return result
+            ds *= 0.5
+            continue
+        new_load = float(corr.info["load"])
+        result.steps += 1
+        previous, state = state, corr.state
+        rising = new_load > load
+        load = new_load
+        result.state, result.load = state, load
+        if not rising:
+            turned = True
+        if turned:
+            lowest = min(lowest, load)
+        else:
+            peak = max(peak, load)
+        result.limit_load, result.lowest_load = peak, lowest
+        if turned and rising and load > peak * (1 + control.recover):
+            result.passed = True
+            return result
+        if floor is not None and load < floor:
+            result.message = f"the path falls below {floor:g} after the limit point"
+            return result
+        if corr.iterations < control.target_iterations:
+            ds = min(control.max_step, 1.5 * ds)
+    result.message = f"the load does not recover within {control.max_steps} arc-length steps"
+    return result

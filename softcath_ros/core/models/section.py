@@ -25,14 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import CacheStore, store_for
-from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, Correction,
-                            StepControl, ramp)
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, ArcControl, Correction,
+                            RampPoint, RampResult, StepControl, arc_length, ramp)
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import LinearSolver, newton
+from ..section_fe.solver import LinearSolver, PathStep, newton
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
@@ -77,6 +77,12 @@ class SectionSettings:
 
 # a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
 LIMIT_RATIO = 0.25
+# limit points passed by arc length per continuation (snaps), and the largest drop of the pressure
+# (fraction of the limit pressure) a snap may have before the limit point counts as the branch's end
+MAX_SNAPS = 4
+# halvings of an inadmissible predictor's step before the corrector gives up on it
+PREDICTOR_CUTS = 3
+MAX_SNAP_DROP = 0.5
 
 # what a cached batch holds (an entry without one of them is solved again)
 _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
@@ -145,6 +151,9 @@ class SectionModel(BendModel):
         self._max_states = 256
         # (last converged pressure key, a pressure it could not reach, message, last state summary)
         self._failures: list[tuple] = []
+        # limit points the continuation passed by arc length (snaps): the pressure (Pa) where the
+        # path turned back and the lowest pressure on it before it rose again
+        self.passed_limit_points: list[dict] = []
 
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
@@ -258,6 +267,21 @@ class SectionModel(BendModel):
         def corrector(guess, t, previous) -> Correction:
             corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                           max_iterations=self.settings.max_newton, linear=self.linear)
+            for _ in range(PREDICTOR_CUTS):
+                if not corr.info.get("inadmissible_start") or guess is previous:
+                    break
+                # the secant predictor pushed the walls through each other: halve its step
+                guess = previous + 0.5 * (guess - previous)
+                iterations = corr.iterations
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=self.settings.max_newton, linear=self.linear)
+                corr.iterations += iterations
+            if not corr.converged and not corr.info.get("inadmissible_start"):
+                # again with a line search on the potential (slower, surer)
+                retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                               max_iterations=self.settings.max_newton, linear=self.linear, line_search=True)
+                retry.iterations += corr.iterations
+                corr = retry if retry.converged else corr
             if not corr.converged:
                 # say how close the holes were to closing: failures cluster just before contact
                 gaps = self.problem.hole_gaps(previous)
@@ -305,10 +329,51 @@ class SectionModel(BendModel):
         control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
                               adaptive=s.adaptive, domain_step=s.contact_resolution)
         result = ramp(corrector, self._states[start_key], cum[1:], control, describe=describe)
-        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and s.adaptive:
-            t_next = cum[1 + len(result.points)]          # the command it could not reach
+        points = list(result.points)
+        for _ in range(MAX_SNAPS):
+            if result.converged or result.stop_reason != NUMERICAL_FAILURE or not s.adaptive:
+                break
+            stable = (result.last_load, result.last_state)
+            t_next = cum[1 + len(points)]                 # the command it could not reach
             result = self._probe_limit_point(result, corrector, min(result.last_load + 2 * s.min_step, t_next),
                                              lambda t: pressure_at(t) / c_ref, describe)
+            if result.stop_reason != LIMIT_POINT:
+                break
+            # a limit point: follow the path by arc length from the last stable state
+            j = int(np.clip(np.searchsorted(cum, stable[0], side="right") - 1, 0, len(seg) - 1))
+            direction = (corners[j + 1] - corners[j]) / seg[j]            # Pa per unit of t
+            base = pressure_at(stable[0]) - stable[0] * direction
+            arc = arc_length(PathStep(self.problem, direction, base / c_ref, tol=s.tol,
+                                      max_iterations=max(s.max_newton, 12), linear=self.linear),
+                             stable[1], stable[0] / c_ref,
+                             ArcControl(initial_step=2 * s.min_step / c_ref, min_step=s.min_step / 64 / c_ref,
+                                        max_step=s.max_step / c_ref),
+                             floor=(1 - MAX_SNAP_DROP) * stable[0] / c_ref)
+            t_limit, t_low = arc.limit_load * c_ref, arc.lowest_load * c_ref
+            if not arc.passed:
+                result.message += (f"; followed by arc length from {describe(stable[0])}: the path turns back at "
+                                   f"{describe(t_limit)} and {arc.message} (down to {describe(t_low)}): "
+                                   "no stable state beyond it on this branch")
+                break
+            self.passed_limit_points.append({"pressure": pressure_at(t_limit).tolist(),
+                                             "lowest_pressure": pressure_at(t_low).tolist()})
+            t_arc = arc.load * c_ref
+            rest = list(cum[1 + len(points):])
+            while rest and rest[0] <= t_arc:              # commands the path passed on its way back up
+                corr = corrector(arc.state, rest[0], arc.state)
+                if not corr.converged:
+                    break
+                points.append(RampPoint(load=rest[0], state=corr.state, iterations=corr.iterations, info=corr.info))
+                rest.pop(0)
+            if rest and rest[0] <= t_arc:
+                result = RampResult(points=[], converged=False, last_load=t_arc, last_state=arc.state,
+                                    stop_reason=NUMERICAL_FAILURE,
+                                    message=f"did not converge at {describe(rest[0])} after the snap past "
+                                            f"{describe(t_limit)} ({corr.message})")
+                break
+            result = ramp(corrector, arc.state, rest, control, start=t_arc, describe=describe)
+            points += result.points
+        result.points = points
         done = []
         for i, point in zip(todo, result.points):
             self._remember(pressures[i], point.state)

@@ -15,6 +15,10 @@ import scipy.sparse.linalg as spla
 from ..continuation import Correction
 from .problem import SectionProblem
 
+ARMIJO = 1e-4               # sufficient decrease of the potential, as a fraction of the slope
+MIN_DESCENT_STEP = 1 / 64   # the descent test stops cutting here (admissibility does not)
+ROUND_OFF = 1e-11           # potential differences below this (relative) are round-off
+
 
 class LinearSolver:
     """Sparse symmetric solves with a fixed pattern: factor once symbolically, then refactor."""
@@ -53,18 +57,22 @@ class LinearSolver:
 
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
-           max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None) -> Correction:
+           max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
+           line_search: bool = False) -> Correction:
     """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
     ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
-    ``project(x) -> x`` onto the constraint."""
+    ``project(x) -> x`` onto the constraint. ``line_search``: backtrack on the potential too (Armijo),
+    not only to stay admissible."""
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
     n = problem.n
     steps: list[float] = []
+    assembled = None                 # the assembly at the accepted trial point, when it was made
     for it in range(1, max_iterations + 1):
-        E, g, K, aux = problem.assemble(x, pressures)
+        E, g, K, aux = problem.assemble(x, pressures) if assembled is None else assembled
         if not np.isfinite(E):
-            return Correction(x, False, it, "inverted element or negative axial stretch in the predictor")
+            return Correction(x, False, it, "inverted element, negative axial stretch or crossed walls in the "
+                                            "predictor", info={"inadmissible_start": True})
         if constraint is not None:
             g, K = constraint.reduce(x, g, K)
         try:
@@ -76,18 +84,34 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
         if not np.all(np.isfinite(dx)):
             return Correction(x, False, it, "singular tangent")
-        # The mixed (u, p) problem is a saddle point, so no descent test: backtrack only to
-        # stay admissible (no inverted element, positive axial stretch everywhere).
+        # Backtrack to stay admissible (no inverted element, positive axial stretch, walls
+        # apart), and with ``line_search`` on the potential (Armijo): with the element pressures
+        # condensed the potential is minimised, and near the contact barrier full steps can
+        # overshoot (Newton cycled at the creased lumen shoulders of fine meshes without it).
+        slope = float(g @ dz) if line_search else 0.0
+        tolerance = ROUND_OFF * (1.0 + abs(E))
+        step = float(np.max(np.abs(dz[:n])))
+        # far from convergence the full step is assembled at once (the next iteration needs it);
+        # near it only its energy (the step may be the last)
+        full = step >= 100 * tol
         alpha = 1.0
+        assembled = None
         for _ in range(12):
             trial = x + alpha * dx if constraint is None else constraint.project(x + alpha * dx)
-            if np.isfinite(problem.energy(trial, pressures)):
+            if full and alpha == 1.0:
+                assembled = problem.assemble(trial, pressures)
+                e_trial = assembled[0]
+            else:
+                e_trial = problem.energy(trial, pressures)
+            if np.isfinite(e_trial) and (slope >= 0 or alpha <= MIN_DESCENT_STEP
+                                         or e_trial <= E + ARMIJO * alpha * slope + tolerance):
                 break
             alpha *= 0.5
         else:
             return Correction(x, False, it, "every step length inverts an element")
+        if alpha < 1.0:
+            assembled = None
         x = trial
-        step = float(np.max(np.abs(dz[:n])))
         # Converged when the step is below tol, or below 100 tol while shrinking 20-fold per
         # iteration (quadratic convergence observed): what is left is then below ~5 tol.
         if alpha == 1.0 and (step < tol or (steps and step < 100 * tol and step < 0.05 * steps[-1])):
@@ -99,3 +123,76 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
             return Correction(x, False, it, f"Newton is not converging (step {step:.2e} after {it} iterations)")
     return Correction(x, False, max_iterations, f"no convergence in {max_iterations} Newton iterations "
                                                  f"(last step {steps[-1]:.2e})")
+
+
+class PathStep:
+    """One pseudo-arc-length step of the section's equilibrium path in (x, mu), channel pressures
+    p = base + mu d (``direction`` d; p, base and mu in units of c1): the corrector of
+    ``continuation.arc_length``.
+
+    The path's tangent (dx/dmu = K^-1 b, b = d(d.V)/dx) is kept with its orientation (the load
+    grows at the start). The arc norm is |(dx / s, dmu)| with s = |dx/dmu| at the start, so state
+    and load share a step and the step is in units of mu. Each Newton iteration solves the
+    bordered system
+        [K       -b ] [dx ]     [g                                     ]
+        [t_x / s  t_m] [dmu] = - [t_x . (x - x0) / s + t_m (mu - mu0) - ds]
+    by block elimination with one factorisation of K (two solves), backtracking to stay admissible."""
+
+    def __init__(self, problem: SectionProblem, direction, base=None, tol: float = 1e-6, max_iterations: int = 12,
+                 linear: LinearSolver | None = None):
+        self.problem, self.d = problem, np.asarray(direction, dtype=float)
+        self.base = np.zeros_like(self.d) if base is None else np.asarray(base, dtype=float)
+        self.tol, self.max_iterations = tol, max_iterations
+        self.linear = LinearSolver() if linear is None else linear
+        self.tangent = None          # (t_x (n,), t_mu) of the last converged state, unit in the arc norm
+        self.scale = None
+
+    def _tangent(self, x, mu):
+        p = self.problem
+        K = p.assemble(x, self.base + mu * self.d)[2]
+        _, b = p.load_vector(x, self.d)
+        w = self.linear.solve(K, b)                     # dx/dmu
+        if self.scale is None:
+            self.scale = float(np.linalg.norm(w))
+        t = np.concatenate([w / self.scale, [1.0]])
+        t /= np.linalg.norm(t)
+        reference = np.append(*self.tangent) if self.tangent is not None else np.eye(len(t))[-1]
+        if t @ reference < 0:
+            t = -t                                      # keep walking the same way along the path
+        return t[:-1], float(t[-1])
+
+    def __call__(self, x0, mu0: float, previous, ds: float) -> Correction:
+        p, n = self.problem, self.problem.n
+        tx, tm = self._tangent(x0, mu0)
+        s = self.scale
+        x = x0.copy()
+        x[:n] += ds * s * tx
+        mu = mu0 + ds * tm
+        for it in range(1, self.max_iterations + 1):
+            E, g, K, aux = p.assemble(x, self.base + mu * self.d)
+            if not np.isfinite(E):
+                return Correction(x0, False, it, "inadmissible predictor on the arc")
+            _, b = p.load_vector(x, self.d)
+            try:
+                a = self.linear.solve(K, -g)
+                w = self.linear.solve(K, b)
+            except (RuntimeError, ValueError) as exc:
+                return Correction(x0, False, it, f"singular tangent ({exc})")
+            r = tx @ (x[:n] - x0[:n]) / s + tm * (mu - mu0) - ds
+            dmu = (-r - tx @ a / s) / (tx @ w / s + tm)
+            dz = a + dmu * w
+            dx = np.concatenate([dz, p.pressure_update(dz, aux)])
+            if not np.all(np.isfinite(dx)):
+                return Correction(x0, False, it, "singular bordered system")
+            alpha = 1.0
+            for _ in range(12):
+                if np.isfinite(p.energy(x + alpha * dx, self.base + (mu + alpha * dmu) * self.d)):
+                    break
+                alpha *= 0.5
+            else:
+                return Correction(x0, False, it, "every step length inverts an element")
+            x, mu = x + alpha * dx, mu + alpha * dmu
+            if alpha == 1.0 and max(float(np.max(np.abs(dz))), abs(dmu)) < self.tol:
+                self.tangent = (tx, tm)
+                return Correction(x, True, it, info={"load": mu})
+        return Correction(x0, False, self.max_iterations, "no convergence on the arc")
