@@ -72,3 +72,24 @@ def test_too_large_fixed_steps_are_a_numerical_failure(design_dict):
     state = _coarse(design_dict, adaptive=False, initial_step=0.25 * BAR).evaluate([0.25 * BAR])
     _stopped(state, NUMERICAL_FAILURE)
     assert state.last_converged["pressure"] == [0.0]
+
+
+def test_a_snap_of_a_stiffening_channel_is_passed_by_arc_length(design_dict):
+    """Without rings a channel of a Yeoh silicone with a small c2 balloons at a limit point and
+    stiffens again further out: the pressure-controlled path snaps. Arc length follows the path
+    over the limit point and back up (the pressure falls, then rises past it), and the ramp goes
+    on from there on the ballooned branch."""
+    design_dict["reinforcement"] = None
+    design_dict["material"] = dict(design_dict["material"], c2=200.0, c3=0.0)
+    model = _coarse(design_dict)
+    state = model.evaluate([0.15 * BAR])
+    assert state.converged and state.message == ""
+    (event,) = model.passed_limit_points
+    assert event["by"] == "arc length"
+    # measured (D/12): the path turns back at 0.1425 bar, falls to 0.1297 bar and rises again
+    assert 0.13 * BAR < event["pressure"][0] < 0.15 * BAR
+    assert event["lowest_pressure"][0] < 0.95 * event["pressure"][0]
+    # on the ballooned branch: the channel's cross-section is many times the body's
+    area = float(state.diagnostics.channel_area[0])
+    assert area > 5 * np.pi * (0.0025 ** 2)
+    assert make_model("section", design_from_dict(design_dict), mesh_size=0.005 / 12).evaluate([0.12 * BAR]).converged

@@ -77,6 +77,7 @@ class RampResult:
     cuts: int = 0                    # rejected attempts
     iterations: int = 0              # corrector iterations in total (accepted and rejected)
     stop_reason: str = ""            # empty when converged, else LIMIT_POINT, MATERIAL_RANGE, ...
+    previous: tuple[float, Any] | None = None   # the converged (load, state) before the last one
 
 
 def secant(t0: float, s0, t1: float, s1, t: float):
@@ -120,6 +121,7 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             if corr.converged:
                 last = corr
                 prev = (t, state)
+                result.previous = prev
                 t, state = (target if t_new >= target else t_new), corr.state
                 result.steps += 1
                 result.last_load, result.last_state = t, state
@@ -169,6 +171,7 @@ class ArcResult:
     steps: int = 0
     iterations: int = 0
     message: str = ""                # why the arc stopped when it did not pass
+    below_floor: bool = False        # it stopped because the load fell below ``floor``: the branch's end
 
 
 def arc_length(corrector: Callable[[Any, float, Any, float], Correction], state0, load0: float,
@@ -212,7 +215,8 @@ def arc_length(corrector: Callable[[Any, float, Any, float], Correction], state0
             result.passed = True
             return result
         if floor is not None and load < floor:
-            result.message = f"the path falls below {floor:g} after the limit point"
+            result.below_floor = True
+            result.message = f"the load falls below {floor:g} after the limit point"
             return result
         if corr.iterations < control.target_iterations:
             ds = min(control.max_step, 1.5 * ds)

@@ -82,6 +82,10 @@ LIMIT_RATIO = 0.25
 MAX_SNAPS = 4
 # halvings of an inadmissible predictor's step before the corrector gives up on it
 PREDICTOR_CUTS = 3
+# iterations of the minimiser that looks for the state a snap lands in, and of the one that
+# retries a step plain Newton failed
+SNAP_ITERATIONS = 40
+RETRY_ITERATIONS = 30
 MAX_SNAP_DROP = 0.5
 
 # what a cached batch holds (an entry without one of them is solved again)
@@ -154,6 +158,9 @@ class SectionModel(BendModel):
         # limit points the continuation passed by arc length (snaps): the pressure (Pa) where the
         # path turned back and the lowest pressure on it before it rose again
         self.passed_limit_points: list[dict] = []
+        # numerical failures of the continuation (no limit point near) it passed by minimising the
+        # potential at the next pressure from the last converged state (a stable state found there)
+        self.bridged_failures: list[dict] = []
 
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
@@ -264,10 +271,14 @@ class SectionModel(BendModel):
 
         hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
 
-        def corrector(guess, t, previous) -> Correction:
-            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                          max_iterations=self.settings.max_newton, linear=self.linear)
-            for _ in range(PREDICTOR_CUTS):
+        def corrector(guess, t, previous, minimise: bool = False) -> Correction:
+            if minimise:      # the stable state a snap at this pressure lands in
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=SNAP_ITERATIONS, linear=self.linear, minimise=True)
+            else:
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=self.settings.max_newton, linear=self.linear)
+            for _ in range(0 if minimise else PREDICTOR_CUTS):
                 if not corr.info.get("inadmissible_start") or guess is previous:
                     break
                 # the secant predictor pushed the walls through each other: halve its step
@@ -276,10 +287,10 @@ class SectionModel(BendModel):
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                               max_iterations=self.settings.max_newton, linear=self.linear)
                 corr.iterations += iterations
-            if not corr.converged and not corr.info.get("inadmissible_start"):
-                # again with a line search on the potential (slower, surer)
+            if not corr.converged and not minimise and not corr.info.get("inadmissible_start"):
+                # again as a minimiser of the potential (line search, no wandering test: slower, surer)
                 retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                               max_iterations=self.settings.max_newton, linear=self.linear, line_search=True)
+                               max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
                 retry.iterations += corr.iterations
                 corr = retry if retry.converged else corr
             if not corr.converged:
@@ -334,44 +345,66 @@ class SectionModel(BendModel):
             if result.converged or result.stop_reason != NUMERICAL_FAILURE or not s.adaptive:
                 break
             stable = (result.last_load, result.last_state)
+            before = result.previous
             t_next = cum[1 + len(points)]                 # the command it could not reach
             result = self._probe_limit_point(result, corrector, min(result.last_load + 2 * s.min_step, t_next),
                                              lambda t: pressure_at(t) / c_ref, describe)
-            if result.stop_reason != LIMIT_POINT:
+            if result.stop_reason == LIMIT_POINT:
+                # follow the path by arc length from the last stable state
+                j = int(np.clip(np.searchsorted(cum, stable[0], side="right") - 1, 0, len(seg) - 1))
+                direction = (corners[j + 1] - corners[j]) / seg[j]            # Pa per unit of t
+                base = pressure_at(stable[0]) - stable[0] * direction
+                x_rest = self._states[tuple([0.0] * self.design.n_channels)]
+                rate = np.linalg.norm(stable[1][:self.problem.n] - x_rest[:self.problem.n]) / (stable[0] / c_ref)
+                towards = None if before is None else (stable[1][:self.problem.n] - before[1][:self.problem.n],
+                                                        (stable[0] - before[0]) / c_ref)
+                arc = arc_length(PathStep(self.problem, direction, rate, base / c_ref, tol=s.tol,
+                                          max_iterations=max(s.max_newton, 12), linear=self.linear, towards=towards),
+                                 stable[1], stable[0] / c_ref,
+                                 ArcControl(initial_step=2 * s.min_step / c_ref, min_step=s.min_step / 8 / c_ref,
+                                            max_step=s.max_step / c_ref),
+                                 floor=(1 - MAX_SNAP_DROP) * stable[0] / c_ref)
+                t_limit, t_low = arc.limit_load * c_ref, arc.lowest_load * c_ref
+                fate = (f"falls below {describe((1 - MAX_SNAP_DROP) * stable[0])} without rising again"
+                        if arc.below_floor else f"{arc.message} (down to {describe(t_low)})")
+                note = f"followed by arc length from {describe(stable[0])}: the path turns back at {describe(t_limit)} and {fate}"
+            else:                                         # a numerical failure with no limit point near
+                arc, t_limit, note = None, stable[0], "the continuation cannot follow the path"
+            if arc is not None and arc.passed:
+                t_arc, landing = arc.load * c_ref, arc.state
+                self.passed_limit_points.append({"pressure": pressure_at(t_limit).tolist(),
+                                                 "lowest_pressure": pressure_at(t_low).tolist(), "by": "arc length"})
+            elif arc is not None and arc.below_floor:
+                result.message += f"; {note}: the end of this branch"
                 break
-            # a limit point: follow the path by arc length from the last stable state
-            j = int(np.clip(np.searchsorted(cum, stable[0], side="right") - 1, 0, len(seg) - 1))
-            direction = (corners[j + 1] - corners[j]) / seg[j]            # Pa per unit of t
-            base = pressure_at(stable[0]) - stable[0] * direction
-            arc = arc_length(PathStep(self.problem, direction, base / c_ref, tol=s.tol,
-                                      max_iterations=max(s.max_newton, 12), linear=self.linear),
-                             stable[1], stable[0] / c_ref,
-                             ArcControl(initial_step=2 * s.min_step / c_ref, min_step=s.min_step / 64 / c_ref,
-                                        max_step=s.max_step / c_ref),
-                             floor=(1 - MAX_SNAP_DROP) * stable[0] / c_ref)
-            t_limit, t_low = arc.limit_load * c_ref, arc.lowest_load * c_ref
-            if not arc.passed:
-                result.message += (f"; followed by arc length from {describe(stable[0])}: the path turns back at "
-                                   f"{describe(t_limit)} and {arc.message} (down to {describe(t_low)}): "
-                                   "no stable state beyond it on this branch")
-                break
-            self.passed_limit_points.append({"pressure": pressure_at(t_limit).tolist(),
-                                             "lowest_pressure": pressure_at(t_low).tolist()})
-            t_arc = arc.load * c_ref
+            else:
+                # the stable state the body jumps to just past that pressure: minimise the potential there
+                t_arc = min(t_limit + s.min_step, t_next)
+                jump = corrector(stable[1], t_arc, stable[1], minimise=True)
+                if not (jump.converged and self.problem.smallest_tangent_eigenvalue(
+                        jump.state, pressure_at(t_arc) / c_ref) > 0):
+                    why = jump.message or "the state it reaches is not stable"
+                    result.message += (f"; {note}; minimising the potential at {describe(t_arc)} finds no stable "
+                                       f"state ({why})" + (": the end of this branch" if arc is not None else ""))
+                    break
+                landing = jump.state
+                event = {"pressure": pressure_at(t_limit).tolist(), "lowest_pressure": None,
+                         "by": "minimised at the next pressure"}
+                (self.passed_limit_points if arc is not None else self.bridged_failures).append(event)
             rest = list(cum[1 + len(points):])
             while rest and rest[0] <= t_arc:              # commands the path passed on its way back up
-                corr = corrector(arc.state, rest[0], arc.state)
+                corr = corrector(landing, rest[0], landing)
                 if not corr.converged:
                     break
                 points.append(RampPoint(load=rest[0], state=corr.state, iterations=corr.iterations, info=corr.info))
                 rest.pop(0)
             if rest and rest[0] <= t_arc:
-                result = RampResult(points=[], converged=False, last_load=t_arc, last_state=arc.state,
+                result = RampResult(points=[], converged=False, last_load=t_arc, last_state=landing,
                                     stop_reason=NUMERICAL_FAILURE,
                                     message=f"did not converge at {describe(rest[0])} after the snap past "
                                             f"{describe(t_limit)} ({corr.message})")
                 break
-            result = ramp(corrector, arc.state, rest, control, start=t_arc, describe=describe)
+            result = ramp(corrector, landing, rest, control, start=t_arc, describe=describe)
             points += result.points
         result.points = points
         done = []

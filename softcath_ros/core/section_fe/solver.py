@@ -58,11 +58,14 @@ class LinearSolver:
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
            max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
-           line_search: bool = False) -> Correction:
+           line_search: bool = False, minimise: bool = False) -> Correction:
     """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
     ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
     ``project(x) -> x`` onto the constraint. ``line_search``: backtrack on the potential too (Armijo),
-    not only to stay admissible."""
+    not only to stay admissible. ``minimise``: a line search, a tangent shifted towards positive
+    definite where the Newton step is not a descent direction, and no test for wandering: the
+    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only)."""
+    line_search = line_search or minimise
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
     n = problem.n
@@ -81,6 +84,8 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
             return Correction(x, False, it, f"singular tangent ({exc})")
         if constraint is not None:
             dz = constraint.expand(x, dz)
+        elif minimise and float(g @ dz) >= 0:
+            dz = _descent_direction(K, g)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
         if not np.all(np.isfinite(dx)):
             return Correction(x, False, it, "singular tangent")
@@ -119,10 +124,29 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         # Newton converges quadratically near a solution; a step that has not halved in two
         # iterations after the fourth means it is wandering (a limit point or a bifurcation).
         steps.append(step)
-        if it >= 5 and step > 0.5 * steps[-3]:
+        if not minimise and it >= 5 and step > 0.5 * steps[-3]:
             return Correction(x, False, it, f"Newton is not converging (step {step:.2e} after {it} iterations)")
     return Correction(x, False, max_iterations, f"no convergence in {max_iterations} Newton iterations "
                                                  f"(last step {steps[-1]:.2e})")
+
+
+def _descent_direction(K, g) -> np.ndarray:
+    """A step -(K + sigma I)^-1 g that descends (g . dz < 0), sigma growing tenfold from 1e-3 of
+    the tangent's largest diagonal entry; steepest descent if none does."""
+    diag = np.flatnonzero(np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)) == K.indices)
+    scale = float(np.max(np.abs(K.data[diag])))
+    sigma = 1e-3 * scale
+    for _ in range(8):
+        data = K.data.copy()
+        data[diag] += sigma
+        try:
+            dz = LinearSolver().solve(K.__class__((data, K.indices, K.indptr), shape=K.shape), -g)
+        except (RuntimeError, ValueError):
+            dz = None
+        if dz is not None and np.all(np.isfinite(dz)) and float(g @ dz) < 0:
+            return dz
+        sigma *= 10
+    return -g / scale
 
 
 class PathStep:
@@ -131,29 +155,32 @@ class PathStep:
     ``continuation.arc_length``.
 
     The path's tangent (dx/dmu = K^-1 b, b = d(d.V)/dx) is kept with its orientation (the load
-    grows at the start). The arc norm is |(dx / s, dmu)| with s = |dx/dmu| at the start, so state
-    and load share a step and the step is in units of mu. Each Newton iteration solves the
+    grows at the start). The arc norm is |(dx / s, dmu)| with ``scale`` s a typical |dx/dmu| of the
+    path (the mean rate from rest: near a limit point the local rate is unbounded), so state and
+    load share a step and the step is in units of mu. Each Newton iteration solves the
     bordered system
         [K       -b ] [dx ]     [g                                     ]
         [t_x / s  t_m] [dmu] = - [t_x . (x - x0) / s + t_m (mu - mu0) - ds]
     by block elimination with one factorisation of K (two solves), backtracking to stay admissible."""
 
-    def __init__(self, problem: SectionProblem, direction, base=None, tol: float = 1e-6, max_iterations: int = 12,
-                 linear: LinearSolver | None = None):
+    def __init__(self, problem: SectionProblem, direction, scale: float, base=None, tol: float = 1e-6,
+                 max_iterations: int = 12, linear: LinearSolver | None = None, towards=None):
+        """``towards``: (dx (n,), dmu), a step along the path so far (the ramp's last secant): the
+        first tangent is oriented along it (near the limit point the load's share of the tangent is
+        too small to say which way is forward)."""
         self.problem, self.d = problem, np.asarray(direction, dtype=float)
         self.base = np.zeros_like(self.d) if base is None else np.asarray(base, dtype=float)
         self.tol, self.max_iterations = tol, max_iterations
         self.linear = LinearSolver() if linear is None else linear
-        self.tangent = None          # (t_x (n,), t_mu) of the last converged state, unit in the arc norm
-        self.scale = None
+        self.scale = float(scale)
+        # (t_x (n,), t_mu) of the last converged state, unit in the arc norm (only its direction matters)
+        self.tangent = None if towards is None else (np.asarray(towards[0]) / self.scale, float(towards[1]))
 
     def _tangent(self, x, mu):
         p = self.problem
         K = p.assemble(x, self.base + mu * self.d)[2]
         _, b = p.load_vector(x, self.d)
         w = self.linear.solve(K, b)                     # dx/dmu
-        if self.scale is None:
-            self.scale = float(np.linalg.norm(w))
         t = np.concatenate([w / self.scale, [1.0]])
         t /= np.linalg.norm(t)
         reference = np.append(*self.tangent) if self.tangent is not None else np.eye(len(t))[-1]
