@@ -206,12 +206,17 @@ class SectionProblem:
         """(lambda, k R) in the frame that follows the silicone's mean displacement and rotation.
 
         Moving the frame origin by o and turning it by w re-describes the same body with
-        lambda' = lambda (1 - k.o) and k' = rot(-w) k / (1 - k.o) (F33 = lambda (1 - k.x))."""
+        lambda' = lambda (1 - k.o) and k' = rot(-w) k / (1 - k.o) (F33 = lambda (1 - k.x)).
+        w is the best-fit (least-squares, weighted by the silicone's area) rotation of the
+        reference section onto the deformed one: exact for any finite rigid turn, so states that
+        differ by one (another gauge) report the same k."""
         u = x[:self.n_u].reshape(-1, 2)
         lam, kx, ky = x[self.n_u:self.n]
         o = self._w_node @ u / self._w_node.sum()
         d = self.X - self._centroid
-        w = float(np.sum(self._rot_weights * (d[:, 0] * (u[:, 1] - o[1]) - d[:, 1] * (u[:, 0] - o[0]))))
+        v = u - o
+        w = float(np.arctan2(np.sum(self._rot_weights * (d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0])),
+                             1.0 + np.sum(self._rot_weights * (d[:, 0] * v[:, 0] + d[:, 1] * v[:, 1]))))
         s = 1 - kx * o[0] - ky * o[1]
         c, si = np.cos(w), np.sin(w)
         k = np.array([c * kx + si * ky, -si * kx + c * ky]) / s
