@@ -93,3 +93,50 @@ def test_a_snap_of_a_stiffening_channel_is_passed_by_arc_length(design_dict):
     area = float(state.diagnostics.channel_area[0])
     assert area > 5 * np.pi * (0.0025 ** 2)
     assert make_model("section", design_from_dict(design_dict), mesh_size=0.005 / 12).evaluate([0.12 * BAR]).converged
+
+
+def _arc_corrector(p, dp):
+    """Pseudo-arc-length corrector on the 1-D path p(x) (the load p, the state x)."""
+    memory = {}
+
+    def corrector(x0, load0, previous, ds):
+        from softcath_ros.core.continuation import Correction
+
+        t = np.array([1.0, dp(x0)])
+        t /= np.linalg.norm(t)
+        if "t" in memory and t @ memory["t"] < 0:
+            t = -t
+        elif "t" not in memory and t[1] < 0:
+            t = -t
+        x, q = x0 + ds * t[0], load0 + ds * t[1]
+        for it in range(1, 30):
+            # residuals: equilibrium p(x) - q = 0 and the arc constraint
+            r = np.array([p(x) - q, t @ [x - x0, q - load0] - ds])
+            J = np.array([[dp(x), -1.0], t])
+            dx, dq = np.linalg.solve(J, -r)
+            x, q = x + dx, q + dq
+            if abs(dx) + abs(dq) < 1e-13:
+                memory["t"] = t
+                return Correction(x, True, it, info={"load": q})
+        return Correction(x0, False, 30, "no convergence")
+
+    return corrector
+
+
+def test_arc_length_passes_a_snap_and_names_the_end_of_a_branch():
+    from softcath_ros.core.continuation import ArcControl, arc_length
+
+    control = ArcControl(initial_step=0.01, min_step=1e-5, max_step=0.05)
+    # an S-shaped path: the load turns back at x1 = 0.2764 (p 0.0723) and rises again from x2 = 0.7236 (p 0.0277)
+    p = lambda x: x**3 - 1.5 * x**2 + 0.6 * x         # noqa: E731
+    dp = lambda x: 3 * x**2 - 3 * x + 0.6             # noqa: E731
+    x1, x2 = (3 - np.sqrt(1.8)) / 6, (3 + np.sqrt(1.8)) / 6
+    arc = arc_length(_arc_corrector(p, dp), 0.25, p(0.25), control, floor=0.0)
+    assert arc.passed and not arc.below_floor
+    assert arc.limit_load == pytest.approx(p(x1), abs=2e-4) and arc.lowest_load == pytest.approx(p(x2), abs=2e-4)
+    assert arc.load > p(x1) and arc.state > x2                  # on the rising branch beyond the snap
+    # a path whose load falls for ever after its maximum (p = x exp(-x), limit point at x = 1)
+    arc = arc_length(_arc_corrector(lambda x: x * np.exp(-x), lambda x: (1 - x) * np.exp(-x)), 0.9,
+                     0.9 * np.exp(-0.9), control, floor=0.5 / np.e)
+    assert not arc.passed and arc.below_floor
+    assert arc.limit_load == pytest.approx(1 / np.e, abs=1e-4)

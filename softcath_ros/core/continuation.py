@@ -16,6 +16,11 @@ never returning a state that did not converge.
 States are numpy arrays for the default secant predictor (linear extrapolation through
 the last two converged states); any other state type needs ``extrapolate=None``
 (constant predictor) or a custom ``extrapolate(t0, s0, t1, s1, t) -> guess``.
+
+Past a limit point of the load-controlled path (the load cannot grow on this branch),
+``arc_length`` follows the path by pseudo-arc length with the caller's arc corrector until
+the load rises above the limit again (a snap: passed, and the ramp can go on from there) or
+falls below a floor (the end of the branch: the stop is LIMIT_POINT).
 """
 from __future__ import annotations
 

@@ -86,7 +86,7 @@ PREDICTOR_CUTS = 3
 # retries a step plain Newton failed
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
-MAX_SNAP_DROP = 0.5
+MAX_SNAP_DROP = 0.3
 
 # what a cached batch holds (an entry without one of them is solved again)
 _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
@@ -95,7 +95,7 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-4"   # bump when the discretisation or the solver changes an answer (4: 3-fold mesh, best-fit frame)
+    solver_version = "section-5"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -287,8 +287,10 @@ class SectionModel(BendModel):
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                               max_iterations=self.settings.max_newton, linear=self.linear)
                 corr.iterations += iterations
-            if not corr.converged and not minimise and not corr.info.get("inadmissible_start"):
-                # again as a minimiser of the potential (line search, no wandering test: slower, surer)
+            if (not corr.converged and not minimise and self.settings.adaptive
+                    and not corr.info.get("inadmissible_start")):
+                # again as a minimiser of the potential (line search, no wandering test: slower,
+                # surer); not with fixed steps (adaptive False), which are plain load stepping
                 retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                                max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
                 retry.iterations += corr.iterations

@@ -265,7 +265,9 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
     else:
         boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
         boundary_pts = boundary
-    n_boundary = sum(len(b) for b in boundary_pts)
+    # fixed while smoothing: the circle points (and the mirror mesh's axis points); the 3-fold
+    # mesh's mirror-line points move, kept on their lines by the symmetrisation
+    n_boundary = sum(len(b) for b in (boundary if three_fold else boundary_pts))
     # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges
     # (with a row through the centre for the 3-fold mesh: the lattice is then invariant under D3).
     dy = h * math.sqrt(3) / 2
