@@ -284,7 +284,7 @@ def test_cache_keys_hold_the_contact_and_fill_settings(implemented_design):
     before = {k: v for k, v in asdict(model.settings).items() if k != "lumen_fill"}
     assert model.settings.key() == before and before["contact_distance"] == 0.01
     parts = {"design": implemented_design.content_hash(), "settings": before,
-             "mesh_nodes": model.mesh.n_nodes, "pressures": [[0.0]]}
+             "mesh_nodes": model.mesh.n_nodes, "mesh": model.mesh_hash, "pressures": [[0.0]]}
     assert model.cache_key(np.zeros((1, 1))) == key_of(SectionModel.solver_version, parts)
     for other in ({"lumen_fill": 0.01}, {"contact_distance": 0.02}, {"contact_distance": None}):
         changed = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8, **other)

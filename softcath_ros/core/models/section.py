@@ -17,6 +17,7 @@ state's pressure and curvature.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
@@ -140,6 +141,10 @@ class SectionModel(BendModel):
         if self.settings.pressure_load not in ("follower", "end_cap"):
             raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
                              "'follower' or 'end_cap'")
+        # the mesh itself in the cache key: a mesher change that keeps the node count must not
+        # find the old mesh's answers
+        self.mesh_hash = hashlib.sha256(np.ascontiguousarray(self.mesh.nodes).tobytes()
+                                        + np.ascontiguousarray(self.mesh.triangles).tobytes()).hexdigest()[:16]
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
                                       end_cap_only=self.settings.pressure_load == "end_cap",
                                       lumen_fill=fill, contact_distance=self.settings.contact_distance)
@@ -165,7 +170,8 @@ class SectionModel(BendModel):
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
         return {"design": self.design.content_hash(), "settings": self.settings.key(),
-                "mesh_nodes": self.mesh.n_nodes, "pressures": np.asarray(pressures, dtype=float).tolist()}
+                "mesh_nodes": self.mesh.n_nodes, "mesh": self.mesh_hash,
+                "pressures": np.asarray(pressures, dtype=float).tolist()}
 
     def cache_key(self, pressures: np.ndarray) -> str:
         return CacheStore.key(self.solver_version, self._cache_parts(pressures))
