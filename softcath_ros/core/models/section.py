@@ -33,7 +33,7 @@ from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import LinearSolver, PathStep, newton
+from ..section_fe.solver import LinearSolver, PathStep, newton, unstable_directions
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
@@ -87,6 +87,7 @@ PREDICTOR_CUTS = 3
 # retries a step plain Newton failed
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
+MAX_FAILED_RETRIES = 10    # per continuation
 MAX_SNAP_DROP = 0.3
 
 # what a cached batch holds (an entry without one of them is solved again)
@@ -277,6 +278,8 @@ class SectionModel(BendModel):
 
         hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
 
+        failed_retries = [0]
+
         def corrector(guess, t, previous, minimise: bool = False) -> Correction:
             if minimise:      # the stable state a snap at this pressure lands in
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
@@ -293,13 +296,15 @@ class SectionModel(BendModel):
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                               max_iterations=self.settings.max_newton, linear=self.linear)
                 corr.iterations += iterations
-            if (not corr.converged and not minimise and self.settings.adaptive
+            if (not corr.converged and not minimise and self.settings.adaptive and failed_retries[0] < MAX_FAILED_RETRIES
                     and not corr.info.get("inadmissible_start")):
                 # again as a minimiser of the potential (line search, no wandering test: slower,
-                # surer); not with fixed steps (adaptive False), which are plain load stepping
+                # surer); not with fixed steps (adaptive False), which are plain load stepping, and
+                # not after MAX_FAILED_RETRIES failed ones (the ramp is then at a limit point)
                 retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                                max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
                 retry.iterations += corr.iterations
+                failed_retries[0] += not retry.converged
                 corr = retry if retry.converged else corr
             if not corr.converged:
                 # say how close the holes were to closing: failures cluster just before contact
@@ -352,6 +357,11 @@ class SectionModel(BendModel):
         for _ in range(MAX_SNAPS):
             if result.converged or result.stop_reason != NUMERICAL_FAILURE or not s.adaptive:
                 break
+            if (result.previous is not None and unstable_directions(
+                    self.problem, result.last_state, pressure_at(result.last_load) / c_ref)):
+                # the ramp's last state lies just past a limit point (an unstable branch): step back
+                result.last_load, result.last_state = result.previous
+                result.previous = None
             stable = (result.last_load, result.last_state)
             before = result.previous
             t_next = cum[1 + len(points)]                 # the command it could not reach
@@ -441,14 +451,22 @@ class SectionModel(BendModel):
         probe = ramp(corrector, result.last_state, [t_probe],
                      StepControl(initial_step=s.min_step / 8, max_step=s.min_step, min_step=s.min_step / 64),
                      start=result.last_load, describe=describe)
+        crossed = 0
         if probe.steps:
-            result.last_load, result.last_state = probe.last_load, probe.last_state
+            crossed = unstable_directions(self.problem, probe.last_state, pressure_of(probe.last_load))
+            if not crossed:       # an unstable state is never reported as the last converged one
+                result.last_load, result.last_state = probe.last_load, probe.last_state
         if self._rest_eigenvalue is None:
             x0 = self.problem.consistent_pressures(self.problem.initial_state())
             self._rest_eigenvalue = self.problem.smallest_tangent_eigenvalue(x0, pressure_of(0.0) * 0)
         ratio = self.problem.smallest_tangent_eigenvalue(result.last_state, pressure_of(result.last_load)) \
             / self._rest_eigenvalue
-        if ratio < LIMIT_RATIO:
+        if crossed:
+            result.stop_reason = LIMIT_POINT
+            result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: just past it, at "
+                               f"{describe(probe.last_load)}, the equilibrium is unstable ({crossed} direction(s) "
+                               "of negative stiffness; pressure control cannot pass it)")
+        elif ratio < LIMIT_RATIO:
             result.stop_reason = LIMIT_POINT
             result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: the tangent's smallest "
                                f"eigenvalue is {ratio:.1%} of its value at rest (pressure control cannot pass it)")

@@ -130,6 +130,18 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
                                                  f"(last step {steps[-1]:.2e})")
 
 
+def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray) -> int:
+    """The tangent's negative eigenvalues at ``x`` (pressures / c1), counted as the negative pivots
+    of its LDL^T (Sylvester's law of inertia): 0 at a stable equilibrium of the pressure-controlled
+    problem, more on an unstable branch (past a limit point or a bifurcation)."""
+    K = problem.assemble(x, pressures)[2]
+    linear = LinearSolver()
+    if not linear._have_qdldl:
+        return int(problem.smallest_tangent_eigenvalue(x, pressures) < 0)
+    linear.solve(K, np.zeros(K.shape[0]))
+    return int(np.count_nonzero(linear._ldl.factors()[1] < 0))
+
+
 def _descent_direction(K, g) -> np.ndarray:
     """A step -(K + sigma I)^-1 g that descends (g . dz < 0), sigma growing tenfold from 1e-3 of
     the tangent's largest diagonal entry; steepest descent if none does."""
