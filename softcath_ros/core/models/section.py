@@ -33,7 +33,7 @@ from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import LinearSolver, PathStep, negative_curvature, newton, unstable_directions
+from ..section_fe.solver import LinearSolver, PathStep, newton, unstable_directions
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
@@ -88,10 +88,6 @@ PREDICTOR_CUTS = 3
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
 MAX_FAILED_RETRIES = 10    # per continuation
-# how far (largest displacement / R) a saddle is left along a direction of negative stiffness (tried in turn)
-ESCAPE = (1e-2, 3e-3, 1e-3, 3e-2)
-ESCAPE_ROUNDS = 4
-ESCAPE_ITERATIONS = 300
 MAX_SNAP_DROP = 0.3
 
 # what a cached batch holds (an entry without one of them is solved again)
@@ -101,7 +97,7 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-6"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states)
+    solver_version = "section-5"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -171,8 +167,6 @@ class SectionModel(BendModel):
         # numerical failures of the continuation (no limit point near) it passed by minimising the
         # potential at the next pressure from the last converged state (a stable state found there)
         self.bridged_failures: list[dict] = []
-        # answers that converged to a saddle of the potential and were replaced by a stable state next to it
-        self.escaped_saddles = 0
 
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
@@ -286,10 +280,10 @@ class SectionModel(BendModel):
 
         failed_retries = [0]
 
-        def corrector(guess, t, previous, minimise: bool = False, iterations: int = SNAP_ITERATIONS) -> Correction:
+        def corrector(guess, t, previous, minimise: bool = False) -> Correction:
             if minimise:      # the stable state a snap at this pressure lands in
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                              max_iterations=iterations, linear=self.linear, minimise=True)
+                              max_iterations=SNAP_ITERATIONS, linear=self.linear, minimise=True)
             else:
                 corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
                               max_iterations=self.settings.max_newton, linear=self.linear)
@@ -432,18 +426,9 @@ class SectionModel(BendModel):
             points += result.points
         result.points = points
         done = []
-        for n_ok, (i, point) in enumerate(zip(todo, result.points)):
-            # an answer is a stable equilibrium: from a saddle (the creased lumen shoulders of some
-            # meshes) step off along a direction of negative stiffness and minimise
-            state, why = self._stable(corrector, point.state, point.load, pressure_at(point.load) / c_ref)
-            if state is None:
-                before_it = result.points[n_ok - 1] if n_ok else RampPoint(0.0, self._states[start_key], 0, {})
-                result = RampResult(points=result.points[:n_ok], converged=False, last_load=before_it.load,
-                                    last_state=before_it.state, stop_reason=NUMERICAL_FAILURE,
-                                    message=f"the equilibrium found at {describe(point.load)} is unstable and {why}")
-                break
-            self._remember(pressures[i], state)
-            done.append((i, state, point.iterations))
+        for i, point in zip(todo, result.points):
+            self._remember(pressures[i], point.state)
+            done.append((i, point.state, point.iterations))
         if result.converged:
             return done, None, "", None
         failed = todo[len(result.points)]
@@ -456,36 +441,6 @@ class SectionModel(BendModel):
         why = f"{result.message} [stop: {result.stop_reason}]"
         self._failures.append((tuple(float(v) for v in last_p), failing_p, why, last))
         return done, failed, self._failure_message(pressures[failed], why), last
-
-    def _stable(self, corrector, x, t: float, pressures):
-        """(a stable equilibrium at this load, ""): ``x`` itself if it is stable; else, repeatedly,
-        the lower of the states the potential's minimiser finds from it moved by an ESCAPE step
-        (largest displacement / R) either way along a direction of negative stiffness, until one is stable
-        (one direction of negative stiffness is left per round: the two creased shoulders are two);
-        (None, why) if that fails."""
-        negative, z = negative_curvature(self.problem, x, pressures)
-        start = negative
-        for _ in range(ESCAPE_ROUNDS):
-            if not negative:
-                self.escaped_saddles += start > 0
-                return x, ""
-            z = z / np.max(np.abs(z[:self.problem.n_u]))
-            found = []
-            for step in ESCAPE:
-                for sign in (1.0, -1.0):
-                    guess = x.copy()
-                    guess[:self.problem.n] += sign * step * z
-                    corr = corrector(guess, t, x, minimise=True, iterations=ESCAPE_ITERATIONS)
-                    if corr.converged:
-                        n_neg, z_next = negative_curvature(self.problem, corr.state, pressures)
-                        if n_neg < negative:
-                            found.append((n_neg, self.problem.energy(corr.state, pressures), corr.state, z_next))
-                if found:
-                    break
-            if not found:
-                break
-            negative, _, x, z = min(found, key=lambda f: (f[0], f[1]))
-        return None, f"no stable state was found next to it ({start} direction(s) of negative stiffness)"
 
     def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
         """A ramp that failed for no named reason, looked at closer: creep on from its last state

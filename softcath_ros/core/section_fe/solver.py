@@ -133,38 +133,13 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
 def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray) -> int:
     """The tangent's negative eigenvalues at ``x`` (pressures / c1), counted as the negative pivots
     of its LDL^T (Sylvester's law of inertia): 0 at a stable equilibrium of the pressure-controlled
-    problem, more on an unstable branch (past a limit point or a bifurcation) or at a saddle."""
-    return negative_curvature(problem, x, pressures)[0]
-
-
-def negative_curvature(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray):
-    """(the tangent's negative eigenvalues, a direction z (n,) with z^T K z < 0 or None): counted on the
-    LDL^T of the permuted tangent, P K P^T = (I + L) D (I + L)^T; z the eigenvector nearest below
-    2 min D - 1 (shift-invert Lanczos), else P^T (I + L)^-T e_j for the most negative pivot D_j
-    (then z^T K z = D_j; a poorer way out of a saddle than the eigenvector)."""
+    problem, more on an unstable branch (past a limit point or a bifurcation)."""
     K = problem.assemble(x, pressures)[2]
     linear = LinearSolver()
     if not linear._have_qdldl:
-        lam, vec = spla.eigsh(K.tocsc(), k=1, sigma=-1e-9, which="LM")
-        return (1, vec[:, 0]) if lam[0] < 0 else (0, None)
+        return int(problem.smallest_tangent_eigenvalue(x, pressures) < 0)
     linear.solve(K, np.zeros(K.shape[0]))
-    L, D, perm = linear._ldl.factors()
-    negative = int(np.count_nonzero(D < 0))
-    if not negative:
-        return 0, None
-    try:
-        lam, vec = spla.eigsh(K.tocsc(), k=1, sigma=2 * float(D.min()) - 1.0, which="LM")
-        if lam[0] < 0:
-            return negative, vec[:, 0]
-    except (RuntimeError, ValueError, spla.ArpackNoConvergence):
-        pass
-    e = np.zeros(K.shape[0])
-    e[int(np.argmin(D))] = 1.0
-    unit_upper = (sp.identity(K.shape[0], format="csr") + L.T.tocsr()).tocsr()
-    y = spla.spsolve_triangular(unit_upper, e, lower=False, unit_diagonal=True)
-    z = np.empty_like(y)
-    z[perm] = y
-    return negative, z
+    return int(np.count_nonzero(linear._ldl.factors()[1] < 0))
 
 
 def _descent_direction(K, g) -> np.ndarray:
