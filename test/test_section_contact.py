@@ -209,3 +209,22 @@ def test_a_device_in_the_lumen_is_never_entered_by_the_wall(implemented_design, 
     # measured (D/12): R_C 4.88 mm at 0.35 bar with the device against 3.53 mm without
     bare = make_model("section", implemented_design, mesh_size=d.outer_diameter / 12).evaluate([0.5 * BAR])
     assert _radius(state.curvature[-1], state.axial_stretch[-1]) > _radius(bare.curvature, bare.axial_stretch)
+
+
+def test_every_channel_of_the_three_channel_design_reaches_the_design_limit_alike():
+    """The 3-channel design on its default (3-fold symmetric) mesh: each channel alone reaches
+    0.5 bar with lumen contact and bends the same, turned by 120 degrees (channel 0 used to stop
+    at 0.481 bar: the secant predictor pushed the lumen walls through each other, and the ramp
+    then cut its steps down to a numerical failure)."""
+    from softcath_ros.core.design import load_design
+
+    d = load_design("three_channel_5mm")
+    k = []
+    for i in (0, 1):
+        p = np.zeros(3)
+        p[i] = 0.5 * BAR
+        state = make_model("section", d).evaluate(p)
+        assert state.converged, state.message
+        k.append(state.curvature)
+    assert np.hypot(*k[1]) == pytest.approx(np.hypot(*k[0]), rel=1e-7)
+    assert np.degrees(np.arctan2(k[1][1], k[1][0]) - np.arctan2(k[0][1], k[0][0])) % 360 == pytest.approx(120.0, abs=1e-6)

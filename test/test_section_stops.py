@@ -72,3 +72,71 @@ def test_too_large_fixed_steps_are_a_numerical_failure(design_dict):
     state = _coarse(design_dict, adaptive=False, initial_step=0.25 * BAR).evaluate([0.25 * BAR])
     _stopped(state, NUMERICAL_FAILURE)
     assert state.last_converged["pressure"] == [0.0]
+
+
+def test_a_snap_of_a_stiffening_channel_is_passed_by_arc_length(design_dict):
+    """Without rings a channel of a Yeoh silicone with a small c2 balloons at a limit point and
+    stiffens again further out: the pressure-controlled path snaps. Arc length follows the path
+    over the limit point and back up (the pressure falls, then rises past it), and the ramp goes
+    on from there on the ballooned branch."""
+    design_dict["reinforcement"] = None
+    design_dict["material"] = dict(design_dict["material"], c2=200.0, c3=0.0)
+    model = _coarse(design_dict)
+    state = model.evaluate([0.15 * BAR])
+    assert state.converged and state.message == ""
+    (event,) = model.passed_limit_points
+    assert event["by"] == "arc length"
+    # measured (D/12): the path turns back at 0.1425 bar, falls to 0.1297 bar and rises again
+    assert 0.13 * BAR < event["pressure"][0] < 0.15 * BAR
+    assert event["lowest_pressure"][0] < 0.95 * event["pressure"][0]
+    # on the ballooned branch: the channel's cross-section is many times the body's
+    area = float(state.diagnostics.channel_area[0])
+    assert area > 5 * np.pi * (0.0025 ** 2)
+    assert make_model("section", design_from_dict(design_dict), mesh_size=0.005 / 12).evaluate([0.12 * BAR]).converged
+
+
+def _arc_corrector(p, dp):
+    """Pseudo-arc-length corrector on the 1-D path p(x) (the load p, the state x)."""
+    memory = {}
+
+    def corrector(x0, load0, previous, ds):
+        from softcath_ros.core.continuation import Correction
+
+        t = np.array([1.0, dp(x0)])
+        t /= np.linalg.norm(t)
+        if "t" in memory and t @ memory["t"] < 0:
+            t = -t
+        elif "t" not in memory and t[1] < 0:
+            t = -t
+        x, q = x0 + ds * t[0], load0 + ds * t[1]
+        for it in range(1, 30):
+            # residuals: equilibrium p(x) - q = 0 and the arc constraint
+            r = np.array([p(x) - q, t @ [x - x0, q - load0] - ds])
+            J = np.array([[dp(x), -1.0], t])
+            dx, dq = np.linalg.solve(J, -r)
+            x, q = x + dx, q + dq
+            if abs(dx) + abs(dq) < 1e-13:
+                memory["t"] = t
+                return Correction(x, True, it, info={"load": q})
+        return Correction(x0, False, 30, "no convergence")
+
+    return corrector
+
+
+def test_arc_length_passes_a_snap_and_names_the_end_of_a_branch():
+    from softcath_ros.core.continuation import ArcControl, arc_length
+
+    control = ArcControl(initial_step=0.01, min_step=1e-5, max_step=0.05)
+    # an S-shaped path: the load turns back at x1 = 0.2764 (p 0.0723) and rises again from x2 = 0.7236 (p 0.0277)
+    p = lambda x: x**3 - 1.5 * x**2 + 0.6 * x         # noqa: E731
+    dp = lambda x: 3 * x**2 - 3 * x + 0.6             # noqa: E731
+    x1, x2 = (3 - np.sqrt(1.8)) / 6, (3 + np.sqrt(1.8)) / 6
+    arc = arc_length(_arc_corrector(p, dp), 0.25, p(0.25), control, floor=0.0)
+    assert arc.passed and not arc.below_floor
+    assert arc.limit_load == pytest.approx(p(x1), abs=2e-4) and arc.lowest_load == pytest.approx(p(x2), abs=2e-4)
+    assert arc.load > p(x1) and arc.state > x2                  # on the rising branch beyond the snap
+    # a path whose load falls for ever after its maximum (p = x exp(-x), limit point at x = 1)
+    arc = arc_length(_arc_corrector(lambda x: x * np.exp(-x), lambda x: (1 - x) * np.exp(-x)), 0.9,
+                     0.9 * np.exp(-0.9), control, floor=0.5 / np.e)
+    assert not arc.passed and arc.below_floor
+    assert arc.limit_load == pytest.approx(1 / np.e, abs=1e-4)

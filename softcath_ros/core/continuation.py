@@ -16,6 +16,11 @@ never returning a state that did not converge.
 States are numpy arrays for the default secant predictor (linear extrapolation through
 the last two converged states); any other state type needs ``extrapolate=None``
 (constant predictor) or a custom ``extrapolate(t0, s0, t1, s1, t) -> guess``.
+
+Past a limit point of the load-controlled path (the load cannot grow on this branch),
+``arc_length`` follows the path by pseudo-arc length with the caller's arc corrector until
+the load rises above the limit again (a snap: passed, and the ramp can go on from there) or
+falls below a floor (the end of the branch: the stop is LIMIT_POINT).
 """
 from __future__ import annotations
 
@@ -77,6 +82,7 @@ class RampResult:
     cuts: int = 0                    # rejected attempts
     iterations: int = 0              # corrector iterations in total (accepted and rejected)
     stop_reason: str = ""            # empty when converged, else LIMIT_POINT, MATERIAL_RANGE, ...
+    previous: tuple[float, Any] | None = None   # the converged (load, state) before the last one
 
 
 def secant(t0: float, s0, t1: float, s1, t: float):
@@ -120,6 +126,7 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             if corr.converged:
                 last = corr
                 prev = (t, state)
+                result.previous = prev
                 t, state = (target if t_new >= target else t_new), corr.state
                 result.steps += 1
                 result.last_load, result.last_state = t, state
@@ -143,4 +150,80 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
         landed = last is not None and result.last_load == target
         result.points.append(RampPoint(load=target, state=state, iterations=last.iterations if landed else 0,
                                        info=last.info if landed else {}))
+    return result
+
+
+# ---------------------------------------------------------------------------------- arc length
+@dataclass
+class ArcControl:
+    """Pseudo-arc-length steps past a limit point (units of the caller's arc norm)."""
+
+    initial_step: float
+    min_step: float
+    max_step: float
+    max_steps: int = 60              # arc steps before giving up on the load recovering
+    recover: float = 1e-9            # the load must exceed the limit load by this (relative) to count as passed
+    target_iterations: int = 4
+
+
+@dataclass
+class ArcResult:
+    passed: bool                     # True: the path came back above the limit load (a snap, passed)
+    state: Any                       # the last converged state on the path
+    load: float                      # and its load
+    limit_load: float                # the largest load before the path turned back (the limit point)
+    lowest_load: float               # the smallest load on the path after it turned
+    steps: int = 0
+    iterations: int = 0
+    message: str = ""                # why the arc stopped when it did not pass
+    below_floor: bool = False        # it stopped because the load fell below ``floor``: the branch's end
+
+
+def arc_length(corrector: Callable[[Any, float, Any, float], Correction], state0, load0: float,
+               control: ArcControl, floor: float | None = None) -> ArcResult:
+    """Follow the equilibrium path by pseudo-arc length from ``state0`` (converged at ``load0``,
+    just below a limit point of the load-controlled path) until the load exceeds the limit load
+    again on a rising branch (the limit point is passed: a snap), or until the path falls below
+    ``floor`` or ``max_steps`` pass without that (the limit point is the end of the branch).
+
+    ``corrector(state, load, previous_state, ds)`` takes one arc step of length ``ds`` from the
+    converged ``state`` (it keeps its own tangent and its orientation) and returns a Correction
+    whose ``info["load"]`` is the load at the new state."""
+    state, load = state0, load0
+    ds = control.initial_step
+    peak, lowest, turned = load0, load0, False
+    result = ArcResult(False, state0, load0, load0, load0)
+    previous = None
+    while result.steps < control.max_steps:
+        corr = corrector(state, load, previous, ds)
+        result.iterations += corr.iterations
+        if not corr.converged:
+            if ds * 0.5 < control.min_step:
+                result.message = f"the arc-length corrector failed ({corr.message})"
+                return result
+            ds *= 0.5
+            continue
+        new_load = float(corr.info["load"])
+        result.steps += 1
+        previous, state = state, corr.state
+        rising = new_load > load
+        load = new_load
+        result.state, result.load = state, load
+        if not rising:
+            turned = True
+        if turned:
+            lowest = min(lowest, load)
+        else:
+            peak = max(peak, load)
+        result.limit_load, result.lowest_load = peak, lowest
+        if turned and rising and load > peak * (1 + control.recover):
+            result.passed = True
+            return result
+        if floor is not None and load < floor:
+            result.below_floor = True
+            result.message = f"the load falls below {floor:g} after the limit point"
+            return result
+        if corr.iterations < control.target_iterations:
+            ds = min(control.max_step, 1.5 * ds)
+    result.message = f"the load does not recover within {control.max_steps} arc-length steps"
     return result

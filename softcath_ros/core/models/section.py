@@ -17,6 +17,7 @@ state's pressure and curvature.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from collections import OrderedDict
 from dataclasses import asdict, dataclass
@@ -25,14 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import CacheStore, store_for
-from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, Correction,
-                            StepControl, ramp)
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, ArcControl, Correction,
+                            RampPoint, RampResult, StepControl, arc_length, ramp)
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import LinearSolver, newton
+from ..section_fe.solver import LinearSolver, PathStep, newton, unstable_directions
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
@@ -77,6 +78,17 @@ class SectionSettings:
 
 # a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
 LIMIT_RATIO = 0.25
+# limit points passed by arc length per continuation (snaps), and the largest drop of the pressure
+# (fraction of the limit pressure) a snap may have before the limit point counts as the branch's end
+MAX_SNAPS = 4
+# halvings of an inadmissible predictor's step before the corrector gives up on it
+PREDICTOR_CUTS = 3
+# iterations of the minimiser that looks for the state a snap lands in, and of the one that
+# retries a step plain Newton failed
+SNAP_ITERATIONS = 40
+RETRY_ITERATIONS = 30
+MAX_FAILED_RETRIES = 10    # per continuation
+MAX_SNAP_DROP = 0.3
 
 # what a cached batch holds (an entry without one of them is solved again)
 _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
@@ -85,7 +97,7 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-3"   # bump when the discretisation or the solver changes an answer
+    solver_version = "section-5"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -130,6 +142,10 @@ class SectionModel(BendModel):
         if self.settings.pressure_load not in ("follower", "end_cap"):
             raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
                              "'follower' or 'end_cap'")
+        # the mesh itself in the cache key: a mesher change that keeps the node count must not
+        # find the old mesh's answers
+        self.mesh_hash = hashlib.sha256(np.ascontiguousarray(self.mesh.nodes).tobytes()
+                                        + np.ascontiguousarray(self.mesh.triangles).tobytes()).hexdigest()[:16]
         self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
                                       end_cap_only=self.settings.pressure_load == "end_cap",
                                       lumen_fill=fill, contact_distance=self.settings.contact_distance)
@@ -145,11 +161,18 @@ class SectionModel(BendModel):
         self._max_states = 256
         # (last converged pressure key, a pressure it could not reach, message, last state summary)
         self._failures: list[tuple] = []
+        # limit points the continuation passed by arc length (snaps): the pressure (Pa) where the
+        # path turned back and the lowest pressure on it before it rose again
+        self.passed_limit_points: list[dict] = []
+        # numerical failures of the continuation (no limit point near) it passed by minimising the
+        # potential at the next pressure from the last converged state (a stable state found there)
+        self.bridged_failures: list[dict] = []
 
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
         return {"design": self.design.content_hash(), "settings": self.settings.key(),
-                "mesh_nodes": self.mesh.n_nodes, "pressures": np.asarray(pressures, dtype=float).tolist()}
+                "mesh_nodes": self.mesh.n_nodes, "mesh": self.mesh_hash,
+                "pressures": np.asarray(pressures, dtype=float).tolist()}
 
     def cache_key(self, pressures: np.ndarray) -> str:
         return CacheStore.key(self.solver_version, self._cache_parts(pressures))
@@ -255,9 +278,34 @@ class SectionModel(BendModel):
 
         hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
 
-        def corrector(guess, t, previous) -> Correction:
-            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                          max_iterations=self.settings.max_newton, linear=self.linear)
+        failed_retries = [0]
+
+        def corrector(guess, t, previous, minimise: bool = False) -> Correction:
+            if minimise:      # the stable state a snap at this pressure lands in
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=SNAP_ITERATIONS, linear=self.linear, minimise=True)
+            else:
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=self.settings.max_newton, linear=self.linear)
+            for _ in range(0 if minimise else PREDICTOR_CUTS):
+                if not corr.info.get("inadmissible_start") or guess is previous:
+                    break
+                # the secant predictor pushed the walls through each other: halve its step
+                guess = previous + 0.5 * (guess - previous)
+                iterations = corr.iterations
+                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                              max_iterations=self.settings.max_newton, linear=self.linear)
+                corr.iterations += iterations
+            if (not corr.converged and not minimise and self.settings.adaptive and failed_retries[0] < MAX_FAILED_RETRIES
+                    and not corr.info.get("inadmissible_start")):
+                # again as a minimiser of the potential (line search, no wandering test: slower,
+                # surer); not with fixed steps (adaptive False), which are plain load stepping, and
+                # not after MAX_FAILED_RETRIES failed ones (the ramp is then at a limit point)
+                retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                               max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
+                retry.iterations += corr.iterations
+                failed_retries[0] += not retry.converged
+                corr = retry if retry.converged else corr
             if not corr.converged:
                 # say how close the holes were to closing: failures cluster just before contact
                 gaps = self.problem.hole_gaps(previous)
@@ -305,10 +353,78 @@ class SectionModel(BendModel):
         control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
                               adaptive=s.adaptive, domain_step=s.contact_resolution)
         result = ramp(corrector, self._states[start_key], cum[1:], control, describe=describe)
-        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and s.adaptive:
-            t_next = cum[1 + len(result.points)]          # the command it could not reach
+        points = list(result.points)
+        for _ in range(MAX_SNAPS):
+            if result.converged or result.stop_reason != NUMERICAL_FAILURE or not s.adaptive:
+                break
+            if (result.previous is not None and unstable_directions(
+                    self.problem, result.last_state, pressure_at(result.last_load) / c_ref)):
+                # the ramp's last state lies just past a limit point (an unstable branch): step back
+                result.last_load, result.last_state = result.previous
+                result.previous = None
+            stable = (result.last_load, result.last_state)
+            before = result.previous
+            t_next = cum[1 + len(points)]                 # the command it could not reach
             result = self._probe_limit_point(result, corrector, min(result.last_load + 2 * s.min_step, t_next),
                                              lambda t: pressure_at(t) / c_ref, describe)
+            if result.stop_reason == LIMIT_POINT:
+                # follow the path by arc length from the last stable state
+                j = int(np.clip(np.searchsorted(cum, stable[0], side="right") - 1, 0, len(seg) - 1))
+                direction = (corners[j + 1] - corners[j]) / seg[j]            # Pa per unit of t
+                base = pressure_at(stable[0]) - stable[0] * direction
+                x_rest = self._states[tuple([0.0] * self.design.n_channels)]
+                rate = np.linalg.norm(stable[1][:self.problem.n] - x_rest[:self.problem.n]) / (stable[0] / c_ref)
+                towards = None if before is None else (stable[1][:self.problem.n] - before[1][:self.problem.n],
+                                                        (stable[0] - before[0]) / c_ref)
+                arc = arc_length(PathStep(self.problem, direction, rate, base / c_ref, tol=s.tol,
+                                          max_iterations=max(s.max_newton, 12), linear=self.linear, towards=towards),
+                                 stable[1], stable[0] / c_ref,
+                                 ArcControl(initial_step=2 * s.min_step / c_ref, min_step=s.min_step / 8 / c_ref,
+                                            max_step=s.max_step / c_ref),
+                                 floor=(1 - MAX_SNAP_DROP) * stable[0] / c_ref)
+                t_limit, t_low = arc.limit_load * c_ref, arc.lowest_load * c_ref
+                fate = (f"falls below {describe((1 - MAX_SNAP_DROP) * stable[0])} without rising again"
+                        if arc.below_floor else f"{arc.message} (down to {describe(t_low)})")
+                note = f"followed by arc length from {describe(stable[0])}: the path turns back at {describe(t_limit)} and {fate}"
+            else:                                         # a numerical failure with no limit point near
+                arc, t_limit, note = None, stable[0], "the continuation cannot follow the path"
+            if arc is not None and arc.passed:
+                t_arc, landing = arc.load * c_ref, arc.state
+                self.passed_limit_points.append({"pressure": pressure_at(t_limit).tolist(),
+                                                 "lowest_pressure": pressure_at(t_low).tolist(), "by": "arc length"})
+            elif arc is not None and arc.below_floor:
+                result.message += f"; {note}: the end of this branch"
+                break
+            else:
+                # the stable state the body jumps to just past that pressure: minimise the potential there
+                t_arc = min(t_limit + s.min_step, t_next)
+                jump = corrector(stable[1], t_arc, stable[1], minimise=True)
+                if not (jump.converged and self.problem.smallest_tangent_eigenvalue(
+                        jump.state, pressure_at(t_arc) / c_ref) > 0):
+                    why = jump.message or "the state it reaches is not stable"
+                    result.message += (f"; {note}; minimising the potential at {describe(t_arc)} finds no stable "
+                                       f"state ({why})" + (": the end of this branch" if arc is not None else ""))
+                    break
+                landing = jump.state
+                event = {"pressure": pressure_at(t_limit).tolist(), "lowest_pressure": None,
+                         "by": "minimised at the next pressure"}
+                (self.passed_limit_points if arc is not None else self.bridged_failures).append(event)
+            rest = list(cum[1 + len(points):])
+            while rest and rest[0] <= t_arc:              # commands the path passed on its way back up
+                corr = corrector(landing, rest[0], landing)
+                if not corr.converged:
+                    break
+                points.append(RampPoint(load=rest[0], state=corr.state, iterations=corr.iterations, info=corr.info))
+                rest.pop(0)
+            if rest and rest[0] <= t_arc:
+                result = RampResult(points=[], converged=False, last_load=t_arc, last_state=landing,
+                                    stop_reason=NUMERICAL_FAILURE,
+                                    message=f"did not converge at {describe(rest[0])} after the snap past "
+                                            f"{describe(t_limit)} ({corr.message})")
+                break
+            result = ramp(corrector, landing, rest, control, start=t_arc, describe=describe)
+            points += result.points
+        result.points = points
         done = []
         for i, point in zip(todo, result.points):
             self._remember(pressures[i], point.state)
@@ -335,14 +451,22 @@ class SectionModel(BendModel):
         probe = ramp(corrector, result.last_state, [t_probe],
                      StepControl(initial_step=s.min_step / 8, max_step=s.min_step, min_step=s.min_step / 64),
                      start=result.last_load, describe=describe)
+        crossed = 0
         if probe.steps:
-            result.last_load, result.last_state = probe.last_load, probe.last_state
+            crossed = unstable_directions(self.problem, probe.last_state, pressure_of(probe.last_load))
+            if not crossed:       # an unstable state is never reported as the last converged one
+                result.last_load, result.last_state = probe.last_load, probe.last_state
         if self._rest_eigenvalue is None:
             x0 = self.problem.consistent_pressures(self.problem.initial_state())
             self._rest_eigenvalue = self.problem.smallest_tangent_eigenvalue(x0, pressure_of(0.0) * 0)
         ratio = self.problem.smallest_tangent_eigenvalue(result.last_state, pressure_of(result.last_load)) \
             / self._rest_eigenvalue
-        if ratio < LIMIT_RATIO:
+        if crossed:
+            result.stop_reason = LIMIT_POINT
+            result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: just past it, at "
+                               f"{describe(probe.last_load)}, the equilibrium is unstable ({crossed} direction(s) "
+                               "of negative stiffness; pressure control cannot pass it)")
+        elif ratio < LIMIT_RATIO:
             result.stop_reason = LIMIT_POINT
             result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: the tangent's smallest "
                                f"eigenvalue is {ratio:.1%} of its value at rest (pressure control cannot pass it)")

@@ -63,8 +63,10 @@ def kinematics(rule: ElementRule, x, n_u: int) -> Kinematics:
     u = x[:n_u].reshape(-1, 2)
     lam, kx, ky = x[n_u:n_u + N_GLOBAL]
     ue = u[rule.triangles]                                          # (e,6,2)
-    F2 = np.eye(2) + np.einsum("eai,eqaj->eqij", ue, rule.dNdX)     # (e,q,2,2)
-    xq = rule.Xq + np.einsum("qa,eai->eqi", rule.N, ue)
+    F2 = np.matmul(ue.transpose(0, 2, 1)[:, None], rule.dNdX)      # (e,q,2,2): sum_a u_ai dN_a/dX_j
+    F2[..., 0, 0] += 1.0
+    F2[..., 1, 1] += 1.0
+    xq = rule.Xq + np.matmul(rule.N, ue)                            # (e,q,2)
     f33 = lam * (1 - kx * xq[..., 0] - ky * xq[..., 1])
     return Kinematics(F2, f33, xq, (lam, kx, ky))
 

@@ -37,6 +37,7 @@ class SectionMesh:
     hole_edges: list[np.ndarray] = field(default_factory=list)  # per hole, (b, 3) counter-clockwise about the hole
     h: float = 0.0
     symmetric: bool = False      # exactly mirror-symmetric about x = 0
+    rotations: int = 1           # 3: also exactly invariant under turns by 120 degrees about the origin
     regions: np.ndarray | None = None  # (e,) 0 silicone, 1 a filled hole's interior; None: all silicone
     filled: tuple[int, ...] = ()       # indices (into the holes) of the holes meshed as the fill region
 
@@ -103,6 +104,116 @@ def _axis_circle_points(c: Circle, h: float) -> np.ndarray:
     return pts
 
 
+def _rotation(degrees: float) -> np.ndarray:
+    t = math.radians(degrees)
+    return np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+
+
+_MIRROR = np.diag([-1.0, 1.0])
+# the maps of the mirror-symmetric mesh (about x = 0) and of the 3-fold one (D3: turns by 120
+# degrees and the mirror), identity first
+MIRROR_GROUP = [np.eye(2), _MIRROR]
+THREE_FOLD_GROUP = [_rotation(a) @ m for m in (np.eye(2), _MIRROR) for a in (0.0, 120.0, 240.0)]
+
+
+def _in_domain(p: np.ndarray, group: list[np.ndarray]) -> np.ndarray:
+    """Points in the group's fundamental domain: x > 0 (mirror), or angles in [90, 150) degrees (D3)."""
+    if len(group) == 2:
+        return p[:, 0] > 0
+    # closed (a triangle symmetric about a mirror line has its centroid on it): images are deduplicated
+    a = np.degrees(np.arctan2(p[:, 1], p[:, 0])) % 360.0
+    return (a >= 90.0 - 1e-9) & (a <= 150.0 + 1e-9)
+
+
+def _is_image(c: Circle, holes: list[Circle], m: np.ndarray, tol: float) -> int | None:
+    """Index of the hole that is ``c`` mapped by ``m`` (an orthogonal map about the origin)."""
+    q = m @ np.asarray(c.center)
+    for i, o in enumerate(holes):
+        if np.hypot(*(np.asarray(o.center) - q)) < tol and abs(o.radius - c.radius) < tol:
+            return i
+    return None
+
+
+def _three_fold(outer: Circle, holes: list[Circle], tol: float) -> bool:
+    """The geometry is invariant under D3 about the origin, and every hole is centred there or on
+    a mirror line of D3 (so its points can be made symmetric): the 3-fold mesher applies."""
+    if np.hypot(*outer.center) > tol or not holes:
+        return False
+    for c in holes:
+        if any(_is_image(c, holes, m, tol) is None for m in THREE_FOLD_GROUP):
+            return False
+        on_axis = [abs((_rotation(-a) @ np.asarray(c.center))[0]) < tol for a in (0.0, 120.0, 240.0)]
+        if not any(on_axis):
+            return False
+    return True
+
+
+def _d3_circle_points(c: Circle, h: float) -> np.ndarray:
+    """Counter-clockwise points on a circle centred on the origin, invariant under D3: a multiple
+    of 6, starting at 90 degrees (on every mirror line)."""
+    n = 6 * max(3, int(math.ceil(2 * math.pi * c.radius / h / 6)))
+    t = math.pi / 2 + 2 * math.pi * np.arange(n) / n
+    return np.column_stack([c.radius * np.cos(t), c.radius * np.sin(t)])
+
+
+def _three_fold_boundary(outer: Circle, holes: list[Circle], h: float, tol: float) -> list[np.ndarray]:
+    """Circle points of the outer boundary and the holes, invariant under D3 as a set: a hole on
+    the y axis mirror-symmetric, its images the turned copies of its points."""
+    boundary = [_d3_circle_points(outer, h)]
+    for c in holes:
+        if np.hypot(*c.center) < tol:
+            boundary.append(_d3_circle_points(Circle((0.0, 0.0), c.radius), h))
+            continue
+        for a in (0.0, 120.0, 240.0):
+            base = _rotation(-a) @ np.asarray(c.center)
+            if abs(base[0]) < tol:       # c is the hole on the y axis at base, turned by a
+                q = _axis_circle_points(Circle((0.0, float(base[1])), c.radius), h)
+                boundary.append(q @ _rotation(a).T)
+                break
+    return boundary
+
+
+def _ray_points(outer: Circle, holes: list[Circle], h: float, degrees: float) -> list[tuple]:
+    """Points at spacing about h on the ray from the origin at ``degrees``, inside the silicone
+    (the ends of each stretch are the circle points where the ray crosses a circle)."""
+    e = np.array([math.cos(math.radians(degrees)), math.sin(math.radians(degrees))])
+    cuts = [0.0]
+    for c in [outer] + list(holes):
+        ec, cc = float(e @ np.asarray(c.center)), float(np.dot(c.center, c.center))
+        disc = ec * ec - cc + c.radius ** 2
+        if disc > 0:
+            cuts += [r for r in (ec - math.sqrt(disc), ec + math.sqrt(disc)) if 0 < r <= outer.radius]
+    cuts = sorted(set(cuts))
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if _region(((a + b) / 2 * e)[None], outer, holes, ())[0] != 0:
+            continue
+        m = max(1, int(round((b - a) / h)))
+        out += [tuple((a + (b - a) * t / m) * e) for t in range(1, m)]
+    return out
+
+
+def _group_maps(points: np.ndarray, group: list[np.ndarray], tol: float) -> list[np.ndarray]:
+    """For each map g of the group, the index of g(p) for every point p (the set must be invariant)."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points)
+    maps = []
+    for m in group:
+        d, idx = tree.query(points @ m.T)
+        if np.max(d) > tol:
+            raise ModelError("section mesher: the symmetric point set is not symmetric (internal error)")
+        maps.append(idx)
+    return maps
+
+
+def _unique(points: np.ndarray, tol: float) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    drop = {j for i, j in cKDTree(points).query_pairs(tol)}
+    return points[[i for i in range(len(points)) if i not in drop]]
+
+
 def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8,
                  filled: tuple[int, ...] = ()) -> SectionMesh:
     """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m); the holes whose
@@ -118,7 +229,16 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
     tol = 1e-9 * outer.radius
     partners = [_mirror_partner(c, holes, tol) for c in holes]
     symmetric = abs(outer.center[0]) < tol and all(p is not None for p in partners)
-    if symmetric:
+    three_fold = not filled and _three_fold(outer, holes, tol)
+    group = THREE_FOLD_GROUP if three_fold else MIRROR_GROUP if symmetric else None
+    if three_fold:
+        # the circles' points and points on the mirror lines (the rays at 90 and 150 degrees and
+        # their images), then the lattice, all invariant under D3
+        boundary = _three_fold_boundary(outer, holes, h, tol)
+        rays = np.array(_ray_points(outer, holes, h, 90.0) + _ray_points(outer, holes, h, 150.0)).reshape(-1, 2)
+        rays = _unique(np.concatenate([rays @ m.T for m in group]), tol)
+        boundary_pts = boundary + [rays]
+    elif symmetric:
         boundary = [_axis_circle_points(outer, h)]
         for i, c in enumerate(holes):
             j = partners[i]
@@ -145,13 +265,19 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
     else:
         boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
         boundary_pts = boundary
-    n_boundary = sum(len(b) for b in boundary_pts)
-    # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges.
+    # fixed while smoothing: the circle points (and the mirror mesh's axis points); the 3-fold
+    # mesh's mirror-line points move, kept on their lines by the symmetrisation
+    n_boundary = sum(len(b) for b in (boundary if three_fold else boundary_pts))
+    # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges
+    # (with a row through the centre for the 3-fold mesh: the lattice is then invariant under D3).
     dy = h * math.sqrt(3) / 2
     ys = np.arange(-outer.radius, outer.radius + dy, dy)
+    if three_fold:
+        ys = dy * np.arange(-int(outer.radius / dy) - 1, int(outer.radius / dy) + 2)
     pts = []
     for j, y in enumerate(ys):
-        half = np.arange(0.0, outer.radius + h, h) + (0.5 * h if j % 2 else 0.0)
+        odd = (j % 2) if not three_fold else int(round(y / dy)) % 2
+        half = np.arange(0.0, outer.radius + h, h) + (0.5 * h if odd else 0.0)
         xs = np.concatenate([-half[::-1], half[1:] if half[0] == 0 else half])
         pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
     interior = np.concatenate(pts)
@@ -159,17 +285,26 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         return (_region(p, outer, holes, filled) >= 0) & (_wall_distance(p, outer, holes) > 0.7 * h)
 
     keep = lattice_keep(interior)
-    if symmetric:
+    if three_fold:
+        # decided for a point and its images together, and away from the mirror lines (their
+        # points are placed on them)
+        for m in group:
+            q = interior @ m.T
+            keep &= lattice_keep(q) & (np.abs(q[:, 0]) > 0.7 * h)
+    elif symmetric:
         # decided for a point and its mirror image together: round-off in a centre given as
         # 1e-19 instead of 0 must not keep one and drop the other
         keep &= lattice_keep(interior * np.array([-1.0, 1.0])) & (np.abs(interior[:, 0]) > 0.7 * h)
     interior = interior[keep]
+    if three_fold:      # the lattice's images of a kept point, exactly (not up to round-off)
+        base = interior[_in_domain(interior, group) | (np.hypot(*interior.T) < tol)]
+        interior = _unique(np.concatenate([base @ m.T for m in group]), tol)
     points = np.concatenate(boundary_pts + [interior])
-    mirror = _mirror_map(points, tol) if symmetric else None
+    maps = _group_maps(points, group, tol) if group is not None else None
 
     region0 = _region(points, outer, holes, filled)
     for _ in range(smoothing_rounds + 1):
-        tri = _triangulate(points, outer, holes, mirror, filled)
+        tri = _triangulate(points, outer, holes, maps, group, filled)
         if _ == smoothing_rounds:
             break
         # Laplacian smoothing of interior nodes (boundary fixed), kept inside the domain.
@@ -184,42 +319,37 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
         movable = np.arange(len(points)) >= n_boundary
         movable &= cnt > 0
         new[movable] = acc[movable] / cnt[movable, None]
-        if mirror is not None:  # keep the points exactly mirror-symmetric
-            new = 0.5 * (new + new[mirror] * np.array([-1.0, 1.0]))
+        if maps is not None:  # keep the points exactly symmetric: the mean over the group
+            new = sum(new[idx] @ m for idx, m in zip(maps, group)) / len(group)
         # a node stays in its own region (silicone or fill), away from every wall
         ok = (_region(new, outer, holes, filled) == region0) & (_wall_distance(new, outer, holes) > 0.5 * h)
-        if mirror is not None:
-            ok &= ok[mirror]
+        if maps is not None:
+            for idx in maps:
+                ok &= ok[idx]
         points = np.where((movable & ok)[:, None], new, points)
     regions = _region(points[tri].mean(axis=1), outer, holes, filled)
     _check_conforming(points, tri, boundary, regions, filled)
     mesh = _to_p2(points, tri, boundary, [outer] + list(holes), h)
     mesh.symmetric = symmetric
+    mesh.rotations = 3 if three_fold else 1
     if filled:
         mesh.regions = regions
         mesh.filled = filled
     return mesh
 
 
-def _mirror_map(points: np.ndarray, tol: float) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
-    d, idx = cKDTree(points).query(points * np.array([-1.0, 1.0]))
-    if np.max(d) > tol:
-        raise ModelError("section mesher: the mirror-symmetric point set is not symmetric (internal error)")
-    return idx
-
-
-def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], mirror=None,
+def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], maps=None, group=None,
                  filled: tuple[int, ...] = ()) -> np.ndarray:
     tri = Delaunay(points).simplices
     centroids = points[tri].mean(axis=1)
     tri = tri[_region(centroids, outer, holes, filled) >= 0]
-    if mirror is not None:
-        # the right half and its mirror image (Delaunay may pick either diagonal of the
-        # lattice's cocircular quadrilaterals, so the full triangulation need not be symmetric)
-        right = tri[points[tri].mean(axis=1)[:, 0] > 0]
-        tri = np.concatenate([right, mirror[right]])
+    if maps is not None:
+        # the fundamental domain's triangles and their images (Delaunay may pick either diagonal of
+        # the lattice's cocircular quadrilaterals, so the full triangulation need not be symmetric)
+        base = tri[_in_domain(points[tri].mean(axis=1), group)]
+        tri = np.concatenate([idx[base] for idx in maps])
+        if len(group) > 2:
+            tri = tri[np.unique(np.sort(tri, axis=1), axis=0, return_index=True)[1]]
     # Counter-clockwise corners.
     p = points[tri]
     area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])

@@ -149,6 +149,10 @@ class SectionProblem:
         a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1) + off_axis))
         b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0]) - off_axis))
         self.pinned = np.array([2 * a, 2 * a + 1, 2 * b])
+        # terms in order of assembly: the silicone (the costly one) last, so an inadmissible state
+        # (crossed walls) is found before it is assembled
+        self._assembly_order = [i for i in range(len(self.terms)) if self.terms[i] is not self.body] + \
+            [self.terms.index(self.body)]
         self._build_pattern()
 
     @property
@@ -202,12 +206,17 @@ class SectionProblem:
         """(lambda, k R) in the frame that follows the silicone's mean displacement and rotation.
 
         Moving the frame origin by o and turning it by w re-describes the same body with
-        lambda' = lambda (1 - k.o) and k' = rot(-w) k / (1 - k.o) (F33 = lambda (1 - k.x))."""
+        lambda' = lambda (1 - k.o) and k' = rot(-w) k / (1 - k.o) (F33 = lambda (1 - k.x)).
+        w is the best-fit (least-squares, weighted by the silicone's area) rotation of the
+        reference section onto the deformed one: exact for any finite rigid turn, so states that
+        differ by one (another gauge) report the same k."""
         u = x[:self.n_u].reshape(-1, 2)
         lam, kx, ky = x[self.n_u:self.n]
         o = self._w_node @ u / self._w_node.sum()
         d = self.X - self._centroid
-        w = float(np.sum(self._rot_weights * (d[:, 0] * (u[:, 1] - o[1]) - d[:, 1] * (u[:, 0] - o[0]))))
+        v = u - o
+        w = float(np.arctan2(np.sum(self._rot_weights * (d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0])),
+                             1.0 + np.sum(self._rot_weights * (d[:, 0] * v[:, 0] + d[:, 1] * v[:, 1]))))
         s = 1 - kx * o[0] - ky * o[1]
         c, si = np.cos(w), np.sin(w)
         k = np.array([c * kx + si * ky, -si * kx + c * ky]) / s
@@ -228,7 +237,7 @@ class SectionProblem:
     def energy(self, x, pressures) -> float:
         """Total potential; +inf for an inadmissible state (an inverted element or negative stretch)."""
         E = 0.0
-        for term in self.terms:
+        for term in (self.terms[i] for i in self._assembly_order):
             e = term.energy(x, pressures)
             if not np.isfinite(e):
                 return np.inf
@@ -240,6 +249,19 @@ class SectionProblem:
 
         With ``end_cap_only`` the channel keeps its reference cross-section in this term."""
         return np.array([c.volume(x) for c in self.channels])
+
+    def load_vector(self, x, direction) -> tuple[float, np.ndarray]:
+        """(d . V, its gradient (n,)) for channel pressures p = mu d: the load's conjugate and
+        -dg/dmu, the derivative of the potential's gradient with respect to the load factor mu
+        (pinned entries zero)."""
+        d = np.asarray(direction, dtype=float)
+        b = np.zeros(self.n)
+        for c in self.channels:
+            if d[c.channel] != 0.0:
+                grad = c.assemble(x, np.eye(len(d))[c.channel]).gradient   # -dV_i per block
+                b -= d[c.channel] * np.bincount(c.dofs.ravel(), weights=grad.ravel(), minlength=self.n)
+        b[self.pinned] = 0.0
+        return float(d @ self.channel_volumes(x)), b
 
     def channel_areas(self, x) -> np.ndarray:
         """Deformed channel cross-sections (/ R^2)."""
@@ -325,12 +347,12 @@ class SectionProblem:
 
         Pinned rows/columns are identity and their gradient entries zero; energy inf (and the
         rest None) if the state is inadmissible."""
-        parts: list[Contribution] = []
-        for term in self.terms:
-            c = term.assemble(x, pressures)
+        parts: list[Contribution | None] = [None] * len(self.terms)
+        for i in self._assembly_order:          # the cheap admissibility tests (contact) first
+            c = self.terms[i].assemble(x, pressures)
             if not np.isfinite(c.energy):
                 return np.inf, None, None, None
-            parts.append(c)
+            parts[i] = c
         E = 0.0
         for c in parts:
             E += c.energy

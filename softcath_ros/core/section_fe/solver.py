@@ -15,6 +15,10 @@ import scipy.sparse.linalg as spla
 from ..continuation import Correction
 from .problem import SectionProblem
 
+ARMIJO = 1e-4               # sufficient decrease of the potential, as a fraction of the slope
+MIN_DESCENT_STEP = 1 / 64   # the descent test stops cutting here (admissibility does not)
+ROUND_OFF = 1e-11           # potential differences below this (relative) are round-off
+
 
 class LinearSolver:
     """Sparse symmetric solves with a fixed pattern: factor once symbolically, then refactor."""
@@ -53,18 +57,25 @@ class LinearSolver:
 
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
-           max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None) -> Correction:
+           max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
+           line_search: bool = False, minimise: bool = False) -> Correction:
     """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
     ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
-    ``project(x) -> x`` onto the constraint."""
+    ``project(x) -> x`` onto the constraint. ``line_search``: backtrack on the potential too (Armijo),
+    not only to stay admissible. ``minimise``: a line search, a tangent shifted towards positive
+    definite where the Newton step is not a descent direction, and no test for wandering: the
+    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only)."""
+    line_search = line_search or minimise
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
     n = problem.n
     steps: list[float] = []
+    assembled = None                 # the assembly at the accepted trial point, when it was made
     for it in range(1, max_iterations + 1):
-        E, g, K, aux = problem.assemble(x, pressures)
+        E, g, K, aux = problem.assemble(x, pressures) if assembled is None else assembled
         if not np.isfinite(E):
-            return Correction(x, False, it, "inverted element or negative axial stretch in the predictor")
+            return Correction(x, False, it, "inverted element, negative axial stretch or crossed walls in the "
+                                            "predictor", info={"inadmissible_start": True})
         if constraint is not None:
             g, K = constraint.reduce(x, g, K)
         try:
@@ -73,21 +84,39 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
             return Correction(x, False, it, f"singular tangent ({exc})")
         if constraint is not None:
             dz = constraint.expand(x, dz)
+        elif minimise and float(g @ dz) >= 0:
+            dz = _descent_direction(K, g)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
         if not np.all(np.isfinite(dx)):
             return Correction(x, False, it, "singular tangent")
-        # The mixed (u, p) problem is a saddle point, so no descent test: backtrack only to
-        # stay admissible (no inverted element, positive axial stretch everywhere).
+        # Backtrack to stay admissible (no inverted element, positive axial stretch, walls
+        # apart), and with ``line_search`` on the potential (Armijo): with the element pressures
+        # condensed the potential is minimised, and near the contact barrier full steps can
+        # overshoot (Newton cycled at the creased lumen shoulders of fine meshes without it).
+        slope = float(g @ dz) if line_search else 0.0
+        tolerance = ROUND_OFF * (1.0 + abs(E))
+        step = float(np.max(np.abs(dz[:n])))
+        # far from convergence the full step is assembled at once (the next iteration needs it);
+        # near it only its energy (the step may be the last)
+        full = step >= 100 * tol
         alpha = 1.0
+        assembled = None
         for _ in range(12):
             trial = x + alpha * dx if constraint is None else constraint.project(x + alpha * dx)
-            if np.isfinite(problem.energy(trial, pressures)):
+            if full and alpha == 1.0:
+                assembled = problem.assemble(trial, pressures)
+                e_trial = assembled[0]
+            else:
+                e_trial = problem.energy(trial, pressures)
+            if np.isfinite(e_trial) and (slope >= 0 or alpha <= MIN_DESCENT_STEP
+                                         or e_trial <= E + ARMIJO * alpha * slope + tolerance):
                 break
             alpha *= 0.5
         else:
             return Correction(x, False, it, "every step length inverts an element")
+        if alpha < 1.0:
+            assembled = None
         x = trial
-        step = float(np.max(np.abs(dz[:n])))
         # Converged when the step is below tol, or below 100 tol while shrinking 20-fold per
         # iteration (quadratic convergence observed): what is left is then below ~5 tol.
         if alpha == 1.0 and (step < tol or (steps and step < 100 * tol and step < 0.05 * steps[-1])):
@@ -95,7 +124,114 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         # Newton converges quadratically near a solution; a step that has not halved in two
         # iterations after the fourth means it is wandering (a limit point or a bifurcation).
         steps.append(step)
-        if it >= 5 and step > 0.5 * steps[-3]:
+        if not minimise and it >= 5 and step > 0.5 * steps[-3]:
             return Correction(x, False, it, f"Newton is not converging (step {step:.2e} after {it} iterations)")
     return Correction(x, False, max_iterations, f"no convergence in {max_iterations} Newton iterations "
                                                  f"(last step {steps[-1]:.2e})")
+
+
+def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray) -> int:
+    """The tangent's negative eigenvalues at ``x`` (pressures / c1), counted as the negative pivots
+    of its LDL^T (Sylvester's law of inertia): 0 at a stable equilibrium of the pressure-controlled
+    problem, more on an unstable branch (past a limit point or a bifurcation)."""
+    K = problem.assemble(x, pressures)[2]
+    linear = LinearSolver()
+    if not linear._have_qdldl:
+        return int(problem.smallest_tangent_eigenvalue(x, pressures) < 0)
+    linear.solve(K, np.zeros(K.shape[0]))
+    return int(np.count_nonzero(linear._ldl.factors()[1] < 0))
+
+
+def _descent_direction(K, g) -> np.ndarray:
+    """A step -(K + sigma I)^-1 g that descends (g . dz < 0), sigma growing tenfold from 1e-3 of
+    the tangent's largest diagonal entry; steepest descent if none does."""
+    diag = np.flatnonzero(np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)) == K.indices)
+    scale = float(np.max(np.abs(K.data[diag])))
+    sigma = 1e-3 * scale
+    for _ in range(8):
+        data = K.data.copy()
+        data[diag] += sigma
+        try:
+            dz = LinearSolver().solve(K.__class__((data, K.indices, K.indptr), shape=K.shape), -g)
+        except (RuntimeError, ValueError):
+            dz = None
+        if dz is not None and np.all(np.isfinite(dz)) and float(g @ dz) < 0:
+            return dz
+        sigma *= 10
+    return -g / scale
+
+
+class PathStep:
+    """One pseudo-arc-length step of the section's equilibrium path in (x, mu), channel pressures
+    p = base + mu d (``direction`` d; p, base and mu in units of c1): the corrector of
+    ``continuation.arc_length``.
+
+    The path's tangent (dx/dmu = K^-1 b, b = d(d.V)/dx) is kept with its orientation (the load
+    grows at the start). The arc norm is |(dx / s, dmu)| with ``scale`` s a typical |dx/dmu| of the
+    path (the mean rate from rest: near a limit point the local rate is unbounded), so state and
+    load share a step and the step is in units of mu. Each Newton iteration solves the
+    bordered system
+        [K       -b ] [dx ]     [g                                     ]
+        [t_x / s  t_m] [dmu] = - [t_x . (x - x0) / s + t_m (mu - mu0) - ds]
+    by block elimination with one factorisation of K (two solves), backtracking to stay admissible."""
+
+    def __init__(self, problem: SectionProblem, direction, scale: float, base=None, tol: float = 1e-6,
+                 max_iterations: int = 12, linear: LinearSolver | None = None, towards=None):
+        """``towards``: (dx (n,), dmu), a step along the path so far (the ramp's last secant): the
+        first tangent is oriented along it (near the limit point the load's share of the tangent is
+        too small to say which way is forward)."""
+        self.problem, self.d = problem, np.asarray(direction, dtype=float)
+        self.base = np.zeros_like(self.d) if base is None else np.asarray(base, dtype=float)
+        self.tol, self.max_iterations = tol, max_iterations
+        self.linear = LinearSolver() if linear is None else linear
+        self.scale = float(scale)
+        # (t_x (n,), t_mu) of the last converged state, unit in the arc norm (only its direction matters)
+        self.tangent = None if towards is None else (np.asarray(towards[0]) / self.scale, float(towards[1]))
+
+    def _tangent(self, x, mu):
+        p = self.problem
+        K = p.assemble(x, self.base + mu * self.d)[2]
+        _, b = p.load_vector(x, self.d)
+        w = self.linear.solve(K, b)                     # dx/dmu
+        t = np.concatenate([w / self.scale, [1.0]])
+        t /= np.linalg.norm(t)
+        reference = np.append(*self.tangent) if self.tangent is not None else np.eye(len(t))[-1]
+        if t @ reference < 0:
+            t = -t                                      # keep walking the same way along the path
+        return t[:-1], float(t[-1])
+
+    def __call__(self, x0, mu0: float, previous, ds: float) -> Correction:
+        p, n = self.problem, self.problem.n
+        tx, tm = self._tangent(x0, mu0)
+        s = self.scale
+        x = x0.copy()
+        x[:n] += ds * s * tx
+        mu = mu0 + ds * tm
+        for it in range(1, self.max_iterations + 1):
+            E, g, K, aux = p.assemble(x, self.base + mu * self.d)
+            if not np.isfinite(E):
+                return Correction(x0, False, it, "inadmissible predictor on the arc")
+            _, b = p.load_vector(x, self.d)
+            try:
+                a = self.linear.solve(K, -g)
+                w = self.linear.solve(K, b)
+            except (RuntimeError, ValueError) as exc:
+                return Correction(x0, False, it, f"singular tangent ({exc})")
+            r = tx @ (x[:n] - x0[:n]) / s + tm * (mu - mu0) - ds
+            dmu = (-r - tx @ a / s) / (tx @ w / s + tm)
+            dz = a + dmu * w
+            dx = np.concatenate([dz, p.pressure_update(dz, aux)])
+            if not np.all(np.isfinite(dx)):
+                return Correction(x0, False, it, "singular bordered system")
+            alpha = 1.0
+            for _ in range(12):
+                if np.isfinite(p.energy(x + alpha * dx, self.base + (mu + alpha * dmu) * self.d)):
+                    break
+                alpha *= 0.5
+            else:
+                return Correction(x0, False, it, "every step length inverts an element")
+            x, mu = x + alpha * dx, mu + alpha * dmu
+            if alpha == 1.0 and max(float(np.max(np.abs(dz))), abs(dmu)) < self.tol:
+                self.tangent = (tx, tm)
+                return Correction(x, True, it, info={"load": mu})
+        return Correction(x0, False, self.max_iterations, "no convergence on the arc")

@@ -55,18 +55,18 @@ class SiliconeBody:
         J = det2 * f33
         Ja, Jaa = jacobian_derivatives(a, det2, f33)
         I1 = np.einsum("eqk,eqk->eq", a, a)
-        # isochoric invariant Ib = J^(-2/3) I1 and its derivatives in a
+        # isochoric invariant Ib = J^(-2/3) I1 and its derivatives in a:
+        #   dIb/da = 2 j23 a - 2/3 j53 I1 Ja,
+        #   d2Ib/da2 = 2 j23 1 - 4/3 j53 (a Ja^T + Ja a^T) + 10/9 j53 I1 / J Ja Ja^T - 2/3 j53 I1 Jaa,
+        # j23 = J^(-2/3), j53 = J^(-5/3); W'' dIb dIb^T expands in the same outer products, so the
+        # tangent's material matrix is assembled from them with one coefficient each
         j23 = J ** (-2.0 / 3.0)
         j53 = j23 / J
         Ib = isochoric_i1(I1, J)
-        Iba = j23[..., None] * 2 * a - (2.0 / 3.0) * (j53 * I1)[..., None] * Ja
-        Ibaa = (j23[..., None, None] * 2 * np.eye(5)
-                - (2.0 / 3.0) * j53[..., None, None] * 2 * (a[..., :, None] * Ja[..., None, :] + Ja[..., :, None] * a[..., None, :])
-                + (10.0 / 9.0) * (j53 * I1 / J)[..., None, None] * Ja[..., :, None] * Ja[..., None, :]
-                - (2.0 / 3.0) * (j53 * I1)[..., None, None] * Jaa)
+        ca, cj = 2 * j23, -(2.0 / 3.0) * j53 * I1          # dIb/da = ca a + cj Ja
+        Iba = ca[..., None] * a + cj[..., None] * Ja
         W, W1, W2 = yeoh_derivatives(Ib, *self.yeoh)
         Wa = W1[..., None] * Iba
-        Waa = W1[..., None, None] * Ibaa + W2[..., None, None] * Iba[..., :, None] * Iba[..., None, :]
         E = np.sum(self.dA_silicone * W)
         # volumetric (mean dilatation): U(theta_e) = K/2 (theta-1)^2 (K = 0 in the fill)
         theta = self._theta(J)
@@ -78,9 +78,21 @@ class SiliconeBody:
         G_e = np.einsum("eqk,eqkl->el", Ga, D)                                          # A_e dtheta
         Pw = self.dA_silicone[..., None] * Wa
         g_e = np.einsum("eqk,eqkl->el", Pw, D) + Up[:, None] * G_e
-        # tangent with the independent element pressure p_e in the geometric terms
+        # tangent with the independent element pressure p_e in the geometric terms:
+        # M = dA (W1 d2Ib + W2 dIb dIb^T + p_e Jaa)   (p_e = 0 in the fill)
+        dA = self.dA_silicone
+        c_eye = dA * W1 * 2 * j23
+        c_aa = dA * W2 * ca * ca
+        c_aj = dA * (W2 * ca * cj - W1 * (4.0 / 3.0) * j53)
+        c_jj = dA * (W2 * cj * cj + W1 * (10.0 / 9.0) * j53 * I1 / J)
+        c_hess = dA * (W1 * cj + p_e[:, None])
+        aJ = a[..., :, None] * Ja[..., None, :]
+        Maa = (c_aa[..., None, None] * (a[..., :, None] * a[..., None, :])
+               + c_aj[..., None, None] * (aJ + np.swapaxes(aJ, -1, -2))
+               + c_jj[..., None, None] * (Ja[..., :, None] * Ja[..., None, :])
+               + c_hess[..., None, None] * Jaa)
+        Maa[..., range(5), range(5)] += c_eye[..., None]
         Pa = Pw + p_e[:, None, None] * Ga
-        Maa = self.dA_silicone[..., None, None] * (Waa + p_e[:, None, None, None] * Jaa)   # p_e = 0 in the fill
         Dr = D.reshape(ne, nq * 5, 15)
         H_e = np.matmul(Dr.transpose(0, 2, 1), np.matmul(Maa, D).reshape(ne, nq * 5, 15))
         add_f33_hessian(H_e, Pa[..., 4], rule.N, kin.xq, *kin.globals)
