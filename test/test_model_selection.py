@@ -125,15 +125,16 @@ def test_picks_rod_for_the_blocking_bench_once_measured(monkeypatch):
 
 
 def test_predict_cli_auto_says_what_it_picked(tmp_path):
-    """The shipped blocking scene goes to the rod (the only rung with contact); the same scene to
-    0.35 bar, beyond the rod's measured range, is refused with every rung's reason."""
+    """The shipped blocking scene (to 0.35 bar) goes to the rod (the only rung with contact); the
+    same scene to 0.4 bar, beyond the rod's measured range, is refused with every rung's reason."""
     import yaml
 
 
     if "rod" in load_envelope()["rungs"]:
         assert select_model(load_scene("blocking_force_bench"), load_envelope()).rung == "rod"
     raw = yaml.safe_load(find("scene", "blocking_force_bench").read_text())
-    raw["pressure_range"] = [0.0, 35000.0]
+    assert raw["pressure_range"] == [0.0, 35000.0]      # the bench's range, held by the hinged rod
+    raw["pressure_range"] = [0.0, 40000.0]
     (tmp_path / "bench_035.yaml").write_text(yaml.safe_dump(raw))
     r = subprocess.run([sys.executable, "-m", "softcath_ros.cli", "predict", "--design", "implemented_5mm",
                         "--model", "auto", "--scene", str(tmp_path / "bench_035.yaml"), "--pressure", "0.1",

@@ -151,7 +151,10 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
 
 def _key_parts(case: Case, rung: str, options: dict) -> list:
     design = load_design(case.design).with_length(case.length)
-    return [design.content_hash(), rung, rung_class(rung).solver_version, options, case.pressures.tolist()]
+    version = rung_class(rung).solver_version
+    if rung == "surrogate":     # its answers are its source rung's: a new source version is a new table
+        version += "/" + rung_class(options.get("source", "section")).solver_version
+    return [design.content_hash(), rung, version, options, case.pressures.tolist()]
 
 
 def is_cached(case: Case, rung: str, options: dict) -> bool:

@@ -42,7 +42,7 @@ CONTACT_STEP = 1250.0   # Pa: the pressure ramp of a body in contact (half the l
 
 class RodModel(BendModel):
     name = "rod"
-    solver_version = f"rod-1/{LAW_VERSION}"   # bump rod-N when the statics change an answer
+    solver_version = f"rod-2/{LAW_VERSION}"   # bump rod-N when the statics change an answer (2: base hinge)
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
