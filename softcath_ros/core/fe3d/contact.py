@@ -82,7 +82,7 @@ def smooth_step_cf(t):
 class LumenContact:
     """The lumen wall's self-contact term added to a problem's BilinearForm."""
 
-    def __init__(self, problem, distance: float, intorder: int = 4):
+    def __init__(self, problem, distance: float, intorder: int = 8):
         """``distance``: the barrier distance d_hat, m."""
         import ngsolve as ng
 
@@ -96,6 +96,9 @@ class LumenContact:
         self.maxdist = max(20.0 * self.d_hat, 0.15 * lumen.radius)
         self.intorder = intorder
         self.tolerance = TOLERANCE * self.d_hat
+        # search the pairs again at convergence and iterate on until they no longer change
+        # (False: the pairs of the step's start hold for the whole step)
+        self.settle = True
         wall = mesh.Boundaries("lumen")
         self.boundary = ng.ContactBoundary(wall, wall, volume=False)
         u, _ = problem.fes.TrialFunction()
@@ -169,17 +172,26 @@ def _deformed_ring(problem, ring, zk):
 
 
 def min_wall_gap(problem, sampling) -> float:
-    """See LumenContact.min_gap. Each deformed section ring is projected onto its best-fit
-    plane; crossings are found with the section rung's polygon test."""
+    """See LumenContact.min_gap. Each deformed section ring is projected onto the plane normal
+    to the deformed axis there; crossings are found with the section rung's polygon test."""
     from ..section_fe.terms.contact import point_segment_distance, segments_cross
 
     ring, levels = sampling
+    length = problem.design.length
     best = math.inf
     for zk in levels:
         cur = _deformed_ring(problem, ring, zk)
         centre = cur.mean(axis=0)
-        _, _, vt = np.linalg.svd(cur - centre, full_matrices=False)
-        P = (cur - centre) @ vt[:2].T          # in-plane coordinates
+        # the deformed section's plane: normal to the body's deformed axis there (a best-fit
+        # plane would tilt out of a closed slit, whose points are nearly on one curve)
+        dz = 0.25 * (levels[1] - levels[0]) if len(levels) > 1 else 1e-4
+        lo, hi = max(zk - dz, 0.0), min(zk + dz, length)
+        axis = (_deformed_ring(problem, ring, hi) - _deformed_ring(problem, ring, lo)).mean(axis=0)
+        axis /= np.linalg.norm(axis)
+        e1 = np.array([1.0, 0.0, 0.0]) - axis[0] * axis
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(axis, e1)
+        P = (cur - centre) @ np.column_stack([e1, e2])          # in-plane coordinates
         m = len(P)
         # every vertex against every segment at least 2 edges of the section mesh away along the wall
         skip = 2 * SAMPLES

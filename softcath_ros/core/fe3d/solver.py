@@ -369,7 +369,7 @@ class Fe3dProblem:
                 log.debug("load %.1f Pa it %d |du.r| %.3e alpha %g (%.2f s)", self.load.Get(), it, work,
                           alpha, time.perf_counter() - t_it)
                 if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
-                    if self.contact is not None and not self._contact_pairs_settled():
+                    if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
                         continue   # converged for the old pairs: iterate on with the new ones
                     if self.contact is not None:
                         gap = self.contact.min_gap()
