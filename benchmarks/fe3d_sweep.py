@@ -156,7 +156,7 @@ def plot(name: str) -> str:
     ax2.set_ylabel("bending angle [deg]")
     status = "converged" if meta["converged"] else meta["message"][:70]
     fig.suptitle(f"{name}: L = {meta['length_m'] * 1e3:.0f} mm, {meta['ndof']} DOF, {meta['total_s']:.0f} s "
-                 f"(load avg {meta['load_average'][0]:.1f}); {status}", fontsize=9)
+                 f"(load avg {meta.get('load_average', meta.get('load_average_before'))[0]:.1f}); {status}", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, name)
 

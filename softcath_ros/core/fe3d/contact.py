@@ -121,11 +121,21 @@ class LumenContact:
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
         self.boundary.AddEnergy(scale * weight * barrier_cf(gap / self.d_hat))
+        # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN):
+        # Newton backtracks from a step that adds to it, as the section rung from a crossing one
+        self.check = ng.ContactBoundary(wall, wall, volume=False)
+        self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
+        self.check_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
 
     def update(self) -> None:
         """Search the contact pairs for the current displacement (before each Newton iteration)."""
-        self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist)
+        self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
+        self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+
+    def overlap_area(self) -> float:
+        """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat."""
+        return self.check_form.Energy(self.problem.gf.vec)
 
     def min_gap(self) -> float:
         """The smallest distance (m) between two wall points of one section that are not

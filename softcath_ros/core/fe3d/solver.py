@@ -344,6 +344,7 @@ class Fe3dProblem:
                 if not math.isfinite(work):
                     raise NewtonFailure("Newton increment is not finite", it)
                 base = self.get_state()
+                overlap0 = self.contact.overlap_area() if self.contact is not None else 0.0
                 alpha = 1.0
                 while True:
                     self.gf.vec.data = base
@@ -355,12 +356,16 @@ class Fe3dProblem:
                         ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
                     else:
                         ok = self.min_jacobian_ok()
+                    if ok and self.contact is not None:
+                        # no step into the barrier's continuation (the walls' overlap must not grow)
+                        ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
                     if ok:
                         break
                     alpha *= 0.5
                     if alpha < st.min_step:
                         where = "" if st.line_search and self.min_jacobian_ok() else f"; {self.worst_element()}"
-                        raise NewtonFailure("line search failed: every step length raises the energy or "
+                        raise NewtonFailure("line search failed: every step length raises the energy, "
+                                            "pushes the lumen walls into each other or "
                                             f"inverts an element (det F <= 0{where})", it)
                 if st.line_search:
                     e0 = e
