@@ -106,7 +106,9 @@ def measure(problem) -> dict:
            "tip_position_m": tip, "tip_rotation": rot, "channel_volume_m3": volumes,
            "channel_area_m2": np.array(areas)}
     if getattr(problem, "contact", None) is not None:
-        out["lumen_min_gap_m"] = problem.contact.min_gap()
+        known = getattr(problem, "last_min_gap_state", None)
+        same = known is not None and np.array_equal(known, problem.get_state())
+        out["lumen_min_gap_m"] = problem.last_min_gap if same else problem.contact.min_gap()
     return out
 
 

@@ -344,7 +344,8 @@ class Fe3dProblem:
                 if not math.isfinite(work):
                     raise NewtonFailure("Newton increment is not finite", it)
                 base = self.get_state()
-                overlap0 = self.contact.overlap_area() if self.contact is not None else 0.0
+                overlap0 = self.contact.overlap_area() if self.contact is not None and \
+                    self.contact.backtrack_on_overlap else 0.0
                 alpha = 1.0
                 while True:
                     self.gf.vec.data = base
@@ -356,7 +357,7 @@ class Fe3dProblem:
                         ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
                     else:
                         ok = self.min_jacobian_ok()
-                    if ok and self.contact is not None:
+                    if ok and self.contact is not None and self.contact.backtrack_on_overlap:
                         # no step into the barrier's continuation (the walls' overlap must not grow)
                         ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
                     if ok:
@@ -382,6 +383,7 @@ class Fe3dProblem:
                             raise NewtonFailure("the lumen wall passes through itself (a section's wall "
                                                 "polygon crosses itself)", it)
                         self.last_min_gap = gap
+                        self.last_min_gap_state = self.get_state()   # measure() reuses the gap of this state
                     return it
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
                                 f"(last |du.r| = {work:.2e} J)", st.max_iterations)
