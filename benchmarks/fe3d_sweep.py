@@ -4,6 +4,8 @@
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_sweep_20mm
     .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 0.7 --name fe3d_mesh_0.7
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.02 --name fe3d_contact_0.02
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --no-section --name fe3d_timing_20mm   # the timed case only
 
 Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending angle,
 R_C = L/theta (and the section rung's at the same pressure with its relative difference:
@@ -27,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
+from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
@@ -45,6 +48,11 @@ def main(argv=None) -> int:
     ap.add_argument("--fixed-steps", type=float, default=None,
                     help="step control off: plain load steps of this size (bar), no cutting, no predictor")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--contact-distance", default=None,
+                    help="lumen contact's barrier distance as a fraction of the lumen diameter "
+                         "(default: the rung's, 0.01); 'none' switches contact off")
+    ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m (default: wall_h)")
+    ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
     ap.add_argument("--name", default="fe3d_sweep")
     ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
     args = ap.parse_args(argv)
@@ -57,8 +65,11 @@ def main(argv=None) -> int:
     control = None
     if args.fixed_steps is not None:
         control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
-    model = Fe3dModel(design, mesh_size=args.mesh_size, step_control=control, cache=False, progress=True,
-                      tangent_predictor=args.fixed_steps is None, threads=args.threads)
+    contact = {} if args.contact_distance is None else {
+        "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
+    mesh = dataclasses.replace(MeshSettings(), lumen_h=args.lumen_h).scaled(args.mesh_size)
+    model = Fe3dModel(design, mesh=mesh, step_control=control, cache=False, progress=True,
+                      tangent_predictor=args.fixed_steps is None, threads=args.threads, **contact)
     t0 = time.perf_counter()
     ndof = model.problem.fes.ndof
     t_setup = time.perf_counter() - t0
@@ -67,9 +78,13 @@ def main(argv=None) -> int:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     # the section rung at the same pressures, as the same R_C = L / theta (= 1 / (|k| lambda)):
     # the section-vs-3D comparison of issue 3 (after the fe3d timing and memory were read)
-    section = make_model("section", design).evaluate(checkpoints[:, None])
-    section_rc = [1.0 / (float(np.hypot(*k)) * lam) if ok and np.hypot(*k) > 0 else None
-                  for k, lam, ok in zip(section.curvature, section.axial_stretch, section.converged)]
+    if args.no_section:
+        section_rc = [None] * len(checkpoints)
+    else:
+        section = make_model("section", design).evaluate(checkpoints[:, None])
+        section_rc = [1.0 / (float(np.hypot(*k)) * lam) if ok and np.hypot(*k) > 0 else None
+                      for k, lam, ok in zip(section.curvature, section.axial_stretch, section.converged)]
+    gaps = {pt.load: pt.measured.get("lumen_min_gap_m") for pt in (ramp.points if ramp else [])}
     rows = []
     for i, p in enumerate(checkpoints):
         ok = bool(state.converged[i])
@@ -90,6 +105,7 @@ def main(argv=None) -> int:
             "channel_volume_mm3": volume * 1e9 if ok and math.isfinite(volume) else None,
             "channel_area_mm2": area * 1e6 if ok and math.isfinite(area) else None,
             "newton_iterations": int(diag.newton_iterations[i]) if ok else None,
+            "lumen_min_gap_um": (gaps[float(p)] * 1e6 if ok and gaps.get(float(p)) is not None else None),
             "time_s": float(diag.time_s[i]) if ok else None})
     meta = {"design": design.name, "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
             "mesh_size": args.mesh_size, "ndof": ndof, "half_model": model.half,
@@ -97,6 +113,9 @@ def main(argv=None) -> int:
             "step_settings": dataclasses.asdict(model.step_control), "threads": args.threads,
             "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
+            "stop_reason": ramp.stop_reason if ramp else "",
+            "contact_distance": model.contact_distance, "lumen_h": args.lumen_h,
+            "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,
             "newton_iterations_total": ramp.iterations if ramp else 0,
             "note": "wall clock on a 2-core machine shared with other jobs (load average in meta)"}
@@ -137,7 +156,7 @@ def plot(name: str) -> str:
     ax2.set_ylabel("bending angle [deg]")
     status = "converged" if meta["converged"] else meta["message"][:70]
     fig.suptitle(f"{name}: L = {meta['length_m'] * 1e3:.0f} mm, {meta['ndof']} DOF, {meta['total_s']:.0f} s "
-                 f"(load avg {meta['load_average'][0]:.1f}); {status}", fontsize=9)
+                 f"(load avg {meta.get('load_average', meta.get('load_average_before'))[0]:.1f}); {status}", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, name)
 

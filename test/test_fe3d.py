@@ -222,3 +222,64 @@ def test_discrete_rings_are_resolved_bands_on_the_outer_surface(short_design):
     assert "ring" not in membrane.mesh.GetBoundaries()
     with pytest.raises(ModelError, match="reinforcement"):
         Fe3dModel(short_design, mesh=COARSE, reinforcement="helix")
+
+
+def test_contact_barrier_is_c2_and_zero_beyond_its_distance():
+    """The lumen contact's barrier beta(xi) (the section rung's b(s) on s = xi^2): zero with zero
+    slope and curvature at xi = 1, its quadratic continuation below XI_MIN joins it C2, and it
+    repels (beta' < 0) everywhere below xi = 1."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.contact import XI_MIN, _barrier_parts, barrier_cf
+
+    mesh = ng.Mesh(ng.unit_square.GenerateMesh(maxh=0.5))
+    xi_param = ng.Parameter(0.5)
+    cf = barrier_cf(xi_param)
+
+    def beta(v):
+        xi_param.Set(v)
+        return cf(mesh(0.5, 0.5))
+
+    for xi in (0.999999, 0.5, 0.1, XI_MIN * 1.0001, XI_MIN * 0.9999, 0.0, -0.05):
+        h = 1e-6 * max(abs(xi), XI_MIN)
+        slope = (beta(xi + h) - beta(xi - h)) / (2 * h)
+        assert slope < 0, xi
+    b, b1, b2 = _barrier_parts(1.0 - 1e-9)
+    assert abs(b) < 1e-15 and abs(b1) < 1e-6 and abs(b2) < 1e-3
+    assert beta(1.2) == 0.0
+    for f in (lambda v: beta(v), lambda v: (beta(v + 1e-5) - beta(v - 1e-5)) / 2e-5):
+        assert f(XI_MIN * (1 + 1e-7)) == pytest.approx(f(XI_MIN * (1 - 1e-7)), rel=1e-4)
+
+
+def test_contact_option_checked(short_design):
+    assert Fe3dModel(short_design, mesh=COARSE).contact_distance == 0.01   # on by default with a lumen
+    assert Fe3dModel(short_design, mesh=COARSE, contact_distance=None).contact_distance is None
+    assert Fe3dModel(short_design, mesh=COARSE, lumen_fill=0.01).contact_distance is None
+    for bad in (0.0, -0.01, 0.5, True):
+        with pytest.raises(ModelError, match="contact_distance"):
+            Fe3dModel(short_design, mesh=COARSE, contact_distance=bad)
+    a = Fe3dModel(short_design, mesh=COARSE)
+    b = Fe3dModel(short_design, mesh=COARSE, contact_distance=0.02)
+    assert a.cache_key != b.cache_key
+
+
+def test_lumen_contact_keeps_the_walls_apart_at_every_step(short_design):
+    """Coarse 10 mm body ramped until the lumen closes (about 0.23 bar on this mesh): the contact
+    barrier becomes active (the wall's smallest gap falls below the barrier distance, here 0.02
+    of the lumen diameter, 30 um) and at every accepted step the wall never crosses itself beyond
+    the tolerance (min gap >= -0.5 d_hat). About 60 s: the steps after the walls engage are slow."""
+    from softcath_ros.core.fe3d.ramp import run_ramp
+
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02)
+    pb = model.problem
+    assert pb.contact is not None
+    d_hat = pb.contact.d_hat
+    assert d_hat == pytest.approx(0.02 * short_design.lumen.diameter)
+    ramp = run_ramp(pb, [1.0], [20000.0, 23200.0])
+    assert ramp.converged, ramp.message
+    loads = [t for t, _ in ramp.min_gap_m]
+    gaps = np.array([g for _, g in ramp.min_gap_m])
+    assert len(gaps) == ramp.steps and loads[-1] == pytest.approx(23200.0)
+    assert np.all(gaps >= -pb.contact.tolerance), gaps
+    assert gaps[-1] < d_hat            # the walls are within the barrier's range: contact is active
+    assert gaps[0] > 5 * d_hat         # and were far apart at the start

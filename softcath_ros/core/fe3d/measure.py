@@ -102,9 +102,14 @@ def measure(problem) -> dict:
     # --- channels
     volumes = problem.channel_volumes()
     areas = [channel_area(problem, i) for i in range(design.n_channels)]
-    return {"bending_angle_rad": theta, "bending_direction": direction, "arc_length_m": arc,
-            "tip_position_m": tip, "tip_rotation": rot, "channel_volume_m3": volumes,
-            "channel_area_m2": np.array(areas)}
+    out = {"bending_angle_rad": theta, "bending_direction": direction, "arc_length_m": arc,
+           "tip_position_m": tip, "tip_rotation": rot, "channel_volume_m3": volumes,
+           "channel_area_m2": np.array(areas)}
+    if getattr(problem, "contact", None) is not None:
+        known = getattr(problem, "last_min_gap_state", None)
+        same = known is not None and np.array_equal(known, problem.get_state())
+        out["lumen_min_gap_m"] = problem.last_min_gap if same else problem.contact.min_gap()
+    return out
 
 
 def channel_area(problem, i: int) -> float:

@@ -31,10 +31,13 @@ class MeshSettings:
     wall_h: float = 0.45e-3
     layer_h: float = 4.0e-3
     cap_layers: int = 2
+    lumen_h: float | None = None    # edge length on an empty lumen's wall (None: wall_h); the
+                                    # contact at its folding shoulders needs it finer
 
     def scaled(self, factor: float) -> "MeshSettings":
         return MeshSettings(self.section_h * factor, self.wall_h * factor, self.layer_h * factor,
-                            max(1, round(self.cap_layers / factor)))
+                            max(1, round(self.cap_layers / factor)),
+                            None if self.lumen_h is None else self.lumen_h * factor)
 
 
 def can_use_half_model(design: Design) -> bool:
@@ -77,8 +80,11 @@ def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionM
         piece.name = name
         # A thin fibre needs a few elements across it.
         piece.maxh = min(settings.wall_h, radius / 1.5) if name == "fibre" else settings.section_h
+        edge_h = min(settings.wall_h, radius / 1.5)
+        if name == "lumen" and settings.lumen_h is not None and design.device is None:
+            edge_h = min(edge_h, settings.lumen_h)
         for e in piece.edges:
-            e.maxh = min(settings.wall_h, radius / 1.5)
+            e.maxh = edge_h
         parts.append(piece)
     body.name = "silicone"
     body.maxh = settings.section_h

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..continuation import Correction, StepControl, ramp
+from ..continuation import MATERIAL_RANGE, Correction, StepControl, ramp
+from ..energy import yeoh_convexity_limit
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
 from ..units import PA_PER_BAR, describe_pressure
@@ -40,6 +41,8 @@ class Fe3dRamp:
     converged: bool = True
     message: str = ""
     interrupted: bool = False
+    stop_reason: str = ""           # empty when converged, else one of core/continuation.py's reasons
+    min_gap_m: list = field(default_factory=list)   # (load Pa, lumen wall's min gap m) per accepted step
     steps: int = 0
     cuts: int = 0
     iterations: int = 0
@@ -71,7 +74,19 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
         except NewtonFailure as exc:
             problem.set_state(previous)
             return Correction(state=previous, converged=False, iterations=exc.iterations, message=exc.reason)
+        if limit is not None:
+            i1 = problem.max_isochoric_i1()
+            if i1 > limit[0]:
+                problem.set_state(previous)
+                return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
+                                  stop_reason=MATERIAL_RANGE,
+                                  message=(f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit[0]:.3g} "
+                                           f"(uniaxial stretch {limit[1]:.3g}) where its Yeoh energy (c3 < 0) "
+                                           "stops being convex"))
         return Correction(state=problem.get_state(), converged=True, iterations=its)
+
+    mat = problem.design.material
+    limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)
 
     corot = CorotationalPredictor(problem) if tangent_predictor and corotational else None
     curvature_at: dict[float, np.ndarray] = {}   # fitted curvature of accepted states, by load
@@ -93,6 +108,8 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
         # The problem holds the accepted state: measure it (the predictor needs its curvature).
         problem.set_state(corr.state)
         m = measure(problem)
+        if "lumen_min_gap_m" in m:
+            out.min_gap_m.append((t, m["lumen_min_gap_m"]))
         if m["arc_length_m"] > 0:
             curvature_at[t] = m["bending_angle_rad"] / m["arc_length_m"] * m["bending_direction"]
         if any(abs(t - c) <= 1e-9 * max(1.0, c) for c in targets) and \
@@ -112,7 +129,8 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
         result = ramp(corrector, problem.get_state(), targets, control, start=0.0,
                       extrapolate=predictor if control.adaptive else None,
                       describe=describe_pressure, on_step=on_step)
-        out.converged, out.message = result.converged, result.message
+        out.converged, out.stop_reason = result.converged, result.stop_reason
+        out.message = f"{result.message} [stop: {result.stop_reason}]" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
     except KeyboardInterrupt:
         done = out.points[-1].load if out.points else 0.0

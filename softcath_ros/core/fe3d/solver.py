@@ -72,7 +72,8 @@ class Fe3dProblem:
 
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
-                 lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane"):
+                 lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
+                 contact_distance: float | None = None):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
         silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
         "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
@@ -123,6 +124,11 @@ class Fe3dProblem:
             bv += ng.Variation(vol_i * ng.ds(f"channel{i}"))
             self.volume_forms.append(bv)
 
+        self.contact = None
+        if contact_distance is not None and "lumen" in mesh.GetBoundaries():
+            from .contact import LumenContact
+
+            self.contact = LumenContact(self, float(contact_distance) * 2.0 * design.lumen.radius)
         self.J = ng.Det(ng.Id(3) + ng.Grad(self.u))
         self.bulk_cf = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=0.0)
         self.reference_volume = ng.Integrate(ng.CF(1.0), mesh) * self.mirror
@@ -233,6 +239,16 @@ class Fe3dProblem:
     def _jacobian_floor(self):
         return self.mesh.MaterialCF({"fill": 1e-4}, default=0.02) if self.has_fill else 0.02
 
+    def max_isochoric_i1(self) -> float:
+        """The largest isochoric first invariant I1b of the silicone over its elements' means
+        (the Yeoh set's fitted range ends at its convexity limit, core/energy.py)."""
+        ng = _ng()
+        F = ng.Id(3) + ng.Grad(self.u)
+        i1 = isochoric_i1(ng.Trace(F.trans * F), ng.Det(F))
+        mean = ng.GridFunction(ng.L2(self.mesh, order=0, definedon=self.mesh.Materials("silicone")))
+        mean.Set(i1)
+        return float(np.max(mean.vec.FV().NumPy()))
+
     def worst_element(self) -> str:
         """Where the current state is most compressed: the element with the lowest mean det F,
         its region, centre (mm) and the nearest surface (which hole's wall, or the outside), so
@@ -271,6 +287,19 @@ class Fe3dProblem:
         out.data += a.harmonic_extension * out
         out.data += a.inner_solve * rhs
 
+    def _contact_pairs_settled(self) -> bool:
+        """Search the contact pairs again at the converged state; True when the new pairs leave
+        it in equilibrium (the Newton increment for them, with the last factorisation, below
+        the tolerance). Between searches the pairs are fixed, so Newton is quadratic on them."""
+        ng = _ng()
+        self.contact.update()
+        self.a.Apply(self.gf.vec, self.res)
+        du = self.gf.vec.CreateVector()
+        self._solve(self.res, du)
+        self.a.Apply(self.gf.vec, self.res)
+        work = abs(ng.InnerProduct(du, self.res))
+        return math.isfinite(work) and work < self.newton_settings.energy_tol * self.energy_scale
+
     def tangent(self) -> np.ndarray:
         """du/ds at the current (converged) state: K du/ds = sum_i d_i dV_i/du."""
         if self.inverse is None:
@@ -300,6 +329,8 @@ class Fe3dProblem:
             if st.line_search:
                 self._update_pressure_field()
                 e0 = self.energy()
+            if self.contact is not None:
+                self.contact.update()
             for it in range(1, st.max_iterations + 1):
                 t_it = time.perf_counter()
                 self.a.Apply(self.gf.vec, self.res)
@@ -313,6 +344,8 @@ class Fe3dProblem:
                 if not math.isfinite(work):
                     raise NewtonFailure("Newton increment is not finite", it)
                 base = self.get_state()
+                overlap0 = self.contact.overlap_area() if self.contact is not None and \
+                    self.contact.backtrack_on_overlap else 0.0
                 alpha = 1.0
                 while True:
                     self.gf.vec.data = base
@@ -324,12 +357,16 @@ class Fe3dProblem:
                         ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
                     else:
                         ok = self.min_jacobian_ok()
+                    if ok and self.contact is not None and self.contact.backtrack_on_overlap:
+                        # no step into the barrier's continuation (the walls' overlap must not grow)
+                        ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
                     if ok:
                         break
                     alpha *= 0.5
                     if alpha < st.min_step:
                         where = "" if st.line_search and self.min_jacobian_ok() else f"; {self.worst_element()}"
-                        raise NewtonFailure("line search failed: every step length raises the energy or "
+                        raise NewtonFailure("line search failed: every step length raises the energy, "
+                                            "pushes the lumen walls into each other or "
                                             f"inverts an element (det F <= 0{where})", it)
                 if st.line_search:
                     e0 = e
@@ -338,6 +375,15 @@ class Fe3dProblem:
                 log.debug("load %.1f Pa it %d |du.r| %.3e alpha %g (%.2f s)", self.load.Get(), it, work,
                           alpha, time.perf_counter() - t_it)
                 if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
+                    if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
+                        continue   # converged for the old pairs: iterate on with the new ones
+                    if self.contact is not None:
+                        gap = self.contact.min_gap()
+                        if gap < -self.contact.tolerance:
+                            raise NewtonFailure("the lumen wall passes through itself (a section's wall "
+                                                "polygon crosses itself)", it)
+                        self.last_min_gap = gap
+                        self.last_min_gap_state = self.get_state()   # measure() reuses the gap of this state
                     return it
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
                                 f"(last |du.r| = {work:.2e} J)", st.max_iterations)

@@ -27,10 +27,12 @@ from ..errors import ModelError
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
 
+DEFAULT_CONTACT_DISTANCE = 0.01   # of the lumen diameter: 15 um on the implemented design
+
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-2"   # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-3"   # bump when a change alters results, so old cache entries are not reused
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe",
@@ -46,13 +48,15 @@ class Fe3dModel(BendModel):
                  Option("lumen_fill", "float", "fill the lumen with a soft solid of this fraction of the "
                                                    "silicone's shear modulus"),
                  Option("formulation", "str", "'mixed' (default) or 'displacement'"),
-                 Option("reinforcement", "str", "'membrane' (default) or 'rings'")))
+                 Option("reinforcement", "str", "'membrane' (default) or 'rings'"),
+                 Option("contact_distance", "float", "lumen wall self-contact: barrier distance as a fraction of "
+                                                         "the lumen diameter (default 0.01; None: off)")))
 
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache=True, progress: bool = False, threads: int = 2,
                  lumen_fill: float | None = None, formulation: str = "mixed",
-                 reinforcement: str = "membrane"):
+                 reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
         ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
         load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
@@ -62,7 +66,11 @@ class Fe3dModel(BendModel):
         "displacement" (P2 displacement only, which locks for nearly incompressible silicone;
         kept to measure how much a standard element would stiffen the body).
         ``reinforcement``: "membrane" (homogenised hoop layer, the default) or "rings" (each
-        ring resolved by the mesh along z: many more layers, for the comparison)."""
+        ring resolved by the mesh along z: many more layers, for the comparison).
+        ``contact_distance``: the empty lumen wall's frictionless self-contact (core/fe3d/contact.py),
+        its barrier distance as a fraction of the lumen diameter; None switches it off (the ramp
+        then stops where the lumen's shoulders fold, about 0.25 bar). Ignored where the lumen is
+        not empty (a device, a fill)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -85,6 +93,7 @@ class Fe3dModel(BendModel):
         if reinforcement not in ("membrane", "rings"):
             raise ModelError(f"fe3d: reinforcement = {reinforcement!r} must be 'membrane' or 'rings'")
         self.reinforcement = reinforcement
+        self.contact_distance = _contact_distance(contact_distance, design, self.lumen_fill)
         self.store = store_for(cache)
         self.use_cache = self.store is not None
         self.progress = progress
@@ -95,7 +104,8 @@ class Fe3dModel(BendModel):
                              # options added later enter the key only when set
                              *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
                              *([] if formulation == "mixed" else [{"formulation": formulation}]),
-                             *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}])]
+                             *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]),
+                             {"contact_distance": self.contact_distance}]
         self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
@@ -106,7 +116,8 @@ class Fe3dModel(BendModel):
 
             self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half,
                                         lumen_fill=self.lumen_fill, formulation=self.formulation,
-                                        reinforcement=self.reinforcement)
+                                        reinforcement=self.reinforcement,
+                                        contact_distance=self.contact_distance)
         return self._problem
 
     def _load_cache(self) -> dict:
@@ -193,6 +204,17 @@ class Fe3dModel(BendModel):
             return state, (self.last_ramps[0] if self.last_ramps else None)
         finally:
             self.use_cache = saved
+
+
+def _contact_distance(value, design: Design, lumen_fill) -> float | None:
+    """The contact option checked: None where the design has no empty lumen (no lumen, a device,
+    a fill) or contact is switched off, else a fraction in (0, 0.2] of the lumen diameter."""
+    if value is None or design.lumen is None or design.device is not None or lumen_fill is not None:
+        return None
+    if isinstance(value, bool) or not 0.0 < float(value) <= 0.2:
+        raise ModelError(f"fe3d: contact_distance = {value!r} must be a fraction of the lumen diameter in "
+                         "(0, 0.2], or None for no lumen contact")
+    return float(value)
 
 
 def _straight(design: Design, c: int) -> dict:

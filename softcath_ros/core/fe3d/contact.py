@@ -1,0 +1,232 @@
+"""Frictionless self-contact of the lumen wall in the 3D problem: NGSolve's ``ContactBoundary``
+with the section rung's clamped log-barrier on the normal gap.
+
+NGSolve pairs every integration point of the lumen wall (primary) with the closest point of
+the lumen wall (secondary) whose normal faces it (its own and its neighbours' do not while
+the wall is smooth; the wall across a closing slit, or across a fold at its shoulders, does),
+within ``maxdist``. The pairs are searched again before every Newton iteration
+(``ContactBoundary.Update``, as NGSolve expects); between searches they are fixed and the
+energy is differentiated exactly by NGSolve, so the tangent is the consistent one of the
+fixed pairing. The gap is the normal one,
+
+    g = ((X' + u') - (X + u)) . n,      n the primary's deformed normal (into the lumen),
+
+and the energy per reference area of the wall is
+
+    W_c = c1 kappa d_hat beta(g / d_hat),   beta(xi) = -(xi^2 - 1)^2 ln(xi^2) for 0 < xi < 1, 0 beyond,
+
+the section rung's barrier b(s) = -(s - s_hat)^2 ln(s / s_hat) on s = g^2
+(core/section_fe/terms/contact.py), C2 at xi = 1. Its traction is about 2 kappa c1 / xi, so
+at a contact pressure p_c the gap is about 2 kappa d_hat c1 / p_c: a fixed fraction of d_hat,
+and results depend on d_hat only through that gap. Below xi = XI_MIN beta is continued by its
+second-order Taylor polynomial, so an overshooting Newton iterate has a finite (steep) energy
+and is pushed back instead of producing NaNs; a converged state whose wall crosses itself
+(``min_gap`` < 0) is rejected by the solver, so no accepted state has interpenetrating walls.
+Each pair is seen from both walls (every wall point is a primary), so the wall's contact
+traction is the sum of both sides' terms.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c
+KAPPA = 0.25
+# below xi = g / d_hat = XI_MIN the barrier is continued quadratically (C2)
+XI_MIN = 0.02
+# a pair counts fully when its separation is within acos(COS_HIGH) of the normal, not at all
+# beyond acos(COS_LOW) (C2 in between)
+COS_LOW, COS_HIGH = 0.3, 0.7
+# and when its two points lie at least NEAR_HIGH lumen radii apart in the reference state, not at
+# all below NEAR_LOW (neighbours along the wall, found at a sharply curved shoulder)
+NEAR_LOW, NEAR_HIGH = 0.25, 0.5
+# a converged state may cross by at most TOLERANCE d_hat between the barrier's quadrature points
+TOLERANCE = 0.5
+# wall points per mesh edge of the lumen wall in the geometric gap check
+SAMPLES = 4
+
+
+def _barrier_parts(xi: float):
+    """beta, beta', beta'' at xi (floats), from b(s) = -(s - 1)^2 ln s with s = xi^2."""
+    s = xi * xi
+    ln = math.log(s)
+    b = -(s - 1) ** 2 * ln
+    b1 = -2 * (s - 1) * ln - (s - 1) ** 2 / s
+    b2 = -2 * ln - 4 * (s - 1) / s + (s - 1) ** 2 / (s * s)
+    return b, 2 * xi * b1, 4 * s * b2 + 2 * b1
+
+
+def barrier_cf(xi):
+    """beta(xi) as an NGSolve CoefficientFunction: the clamped log-barrier, 0 for xi >= 1,
+    continued by its Taylor polynomial at XI_MIN below XI_MIN (C2 at both joints)."""
+    import ngsolve as ng
+
+    inside = ng.IfPos(xi - 1.0, 1.0, ng.IfPos(xi - XI_MIN, xi, XI_MIN))   # log never sees xi <= 0
+    s = inside * inside
+    log_part = -(s - 1.0) * (s - 1.0) * ng.log(s)
+    b0, b1, b2 = _barrier_parts(XI_MIN)
+    d = xi - XI_MIN
+    taylor = b0 + b1 * d + 0.5 * b2 * d * d
+    return ng.IfPos(xi - 1.0, 0.0, ng.IfPos(xi - XI_MIN, log_part, taylor))
+
+
+def smooth_step_cf(t):
+    """S(t) = 6t^5 - 15t^4 + 10t^3 on [0, 1], 0 below, 1 above (C2), as a CoefficientFunction."""
+    import ngsolve as ng
+
+    c = ng.IfPos(t - 1.0, 1.0, ng.IfPos(t, t, 0.0))
+    return c * c * c * (10.0 - 15.0 * c + 6.0 * c * c)
+
+
+class LumenContact:
+    """The lumen wall's self-contact term added to a problem's BilinearForm."""
+
+    def __init__(self, problem, distance: float, intorder: int = 8):
+        """``distance``: the barrier distance d_hat, m."""
+        import ngsolve as ng
+
+        mesh = problem.mesh
+        self.problem = problem
+        self.d_hat = float(distance)
+        lumen = problem.design.lumen
+        # pairs are searched up to maxdist: far more than d_hat, so a wall closing by more than
+        # d_hat in one Newton step is still paired at the next search, and well below the
+        # lumen's radius, so the smooth wall never pairs with itself
+        self.maxdist = max(20.0 * self.d_hat, 0.15 * lumen.radius)
+        self.intorder = intorder
+        self.tolerance = TOLERANCE * self.d_hat
+        # search the pairs again at convergence and iterate on until they no longer change
+        # (False: the pairs of the step's start hold for the whole step)
+        self.settle = True
+        # backtrack from a Newton step that adds to overlap_area(): off, since on the coarse
+        # 10 mm body it stopped the ramp at the same pressure (0.2439 bar) and cost time
+        self.backtrack_on_overlap = False
+        wall = mesh.Boundaries("lumen")
+        self.boundary = ng.ContactBoundary(wall, wall, volume=False)
+        u, _ = problem.fes.TrialFunction()
+        X = ng.CF((ng.x, ng.y, ng.z))
+        sep = X.Other() + u.Other() - X - u
+        # the primary's deformed normal from the trial function (so it is differentiated too):
+        # Nanson, n ~ cof(F) N, N the reference normal (out of the silicone, into the lumen)
+        fs = ng.Id(3) + ng.Grad(u).Trace()
+        cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
+        normal = cof_n / ng.Norm(cof_n)
+        gap = sep * normal
+        # |cos| of the angle between the separation and the normal: a pair across the lumen is
+        # along the normal; a neighbour on a sharply curved wall (a shoulder) is found at the
+        # shared edge, nearly in the tangent plane, and must not count as contact
+        cos = gap / ng.sqrt(sep * sep + (1e-6 * self.d_hat) ** 2)
+        weight = smooth_step_cf((ng.IfPos(cos, cos, -cos) - COS_LOW) / (COS_HIGH - COS_LOW))
+        # and the two points must be apart on the reference wall: a neighbour along the wall
+        # is not a contact partner (the section rung's exclusion of incident segments)
+        ref = ng.Norm(X.Other() - X) / lumen.radius
+        weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+        scale = problem.design.material.c1 * KAPPA * self.d_hat
+        self.boundary.AddEnergy(scale * weight * barrier_cf(gap / self.d_hat))
+        # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
+        # Newton can backtrack from a step that adds to it (backtrack_on_overlap)
+        self.check = ng.ContactBoundary(wall, wall, volume=False)
+        self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
+        self.check_form = ng.BilinearForm(problem.fes)
+        self._sampling = wall_sampling(problem)
+
+    def update(self) -> None:
+        """Search the contact pairs for the current displacement (before each Newton iteration)."""
+        self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
+        if self.backtrack_on_overlap:
+            self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+
+    def overlap_area(self) -> float:
+        """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat
+        (the pairs of the last update with backtrack_on_overlap on)."""
+        return self.check_form.Energy(self.problem.gf.vec)
+
+    def min_gap(self) -> float:
+        """The smallest distance (m) between two wall points of one section that are not
+        neighbours along the wall, over every section of the mesh; negative (minus the
+        depth of the deepest crossing point) when a section's wall crosses itself."""
+        return min_wall_gap(self.problem, self._sampling)
+
+
+def wall_sampling(problem):
+    """Reference points of the lumen wall, per mesh level: SAMPLES points per wall edge of the
+    section, in order around the lumen (the half model's half wall mirrored later), and the
+    reference arc length of each, for excluding neighbours along the wall."""
+    prism = problem.prism
+    sec = prism.section
+    lumen = problem.design.lumen
+    on = np.abs(np.hypot(sec.points[:, 0] - lumen.center[0], sec.points[:, 1] - lumen.center[1])
+                - lumen.radius) < 0.1 * lumen.radius
+    pts = sec.points[on]
+    ang = np.arctan2(pts[:, 1] - lumen.center[1], pts[:, 0] - lumen.center[0])
+    pts = pts[np.argsort(ang)]
+    closed = not problem.half
+    nxt = np.roll(pts, -1, axis=0) if closed else pts[1:]
+    start = pts if closed else pts[:-1]
+    t = np.arange(SAMPLES) / SAMPLES
+    ring = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
+    if not closed:
+        ring = np.vstack([ring, pts[-1:]])
+    # levels: every mesh level and the middle of every layer (the P2 field is curved along z too)
+    z = prism.z_levels
+    levels = np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))   # the base does not move
+    return ring, levels
+
+
+def _deformed_ring(problem, ring, zk):
+    from .measure import _evaluate
+
+    ref = np.column_stack([ring, np.full(len(ring), zk)])
+    cur = ref + _evaluate(problem, ref)
+    if problem.half:   # the mirrored half closes the wall
+        back = cur[::-1].copy()
+        back[:, 0] *= -1.0
+        cur = np.vstack([cur, back[1:-1]])
+    return cur
+
+
+def min_wall_gap(problem, sampling) -> float:
+    """See LumenContact.min_gap. Each deformed section ring is projected onto the plane normal
+    to the deformed axis there; crossings are found with the section rung's polygon test."""
+    from ..section_fe.terms.contact import point_segment_distance, segments_cross
+
+    ring, levels = sampling
+    length = problem.design.length
+    best = math.inf
+    for zk in levels:
+        cur = _deformed_ring(problem, ring, zk)
+        centre = cur.mean(axis=0)
+        # the deformed section's plane: normal to the body's deformed axis there (a best-fit
+        # plane would tilt out of a closed slit, whose points are nearly on one curve)
+        dz = 0.25 * (levels[1] - levels[0]) if len(levels) > 1 else 1e-4
+        lo, hi = max(zk - dz, 0.0), min(zk + dz, length)
+        axis = (_deformed_ring(problem, ring, hi) - _deformed_ring(problem, ring, lo)).mean(axis=0)
+        axis /= np.linalg.norm(axis)
+        e1 = np.array([1.0, 0.0, 0.0]) - axis[0] * axis
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(axis, e1)
+        P = (cur - centre) @ np.column_stack([e1, e2])          # in-plane coordinates
+        m = len(P)
+        # every vertex against every segment at least 2 edges of the section mesh away along the wall
+        skip = 2 * SAMPLES
+        vi, sj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+        off = (sj - vi) % m
+        keep = (off >= skip) & (off <= m - skip - 1)
+        d = point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m])
+        si, sk = np.triu_indices(m, k=2)
+        far = (sk - si) <= m - 2
+        crossing = segments_cross(P, si[far], sk[far])
+        if np.any(crossing):
+            # crossed: minus the depth, for each crossing pair of segments the smaller of the
+            # distances of their end points to the other segment (a small crossing between
+            # the barrier's quadrature points has a depth of a fraction of d_hat)
+            i, k = si[far][crossing], sk[far][crossing]
+            a, b, c, e = P[i], P[(i + 1) % m], P[k], P[(k + 1) % m]
+            depth = np.min(np.stack([point_segment_distance(a, c, e), point_segment_distance(b, c, e),
+                                     point_segment_distance(c, a, b), point_segment_distance(e, a, b)]), axis=0)
+            best = min(best, -max(float(np.max(depth)), 1e-15))
+            continue
+        if len(d):
+            best = min(best, float(np.min(d)))
+    return best
