@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields
+from dataclasses import replace, dataclass, fields
 
 import numpy as np
 
@@ -145,6 +145,9 @@ class SimulatedRig:
         state = self.true_state()
         k = np.asarray(state.curvature, dtype=float)
         keep = (1.0 - p.friction_underread)
+        if not bool(np.all(state.converged)):   # the truth did not answer: no reading, never a made-up one
+            k = np.full(2, np.nan)
+            state = replace(state, curvature=k, axial_stretch=np.nan)
         if self.bench == "angle":
             angle = float(angle_per_length(state)[0]) * self.length * keep * math.cos(p.out_of_plane_tilt)
             force = 0.0
