@@ -109,7 +109,7 @@ def test_colcon_style_install(tmp_path):
     site = next(prefix.glob("lib/python3*/site-packages"))
     share = prefix / "share" / "softcath_ros"
     assert (share / "package.xml").is_file()
-    params = {"model_node", "allocation_node", "bench_node", "sim_bench_node"}
+    params = {"model_node", "allocation_node", "bench_node", "sim_bench_node", "steer_node"}
     assert {p.stem for p in (share / "config").glob("*.yaml")} == params  # for `--params-file`
     assert (prefix / "share/ament_index/resource_index/packages/softcath_ros").is_file()
     assert (prefix / "lib" / "softcath_ros" / "model_node").is_file()  # `ros2 run softcath_ros model_node`
