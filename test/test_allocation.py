@@ -412,17 +412,10 @@ def test_a_limit_beyond_the_rungs_reach_is_lowered_to_it_and_said(three):
     """A rung that answers a channel alone only up to some pressure below the design's limit (a
     table that ends early, a solver that stops): the allocator allocates up to the largest pressure
     every channel alone reaches, says so, and never commands beyond it."""
-    from softcath_ros.core.models.closed_form import ClosedFormModel
+    from rung_stand_ins import closed_form_ending_at
 
     reach_pa = 0.8 * three.max_pressure
-
-    class EndsEarly(ClosedFormModel):
-        def _evaluate_batch(self, pressures):
-            state = super()._evaluate_batch(pressures)
-            state.converged = pressures.max(axis=1) <= reach_pa
-            return state
-
-    allocator = Allocator(EndsEarly(three))
+    allocator = Allocator(closed_form_ending_at(three, reach_pa))
     assert "answers each channel alone only up to" in allocator.limited_by_rung
     assert 0.99 * reach_pa <= allocator.max_pressure <= reach_pa
     for deg in range(0, 360, 30):

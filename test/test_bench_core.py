@@ -281,7 +281,7 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
     from softcath_ros.core.design import load_design
     from softcath_ros.core.models import make_model
-    from softcath_ros.core.models.closed_form import ClosedFormModel
+    from rung_stand_ins import closed_form_ending_at
 
     model = make_model("surrogate", load_design("implemented_5mm"), build=False)
     rig = SimulatedRig(model, RigParams(gauge_noise=0.0, angle_noise=0.0))
@@ -293,15 +293,8 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     assert math.isfinite(inside.angle) and inside.angle == pytest.approx(
         theta * 0.95 * math.cos(rig.params.out_of_plane_tilt), rel=1e-6)
     three = load_design("three_channel_5mm")
-    reach_pa = 0.8 * three.max_pressure
-
-    class EndsEarly(ClosedFormModel):
-        def _evaluate_batch(self, pressures):
-            out = super()._evaluate_batch(pressures)
-            out.converged = pressures.max(axis=1) <= reach_pa
-            return out
-
-    rig = SimulatedRig(EndsEarly(three), RigParams(gauge_noise=0.0, angle_noise=0.0, pressure_shift=0.0))
+    ending = closed_form_ending_at(three, 0.8 * three.max_pressure)
+    rig = SimulatedRig(ending, RigParams(gauge_noise=0.0, angle_noise=0.0, pressure_shift=0.0))
     rig.advance(10.0, [0.7 * three.max_pressure, 0.0, 0.0])
     assert math.isfinite(rig.read().angle)
     rig.advance(10.0, [three.max_pressure, 0.0, 0.0])
