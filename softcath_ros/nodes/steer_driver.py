@@ -1,7 +1,10 @@
 """steer_driver (softcath_steer_driver): drives and scores one steering run (`softcath steer-sim`).
 
 Waits until the simulated rig's true tip (/softcath/bench/tip_true) arrives, then publishes the
-trajectory's targets on /softcath/tip_target at ``target_rate`` for ``duration`` s, records the
+trajectory's first target until the controller answers it (the first non-zero
+/softcath/pressure_cmd: on a loaded machine the controller may match the target topic late, and
+targets it never got must not count against it). From that moment it publishes the trajectory's
+targets on /softcath/tip_target at ``target_rate`` for ``duration`` s, records the
 steering topics (topics.STEERING_RECORDED) to an MCAP bag, and scores the true tip against the
 target (bench/steering_sim.metrics). Ends by itself and prints ``summary: {json}`` with the
 metrics, the recording and the time series file (``<recording>/series.npz``).
@@ -20,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
 
 from .. import topics
 from ..bench.sim_rig import RigParams, truth_model
@@ -60,6 +64,7 @@ class SteerDriver(Node):
         qos = stream_qos(100)
         self.pub = self.create_publisher(PointStamped, topics.TIP_TARGET, qos)
         self.create_subscription(PoseStamped, topics.TIP_TRUE, self._on_true, 100)
+        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self._on_command, qos)
         self.t0: float | None = None
         self.t_wait = time.monotonic()
         self.state = "waiting"
@@ -68,27 +73,39 @@ class SteerDriver(Node):
 
     def _on_true(self, msg: PoseStamped) -> None:
         if self.state == "waiting" and self.count_subscribers(topics.TIP_TARGET) > 0:
-            self.state, self.t0 = "running", time.monotonic()
-            self.get_logger().info(f"rig and controller found: {self.kind} for {self.duration:g} s")
+            self.state = "priming"
+            self.get_logger().info("rig and controller found: sending the first target until the controller answers")
         if self.state != "running":
             return
         t = time.monotonic() - self.t0
         q = msg.pose.position
         self.samples.append((t, *self.path(t), q.x, q.y, q.z))
 
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        # Every trajectory starts away from the straight tip, so the controller's first answer to
+        # the first target is a non-zero pressure.
+        if self.state == "priming" and any(v > 0.0 for v in msg.data):
+            self.state, self.t0 = "running", time.monotonic()
+            self.get_logger().info(f"controller answered: {self.kind} for {self.duration:g} s")
+
     def _tick(self) -> None:
         now = time.monotonic()
-        if self.state == "waiting":
+        if self.state in ("waiting", "priming"):
             if now - self.t_wait > self.wait_timeout:
+                self.get_logger().error(f"no rig/controller answering within {self.wait_timeout:g} s "
+                                        f"(stopped while {self.state})")
                 self.state = "failed"
-                self.get_logger().error(f"no rig/controller within {self.wait_timeout:g} s")
+                return
+            if self.state == "waiting":
+                return
+            t = 0.0
+        elif self.state != "running":
             return
-        if self.state != "running":
-            return
-        t = now - self.t0
-        if t > self.duration:
-            self.state = "done"
-            return
+        else:
+            t = now - self.t0
+            if t > self.duration:
+                self.state = "done"
+                return
         msg = PointStamped()
         msg.header.frame_id = topics.FRAME_ID
         msg.header.stamp = self.get_clock().now().to_msg()
