@@ -214,3 +214,32 @@ def test_blocked_rod_without_a_known_capacity_stops_with_a_named_reason(design, 
     st = rod.evaluate(np.array([[35000.0]]))
     assert not st.converged[0] and np.isnan(st.contact_force[0])
     assert "before the section's moment peaks" in st.message and f"[{OUTSIDE_MODEL}]" in st.message
+
+
+def test_blocked_rod_ramps_on_the_shared_continuation_with_the_former_loops_answers(design, blocking_law, monkeypatch):
+    """With the tip on the scale ``RodModel.solve`` ramps the pressure with core/continuation.ramp.
+    The forces are those the former fixed-step loop gave on this law (measured at commit ce0b449),
+    to solver tolerance; a ramp past the table's pressures stops, after its cuts, at the last
+    pressure it reached, with the reason."""
+    from softcath_ros.bench.blocking import bench_contact
+    from softcath_ros.core.continuation import OUTSIDE_MODEL
+    from softcath_ros.core.models import rod as rod_module
+
+    ramps = []
+    shared = rod_module.ramp
+
+    def counted(*args, **kwargs):
+        ramps.append(kwargs.get("describe"))
+        return shared(*args, **kwargs)
+
+    monkeypatch.setattr(rod_module, "ramp", counted)
+    rod = _rod(design, blocking_law)
+    before = {17500.0: 0.02575718456740408, 26250.0: 0.03760976720104275, 35000.0: 0.05364625338616207}
+    for p, force in before.items():
+        sol = rod.solve(p, L, bench_contact(L))
+        assert sol.converged and sol.contact_force == pytest.approx(force, rel=1e-6)
+    assert len(ramps) == 3
+    with pytest.raises(LawRangeError) as refused:
+        rod.solve(36000.0, L, bench_contact(L))
+    assert "last converged p = 0.35 bar" in str(refused.value) and "cut(s)" in str(refused.value)
+    assert refused.value.stop_reason == OUTSIDE_MODEL

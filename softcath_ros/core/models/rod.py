@@ -25,6 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..continuation import Correction, StepControl, ramp
 from ..design import Design
 from ..errors import ModelError
 from ..rod.law import LawRangeError, LinearLaw
@@ -37,7 +38,8 @@ from ..units import PA_PER_BAR
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 _PLANE_TOL = 1e-9
-CONTACT_STEP = 1250.0   # Pa: the pressure ramp of a body in contact (half the law's table step)
+# Pa: the pressure ramp of a body in contact (steps of at most half the law's table step, cut to 1/16 of it)
+CONTACT_STEPS = StepControl(initial_step=1250.0, max_step=1250.0, min_step=1250.0 / 16)
 
 
 class RodModel(BendModel):
@@ -141,28 +143,44 @@ class RodModel(BendModel):
     def solve(self, pressure: float, length: float | None = None, loads: PlanarLoads | None = None):
         """The rod solution (``RodSolution``) at one pressure (Pa); raises LawRangeError outside the law.
 
-        With a contact plane the pressure is ramped from 0 in steps of at most ``CONTACT_STEP``, each
-        solve starting from the last: the bench's path (the tip on the plane from p = 0), not another
-        equilibrium of the same pressure (a body curled past the plane and pressed back)."""
+        With a contact plane the pressure is ramped from 0 (``core/continuation.ramp``, steps of at most
+        ``CONTACT_STEPS.max_step``), each solve starting from the last: the bench's path (the tip on the
+        plane from p = 0), not another equilibrium of the same pressure (a body curled past the plane
+        and pressed back)."""
         length = self.design.length if length is None else float(length)
         loads = self.planar if loads is None else loads
         p = float(pressure)
         if loads.contact is None or p <= 0:
             return solve_rod(self._slice(p), length, loads, self.n_segments)
-        sol, done, step = None, 0.0, CONTACT_STEP
-        while done < p:
-            target = min(p, done + step)
-            if p - target < 0.1 * step:
-                target = p
-            trial = solve_rod(self._slice(target), length, loads, self.n_segments, guess=sol)
-            if trial.converged:
-                sol, done = trial, target
-            elif step > CONTACT_STEP / 16:
-                step /= 2
-            else:
-                trial.message = f"at p = {target / PA_PER_BAR:.5g} bar on the ramp from 0: {trial.message}"
-                return trial
-        return sol
+        result, failed, refusal = self._contact_ramp([p], length, loads)
+        if result.converged:
+            return result.points[0].state
+        if refusal is not None:
+            raise LawRangeError(f"{result.message}")
+        failed.message, failed.stop_reason = result.message, result.stop_reason
+        return failed
+
+    def _contact_ramp(self, pressures, length: float, loads: PlanarLoads):
+        """One ramp from 0 through the increasing ``pressures`` (Pa) with the tip on the plane:
+        (RampResult, the last failed RodSolution or None, the LawRangeError that stopped it or None)."""
+        failed: list = [None, None]
+
+        def corrector(guess, t, previous) -> Correction:
+            try:
+                sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess)
+            except LawRangeError as exc:
+                failed[1] = exc
+                return Correction(state=None, converged=False, message=str(exc), outside_domain=True,
+                                  stop_reason=exc.stop_reason)
+            failed[1] = None
+            if not sol.converged:
+                failed[0] = sol
+            return Correction(state=sol, converged=sol.converged, iterations=sol.iterations, message=sol.message,
+                              stop_reason=sol.stop_reason)
+
+        result = ramp(corrector, None, pressures, CONTACT_STEPS, extrapolate=None,
+                      describe=lambda t: f"p = {t / PA_PER_BAR:.5g} bar")
+        return result, failed[0], failed[1]
 
     def _slice(self, pressure: float):
         return self.law.at(pressure, extra_stiffness=self.device_stiffness)
