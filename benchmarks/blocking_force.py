@@ -32,6 +32,7 @@ import numpy as np
 
 from harness import median_time, save_figure, write_results
 from softcath_ros.bench.blocking import BlockingForce, bench_contact
+from softcath_ros.core.continuation import stop_tag
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.rod.law import LawRangeError
@@ -85,7 +86,7 @@ def blocked(rod, pressures, diameter):
         try:
             sol = rod.solve(float(p), LENGTH, bench_contact(LENGTH))
         except LawRangeError as exc:
-            row["stop"] = f"{exc} [{exc.stop_reason}]"
+            row["stop"] = f"{exc} {stop_tag(exc.stop_reason)}"
             hinge.append(row)
             continue
         if sol.converged:
@@ -97,7 +98,7 @@ def blocked(rod, pressures, diameter):
                 row.update(rotation_rad=sol.hinge_rotation, moment_Nm=sol.hinge_moment,
                            force_if_spread_over_D_mN=sol.contact_force * ratio * 1e3)
         else:
-            row["stop"] = f"{sol.message} [{sol.stop_reason}]"
+            row["stop"] = f"{sol.message} {stop_tag(sol.stop_reason)}"
         hinge.append(row)
     return f, hinge
 

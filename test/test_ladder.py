@@ -4,7 +4,8 @@ the accuracy boundary per tolerance, the named stop reason, and the envelope bui
 import pytest
 
 from softcath_ros.core import ladder
-from softcath_ros.core.continuation import LIMIT_POINT, NUMERICAL_FAILURE
+from softcath_ros.core.continuation import (LIMIT_POINT, NUMERICAL_FAILURE, OUTSIDE_MODEL, STOP_REASONS, stop_tag,
+                                            tagged_stop)
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.model_selection import select_model
 from softcath_ros.core.scene import scene_from_dict
@@ -76,6 +77,11 @@ def test_stop_reasons_are_named():
     assert ladder.stop_reason(f"did not converge at p = 0.27 bar [stop: {NUMERICAL_FAILURE}]") == NUMERICAL_FAILURE
     assert ladder.stop_reason(f"...; {LIMIT_POINT} at p = 0.4 bar: the tangent's ...") == LIMIT_POINT
     assert ladder.stop_reason("rod Newton did not converge in 40 iterations") == "unnamed"
+    # one tag, written by continuation.stop_tag and read by continuation.tagged_stop: the tag wins over a
+    # reason the message's text mentions
+    assert all(tagged_stop(f"did not converge (...) {stop_tag(r)}; next") == r for r in STOP_REASONS)
+    assert tagged_stop("rod Newton did not converge") is None
+    assert ladder.stop_reason(f"past the {LIMIT_POINT} the law ends {stop_tag(OUTSIDE_MODEL)}") == OUTSIDE_MODEL
 
 
 def test_no_reference_is_refused(monkeypatch):

@@ -24,6 +24,7 @@ falls below a floor (the end of the branch: the stop is LIMIT_POINT).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
@@ -32,6 +33,19 @@ LIMIT_POINT = "physical limit point"               # the tangent turns singular:
 MATERIAL_RANGE = "material outside its fitted range"  # e.g. a Yeoh set with c3 < 0 past its convexity limit
 OUTSIDE_MODEL = "outside the model's validity"     # e.g. walls touching with contact switched off
 NUMERICAL_FAILURE = "numerical failure"            # the corrector failed for none of the reasons above
+STOP_REASONS = (LIMIT_POINT, MATERIAL_RANGE, OUTSIDE_MODEL, NUMERICAL_FAILURE)
+_STOP_TAG = re.compile(r"\[stop: ([^\]]+)\]")
+
+
+def stop_tag(reason: str) -> str:
+    """How a failure message names its stop reason: ``[stop: <reason>]`` (read back by ``tagged_stop``)."""
+    return f"[stop: {reason}]"
+
+
+def tagged_stop(message: str) -> str | None:
+    """The stop reason the first ``stop_tag`` in ``message`` names, or None when it has none."""
+    found = _STOP_TAG.search(message or "")
+    return found.group(1) if found else None
 
 
 @dataclass

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import statistics
 import time
 from dataclasses import dataclass
@@ -40,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from . import cache
-from .continuation import LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL
+from .continuation import STOP_REASONS, tagged_stop
 from .design import load_design
 from .errors import ModelError
 from .models import RUNGS, make_model, rung_class, rung_info
@@ -88,8 +87,6 @@ DEFAULT_SETTING = {"closed_form": "closed_form", "surrogate": "surrogate (of sec
 SECTION_REFERENCE = "section D/20"   # the section rung with lumen contact at its default mesh
 # R_C error tolerances at which the accuracy boundary is recorded (accurate_to_pa_<n>pct)
 TOLERANCES = (0.02, 0.05, 0.10)
-# the stop reasons a rung names in its message (core/continuation.py); others are "unnamed"
-STOP_REASONS = (LIMIT_POINT, MATERIAL_RANGE, OUTSIDE_MODEL, NUMERICAL_FAILURE)
 LADDER_VERSION = "ladder-3"   # bump when what a cached row records changes (3: R_C = l / theta, 0-0.5 bar)
 
 
@@ -188,10 +185,8 @@ def stop_reason(message: str) -> str:
     """The named reason (core/continuation.py) a failure message gives; "unnamed" if it names none."""
     if not message:
         return ""
-    tagged = re.search(r"\[stop: ([^\]]+)\]", message)
-    if tagged:
-        return tagged.group(1)
-    return next((name for name in STOP_REASONS if name in message), "unnamed")
+    # untagged: a message written before the tag (a cached result), naming the reason in its text
+    return tagged_stop(message) or next((name for name in STOP_REASONS if name in message), "unnamed")
 
 
 def reference_labels(results: dict) -> list:

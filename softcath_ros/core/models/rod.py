@@ -25,7 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..continuation import Correction, StepControl, ramp
+from ..continuation import Correction, StepControl, ramp, stop_tag
 from ..design import Design
 from ..errors import ModelError
 from ..rod.law import LawRangeError, LinearLaw
@@ -200,10 +200,10 @@ class RodModel(BendModel):
             try:
                 sol = self.solve(p)
             except LawRangeError as exc:
-                messages.append(f"rod model: command p = {p:.6g} Pa: {exc} [{exc.stop_reason}]")
+                messages.append(f"rod model: command p = {p:.6g} Pa: {exc} {stop_tag(exc.stop_reason)}")
                 continue
             if not sol.converged:
-                messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message} [{sol.stop_reason}]")
+                messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message} {stop_tag(sol.stop_reason)}")
                 continue
             th = sol.theta[-1]
             curvature[i] = e * th / sol.arc_length

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..cache import CacheStore, store_for
 from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, ArcControl, Correction,
-                            RampPoint, RampResult, StepControl, arc_length, ramp)
+                            RampPoint, RampResult, StepControl, arc_length, ramp, stop_tag)
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
@@ -438,7 +438,7 @@ class SectionModel(BendModel):
         last = {"pressure": last_p.tolist(), "curvature": k.tolist(), "axial_stretch": float(lam)}
         # Commands further out along the same direction from this state fail the same way.
         failing_p = pressure_at(min(result.last_load + s.min_step, cum[-1]))
-        why = f"{result.message} [stop: {result.stop_reason}]"
+        why = f"{result.message} {stop_tag(result.stop_reason)}"
         self._failures.append((tuple(float(v) for v in last_p), failing_p, why, last))
         return done, failed, self._failure_message(pressures[failed], why), last
 
