@@ -118,3 +118,40 @@ def test_a_point_beyond_the_references_ramp_boundary_is_no_reference():
     (another branch): that point has no reference, so no error is recorded there."""
     results = {"section D/20": {**FAKE["section D/20"], "boundary_pa": 30000.0}}
     assert ladder.reference_labels(results) == ["section D/20"] * 3 + [None]
+
+
+SHORT = ladder.Case("1ch 17mm", "length", "implemented_5mm", 0.017, (1.0,), (10000.0, 20000.0))
+LINEAR_ROD = {"source": "closed_form"}   # the rod on the closed form's linear law: models contact, solves fast
+
+
+def test_a_cached_rung_result_is_complete_and_an_old_one_still_reads(monkeypatch):
+    """run_rung caches the whole record; reading it computes nothing. A result cached in the former
+    format (no contact_boundary_pa) reads under the same key and gains the field once."""
+    from softcath_ros.core import cache
+    from softcath_ros.core.models import make_model, rung_class
+
+    fresh = ladder.run_rung(SHORT, "rod", LINEAR_ROD, True, refresh=True)
+    assert fresh["record"] == ladder.RECORD and fresh["contact_boundary_pa"] > 0
+    # the key is the format every cached ladder result was written under
+    design = ladder.load_design(SHORT.design).with_length(SHORT.length)
+    key = ladder._key_parts(SHORT, "rod", LINEAR_ROD)
+    assert key == [design.content_hash(), "rod", rung_class("rod").solver_version, LINEAR_ROD,
+                   SHORT.pressures.tolist()]
+    assert cache.load_json("ladder", ladder.LADDER_VERSION, key, "rod") == fresh
+
+    def no_solving(*args, **kwargs):
+        raise AssertionError("a cached result was computed again")
+
+    calls = []
+    real_boundary = ladder.contact_boundary
+    monkeypatch.setattr(ladder, "make_model", no_solving)
+    monkeypatch.setattr(ladder, "contact_boundary", no_solving)
+    assert ladder.run_rung(SHORT, "rod", LINEAR_ROD, True) == fresh
+    # a result in format 1, as written before the field existed
+    old = {k: v for k, v in fresh.items() if k not in ("record", "contact_boundary_pa")}
+    cache.save_json("ladder", ladder.LADDER_VERSION, key, old, "rod")
+    monkeypatch.setattr(ladder, "make_model", make_model)
+    monkeypatch.setattr(ladder, "contact_boundary", lambda *a: calls.append(a) or real_boundary(*a))
+    upgraded = ladder.run_rung(SHORT, "rod", LINEAR_ROD, True)
+    assert upgraded == fresh and len(calls) == 1
+    assert ladder.run_rung(SHORT, "rod", LINEAR_ROD, True) == fresh and len(calls) == 1   # saved: once

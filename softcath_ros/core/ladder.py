@@ -88,6 +88,9 @@ SECTION_REFERENCE = "section D/20"   # the section rung with lumen contact at it
 # R_C error tolerances at which the accuracy boundary is recorded (accurate_to_pa_<n>pct)
 TOLERANCES = (0.02, 0.05, 0.10)
 LADDER_VERSION = "ladder-3"   # bump when what a cached row records changes (3: R_C = l / theta, 0-0.5 bar)
+# The format of a cached rung result, kept in the value (a change of the key voids every cached result,
+# hours of fe3d): 2 adds contact_boundary_pa; a result without "record" is format 1.
+RECORD = 2
 
 
 def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
@@ -97,10 +100,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     key_parts = _key_parts(case, rung, options)
     hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
     if hit is not None:
-        if "contact_boundary_pa" not in hit:
-            hit["contact_boundary_pa"] = contact_boundary(case, rung, options)
-            cache.save_json("ladder", LADDER_VERSION, key_parts, hit, rung)
-        return hit
+        return _current_record(hit, case, rung, options, key_parts)
     opts = dict(options)
     if rung == "section":
         opts["cache"] = False   # cold: the time is the solver's
@@ -138,12 +138,24 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
         boundary, beyond, message = ramp_boundary(make_model(rung, design, **opts), case.direction)
         first_failure = message.split("; ")[0] if beyond else ""
         stop = stop_reason(message) if beyond else ""
-    out = {"rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary, "stop_reason": stop,
+    out = {"record": RECORD, "rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary, "stop_reason": stop,
            "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
            "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
            "predictions": [p.to_json() for p in preds], "contact_boundary_pa": contact_boundary(case, rung, options)}
     cache.save_json("ladder", LADDER_VERSION, key_parts, out, rung)
     return out
+
+
+def _current_record(hit: dict, case: Case, rung: str, options: dict, key_parts: list) -> dict:
+    """A cached result in the current format (``RECORD``). One written in format 1 (before the range
+    with the tip on the scale was recorded) gains ``contact_boundary_pa`` and is saved again under the
+    same key, once; a current one is returned as it was cached (one written with the field before the
+    format was recorded counts as current)."""
+    if hit.get("record", 2 if "contact_boundary_pa" in hit else 1) >= RECORD:
+        return hit
+    hit = {**hit, "record": RECORD, "contact_boundary_pa": contact_boundary(case, rung, options)}
+    cache.save_json("ladder", LADDER_VERSION, key_parts, hit, rung)
+    return hit
 
 
 def _key_parts(case: Case, rung: str, options: dict) -> list:
