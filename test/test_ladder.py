@@ -1,6 +1,8 @@
 """The ladder's bookkeeping (core/ladder.py), without solving: the reference chosen per point (fe3d
 where it converged, else the section rung with contact), errors against that point's reference,
 the accuracy boundary per tolerance, the named stop reason, and the envelope built from the rows."""
+import dataclasses
+
 import pytest
 
 from softcath_ros.core import ladder
@@ -155,3 +157,15 @@ def test_a_cached_rung_result_is_complete_and_an_old_one_still_reads(monkeypatch
     upgraded = ladder.run_rung(SHORT, "rod", LINEAR_ROD, True)
     assert upgraded == fresh and len(calls) == 1
     assert ladder.run_rung(SHORT, "rod", LINEAR_ROD, True) == fresh and len(calls) == 1   # saved: once
+
+
+def test_a_case_loads_its_design_once(monkeypatch):
+    """Its key, its rungs and its ramp with the tip on the scale share one loaded design."""
+    loads = []
+    real = ladder.load_design
+    monkeypatch.setattr(ladder, "load_design", lambda name: loads.append(name) or real(name))
+    case = dataclasses.replace(SHORT)          # a new case: nothing loaded yet
+    ladder.run_rung(case, "rod", LINEAR_ROD, True, refresh=True)
+    assert ladder.is_cached(case, "rod", LINEAR_ROD) and ladder.is_cached(case, "closed_form", {}) is False
+    assert ladder._key_parts(case, "rod", LINEAR_ROD)[0] == real(SHORT.design).with_length(SHORT.length).content_hash()
+    assert loads == [SHORT.design]

@@ -34,13 +34,14 @@ import os
 import statistics
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from . import cache
 from .continuation import STOP_REASONS, tagged_stop
-from .design import load_design
+from .design import Design, load_design
 from .errors import ModelError
 from .models import RUNGS, make_model, rung_class, rung_info
 from .prediction import predict
@@ -59,6 +60,11 @@ class Case:
     @property
     def pressures(self) -> np.ndarray:
         return np.outer(self.magnitudes_pa, self.direction)
+
+    @cached_property
+    def sample(self) -> Design:
+        """The case's design at its length, loaded once per case (its key, its rungs, its contact ramp)."""
+        return load_design(self.design).with_length(self.length)
 
 
 PRESSURES_PA = tuple(5000.0 * i for i in range(1, 11))   # 0.05 .. 0.5 bar
@@ -95,7 +101,7 @@ RECORD = 2
 
 def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
     """Predictions at the case's pressures, time per evaluation and failure boundary (cached)."""
-    design = load_design(case.design).with_length(case.length)
+    design = case.sample
     pressures = case.pressures
     key_parts = _key_parts(case, rung, options)
     hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
@@ -159,11 +165,10 @@ def _current_record(hit: dict, case: Case, rung: str, options: dict, key_parts: 
 
 
 def _key_parts(case: Case, rung: str, options: dict) -> list:
-    design = load_design(case.design).with_length(case.length)
     version = rung_class(rung).solver_version
     if rung == "surrogate":     # its answers are its source rung's: a new source version is a new table
         version += "/" + rung_class(options.get("source", "section")).solver_version
-    return [design.content_hash(), rung, version, options, case.pressures.tolist()]
+    return [case.sample.content_hash(), rung, version, options, case.pressures.tolist()]
 
 
 def is_cached(case: Case, rung: str, options: dict) -> bool:
@@ -179,8 +184,7 @@ def contact_boundary(case: Case, rung: str, options: dict):
         return None
     from .scene import load_scene
 
-    design = load_design(case.design).with_length(case.length)
-    model = make_model(rung, design, loads=load_scene("blocking_force_bench").loads, **options)
+    model = make_model(rung, case.sample, loads=load_scene("blocking_force_bench").loads, **options)
     return ramp_boundary(model, case.direction)[0]
 
 
