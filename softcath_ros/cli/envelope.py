@@ -4,6 +4,7 @@ rung; core/ladder.py) and write the envelope that `model: auto` reads, plus the 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import os
 from pathlib import Path
 
@@ -64,7 +65,7 @@ def run(args) -> int:
     report(rows)
     if args.results:
         stem = Path(args.results)
-        meta = {"cases": [c.__dict__ for c in cases], "references": references,
+        meta = {"cases": [dataclasses.asdict(c) for c in cases], "references": references,
                 "note": "R_C = l / theta. Reference per point (column reference): fe3d where it converged, "
                         "else section D/20 (lumen contact); 3-channel cases: fe3d with --fe3d-three-channel "
                         "(a full model) or where cached", **machine_meta(load_before)}
