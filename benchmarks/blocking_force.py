@@ -81,14 +81,10 @@ def blocked(rod, pressures, diameter):
     the force to the hinge's length), plus the stop message where refused."""
     f = np.full(len(pressures), np.nan)
     hinge = []
-    for i, p in enumerate(pressures):
+    # one ramp through the pressures (a refused one: converged False with the law's message)
+    sols = rod.solve(np.asarray(pressures, dtype=float), LENGTH, bench_contact(LENGTH))
+    for i, (p, sol) in enumerate(zip(pressures, sols)):
         row = {"rotation_rad": None, "moment_Nm": None, "force_if_spread_over_D_mN": None, "stop": ""}
-        try:
-            sol = rod.solve(float(p), LENGTH, bench_contact(LENGTH))
-        except LawRangeError as exc:
-            row["stop"] = f"{exc} {stop_tag(exc.stop_reason)}"
-            hinge.append(row)
-            continue
         if sol.converged:
             f[i] = sol.contact_force
             if sol.hinge_moment is not None:

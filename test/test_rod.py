@@ -248,3 +248,32 @@ def test_blocked_rod_ramps_on_the_shared_continuation_with_the_former_loops_answ
         rod.solve(36000.0, L, bench_contact(L))
     assert "last converged p = 0.35 bar" in str(refused.value) and "cut(s)" in str(refused.value)
     assert refused.value.stop_reason == OUTSIDE_MODEL
+
+
+def test_a_batch_with_the_tip_on_the_scale_is_one_ramp_with_each_commands_answer(design, blocking_law, monkeypatch):
+    """Commands in any order (repeats, 0, one past the table) are answered from one ramp through the
+    sorted pressures, as each alone would be; so is the blocking force of several pressures, also
+    through a calibration (the shift scales the ramp's pressures)."""
+    from softcath_ros.bench.blocking import BlockingForce, bench_contact
+    from softcath_ros.core.calibration_file import CalibratedModel
+    from softcath_ros.core.continuation import OUTSIDE_MODEL, stop_tag
+    from softcath_ros.core.models import rod as rod_module
+
+    rod = _rod(design, blocking_law, contact=TipPlaneContact(normal=(0.0, 1.0, 0.0)))
+    alone = {p: rod.solve(p).contact_force for p in (8750.0, 26250.0, 35000.0)}
+    ramps = []
+    shared = rod_module.ramp
+    monkeypatch.setattr(rod_module, "ramp", lambda *a, **k: ramps.append(a[2]) or shared(*a, **k))
+    st = rod.evaluate(np.array([[35000.0], [0.0], [8750.0], [36000.0], [26250.0], [8750.0]]))
+    assert ramps == [[8750.0, 26250.0, 35000.0, 36000.0]]
+    assert st.converged.tolist() == [True, True, True, False, True, True] and st.contact_force[1] == 0.0
+    for i, p in ((0, 35000.0), (2, 8750.0), (4, 26250.0), (5, 8750.0)):
+        assert st.contact_force[i] == pytest.approx(alone[p], rel=1e-9)
+    assert np.isnan(st.contact_force[3]) and "command p = 36000 Pa" in st.message
+    assert stop_tag(OUTSIDE_MODEL) in st.message and "last converged p = 0.35 bar" in st.message
+    bench = [rod.solve(p, L, bench_contact(L)).contact_force for p in (8750.0, 26250.0)]
+    ramps.clear()
+    f = BlockingForce(rod)(np.array([[26250.0], [8750.0]]), L)
+    assert len(ramps) == 1 and f.tolist() == pytest.approx(bench[::-1], rel=1e-9)
+    shifted = BlockingForce(CalibratedModel(rod, 0.25))(np.array([[35000.0], [11666.666666666666]]), L)
+    assert len(ramps) == 2 and shifted.tolist() == pytest.approx(bench[::-1], rel=1e-9)

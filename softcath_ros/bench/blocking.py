@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.rod.law import LawRangeError, LinearLaw
+from ..core.rod.law import LinearLaw
 from ..core.rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..core.section_properties import transformed_section
 
@@ -56,13 +56,7 @@ class BlockingForce:
         if not self.model.info.solves_backbone:   # free curvature through the linear law
             return self.from_curvature(self.model.evaluate(pressures).curvature, length)
         p = np.asarray(pressures, dtype=float)
-        batch = np.atleast_2d(p)
-        out = np.full(len(batch), np.nan)
-        for i, pi in enumerate(batch[:, 0]):
-            try:
-                sol = self.model.solve(pi, length=length, loads=bench_contact(length))
-            except LawRangeError:
-                continue
-            if sol.converged:
-                out[i] = sol.contact_force
+        # one ramp through the pressures (the rod's solve of an array), each state from the last
+        sols = self.model.solve(np.atleast_2d(p)[:, 0], length=length, loads=bench_contact(length))
+        out = np.array([sol.contact_force if sol.converged else np.nan for sol in sols])
         return out if p.ndim > 1 else out[0]

@@ -31,7 +31,7 @@ from ..errors import ModelError
 from ..rod.law import LawRangeError, LinearLaw
 from ..rod.loads import REST_TIP, Loads, TipPlaneContact
 from ..rod.section_law import LAW_VERSION, LawGrid, section_law
-from ..rod.statics import PlanarLoads, PlaneContact, solve_rod
+from ..rod.statics import PlanarLoads, PlaneContact, RodSolution, solve_rod
 from ..section_properties import transformed_section
 from ..options import Option
 from ..units import PA_PER_BAR
@@ -140,25 +140,51 @@ class RodModel(BendModel):
         return float(p[2]), float(p[0] * e[0] + p[1] * e[1])
 
     # ------------------------------------------------------------------ evaluation
-    def solve(self, pressure: float, length: float | None = None, loads: PlanarLoads | None = None):
-        """The rod solution (``RodSolution``) at one pressure (Pa); raises LawRangeError outside the law.
+    def solve(self, pressure, length: float | None = None, loads: PlanarLoads | None = None):
+        """The rod solution (``RodSolution``) at one pressure (Pa), or the list of them for a 1-D array of
+        pressures. One pressure outside the law raises LawRangeError; in a list, its solution has
+        ``converged=False`` and the law's message and stop reason.
 
-        With a contact plane the pressure is ramped from 0 (``core/continuation.ramp``, steps of at most
-        ``CONTACT_STEPS.max_step``), each solve starting from the last: the bench's path (the tip on the
-        plane from p = 0), not another equilibrium of the same pressure (a body curled past the plane
-        and pressed back)."""
+        With a contact plane the pressures are reached on one ramp from 0 through them in increasing
+        order (``core/continuation.ramp``, steps of at most ``CONTACT_STEPS.max_step``), each solve
+        starting from the last: the bench's path (the tip on the plane from p = 0), not another
+        equilibrium of the same pressure (a body curled past the plane and pressed back)."""
         length = self.design.length if length is None else float(length)
         loads = self.planar if loads is None else loads
-        p = float(pressure)
-        if loads.contact is None or p <= 0:
-            return solve_rod(self._slice(p), length, loads, self.n_segments)
-        result, failed, refusal = self._contact_ramp([p], length, loads)
-        if result.converged:
-            return result.points[0].state
-        if refusal is not None:
-            raise LawRangeError(f"{result.message}")
-        failed.message, failed.stop_reason = result.message, result.stop_reason
-        return failed
+        single = np.ndim(pressure) == 0
+        out = self._solutions(np.atleast_1d(np.asarray(pressure, dtype=float)), length, loads)
+        if single:
+            if isinstance(out[0], LawRangeError):
+                raise out[0]
+            return out[0]
+        return [_refused(s, self.n_segments) if isinstance(s, LawRangeError) else s for s in out]
+
+    def _solutions(self, pressures: np.ndarray, length: float, loads: PlanarLoads) -> list:
+        """Per pressure its RodSolution or the LawRangeError that refused it: directly where nothing is
+        touched (or p <= 0), else from one contact ramp through the sorted positive pressures."""
+        ramped = loads.contact is not None
+        out: list = [None] * len(pressures)
+        for i, p in enumerate(pressures):
+            if not (ramped and p > 0):
+                try:
+                    out[i] = solve_rod(self._slice(float(p)), length, loads, self.n_segments)
+                except LawRangeError as exc:
+                    out[i] = exc
+        targets = sorted({float(p) for p in pressures if ramped and p > 0})
+        if not targets:
+            return out
+        result, failed, refusal = self._contact_ramp(targets, length, loads)
+        reached = {pt.load: pt.state for pt in result.points}
+        for i, p in enumerate(pressures):
+            if not (ramped and p > 0):
+                continue
+            if float(p) in reached:
+                out[i] = reached[float(p)]
+            elif refusal is not None:        # the ramp stopped below p: where and why
+                out[i] = LawRangeError(result.message)
+            else:
+                out[i] = replace(failed, message=result.message, stop_reason=result.stop_reason)
+        return out
 
     def _contact_ramp(self, pressures, length: float, loads: PlanarLoads):
         """One ramp from 0 through the increasing ``pressures`` (Pa) with the tip on the plane:
@@ -196,12 +222,7 @@ class RodModel(BendModel):
         force = np.full(n, np.nan)
         angle = np.full(n, np.nan)
         messages = []
-        for i, p in enumerate(pressures[:, 0]):
-            try:
-                sol = self.solve(p)
-            except LawRangeError as exc:
-                messages.append(f"rod model: command p = {p:.6g} Pa: {exc} {stop_tag(exc.stop_reason)}")
-                continue
+        for i, (p, sol) in enumerate(zip(pressures[:, 0], self.solve(pressures[:, 0]))):
             if not sol.converged:
                 messages.append(f"rod model: command p = {p:.6g} Pa: {sol.message} {stop_tag(sol.stop_reason)}")
                 continue
@@ -221,6 +242,13 @@ class RodModel(BendModel):
                          # a contact force only where there is something to touch
                          contact_force=force if self.loads.contact is not None else None,
                          diagnostics=SolverDiagnostics(law=self.law.source))
+
+
+def _refused(exc: LawRangeError, n_segments: int) -> RodSolution:
+    """A solution the law refused: no numbers, its message and stop reason."""
+    return RodSolution(theta=np.full(n_segments + 1, np.nan), positions=np.full((n_segments + 1, 2), np.nan),
+                       kappa=np.full(n_segments, np.nan), arc_length=math.nan, contact_force=math.nan,
+                       converged=False, message=str(exc), stop_reason=exc.stop_reason)
 
 
 __all__ = ["RodModel"]
