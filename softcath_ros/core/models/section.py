@@ -95,6 +95,19 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
                   "last_converged")
 
 
+def _ray_order(pressures: np.ndarray) -> list[int]:
+    """The order commands are solved in: the rest state first, then per ray (at its first command)
+    that ray's commands by increasing pressure, so that one ramp walks up through all of them instead
+    of back down to a smaller one; commands on rays of their own keep their order (a trajectory)."""
+    peak = np.max(np.abs(pressures), axis=1)
+    first: dict[tuple, int] = {}
+    keys = []
+    for i, (p, m) in enumerate(zip(pressures, peak)):
+        ray = () if m == 0 else tuple(np.round(p / m, 12))
+        keys.append((-1 if m == 0 else first.setdefault(ray, i), m, i))
+    return [k[2] for k in sorted(keys)]
+
+
 class SectionModel(BendModel):
     name = "section"
     solver_version = "section-5"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame)
@@ -191,7 +204,7 @@ class SectionModel(BendModel):
         iterations = np.zeros(n, dtype=int)
         messages: list[str] = []
         last_converged: list[dict | None] = [None] * n
-        todo = list(range(n))
+        todo = _ray_order(pressures)
         bar = None
         if self.progress:
             from tqdm import tqdm
