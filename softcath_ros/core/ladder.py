@@ -144,7 +144,8 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
         boundary, beyond, message = ramp_boundary(make_model(rung, design, **opts), case.direction)
         first_failure = message.split("; ")[0] if beyond else ""
         stop = stop_reason(message) if beyond else ""
-    out = {"record": RECORD, "rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary, "stop_reason": stop,
+    out = {"record": RECORD, "rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
+           "stop_reason": stop,
            "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
            "fails_beyond": beyond, "first_failure": first_failure[:300], "loadavg_1min": [load0, os.getloadavg()[0]],
            "predictions": [p.to_json() for p in preds], "contact_boundary_pa": contact_boundary(case, rung, options)}

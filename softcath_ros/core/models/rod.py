@@ -189,24 +189,24 @@ class RodModel(BendModel):
     def _contact_ramp(self, pressures, length: float, loads: PlanarLoads):
         """One ramp from 0 through the increasing ``pressures`` (Pa) with the tip on the plane:
         (RampResult, the last failed RodSolution or None, the LawRangeError that stopped it or None)."""
-        failed: list = [None, None]
+        last = {"failed": None, "refusal": None}     # of the latest attempt: how the ramp's stop failed
 
         def corrector(guess, t, previous) -> Correction:
             try:
                 sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess)
             except LawRangeError as exc:
-                failed[1] = exc
+                last["refusal"] = exc
                 return Correction(state=None, converged=False, message=str(exc), outside_domain=True,
                                   stop_reason=exc.stop_reason)
-            failed[1] = None
+            last["refusal"] = None
             if not sol.converged:
-                failed[0] = sol
+                last["failed"] = sol
             return Correction(state=sol, converged=sol.converged, iterations=sol.iterations, message=sol.message,
                               stop_reason=sol.stop_reason)
 
         result = ramp(corrector, None, pressures, CONTACT_STEPS, extrapolate=None,
                       describe=lambda t: f"p = {t / PA_PER_BAR:.5g} bar")
-        return result, failed[0], failed[1]
+        return result, last["failed"], last["refusal"]
 
     def _slice(self, pressure: float):
         return self.law.at(pressure, extra_stiffness=self.device_stiffness)
