@@ -466,21 +466,22 @@ class SectionModel(BendModel):
 
     def _leave_saddle(self, corr: Correction, pressures: np.ndarray, where: str) -> Correction:
         """A converged state whose tangent has negative directions is a saddle of the potential, not
-        a state the body rests in. Where the lumen wall's contact is active (the creased shoulders
-        of a closed lumen make such saddles) it is left for the stable state next to it
+        a state the body rests in. Where the lumen wall's contact is active, or the lumen is filled
+        (the creased shoulders of a closing lumen make such saddles), it is left for the stable
+        state next to it
         (``solver.leave_saddle``), and the ramp goes on from there; a saddle it cannot leave is
-        refused (UNSTABLE). Elsewhere (no contact) it is kept: a state just past a limit point,
+        refused (UNSTABLE). Elsewhere (no contact, no fill) it is kept: a state just past a limit point,
         which the limit-point probe steps back from; ``_evaluate_batch`` never answers with one."""
         count = corr.info["negative_directions"]
-        if not self.problem.contact_active(corr.state):
-            return corr
         s = self.settings
+        if self.problem.fill is None and not self.problem.contact_active(corr.state):
+            return corr
         stable, _ = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=SNAP_ITERATIONS,
                                  linear=self.linear)
         if stable is None:
             return Correction(corr.state, False, corr.iterations, stop_reason=UNSTABLE, outside_domain=True,
                               message=f"the equilibrium at {where} is a saddle ({count} direction(s) of negative "
-                                      "stiffness at the lumen wall's contact) and minimising the potential from "
+                                      "stiffness at the closed lumen's wall) and minimising the potential from "
                                       "it finds no stable state below it")
         self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
                                   "energy_drop": stable.info["energy_drop"]})

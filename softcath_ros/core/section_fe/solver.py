@@ -105,13 +105,18 @@ class LinearSolver:
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
            max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
-           line_search: bool = False, minimise: bool = False) -> Correction:
+           line_search: bool = False, minimise: bool = False, stable_only: bool = False) -> Correction:
     """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
     ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
     ``project(x) -> x`` onto the constraint. ``line_search``: backtrack on the potential too (Armijo),
     not only to stay admissible. ``minimise``: a line search, a tangent shifted towards positive
     definite where the Newton step is not a descent direction, and no test for wandering: the
-    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only)."""
+    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only).
+    ``stable_only``: a minimiser that may not end at a saddle: where the tangent is indefinite (its
+    LDL^T has negative pivots) it steps with the tangent shifted until positive definite, and it
+    converges only where the unshifted tangent is positive definite (slower: ``leave_saddle``).
+    A converged state's ``info["negative_directions"]`` is the last tangent's inertia (qdldl)."""
+    minimise = minimise or stable_only
     line_search = line_search or minimise
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
@@ -130,11 +135,11 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
         # the tangent's inertia: needed by the minimiser at every iteration, else only at the end
-        negative = linear.negative_pivots() if constraint is None and minimise else None
+        negative = linear.negative_pivots() if constraint is None and stable_only else None
         shifted = False
         if constraint is not None:
             dz = constraint.expand(x, dz)
-        elif minimise and negative:
+        elif stable_only and negative:
             # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
             # tangent shifted until positive definite (it descends, and leaves along the negative
             # directions); converged only where the unshifted tangent is positive definite
@@ -301,7 +306,7 @@ def leave_saddle(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray, 
     """The stable state next to the saddle ``x`` (an equilibrium at ``pressures`` / c1 whose tangent
     has negative directions): step off it by ``size`` (largest non-dimensional entry) along its most
     negative direction of curvature (``LinearSolver.negative_curvature_directions``), both ways,
-    minimise the potential from each (``newton(minimise=True)``, which converges only where the
+    minimise the potential from each (``newton(stable_only=True)``, which converges only where the
     tangent is positive definite) and keep the lower-energy state. Returns (Correction or None,
     the saddle's negative directions); None when neither way reaches a stable state below the
     saddle's energy."""
@@ -325,7 +330,7 @@ def leave_saddle(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray, 
         else:
             continue
         corr = newton(problem, trial, pressures, tol=tol, max_iterations=max_iterations, linear=linear,
-                      minimise=True)
+                      stable_only=True)
         if corr.converged and corr.info.get("negative_directions") == 0:
             energy = problem.energy(corr.state, pressures)
             if energy < best_energy:
