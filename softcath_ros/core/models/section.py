@@ -87,6 +87,9 @@ PREDICTOR_CUTS = 3
 # retries a step plain Newton failed
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
+# iterations of the minimiser that leaves a saddle (it steps with shifted tangents until past the
+# indefinite region: 48-49 at D/30 near 0.27 bar)
+ESCAPE_ITERATIONS = 80
 MAX_FAILED_RETRIES = 10    # per continuation
 MAX_SNAP_DROP = 0.3
 
@@ -476,7 +479,7 @@ class SectionModel(BendModel):
         s = self.settings
         if self.problem.fill is None and not self.problem.contact_active(corr.state):
             return corr
-        stable, _ = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=SNAP_ITERATIONS,
+        stable, _ = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=ESCAPE_ITERATIONS,
                                  linear=self.linear)
         if stable is None:
             return Correction(corr.state, False, corr.iterations, stop_reason=UNSTABLE, outside_domain=True,
