@@ -471,16 +471,19 @@ class SectionModel(BendModel):
         """A converged state whose tangent has negative directions is a saddle of the potential, not
         a state the body rests in. Where the lumen wall's contact is active, or the lumen is filled
         (the creased shoulders of a closing lumen make such saddles), it is left for the stable
-        state next to it
-        (``solver.leave_saddle``), and the ramp goes on from there; a saddle it cannot leave is
-        refused (UNSTABLE). Elsewhere (no contact, no fill) it is kept: a state just past a limit point,
-        which the limit-point probe steps back from; ``_evaluate_batch`` never answers with one."""
+        state next to it (``solver.leave_saddle``) and the ramp goes on from there; a saddle it
+        cannot leave stops the ramp (UNSTABLE). Elsewhere (no contact, no fill) it is kept: a state
+        just past a limit point, which the limit-point probe steps back from; ``_evaluate_batch``
+        never answers with one."""
         count = corr.info["negative_directions"]
         s = self.settings
         if self.problem.fill is None and not self.problem.contact_active(corr.state):
             return corr
-        stable, _ = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=ESCAPE_ITERATIONS,
-                                 linear=self.linear)
+        stable, here = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=ESCAPE_ITERATIONS,
+                                    linear=self.linear)
+        if here == 0:          # stable at the state itself (the count was the iterate's before it)
+            corr.info["negative_directions"] = 0
+            return corr
         if stable is None:
             return Correction(corr.state, False, corr.iterations, stop_reason=UNSTABLE, outside_domain=True,
                               message=f"the equilibrium at {where} is a saddle ({count} direction(s) of negative "

@@ -25,6 +25,7 @@ class LinearSolver:
 
     def __init__(self):
         self._ldl = None
+        self._shifted = None          # the factor of shifted tangents (solve_positive_definite)
         try:
             import qdldl  # noqa: F401
             self._have_qdldl = True
@@ -62,30 +63,25 @@ class LinearSolver:
             return None
         return int(np.count_nonzero(self._ldl.factors()[1] < 0))
 
-    def negative_curvature_directions(self) -> np.ndarray:
-        """(m, n): for each negative pivot d_j of the last LDL^T = P K P^T, the direction
-        v = P^T L^-T e_j, with v.K.v = d_j < 0 and v_i.K.v_j = 0 for i != j (so K is negative
-        definite on their span): the ways down from a saddle, most negative pivot first, each
+    def negative_curvature_direction(self) -> np.ndarray:
+        """For the most negative pivot d_j of the last LDL^T = P K P^T, the direction
+        v = P^T L^-T e_j, along which v.K.v = d_j < 0: a way down from a saddle (qdldl only),
         scaled to a largest entry of one."""
         L, d, perm = self._ldl.factors()
         n = len(d)
-        upper = (sp.eye(n, format="csr") + L.T).tocsr()
-        out = []
-        for j in np.flatnonzero(d < 0)[np.argsort(d[d < 0])]:
-            e = np.zeros(n)
-            e[j] = 1.0
-            y = spla.spsolve_triangular(upper, e, lower=False)
-            v = np.empty(n)
-            v[perm] = y
-            out.append(v / np.max(np.abs(v)))
-        return np.array(out).reshape(len(out), n)
+        e = np.zeros(n)
+        e[int(np.argmin(d))] = 1.0
+        y = spla.spsolve_triangular((sp.eye(n, format="csr") + L.T).tocsr(), e, lower=False)
+        v = np.empty(n)
+        v[perm] = y
+        return v / np.max(np.abs(v))
 
     def solve_positive_definite(self, K, rhs: np.ndarray) -> tuple[np.ndarray, float]:
         """(z, sigma): solve (K + sigma I) z = rhs with a shift sigma just large enough that the
         LDL^T has no negative pivot (growing threefold from a third of the last one, or from 1e-6
         of K's largest diagonal entry): the step of a minimiser that may not head for a saddle
         (qdldl only; a second factor of the same pattern)."""
-        if not hasattr(self, "_shifted"):
+        if self._shifted is None:
             self._shifted = LinearSolver()
             rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
             self._diag = np.flatnonzero(rows == K.indices)
@@ -305,18 +301,18 @@ def leave_saddle(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray, 
                  max_iterations: int = 40, linear: LinearSolver | None = None, size: float = 1e-2):
     """The stable state next to the saddle ``x`` (an equilibrium at ``pressures`` / c1 whose tangent
     has negative directions): step off it by ``size`` (largest non-dimensional entry) along its most
-    negative direction of curvature (``LinearSolver.negative_curvature_directions``), both ways,
+    negative direction of curvature (``LinearSolver.negative_curvature_direction``), both ways,
     minimise the potential from each (``newton(stable_only=True)``, which converges only where the
     tangent is positive definite) and keep the lower-energy state. Returns (Correction or None,
-    the saddle's negative directions); None when neither way reaches a stable state below the
-    saddle's energy."""
+    the negative directions at ``x``); None when neither way reaches a stable state below the
+    saddle's energy, or when ``x`` has no negative direction (count 0: it is stable itself)."""
     linear = LinearSolver() if linear is None else linear
     E0, _, K, _ = problem.assemble(x, pressures)
     linear.solve(K, np.zeros(K.shape[0]))
     count = linear.negative_pivots()
     if not count:
         return None, count
-    v = linear.negative_curvature_directions()[0]
+    v = linear.negative_curvature_direction()
     n = problem.n
     best, best_energy = None, E0 - ROUND_OFF * (1.0 + abs(E0))
     for sign in (1.0, -1.0):
