@@ -70,6 +70,11 @@ def test_answers_past_the_saddle_are_stable_states(implemented_design):
     assert model.left_saddles[0]["energy_drop"] > 0
     # measured: 3.5244 mm, against 3.5285 mm at the saddle plain Newton reached
     assert _radius(state.curvature, state.axial_stretch) == pytest.approx(3.5244e-3, rel=2e-4)
+    # asked again (answered from the solved state: its inertia is measured there) and as predict's JSON
+    from softcath_ros.core.prediction import predict
+
+    out = predict(model, np.array([[0.35 * BAR]]))[0].to_json()
+    assert out["converged"] and out["negative_directions"] == 0
 
 
 def test_a_stable_answer_is_untouched(implemented_design, monkeypatch):
