@@ -448,12 +448,17 @@ class SectionModel(BendModel):
         result.points = points
         done = []
         for i, point in zip(todo, result.points):
+            x = point.state
             negative = point.info.get("negative_directions")
             if negative is None and np.any(pressures[i] != 0):    # a command the ramp did not step to
-                negative = unstable_directions(self.problem, point.state, pressures[i] / c_ref)
-            if not negative:     # a saddle (reached without contact: no stable state was looked for)
-                self._remember(pressures[i], point.state)       # is never a start for later commands
-            done.append((i, point.state, point.iterations, int(negative or 0)))
+                negative = unstable_directions(self.problem, x, pressures[i] / c_ref)
+            if negative:
+                # a saddle the ramp kept (no contact, no fill: perhaps past a limit point); as an
+                # answer it is left for the stable state next to it if there is one, else refused
+                x, negative = self._stable_answer(x, pressures[i] / c_ref)
+            if not negative:     # a saddle is never a start for later commands
+                self._remember(pressures[i], x)
+            done.append((i, x, point.iterations, int(negative or 0)))
         if result.converged:
             return done, None, "", None
         failed = todo[len(result.points)]
@@ -494,6 +499,17 @@ class SectionModel(BendModel):
         stable.iterations += corr.iterations
         stable.info["restart_predictor"] = True     # the secant through the saddle's branch would overshoot
         return stable
+
+    def _stable_answer(self, x: np.ndarray, pressures: np.ndarray) -> tuple[np.ndarray, int]:
+        """(state, negative directions) to answer with at the saddle ``x``: the stable state next to
+        it (``solver.leave_saddle``) with 0, or ``x`` itself with its count when there is none."""
+        stable, count = leave_saddle(self.problem, x, pressures, tol=self.settings.tol,
+                                     max_iterations=ESCAPE_ITERATIONS, linear=self.linear)
+        if stable is None:
+            return x, count
+        self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
+                                  "energy_drop": stable.info["energy_drop"]})
+        return stable.state, 0
 
     def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
         """A ramp that failed for no named reason, looked at closer: creep on from its last state
