@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 
-from softcath_ros.core.continuation import LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL
+from softcath_ros.core.continuation import LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, UNSTABLE
 from softcath_ros.core.design import design_from_dict
 from softcath_ros.core.energy import yeoh_convexity_limit, yeoh_derivatives
 from softcath_ros.core.models import make_model
@@ -23,7 +23,7 @@ def _coarse(design_dict, **options):
 def _stopped(state, reason):
     assert not state.converged.any() and np.isnan(state.curvature).all()
     assert f"[stop: {reason}]" in state.message, state.message
-    for other in (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL):
+    for other in (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, UNSTABLE):
         if other != reason:
             assert f"[stop: {other}]" not in state.message
 

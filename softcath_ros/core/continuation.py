@@ -32,8 +32,9 @@ from typing import Any, Callable, Sequence
 LIMIT_POINT = "physical limit point"               # the tangent turns singular: p cannot grow further on this branch
 MATERIAL_RANGE = "material outside its fitted range"  # e.g. a Yeoh set with c3 < 0 past its convexity limit
 OUTSIDE_MODEL = "outside the model's validity"     # e.g. walls touching with contact switched off
+UNSTABLE = "unstable equilibrium"                  # the equilibrium reached is a saddle and no stable state is near
 NUMERICAL_FAILURE = "numerical failure"            # the corrector failed for none of the reasons above
-STOP_REASONS = (LIMIT_POINT, MATERIAL_RANGE, OUTSIDE_MODEL, NUMERICAL_FAILURE)
+STOP_REASONS = (LIMIT_POINT, MATERIAL_RANGE, OUTSIDE_MODEL, UNSTABLE, NUMERICAL_FAILURE)
 _STOP_TAG = re.compile(r"\[stop: ([^\]]+)\]")
 
 
@@ -139,7 +140,8 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             result.iterations += corr.iterations
             if corr.converged:
                 last = corr
-                prev = (t, state)
+                # a corrector that jumped to another branch (info "restart_predictor") restarts the secant
+                prev = None if corr.info.get("restart_predictor") else (t, state)
                 result.previous = prev
                 t, state = (target if t_new >= target else t_new), corr.state
                 result.steps += 1

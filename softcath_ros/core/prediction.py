@@ -26,6 +26,8 @@ class Prediction:
     reason: str = ""
     contact_force_n: float | None = None   # the tip's contact reaction, for rungs that model contact
     band95: dict | None = None   # 95% half-widths from a calibration's covariance (core/calibration_file.py)
+    negative_directions: int | None = None   # the tangent's negative eigenvalues at the solved state (section
+                                             # rung: 0, a stable state; a saddle is refused); None: not measured
 
     def to_json(self) -> dict:
         d = dict(self.__dict__)
@@ -39,6 +41,8 @@ class Prediction:
             d.pop("contact_force_n")
         if d["band95"] is None:
             d.pop("band95")
+        if d["negative_directions"] is None:   # only rungs that check stability report it
+            d.pop("negative_directions")
         return d
 
 
@@ -62,6 +66,7 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             pos, quat = tip_pose(state.curvature, arc)
             angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.contact_force
+    negative = None if state.diagnostics is None else state.diagnostics.negative_directions
     # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
     measured_rc = state.radius_l_over_theta if own_length else None
     out = []
@@ -86,7 +91,8 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             converged=converged,
             solve_time_s=elapsed,
             reason=reason,
-            contact_force_n=None if contact is None else float(np.asarray(contact)[i])))
+            contact_force_n=None if contact is None else float(np.asarray(contact)[i]),
+            negative_directions=None if negative is None or negative[i] < 0 else int(negative[i])))
     return out
 
 

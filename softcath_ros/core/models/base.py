@@ -75,6 +75,8 @@ class SolverDiagnostics:
     channel_area: np.ndarray | None = None        # (..., C) m^2: section rung's cross-section, fe3d's mid-length
     channel_volume: np.ndarray | None = None      # (..., C) m^3 (fe3d)
     time_s: np.ndarray | None = None              # (...) wall time of the solve at each command (fe3d)
+    negative_directions: np.ndarray | None = None  # (...) int: the tangent's negative eigenvalues at the state
+                                                   # reached (section; 0: stable, > 0: a saddle, refused; -1: none)
     mesh_nodes: int | None = None
     mesh_size: float | None = None                # m
     cached: bool = False                          # the whole batch came from the disk cache
@@ -115,7 +117,8 @@ class BendState:
         if self.diagnostics is not None:
             d = self.diagnostics
             diag = replace(d, newton_iterations=at(d.newton_iterations), channel_area=at(d.channel_area),
-                           channel_volume=at(d.channel_volume), time_s=at(d.time_s))
+                           channel_volume=at(d.channel_volume), time_s=at(d.time_s),
+                           negative_directions=at(d.negative_directions))
         return replace(self, curvature=self.curvature[i], axial_stretch=self.axial_stretch[i],
                        converged=self.converged[i], tip=tip, backbone=at(self.backbone),
                        contact_force=at(self.contact_force), radius_l_over_theta=at(self.radius_l_over_theta),

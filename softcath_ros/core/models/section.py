@@ -26,14 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from ..cache import CacheStore, store_for
-from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, ArcControl, Correction,
-                            RampPoint, RampResult, StepControl, arc_length, ramp, stop_tag)
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, UNSTABLE, ArcControl,
+                            Correction, RampPoint, RampResult, StepControl, arc_length, ramp, stop_tag)
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.mesh import Circle, mesh_section
 from ..section_fe.problem import SectionProblem
-from ..section_fe.solver import LinearSolver, PathStep, newton, unstable_directions
+from ..section_fe.solver import LinearSolver, PathStep, leave_saddle, newton, unstable_directions
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
 from ..units import PA_PER_BAR
@@ -87,12 +87,15 @@ PREDICTOR_CUTS = 3
 # retries a step plain Newton failed
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
+# iterations of the minimiser that leaves a saddle (it steps with shifted tangents until past the
+# indefinite region: 48-49 at D/30 near 0.27 bar)
+ESCAPE_ITERATIONS = 80
 MAX_FAILED_RETRIES = 10    # per continuation
 MAX_SNAP_DROP = 0.3
 
 # what a cached batch holds (an entry without one of them is solved again)
 _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel_area", "newton_iterations",
-                  "last_converged")
+                  "negative_directions", "last_converged")
 
 
 def _ray_order(pressures: np.ndarray) -> list[int]:
@@ -110,7 +113,7 @@ def _ray_order(pressures: np.ndarray) -> list[int]:
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-5"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame)
+    solver_version = "section-6"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -180,6 +183,9 @@ class SectionModel(BendModel):
         # numerical failures of the continuation (no limit point near) it passed by minimising the
         # potential at the next pressure from the last converged state (a stable state found there)
         self.bridged_failures: list[dict] = []
+        # saddles the continuation reached and left for the stable state next to them (pressure Pa,
+        # negative directions, the potential's drop in units of c1 R^2)
+        self.left_saddles: list[dict] = []
 
     # ------------------------------------------------------------------ identity
     def _cache_parts(self, pressures: np.ndarray) -> dict:
@@ -202,6 +208,8 @@ class SectionModel(BendModel):
         converged = np.zeros(n, dtype=bool)
         area = np.full((n, c), np.nan)
         iterations = np.zeros(n, dtype=int)
+        negative_directions = np.full(n, -1)     # -1: not reached
+        refused: set[int] = set()
         messages: list[str] = []
         last_converged: list[dict | None] = [None] * n
         todo = _ray_order(pressures)
@@ -221,22 +229,31 @@ class SectionModel(BendModel):
                     retry, failed_again, msg, last = self._solve_path(pressures, [failed], origin)
                     done += retry
                     failed = failed_again
-                for i, x, its in done:
+                for i, x, its, negative in done:
+                    iterations[i] = its
+                    negative_directions[i] = negative
+                    if negative:
+                        # an equilibrium, but a saddle: never answered as a state of the body
+                        refused.add(i)
+                        messages.append(self._failure_message(
+                            pressures[i], f"reaches a saddle of the potential ({negative} direction(s) of negative "
+                                          f"stiffness) {stop_tag(UNSTABLE)}"))
+                        continue
                     curvature[i], stretch[i], area[i] = self._outputs(x)
                     converged[i] = True
-                    iterations[i] = its
                 if bar is not None:
                     bar.update(len(done) + (failed is not None))
                 if failed is not None:
                     messages.append(msg)
                     last_converged[failed] = last
-                todo = [i for i in todo if i != failed and not converged[i]]
+                todo = [i for i in todo if i != failed and not converged[i] and i not in refused]
         finally:
             if bar is not None:
                 bar.close()
         state = BendState(curvature=curvature, axial_stretch=stretch, converged=converged,
                           message="; ".join(messages), last_converged=last_converged,
                           diagnostics=SolverDiagnostics(newton_iterations=iterations, channel_area=area,
+                                                        negative_directions=negative_directions,
                                                         mesh_nodes=self.mesh.n_nodes, mesh_size=self.mesh.h))
         if self.store is not None:
             self._save_cached(pressures, state)
@@ -319,6 +336,10 @@ class SectionModel(BendModel):
                 retry.iterations += corr.iterations
                 failed_retries[0] += not retry.converged
                 corr = retry if retry.converged else corr
+            if corr.converged and not minimise and corr.info.get("negative_directions"):
+                corr = self._leave_saddle(corr, pressure_at(t) / c_ref, describe(t))
+            if not corr.converged and corr.stop_reason == UNSTABLE:
+                return corr
             if not corr.converged:
                 # say how close the holes were to closing: failures cluster just before contact
                 gaps = self.problem.hole_gaps(previous)
@@ -440,8 +461,17 @@ class SectionModel(BendModel):
         result.points = points
         done = []
         for i, point in zip(todo, result.points):
-            self._remember(pressures[i], point.state)
-            done.append((i, point.state, point.iterations))
+            x = point.state
+            negative = point.info.get("negative_directions")
+            if negative is None and np.any(pressures[i] != 0):    # a command the ramp did not step to
+                negative = unstable_directions(self.problem, x, pressures[i] / c_ref)
+            if negative:
+                # a saddle the ramp kept (no contact, no fill: perhaps past a limit point); as an
+                # answer it is left for the stable state next to it if there is one, else refused
+                x, negative = self._stable_answer(x, pressures[i] / c_ref)
+            if not negative:     # a saddle is never a start for later commands
+                self._remember(pressures[i], x)
+            done.append((i, x, point.iterations, int(negative or 0)))
         if result.converged:
             return done, None, "", None
         failed = todo[len(result.points)]
@@ -454,6 +484,45 @@ class SectionModel(BendModel):
         why = f"{result.message} {stop_tag(result.stop_reason)}"
         self._failures.append((tuple(float(v) for v in last_p), failing_p, why, last))
         return done, failed, self._failure_message(pressures[failed], why), last
+
+    def _leave_saddle(self, corr: Correction, pressures: np.ndarray, where: str) -> Correction:
+        """A converged state whose tangent has negative directions is a saddle of the potential, not
+        a state the body rests in. Where the lumen wall's contact is active, or the lumen is filled
+        (the creased shoulders of a closing lumen make such saddles), it is left for the stable
+        state next to it (``solver.leave_saddle``) and the ramp goes on from there; a saddle it
+        cannot leave stops the ramp (UNSTABLE). Elsewhere (no contact, no fill) it is kept: a state
+        just past a limit point, which the limit-point probe steps back from; ``_evaluate_batch``
+        never answers with one."""
+        count = corr.info["negative_directions"]
+        s = self.settings
+        if self.problem.fill is None and not self.problem.contact_active(corr.state):
+            return corr
+        stable, here = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=ESCAPE_ITERATIONS,
+                                    linear=self.linear)
+        if here == 0:          # stable at the state itself (the count was the iterate's before it)
+            corr.info["negative_directions"] = 0
+            return corr
+        if stable is None:
+            return Correction(corr.state, False, corr.iterations, stop_reason=UNSTABLE, outside_domain=True,
+                              message=f"the equilibrium at {where} is a saddle ({count} direction(s) of negative "
+                                      "stiffness at the closed lumen's wall) and minimising the potential from "
+                                      "it finds no stable state below it")
+        self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
+                                  "energy_drop": stable.info["energy_drop"]})
+        stable.iterations += corr.iterations
+        stable.info["restart_predictor"] = True     # the secant through the saddle's branch would overshoot
+        return stable
+
+    def _stable_answer(self, x: np.ndarray, pressures: np.ndarray) -> tuple[np.ndarray, int]:
+        """(state, negative directions) to answer with at the saddle ``x``: the stable state next to
+        it (``solver.leave_saddle``) with 0, or ``x`` itself with its count when there is none."""
+        stable, count = leave_saddle(self.problem, x, pressures, tol=self.settings.tol,
+                                     max_iterations=ESCAPE_ITERATIONS, linear=self.linear)
+        if stable is None:
+            return x, count
+        self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
+                                  "energy_drop": stable.info["energy_drop"]})
+        return stable.state, 0
 
     def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
         """A ramp that failed for no named reason, looked at closer: creep on from its last state
@@ -579,7 +648,9 @@ class SectionModel(BendModel):
                          converged=z["converged"], message=str(z["message"]),
                          last_converged=json.loads(str(z["last_converged"])),
                          diagnostics=SolverDiagnostics(newton_iterations=z["newton_iterations"],
-                                                       channel_area=z["channel_area"], mesh_nodes=self.mesh.n_nodes,
+                                                       channel_area=z["channel_area"],
+                                                       negative_directions=z["negative_directions"],
+                                                       mesh_nodes=self.mesh.n_nodes,
                                                        mesh_size=self.mesh.h, cached=True))
 
     def _save_cached(self, pressures, state: BendState) -> None:
@@ -587,6 +658,7 @@ class SectionModel(BendModel):
             curvature=state.curvature, axial_stretch=state.axial_stretch, converged=state.converged,
             message=np.array(state.message), channel_area=state.diagnostics.channel_area,
             newton_iterations=state.diagnostics.newton_iterations,
+            negative_directions=state.diagnostics.negative_directions,
             last_converged=np.array(json.dumps(state.last_converged))), self.design.name)
 
 

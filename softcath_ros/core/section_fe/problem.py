@@ -318,6 +318,11 @@ class SectionProblem:
         negative if a wall polygon crosses itself)."""
         return min((w.min_gap(x) * self.R for _, w in self.contact), default=np.inf)
 
+    def contact_active(self, x) -> bool:
+        """Some wall point is within the contact barrier's distance of the wall (or the device's)."""
+        return (any(w.energy(x, None) > 0 for _, w in self.contact)
+                or (self.device is not None and bool(np.any(self.device.gaps(x) < self.device.d_hat))))
+
     def device_min_gap(self, x) -> float:
         """The smallest distance (m) between the lumen wall and the device (inf without one)."""
         return np.inf if self.device is None else float(self.device.gaps(x).min() * self.R)

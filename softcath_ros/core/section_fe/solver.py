@@ -25,6 +25,7 @@ class LinearSolver:
 
     def __init__(self):
         self._ldl = None
+        self._shifted = None          # the factor of shifted tangents (solve_positive_definite)
         try:
             import qdldl  # noqa: F401
             self._have_qdldl = True
@@ -55,16 +56,63 @@ class LinearSolver:
         return spla.splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                          options={"SymmetricMode": True}).solve(rhs)
 
+    def negative_pivots(self) -> int | None:
+        """The last factorised matrix's negative eigenvalues, counted as the negative pivots of its
+        LDL^T (Sylvester's law of inertia); None without qdldl (SuperLU's LU does not tell)."""
+        if not self._have_qdldl or self._ldl is None:
+            return None
+        return int(np.count_nonzero(self._ldl.factors()[1] < 0))
+
+    def negative_curvature_direction(self) -> np.ndarray:
+        """For the most negative pivot d_j of the last LDL^T = P K P^T, the direction
+        v = P^T L^-T e_j, along which v.K.v = d_j < 0: a way down from a saddle (qdldl only),
+        scaled to a largest entry of one."""
+        L, d, perm = self._ldl.factors()
+        n = len(d)
+        e = np.zeros(n)
+        e[int(np.argmin(d))] = 1.0
+        y = spla.spsolve_triangular((sp.eye(n, format="csr") + L.T).tocsr(), e, lower=False)
+        v = np.empty(n)
+        v[perm] = y
+        return v / np.max(np.abs(v))
+
+    def solve_positive_definite(self, K, rhs: np.ndarray) -> tuple[np.ndarray, float]:
+        """(z, sigma): solve (K + sigma I) z = rhs with a shift sigma just large enough that the
+        LDL^T has no negative pivot (growing threefold from a third of the last one, or from 1e-6
+        of K's largest diagonal entry): the step of a minimiser that may not head for a saddle
+        (qdldl only; a second factor of the same pattern)."""
+        if self._shifted is None:
+            self._shifted = LinearSolver()
+            rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
+            self._diag = np.flatnonzero(rows == K.indices)
+            self._sigma = None
+        scale = float(np.max(np.abs(K.data[self._diag])))
+        sigma = 1e-6 * scale if self._sigma is None else max(self._sigma / 3, 1e-9 * scale)
+        for _ in range(24):
+            data = K.data.copy()
+            data[self._diag] += sigma
+            z = self._shifted.solve(K.__class__((data, K.indices, K.indptr), shape=K.shape), rhs)
+            if self._shifted.negative_pivots() == 0 and np.all(np.isfinite(z)):
+                self._sigma = sigma
+                return z, sigma
+            sigma *= 3
+        return rhs / scale, scale
+
 
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
            max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
-           line_search: bool = False, minimise: bool = False) -> Correction:
+           line_search: bool = False, minimise: bool = False, stable_only: bool = False) -> Correction:
     """``constraint`` (optional) fixes some unknowns as functions of the others (``moment.HeldSection``):
     ``reduce(x, g, K) -> (g, K)`` in the free unknowns, ``expand(x, dz) -> dz`` for the full step, and
     ``project(x) -> x`` onto the constraint. ``line_search``: backtrack on the potential too (Armijo),
     not only to stay admissible. ``minimise``: a line search, a tangent shifted towards positive
     definite where the Newton step is not a descent direction, and no test for wandering: the
-    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only)."""
+    potential's minimiser, which finds the stable state a snap lands in (slow: use it there only).
+    ``stable_only``: a minimiser that may not end at a saddle: where the tangent is indefinite (its
+    LDL^T has negative pivots) it steps with the tangent shifted until positive definite, and it
+    converges only where the unshifted tangent is positive definite (slower: ``leave_saddle``).
+    A converged state's ``info["negative_directions"]`` is the last tangent's inertia (qdldl)."""
+    minimise = minimise or stable_only
     line_search = line_search or minimise
     linear = LinearSolver() if linear is None else linear
     x = x0.copy()
@@ -82,8 +130,17 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
             dz = linear.solve(K, -g)
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
+        # the tangent's inertia: needed by the minimiser at every iteration, else only at the end
+        negative = linear.negative_pivots() if constraint is None and stable_only else None
+        shifted = False
         if constraint is not None:
             dz = constraint.expand(x, dz)
+        elif stable_only and negative:
+            # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
+            # tangent shifted until positive definite (it descends, and leaves along the negative
+            # directions); converged only where the unshifted tangent is positive definite
+            dz, _ = linear.solve_positive_definite(K, -g)
+            shifted = True
         elif minimise and float(g @ dz) >= 0:
             dz = _descent_direction(K, g)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
@@ -119,8 +176,11 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         x = trial
         # Converged when the step is below tol, or below 100 tol while shrinking 20-fold per
         # iteration (quadratic convergence observed): what is left is then below ~5 tol.
-        if alpha == 1.0 and (step < tol or (steps and step < 100 * tol and step < 0.05 * steps[-1])):
-            return Correction(x, True, it)
+        if alpha == 1.0 and not shifted and (step < tol or (steps and step < 100 * tol and step < 0.05 * steps[-1])):
+            # the inertia of the last tangent (a step below tol before x): 0 at a stable state
+            if constraint is None and negative is None:
+                negative = linear.negative_pivots()
+            return Correction(x, True, it, info={} if negative is None else {"negative_directions": negative})
         # Newton converges quadratically near a solution; a step that has not halved in two
         # iterations after the fourth means it is wandering (a limit point or a bifurcation).
         steps.append(step)
@@ -139,7 +199,7 @@ def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.nd
     if not linear._have_qdldl:
         return int(problem.smallest_tangent_eigenvalue(x, pressures) < 0)
     linear.solve(K, np.zeros(K.shape[0]))
-    return int(np.count_nonzero(linear._ldl.factors()[1] < 0))
+    return linear.negative_pivots()
 
 
 def _descent_direction(K, g) -> np.ndarray:
@@ -235,3 +295,42 @@ class PathStep:
                 self.tangent = (tx, tm)
                 return Correction(x, True, it, info={"load": mu})
         return Correction(x0, False, self.max_iterations, "no convergence on the arc")
+
+
+def leave_saddle(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
+                 max_iterations: int = 40, linear: LinearSolver | None = None, size: float = 1e-2):
+    """The stable state next to the saddle ``x`` (an equilibrium at ``pressures`` / c1 whose tangent
+    has negative directions): step off it by ``size`` (largest non-dimensional entry) along its most
+    negative direction of curvature (``LinearSolver.negative_curvature_direction``), both ways,
+    minimise the potential from each (``newton(stable_only=True)``, which converges only where the
+    tangent is positive definite) and keep the lower-energy state. Returns (Correction or None,
+    the negative directions at ``x``); None when neither way reaches a stable state below the
+    saddle's energy, or when ``x`` has no negative direction (count 0: it is stable itself)."""
+    linear = LinearSolver() if linear is None else linear
+    E0, _, K, _ = problem.assemble(x, pressures)
+    linear.solve(K, np.zeros(K.shape[0]))
+    count = linear.negative_pivots()
+    if not count:
+        return None, count
+    v = linear.negative_curvature_direction()
+    n = problem.n
+    best, best_energy = None, E0 - ROUND_OFF * (1.0 + abs(E0))
+    for sign in (1.0, -1.0):
+        a = size
+        for _ in range(12):          # stay admissible (walls apart, no inverted element)
+            trial = x.copy()
+            trial[:n] += sign * a * v
+            if np.isfinite(problem.energy(trial, pressures)):
+                break
+            a *= 0.5
+        else:
+            continue
+        corr = newton(problem, trial, pressures, tol=tol, max_iterations=max_iterations, linear=linear,
+                      stable_only=True)
+        if corr.converged and corr.info.get("negative_directions") == 0:
+            energy = problem.energy(corr.state, pressures)
+            if energy < best_energy:
+                best, best_energy = corr, energy
+    if best is not None:
+        best.info.update({"left_saddle": count, "energy_drop": float(E0 - best_energy)})
+    return best, count
