@@ -25,7 +25,8 @@ def register(sub) -> None:
     p.add_argument("--pressure", required=True, nargs="+",
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
-    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's); the rod is solved at this length, "
+                   "fe3d refuses another (give a design file)")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
     p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
     p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")

@@ -21,6 +21,7 @@ scaled design. The safety limit stays the design's ``max_pressure`` on the comma
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import math
 from dataclasses import asdict, dataclass, replace
@@ -278,6 +279,16 @@ class CalibratedModel(BendModel):
         if self.factor > 0:
             lo, hi = lo / self.factor, hi / self.factor
         return lo, min(hi, float(self.design.max_pressure))
+
+    def at_length(self, length: float) -> BendModel:
+        """The calibrated rung for a body of actuated length ``length`` (m): ``inner`` at that length."""
+        inner = self.inner.at_length(length)
+        if inner is self.inner:
+            return self
+        other = copy.copy(self)
+        other.inner = inner
+        other.design = self.design.with_length(length)
+        return other
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
         return self.inner.evaluate(pressures * self.factor)

@@ -12,6 +12,7 @@ constructor takes. Callers read that declaration (or the registry's ``rung_info`
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -35,6 +36,8 @@ class RungInfo:
                                      # where it refuses (the surrogate's pair tables; the allocator's Newton)
     solves_backbone: bool = False    # its own backbone and tip pose (BendState.backbone, .tip) replace the arc's,
                                      # and it answers ``solve(pressure, length, loads)`` (planar loads)
+    depends_on_length: bool = False  # its answers are of a body of the design's length (end effects, a solved
+                                     # backbone), not per section: another length is another body (``at_length``)
     options: tuple[Option, ...] = ()
     more_options: str = ""           # where options not listed go (e.g. "passed to the source rung"); "" = refused
     needs: str = ""                  # optional dependency ("fe" extra), "" = none
@@ -169,6 +172,16 @@ class BendModel:
         """Largest principal stretch in the silicone at a solved command (Pa), for rungs that resolve
         the section's strain field; None for the others."""
         return None
+
+    def at_length(self, length: float) -> "BendModel":
+        """This rung for a body of actuated length ``length`` (m). A rung answering per section
+        (``info.depends_on_length`` False) is itself: its arc is laid out at that length. A rung that
+        solves a body of the design's length refuses another unless it overrides this (the rod does)."""
+        if not self.info.depends_on_length or math.isclose(length, self.design.length, rel_tol=1e-12):
+            return self
+        raise ModelError(f"model '{self.name}' solves a body of design '{self.design.name}''s length "
+                         f"({self.design.length * 1e3:.4g} mm), not {length * 1e3:.4g} mm: give a design file "
+                         f"with length: {length:.6g}")
 
 
 def lumen_fill_fraction(value, rung: str) -> float | None:

@@ -20,6 +20,7 @@ the reason.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 
@@ -48,6 +49,7 @@ class RodModel(BendModel):
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
+        depends_on_length=True,
         options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
                  Option("loads", "object", "a Loads (tip force, gravity, contact); or the three below"),
                  Option("tip_force", "object", "[fx, fy, fz] N in softcath_base"),
@@ -102,6 +104,16 @@ class RodModel(BendModel):
             self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
         self.weight_per_length = design.material.density * section.silicone_area
         self.planar = self._planar_loads(self.loads)
+
+    def at_length(self, length: float) -> "RodModel":
+        """The rod of actuated length ``length`` (m): the same law (it depends on the section only)
+        and loads; a contact plane at the rest tip moves to this length's rest tip."""
+        if math.isclose(length, self.design.length, rel_tol=1e-12):
+            return self
+        other = copy.copy(self)
+        other.design = self.design.with_length(length)
+        other.planar = other._planar_loads(other.loads)
+        return other
 
     # ------------------------------------------------------------------ loads in the bending plane
     def _in_plane(self, v, what: str) -> tuple[float, float]:
