@@ -165,12 +165,12 @@ def test_predict_at_another_length_reports_the_rod_solved_at_that_length(loads):
             assert np.linalg.norm(np.subtract(arc.tip_position_m, r.tip_position_m)) > 1e-5
 
 
-def test_length_on_rungs_that_solve_a_body_of_the_designs_length():
+def test_length_on_rungs_that_solve_a_body_of_the_designs_length(monkeypatch):
     """A rung answering per section (closed form) lays its arc out at any length; one that solves a body
-    of the design's length (fe3d, a surrogate tabulating it) refuses another in one line."""
+    of the design's length (fe3d, a surrogate tabulating it) is built again for the other length with
+    the options it was made with; built directly, without them, it refuses in one line."""
     from softcath_ros.core.errors import ModelError
-    from softcath_ros.core.models.closed_form import ClosedFormModel
-    from softcath_ros.core.models.base import RungInfo
+    from softcath_ros.core.models import RUNGS, rung_info
     from softcath_ros.core.prediction import predict
 
     design = load_design("implemented_5mm")
@@ -180,15 +180,35 @@ def test_length_on_rungs_that_solve_a_body_of_the_designs_length():
     (b,) = predict(make_model("closed_form", design.with_length(0.02)), np.array([[20000.0]]))
     np.testing.assert_allclose(a.tip_position_m, b.tip_position_m, atol=1e-15)
 
-    class WholeBody(ClosedFormModel):
-        info = RungInfo(summary="stand-in for a rung solving a body of the design's length", depends_on_length=True)
-
-    body = WholeBody(design)
-    assert predict(body, np.array([[20000.0]]), 0.04)[0].converged    # its own length: answered
+    monkeypatch.setitem(RUNGS, "whole_body", "test_cli_predict:WholeBody")
+    body = make_model("whole_body", design, tip_gain=2.0)
+    assert body.at_length(0.04) is body
+    short = body.at_length(0.02)
+    assert short.design.length == 0.02 and short.tip_gain == 2.0 and body.design.length == 0.04
+    (r,) = predict(body, np.array([[20000.0]]), 0.02)
+    assert r.tip_position_m == pytest.approx(predict(short, np.array([[20000.0]]))[0].tip_position_m, abs=1e-15)
     with pytest.raises(ModelError, match="solves a body of design 'implemented_5mm''s length") as exc:
-        predict(body, np.array([[20000.0]]), 0.02)
+        predict(WholeBody(design), np.array([[20000.0]]), 0.02)
     assert "\n" not in str(exc.value)
-    from softcath_ros.core.models import rung_info
-
     assert rung_info("fe3d").depends_on_length and rung_info("rod").depends_on_length
     assert not rung_info("section").depends_on_length and not rung_info("closed_form").depends_on_length
+
+
+def _whole_body_class():
+    from softcath_ros.core.models.base import RungInfo
+    from softcath_ros.core.models.closed_form import ClosedFormModel
+
+    class WholeBody(ClosedFormModel):
+        """Stand-in for a rung solving a body of the design's length (fe3d without NGSolve)."""
+
+        name = "whole_body"
+        info = RungInfo(summary="stand-in", depends_on_length=True)
+
+        def __init__(self, design, tip_gain: float = 1.0):
+            super().__init__(design)
+            self.tip_gain = tip_gain
+
+    return WholeBody
+
+
+WholeBody = _whole_body_class()

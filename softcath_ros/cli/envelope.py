@@ -47,6 +47,11 @@ def run(args) -> int:
     unknown = [s for s in (args.settings or []) if s not in known_settings]
     if unknown:
         raise SoftcathError(f"--settings: unknown {unknown}; known: {list(known_settings)}")
+    from ..core.models import RUNGS
+
+    unknown = [r for r in (args.refresh or []) if r not in RUNGS and r != "all"]
+    if unknown:
+        raise SoftcathError(f"--refresh: unknown rung(s) {unknown}; known: {sorted(RUNGS)}")
     out = Path(args.out)
     if not out.parent.is_dir():
         raise SoftcathError(f"--out {out}: folder {out.parent} does not exist")

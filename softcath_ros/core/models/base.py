@@ -132,6 +132,7 @@ class BendModel:
     info = RungInfo(summary="abstract rung")
     built_now = False   # True when the constructor built a table the cache did not hold (surrogate)
     solver_version: str | None = None   # bumped when the rung's answers change: part of every cache key
+    made_with: dict | None = None       # the options make_model built it with (what ``at_length`` rebuilds with)
 
     def __init__(self, design: Design):
         self.design = design
@@ -175,13 +176,18 @@ class BendModel:
 
     def at_length(self, length: float) -> "BendModel":
         """This rung for a body of actuated length ``length`` (m). A rung answering per section
-        (``info.depends_on_length`` False) is itself: its arc is laid out at that length. A rung that
-        solves a body of the design's length refuses another unless it overrides this (the rod does)."""
+        (``info.depends_on_length`` False) is itself: its arc is laid out at that length. One that
+        solves a body of the design's length is built again for that length with the options
+        ``make_model`` built it with (a rung constructed directly, without them, refuses)."""
         if not self.info.depends_on_length or math.isclose(length, self.design.length, rel_tol=1e-12):
             return self
-        raise ModelError(f"model '{self.name}' solves a body of design '{self.design.name}''s length "
-                         f"({self.design.length * 1e3:.4g} mm), not {length * 1e3:.4g} mm: give a design file "
-                         f"with length: {length:.6g}")
+        if self.made_with is None:
+            raise ModelError(f"model '{self.name}' solves a body of design '{self.design.name}''s length "
+                             f"({self.design.length * 1e3:.4g} mm), not {length * 1e3:.4g} mm: build it for a "
+                             f"design of length {length:.6g} m")
+        from . import make_model
+
+        return make_model(self.name, self.design.with_length(length), **self.made_with)
 
 
 def lumen_fill_fraction(value, rung: str) -> float | None:

@@ -39,6 +39,7 @@ from ..units import PA_PER_BAR
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 _PLANE_TOL = 1e-9
+MIN_SEGMENTS, MAX_SEGMENTS = 4, 1000   # a dense Newton per solve: its memory and time grow as n^2 and n^3
 # Pa: the pressure ramp of a body in contact (steps of at most half the law's table step, cut to 1/16 of it)
 CONTACT_STEPS = StepControl(initial_step=1250.0, max_step=1250.0, min_step=1250.0 / 16)
 
@@ -55,7 +56,7 @@ class RodModel(BendModel):
                  Option("tip_force", "object", "[fx, fy, fz] N in softcath_base"),
                  Option("gravity", "object", "[gx, gy, gz] m/s^2 in softcath_base"),
                  Option("contact", "object", "a TipPlaneContact"),
-                 Option("n_segments", "int", "rod segments (at least 4)"),
+                 Option("n_segments", "int", "rod segments (4 to 1000)"),
                  Option("grid", "object", "LawGrid: where the section law is tabulated"),
                  Option("cache", "object", "True (the project cache), a cache root directory, or False: "
                                            "where the section law is kept"),
@@ -76,8 +77,8 @@ class RodModel(BendModel):
         self.loads = loads if loads is not None else Loads(
             tip_force=None if tip_force is None else tuple(float(v) for v in tip_force),
             gravity=None if gravity is None else tuple(float(v) for v in gravity), contact=contact)
-        if n_segments < 4:
-            raise ModelError(f"model 'rod': n_segments {n_segments} must be at least 4")
+        if not MIN_SEGMENTS <= n_segments <= MAX_SEGMENTS:
+            raise ModelError(f"model 'rod': n_segments {n_segments} must lie in [{MIN_SEGMENTS}, {MAX_SEGMENTS}]")
         self.n_segments = int(n_segments)
         body = replace(design, device=None)
         section = transformed_section(body)

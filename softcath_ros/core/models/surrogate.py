@@ -152,9 +152,9 @@ class SurrogateModel(BendModel):
             raise ModelError(f"model 'surrogate': {exc}; settings: {list(SurrogateSettings.__annotations__)}") from None
         if self.settings.source == "surrogate":
             raise ModelError("model 'surrogate': source 'surrogate' would tabulate itself")
-        from . import RUNGS, rung_info
+        from . import rung_info
 
-        if self.settings.source in RUNGS and rung_info(self.settings.source).depends_on_length:
+        if rung_info(self.settings.source).depends_on_length:   # an unknown source: refused here, before a build
             # a table of a body of the design's length (fe3d, rod): another length is another table
             self.info = replace(self.info, depends_on_length=True)
         if self.settings.pairs not in ("auto", "each", "rotated"):
