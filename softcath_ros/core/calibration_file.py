@@ -198,6 +198,10 @@ def calibration_from_dict(data, source: str = "calibration") -> Calibration:
                   "modulus): re-run softcath calibrate on its recording")
     if out.get("schema", SCHEMA_VERSION) != SCHEMA_VERSION:
         raise bad("schema", out["schema"], f"this softcath reads schema {SCHEMA_VERSION}")
+    from .models import RUNGS
+
+    if out["rung"] not in RUNGS:
+        raise bad("rung", out["rung"], f"not a rung of this softcath; rungs: {sorted(RUNGS)}")
     if not SHIFT_RANGE[0] <= out["pressure_shift"] <= SHIFT_RANGE[1]:
         raise bad("pressure_shift", out["pressure_shift"], f"must lie in {list(SHIFT_RANGE)}")
     if not SCALE_RANGE[0] <= out["material_scale"] <= SCALE_RANGE[1]:
@@ -222,6 +226,8 @@ def load_calibration(path) -> Calibration:
     from .yaml_io import load_yaml_file
 
     source = f"calibration {path}"
+    if Path(path).is_dir():
+        raise CalibrationError(f"{source}: a folder, not a calibration file")
     if not Path(path).is_file():
         raise CalibrationError(f"{source}: no such file")
     return calibration_from_dict(load_yaml_file(path, source), source=source)
