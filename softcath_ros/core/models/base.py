@@ -185,9 +185,9 @@ class BendModel:
             raise ModelError(f"model '{self.name}' solves a body of design '{self.design.name}''s length "
                              f"({self.design.length * 1e3:.4g} mm), not {length * 1e3:.4g} mm: build it for a "
                              f"design of length {length:.6g} m")
-        from . import make_model
-
-        return make_model(self.name, self.design.with_length(length), **self.made_with)
+        other = type(self)(self.design.with_length(length), **self.made_with)
+        other.made_with = dict(self.made_with)
+        return other
 
 
 def lumen_fill_fraction(value, rung: str) -> float | None:
