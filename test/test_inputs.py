@@ -195,6 +195,13 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
            "n_residuals": 2, "recording": "r.mcap", "recording_sha256": "0", "date": "2026-12-01", "schema": 2}
     bad_rung = tmp_path / "bad_rung.calibration.yaml"
     bad_rung.write_text(yaml.safe_dump(cal))
+    from softcath_ros.core.yaml_io import load_yaml_file
+    from softcath_ros.resources import find
+
+    quick = load_yaml_file(find("protocol", "quick"))
+    above, in_bar = tmp_path / "above.yaml", tmp_path / "in_bar.yaml"
+    above.write_text(yaml.safe_dump({**quick, "staircase": {"max": 60000.0, "step": 10000.0}}))
+    in_bar.write_text(yaml.safe_dump({**quick, "staircase": {"levels": [0.0, 0.1, 0.2, 0.3]}}))
     predict = ["predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "1000"]
     out = tmp_path / "out"
     cases = [
@@ -216,6 +223,8 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
         (["characterise", "--sim-model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
         (["characterise", "--wait-timeout", "-1", "--output-dir", str(out)], "must lie in [0.1, 3600]"),
         (["characterise", "--timeout", "nan", "--output-dir", str(out)], "must be a finite number"),
+        (["characterise", "--protocol", str(above), "--output-dir", str(out)], "outside [0, max_pressure 50000]"),
+        (["characterise", "--protocol", str(in_bar), "--output-dir", str(out)], "0.3 Pa is implausible"),
         (["envelope", "--refresh", "bogus", "--out", str(out / "e.yaml")], "--refresh: unknown rung(s) ['bogus']"),
         (["import", str(binary), "--output-dir", str(out)], "not a CSV text file (not UTF-8 at byte 0)"),
         (["chart", "--csv", str(binary)], "not a CSV text file"),
