@@ -55,6 +55,10 @@ def run(args) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise SoftcathError(f"--out {out}: folder {out.parent} does not exist")
+    if out.is_dir():
+        raise SoftcathError(f"--out {out}: a folder; name the envelope file")
+    if args.results and not Path(args.results).parent.is_dir():
+        raise SoftcathError(f"--results {args.results}: folder {Path(args.results).parent} does not exist")
     cases = [known_cases[c] for c in args.cases] if args.cases else CASES
     settings = [known_settings[s] for s in args.settings] if args.settings else SETTINGS
     refresh = ("all",) if args.no_cache else () if args.refresh is None else tuple(args.refresh or ["all"])
