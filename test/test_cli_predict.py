@@ -95,6 +95,7 @@ def test_models_lists_what_each_rung_declares():
     doc = json.loads(r.stdout)
     assert set(doc) == {"closed_form", "section", "fe3d", "surrogate", "rod"}
     assert doc["closed_form"]["linear_gain"] and doc["rod"]["solves_backbone"]
+    assert doc["rod"]["depends_on_length"] and doc["fe3d"]["depends_on_length"] and not doc["section"]["depends_on_length"]
     assert "contact" in doc["rod"]["models"] and "contact" not in doc["section"]["models"]
     assert doc["section"]["options"]["mesh_size"]["kind"] == "float"
 
