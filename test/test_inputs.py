@@ -207,6 +207,8 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
     cases = [
         (predict + ["--length", "40"], "--length 40: 40 m length is implausible"),
         (predict + ["--length", "1e-12"], "below 1 mm"),
+        (["predict", "--design", "implemented_5mm", "--model", "auto", "--scene", "blocking_force_bench",
+          "--pressure", "1000", "--length", "0.03"], "scene 'blocking_force_bench' sets the length (0.017 m)"),
         (["sweep", "--design", "implemented_5mm", "--model", "closed_form", "--to", "1000", "--length", "40",
           "--no-plot", "--out", str(out / "s")], "--length 40"),
         (["predict", "--design", "implemented_5mm", "--model", "rod", "--option", "source=closed_form",

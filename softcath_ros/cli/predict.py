@@ -53,6 +53,10 @@ def run(args) -> int:
         if args.scene is None:
             raise SoftcathError("--model auto needs --scene FILE (what the model must handle)")
         options = {"scene": load_scene(args.scene)}
+        scene_length = options["scene"].design.length
+        if length is not None and not math.isclose(length, scene_length, rel_tol=1e-9):
+            raise SoftcathError(f"--length {length:g} with --model auto: scene '{options['scene'].name}' sets the "
+                                f"length ({scene_length:g} m) the rung was chosen for; give a scene of that length")
     else:
         options = {**run_options(args.model, cache=not args.no_cache), **parse_model_options(args.model, args.option)}
     model = build_model(args.model, design, calibration, **options)
