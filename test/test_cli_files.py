@@ -79,6 +79,7 @@ def test_unwritable_outputs_are_one_line(tmp_path, recording):
     assert_one_line_exit_2(cli("report", recording, "--out", a_file / "sub"))
     assert_one_line_exit_2(cli("calibrate", recording, "--output", a_file / "sub" / "d.yaml"))
     assert_one_line_exit_2(cli("recover", recording, "--output", tmp_path / "missing" / "r.mcap"), "does not exist")
+    assert_one_line_exit_2(cli("calibrate", recording, "--model", "closed_form", "--output", tmp_path), "a folder")
     assert_one_line_exit_2(cli("sweep", "--design", "implemented_5mm", "--to", "1000", "--no-plot",
                                "--out", a_file / "sub" / "s"))
 
@@ -115,3 +116,13 @@ def test_protocol_types_and_size_are_checked(patch, field):
     with pytest.raises(ProtocolError, match=re.escape(f"'{field}")) as e:
         protocol_from_dict({**protocol, **patch})
     assert "\n" not in str(e.value)
+
+
+def test_a_recording_read_as_another_design_is_one_line_and_writes_nothing(tmp_path, recording):
+    """A one-channel recording with a three-channel design named: report and calibrate refuse it before
+    a rung sees the readings; no report folder, no calibration file."""
+    assert_one_line_exit_2(cli("report", recording, "--design", "three_channel_5mm", "--model", "closed_form",
+                               "--out", tmp_path / "r"), "carry 1 channel pressure(s); design 'three_channel_5mm' has 3")
+    assert_one_line_exit_2(cli("calibrate", recording, "--design", "three_channel_5mm", "--model", "closed_form",
+                               "--output", tmp_path / "c.calibration.yaml"), "name the design it recorded")
+    assert not (tmp_path / "r").exists() and not (tmp_path / "c.calibration.yaml").exists()

@@ -95,6 +95,7 @@ def test_models_lists_what_each_rung_declares():
     doc = json.loads(r.stdout)
     assert set(doc) == {"closed_form", "section", "fe3d", "surrogate", "rod"}
     assert doc["closed_form"]["linear_gain"] and doc["rod"]["solves_backbone"]
+    assert doc["rod"]["depends_on_length"] and doc["fe3d"]["depends_on_length"] and not doc["section"]["depends_on_length"]
     assert "contact" in doc["rod"]["models"] and "contact" not in doc["section"]["models"]
     assert doc["section"]["options"]["mesh_size"]["kind"] == "float"
 
@@ -132,3 +133,83 @@ def test_commands_default_to_the_accurate_rung():
     state = make_model("surrogate", load_design("implemented_5mm"), build=False).evaluate([2e4])
     assert doc["model"] == "surrogate"
     assert doc["results"][0]["curvature_per_m"] == pytest.approx(list(np.ravel(state.curvature)), rel=1e-9)
+
+
+@pytest.mark.parametrize("loads", [{}, {"tip_force": [0.0, 2e-3, 0.0]}, {"gravity": [0.0, -9.81, 0.0]},
+                                   {"contact": "rest_tip"}])
+def test_predict_at_another_length_reports_the_rod_solved_at_that_length(loads):
+    """--length on the rod: tip pose, angle, R_C = l/theta and 1/|k| are those of the rod of that
+    length (solved, under the same loads; the scale at that length's rest tip), not an arc of the
+    design's rod laid out at the new length."""
+    from softcath_ros.core.prediction import predict
+    from softcath_ros.core.rod.loads import TipPlaneContact
+
+    if loads.get("contact") == "rest_tip":
+        loads = {"contact": TipPlaneContact(normal=(0.0, 1.0, 0.0))}
+    design = load_design("implemented_5mm")
+    rod = make_model("rod", design, source="closed_form", **loads)
+    for length in (0.017, 0.04, 0.06):
+        (r,) = predict(rod, np.array([[20000.0]]), length)
+        solved = make_model("rod", design.with_length(length), source="closed_form", **loads).solve(20000.0)
+        theta = solved.theta[-1]
+        assert r.converged and r.bending_angle_rad == pytest.approx(theta, rel=1e-9)
+        e = rod.direction
+        tip = [solved.positions[-1, 1] * e[0], solved.positions[-1, 1] * e[1], solved.positions[-1, 0]]
+        np.testing.assert_allclose(r.tip_position_m, tip, rtol=0, atol=1e-12)
+        assert r.radius_of_curvature_m == pytest.approx(length / abs(theta), rel=1e-9)
+        assert r.centreline_radius_m == pytest.approx(solved.arc_length / abs(theta), rel=1e-9)
+        assert r.axial_stretch == pytest.approx(solved.arc_length / length, rel=1e-9)
+        if "contact" in loads:   # held on the scale at the rest tip of this length
+            assert abs(r.tip_position_m[1]) < 1e-9 and r.tip_position_m[2] < length and r.contact_force_n > 0
+        elif loads:              # under a load no single arc has the rod's tip
+            arc = predict(make_model("closed_form", design), np.array([[20000.0]]), length)[0]
+            assert np.linalg.norm(np.subtract(arc.tip_position_m, r.tip_position_m)) > 1e-5
+
+
+def test_length_on_rungs_that_solve_a_body_of_the_designs_length(monkeypatch):
+    """A rung answering per section (closed form) lays its arc out at any length; one that solves a body
+    of the design's length (fe3d, a surrogate tabulating it) is built again for the other length with
+    the options it was made with; built directly, without them, it refuses in one line."""
+    from softcath_ros.core.errors import ModelError
+    from softcath_ros.core.models import RUNGS, rung_info
+    from softcath_ros.core.prediction import predict
+
+    design = load_design("implemented_5mm")
+    cf = make_model("closed_form", design)
+    assert cf.at_length(0.02) is cf
+    (a,) = predict(cf, np.array([[20000.0]]), 0.02)
+    (b,) = predict(make_model("closed_form", design.with_length(0.02)), np.array([[20000.0]]))
+    np.testing.assert_allclose(a.tip_position_m, b.tip_position_m, atol=1e-15)
+
+    monkeypatch.setitem(RUNGS, "whole_body", "test_cli_predict:WholeBody")
+    body = make_model("whole_body", design, tip_gain=2.0)
+    assert body.at_length(0.04) is body
+    short = body.at_length(0.02)
+    assert short.design.length == 0.02 and short.tip_gain == 2.0 and body.design.length == 0.04
+    (r,) = predict(body, np.array([[20000.0]]), 0.02)
+    assert r.tip_position_m == pytest.approx(predict(short, np.array([[20000.0]]))[0].tip_position_m, abs=1e-15)
+    with pytest.raises(ModelError, match="solves a body of design 'implemented_5mm''s length") as exc:
+        predict(WholeBody(design), np.array([[20000.0]]), 0.02)
+    assert "\n" not in str(exc.value)
+    assert rung_info("fe3d").depends_on_length and rung_info("rod").depends_on_length
+    assert not rung_info("section").depends_on_length and not rung_info("closed_form").depends_on_length
+
+
+def _whole_body_class():
+    from softcath_ros.core.models.base import RungInfo
+    from softcath_ros.core.models.closed_form import ClosedFormModel
+
+    class WholeBody(ClosedFormModel):
+        """Stand-in for a rung solving a body of the design's length (fe3d without NGSolve)."""
+
+        name = "whole_body"
+        info = RungInfo(summary="stand-in", depends_on_length=True)
+
+        def __init__(self, design, tip_gain: float = 1.0):
+            super().__init__(design)
+            self.tip_gain = tip_gain
+
+    return WholeBody
+
+
+WholeBody = _whole_body_class()

@@ -173,3 +173,76 @@ def test_pressure_sweep_table_reports_r_c_as_l_over_theta():
     theta = 30.0 * length * stretch
     assert float(cells[1]) == pytest.approx(length / theta * 1e3, abs=0.006)   # printed to 0.01 mm
     assert float(cells[2]) == pytest.approx(1e3 / 30.0, abs=0.006)
+
+
+def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
+    """The CLI audit's cases (in-process, each refused before any solve, node or build starts): a unit
+    slip in --length or --max-pressure, limits above the design's, unbounded sizes and durations, an
+    unknown rung named where nodes would start, files that are not text, outputs under a file.
+    Nothing is written where the command was refused."""
+    import yaml
+
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"\x89PNG\xff\xfe\x00")
+    chart_csv = tmp_path / "chart.csv"
+    head = ("case,family,setting,reference,converged,fails_beyond,pressure_pa,s_per_eval,boundary_pa,rc_rel_error,"
+            "tip_error_mm,direction_error_deg,length_m,rc_m")
+    chart_csv.write_text(head + "\n1ch,1ch,rod,fe3d,True,False,abc,1,1,1,1,1,0.04,0.1\n")
+    cal = {"design": "implemented_5mm", "design_hash": "0" * 16, "rung": "no_such_rung", "pressure_shift": 0.1,
+           "material_scale": 1.0, "covariance": [[0, 0], [0, 0]], "rms_before": 1.0, "rms_after": 1.0,
+           "n_residuals": 2, "recording": "r.mcap", "recording_sha256": "0", "date": "2026-12-01", "schema": 2}
+    bad_rung = tmp_path / "bad_rung.calibration.yaml"
+    bad_rung.write_text(yaml.safe_dump(cal))
+    from softcath_ros.core.yaml_io import load_yaml_file
+    from softcath_ros.resources import find
+
+    quick = load_yaml_file(find("protocol", "quick"))
+    above, in_bar = tmp_path / "above.yaml", tmp_path / "in_bar.yaml"
+    above.write_text(yaml.safe_dump({**quick, "staircase": {"max": 60000.0, "step": 10000.0}}))
+    in_bar.write_text(yaml.safe_dump({**quick, "staircase": {"levels": [0.0, 0.1, 0.2, 0.3]}}))
+    predict = ["predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "1000"]
+    out = tmp_path / "out"
+    cases = [
+        (predict + ["--length", "40"], "--length 40: 40 m length is implausible"),
+        (predict + ["--length", "1e-12"], "below 1 mm"),
+        (["predict", "--design", "implemented_5mm", "--model", "auto", "--scene", "blocking_force_bench",
+          "--pressure", "1000", "--length", "0.03"], "scene 'blocking_force_bench' sets the length (0.017 m)"),
+        (["sweep", "--design", "implemented_5mm", "--model", "closed_form", "--to", "1000", "--length", "40",
+          "--no-plot", "--out", str(out / "s")], "--length 40"),
+        (["predict", "--design", "implemented_5mm", "--model", "rod", "--option", "source=closed_form",
+          "--option", "n_segments=100000000", "--pressure", "1000"], "n_segments 100000000 must lie in [4, 1000]"),
+        (predict + ["--calibration", str(tmp_path)], "a folder, not a calibration file"),
+        (predict + ["--calibration", str(bad_rung)], "field 'rung' = 'no_such_rung': not a rung"),
+        (["allocate", "--design", "three_channel_5mm", "--model", "closed_form", "--curvature", "3,0",
+          "--max-pressure", "0.3"], "0.3 Pa is implausible (below 1000 Pa): it is in pascals; 30000 (0.3 bar)?"),
+        (["steer-sim", "--max-pressure", "1e9", "--output-dir", str(out)], "at most design 'three_channel_5mm''s"),
+        (["steer-sim", "--max-pressure", "0.3", "--output-dir", str(out)], "in pascals"),
+        (["steer-sim", "--duration", "1e9", "--output-dir", str(out)], "at most 3600 s"),
+        (["steer-sim", "--model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
+        (["characterise", "--model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
+        (["characterise", "--sim-model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
+        (["characterise", "--wait-timeout", "-1", "--output-dir", str(out)], "must lie in [0.1, 3600]"),
+        (["characterise", "--timeout", "nan", "--output-dir", str(out)], "must be a finite number"),
+        (["characterise", "--protocol", str(above), "--output-dir", str(out)], "outside [0, max_pressure 50000]"),
+        (["characterise", "--protocol", str(in_bar), "--output-dir", str(out)], "0.3 Pa is implausible"),
+        (["envelope", "--refresh", "bogus", "--out", str(out / "e.yaml")], "--refresh: unknown rung(s) ['bogus']"),
+        (["envelope", "--cases", "1ch 40mm", "--out", str(tmp_path)], "a folder; name the envelope file"),
+        (["envelope", "--cases", "1ch 40mm", "--out", str(tmp_path / "e.yaml"), "--results", str(out / "x" / "r")],
+         "does not exist"),
+        (["import", str(binary), "--output-dir", str(out)], "not a CSV text file (not UTF-8 at byte 0)"),
+        (["chart", "--csv", str(binary)], "not a CSV text file"),
+        (["chart", "--csv", str(chart_csv), "--out", str(out / "c.png")], "row 2: pressure_pa = 'abc' is not a number"),
+        (["study", "sensitivity", "--design", "implemented_5mm", "--model", "closed_form", "--out",
+          str(a_file / "s")], "Not a directory"),
+        (["surrogate", "build", "implemented_5mm", "--option", "source=bogus"], "unknown model 'bogus'"),
+        (["surrogate", "build", "implemented_5mm", "--workers", "0"], "must lie in [1, 256]"),
+        (["surrogate", "build", "implemented_5mm", "--option", "source=closed_form", "--out",
+          str(a_file / "t.npz")], str(a_file)),
+    ]
+    for argv, words in cases:
+        code = main(argv)
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err and words in err, (argv, err)
+    assert not out.exists()   # refused before anything was written

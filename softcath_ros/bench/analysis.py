@@ -162,6 +162,15 @@ def tare_forces(rows: list[SampleRow]) -> list[SampleRow]:
     return rows
 
 
+def check_rows_match_design(rows, design) -> None:
+    """Readings of ``design``: one pressure per channel of it (another design named on a recording is
+    refused in one line, not met as a shape error inside a rung)."""
+    counts = sorted({int(np.size(r.pressure)) for r in rows})
+    if counts and counts != [design.n_channels]:
+        raise SoftcathError(f"the recording's readings carry {', '.join(map(str, counts))} channel pressure(s); "
+                            f"design '{design.name}' has {design.n_channels}: name the design it recorded")
+
+
 def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[SampleRow]:
     """Sample rows of a bench recording: the stamped rig topics, or (a recording without them)
     the deprecated unstamped ones; ``topics`` overrides names (keys as DEFAULT_TOPICS)."""

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 from ..core.calibration_file import CalibratedModel, pressure_only, scaled_design
 from ..core.errors import SoftcathError
 from ..core.prediction import angle_per_length
-from .analysis import SampleRow, summarise
+from .analysis import SampleRow, check_rows_match_design, summarise
 from .blocking import BlockingForce
 
 Z95 = 1.959963984540054
@@ -78,6 +78,7 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
     pressures is exact (the former way; tests and benchmarks/calibration_speed.py compare the two)."""
     from ..core.models import make_model
 
+    check_rows_match_design(rows, design)
     use, meas, sigma = _residual_setup(rows, curvature_floor, force_floor)
     pressures = np.clip(np.array([r.pressure for r in use]), 0.0, None)
     is_angle = np.array([r.bench == "angle" for r in use])

@@ -61,6 +61,8 @@ def read_rows(path, max_pressure: float) -> list[dict]:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise CsvImportError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise CsvImportError(f"{path}: not a CSV text file (not UTF-8 at byte {exc.start})") from None
     reader = csv.reader(text.splitlines())
     try:
         header = [h.strip().lower() for h in next(reader)]

@@ -25,6 +25,7 @@ import yaml
 
 from ..core.errors import SoftcathError, shown
 from ..core.checks import NAME_RULE, finite_number, is_file_name
+from ..core.design import PLAUSIBLE_PRESSURE, pressure_guess
 from ..core.yaml_io import load_yaml_file
 
 BENCHES = ("angle", "force")
@@ -213,6 +214,10 @@ def protocol_from_dict(data) -> Protocol:
     if drive == "direction" and levels[-1] > 1.0:
         raise ProtocolError("staircase.levels", list(levels),
                             "for drive 'direction' levels are fractions of the reachable curvature (<= 1)")
+    if drive != "direction" and 0 < levels[-1] < PLAUSIBLE_PRESSURE[0]:   # a staircase in bar given as Pa
+        raise ProtocolError("staircase.levels", list(levels), f"top level {levels[-1]:g} Pa is implausible (below "
+                            f"{PLAUSIBLE_PRESSURE[0]:g} Pa): protocol pressures are in pascals; "
+                            f"{pressure_guess(levels[-1])}?")
     down = sc.get("down", True)
     if not isinstance(down, bool):
         raise ProtocolError("staircase.down", down, "must be true or false")

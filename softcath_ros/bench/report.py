@@ -178,11 +178,11 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
     from ..core.errors import SoftcathError
     from ..core.models import run_options
     from ..recording.reader import read_metadata, recording_file
-    from .analysis import MODEL_QUANTITIES, hysteresis, model_quantities, overlay_model, rows_from_recording, summarise
+    from .analysis import (MODEL_QUANTITIES, check_rows_match_design, hysteresis, model_quantities, overlay_model,
+                           rows_from_recording, summarise)
 
     path = recording_file(recording)
     out = Path(out_dir) if out_dir else path.parent
-    out.mkdir(parents=True, exist_ok=True)
     design = design or recording_design(path)
     if design is None:
         raise SoftcathError(f"{path} has no design attached; pass --design")
@@ -191,6 +191,8 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
     rows = rows_from_recording(path, topics)
     if not rows:
         raise SoftcathError(f"{path}: no bench readings (no 'sample' markers on the step topic)")
+    check_rows_match_design(rows, design)
+    out.mkdir(parents=True, exist_ok=True)   # after the checks: a refused report leaves no folder
     stats = summarise(rows)
     overlaid = []
     for rung in rungs:

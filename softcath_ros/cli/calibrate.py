@@ -38,6 +38,8 @@ def run(args) -> int:
         raise SoftcathError(f"{path} has no design attached; pass --design")
     out = Path(args.output) if args.output else path.parent / f"{design.name}.calibration.yaml"
     out.parent.mkdir(parents=True, exist_ok=True)   # an output that cannot be written fails before the fit
+    if out.is_dir():
+        raise SoftcathError(f"--output {out}: a folder; name the calibration file")
     result = calibrate(rows_from_recording(path), design, args.model)
     if not all(math.isfinite(v) for row in result.covariance for v in row):
         raise SoftcathError(f"{path}: shift and scale are not identifiable from this recording ({result.message})")

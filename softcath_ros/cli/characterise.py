@@ -40,6 +40,7 @@ from typing import Callable
 from ..bench.report import DEFAULT_OVERLAY
 from ..core.errors import SoftcathError
 from ..graph import NodeGraph, stop_process
+from .common import bounded_float, check_rung_names
 
 EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
 EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
@@ -77,21 +78,24 @@ def register(sub) -> None:
                    help="rung(s) overlaid in the report; the first also drives the nodes (default: %(default)s)")
     p.add_argument("--output-dir", default="runs", help="where the recording directory goes (default runs/)")
     p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
-    p.add_argument("--timeout", type=float, default=170.0, help="give up after this many seconds")
-    p.add_argument("--wait-timeout", type=float, default=20.0,
+    p.add_argument("--timeout", type=bounded_float(1.0, 7 * 86400.0), default=170.0,
+                   help="give up after this many seconds (at most a week)")
+    p.add_argument("--wait-timeout", type=bounded_float(0.1, 3600.0), default=20.0,
                    help="seconds bench_node waits for the rig's topics (default 20)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..bench.protocol import load_protocol
+    from ..bench.protocol import expand_steps, load_protocol
     from ..core.design import load_design
 
+    check_rung_names([*args.model, *([args.sim_model] if args.rig == "sim" else [])])
     if args.rig == "manual":
         return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
+    expand_steps(protocol, design.n_channels, design.max_pressure)   # a step beyond the design: refused now
     main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
     previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:

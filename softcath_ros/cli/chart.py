@@ -51,16 +51,23 @@ def load_rows(path: str | None) -> list[dict]:
                             "(written by `softcath envelope --results STEM`)")
     if not Path(path).is_file():
         raise SoftcathError(f"--csv {path}: no such file; run benchmarks/ladder_chart.py first")
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except UnicodeDecodeError as exc:
+        raise SoftcathError(f"--csv {path}: not a CSV text file (not UTF-8 at byte {exc.start})") from None
     if not rows:
         raise SoftcathError(f"--csv {path}: no rows")
-    missing = [k for k in ("case", "family", *NUMBERS) if k not in rows[0]]
+    missing = [k for k in ("case", "family", "setting", "reference", "converged", "fails_beyond", *NUMBERS)
+               if k not in rows[0]]
     if missing:
         raise SoftcathError(f"--csv {path}: columns {missing} missing; re-run benchmarks/ladder_chart.py")
-    for r in rows:
+    for i, r in enumerate(rows, start=2):
         for k in NUMBERS + tuple(k for k in OPTIONAL_NUMBERS if k in r):
-            r[k] = _float(r[k])
+            try:
+                r[k] = _float(r[k])
+            except (TypeError, ValueError):
+                raise SoftcathError(f"--csv {path} row {i}: {k} = {r[k]!r} is not a number") from None
         r["converged"] = r["converged"] == "True"
         r["fails_beyond"] = r["fails_beyond"] == "True"
     return rows

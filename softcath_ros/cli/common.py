@@ -29,6 +29,27 @@ def positive_float(text: str) -> float:
     return value
 
 
+def bounded_float(lo: float, hi: float):
+    """argparse type: a finite number in [lo, hi]."""
+    def parse(text: str) -> float:
+        value = finite_float(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{value:g}: must lie in [{lo:g}, {hi:g}]")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def check_rung_names(names) -> None:
+    """Each of ``names`` a rung (or a chooser such as auto), else the one-line 'unknown model' error:
+    before anything is started that would fail on it later."""
+    from ..core.models import CHOOSERS, rung_class
+
+    for name in names:
+        if name not in CHOOSERS:
+            rung_class(name)
+
+
 def bounded_int(lo: int, hi: int):
     """argparse type: an integer in [lo, hi] (counts that size memory and run time are bounded)."""
     def parse(text: str) -> int:
@@ -41,6 +62,19 @@ def bounded_int(lo: int, hi: int):
         return value
     parse.__name__ = "integer"
     return parse
+
+
+def checked_length(design, length: float | None) -> float:
+    """``--length`` (m) checked as a body length (plausible, so a slip of mm for m is named), or the
+    design's when not given."""
+    from ..core.errors import DesignError
+
+    if length is None:
+        return design.length
+    try:
+        return design.with_length(length).length
+    except DesignError as exc:
+        raise SoftcathError(f"--length {length:g}: {exc.reason}") from None
 
 
 def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray:

@@ -47,9 +47,18 @@ def run(args) -> int:
     unknown = [s for s in (args.settings or []) if s not in known_settings]
     if unknown:
         raise SoftcathError(f"--settings: unknown {unknown}; known: {list(known_settings)}")
+    from ..core.models import RUNGS
+
+    unknown = [r for r in (args.refresh or []) if r not in RUNGS and r != "all"]
+    if unknown:
+        raise SoftcathError(f"--refresh: unknown rung(s) {unknown}; known: {sorted(RUNGS)}")
     out = Path(args.out)
     if not out.parent.is_dir():
         raise SoftcathError(f"--out {out}: folder {out.parent} does not exist")
+    if out.is_dir():
+        raise SoftcathError(f"--out {out}: a folder; name the envelope file")
+    if args.results and not Path(args.results).parent.is_dir():
+        raise SoftcathError(f"--results {args.results}: folder {Path(args.results).parent} does not exist")
     cases = [known_cases[c] for c in args.cases] if args.cases else CASES
     settings = [known_settings[s] for s in args.settings] if args.settings else SETTINGS
     refresh = ("all",) if args.no_cache else () if args.refresh is None else tuple(args.refresh or ["all"])

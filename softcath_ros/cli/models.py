@@ -19,14 +19,15 @@ def run(args) -> int:
     for name in available_models():
         info = rung_info(name)
         doc[name] = {"summary": info.summary, "models": list(info.models), "linear_gain": info.linear_gain,
-                     "solves_backbone": info.solves_backbone, "needs": info.needs,
+                     "solves_backbone": info.solves_backbone, "depends_on_length": info.depends_on_length,
+                     "needs": info.needs,
                      "options": {o.name: {"kind": o.kind, "description": o.description} for o in info.options},
                      "more_options": info.more_options}
     if args.json:
         print(json_output.dumps(doc, indent=2))
         return 0
     for name, d in doc.items():
-        flags = [f for f in ("linear_gain", "solves_backbone") if d[f]]
+        flags = [f for f in ("linear_gain", "solves_backbone", "depends_on_length") if d[f]]
         print(f"{name}: {d['summary']}")
         print(f"  models: {', '.join(d['models'])}" + (f"; {', '.join(flags)}" if flags else "")
               + (f"; needs the '{d['needs']}' extra" if d["needs"] else ""))

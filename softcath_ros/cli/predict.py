@@ -14,8 +14,8 @@ import numpy as np
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import (PA_PER_BAR, add_model_argument, add_option_argument, check_pressure_limits, parse_model_options,
-                     parse_pressures, positive_float)
+from .common import (PA_PER_BAR, add_model_argument, add_option_argument, check_pressure_limits, checked_length,
+                     parse_model_options, parse_pressures, positive_float)
 
 
 def register(sub) -> None:
@@ -25,7 +25,9 @@ def register(sub) -> None:
     p.add_argument("--pressure", required=True, nargs="+",
                    help="one command per value; comma list per channel for multi-channel designs")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
-    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--length", type=positive_float, default=None,
+                   help="actuated length in m (default: the design's); rungs that solve the whole body (rod, fe3d) "
+                        "solve one of this length")
     p.add_argument("--scene", default=None, help="scene YAML file or shipped scene name (for --model auto)")
     p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
     p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
@@ -40,6 +42,7 @@ def run(args) -> int:
     from ..core.prediction import format_mm, predict
 
     design = load_design(args.design)
+    length = None if args.length is None else checked_length(design, args.length)   # None: the model's own
     pressures = parse_pressures(args.pressure, design.n_channels, args.unit)
     check_pressure_limits(pressures, design)
     calibration = load_calibration(args.calibration) if args.calibration else None
@@ -50,15 +53,19 @@ def run(args) -> int:
         if args.scene is None:
             raise SoftcathError("--model auto needs --scene FILE (what the model must handle)")
         options = {"scene": load_scene(args.scene)}
+        scene_length = options["scene"].design.length
+        if length is not None and not math.isclose(length, scene_length, rel_tol=1e-9):
+            raise SoftcathError(f"--length {length:g} with --model auto: scene '{options['scene'].name}' sets the "
+                                f"length ({scene_length:g} m) the rung was chosen for; give a scene of that length")
     else:
         options = {**run_options(args.model, cache=not args.no_cache), **parse_model_options(args.model, args.option)}
     model = build_model(args.model, design, calibration, **options)
     if args.model == "auto":
         print(model.selection.reason, file=sys.stderr)
-    results = predict(model, pressures, args.length)
+    results = predict(model, pressures, length)
     if calibration is not None:
-        add_bands(results, args.model, design, calibration, pressures, args.length, options)
-    length = args.length if args.length is not None else model.design.length
+        add_bands(results, args.model, design, calibration, pressures, length, options)
+    length = model.design.length if length is None else length   # auto's is the scene's
     if args.json:
         doc = {"model": model.name, "design": design.name, "length_m": length,
                "results": [r.to_json() for r in results]}

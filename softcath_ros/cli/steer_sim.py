@@ -10,14 +10,17 @@ loop's path from the core simulation (bench/steering_sim.py, same scenario, no D
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
 from datetime import datetime
 from pathlib import Path
 
+from ..core.allocation import lowered_max_pressure
 from ..core.errors import SoftcathError
+from .common import check_rung_names
+
+MAX_DURATION_S = 3600.0   # of targets: the run, its recording and its plot are held to this
 
 
 def register(sub) -> None:
@@ -84,16 +87,16 @@ def run(args) -> int:
     from ..core.steering import STEERING_MAX_PRESSURE, SteeringParams
     from ..graph import NodeGraph, stop_process
 
-    if not (args.duration > 0 and math.isfinite(args.duration)):
-        raise SoftcathError(f"--duration {args.duration} s must be positive")
+    if not (0 < args.duration <= MAX_DURATION_S):
+        raise SoftcathError(f"--duration {args.duration} s must be positive and at most {MAX_DURATION_S:g} s")
     if not 0 <= args.drop < 1 or not 0 <= args.latency < 10:
         raise SoftcathError("--drop must lie in [0, 1) and --latency in [0, 10) s")
     from ..core.design import load_design
 
-    load_design(args.design)   # a wrong name or file is one line here, not a node that fails to start
-    max_pressure = STEERING_MAX_PRESSURE if args.max_pressure is None else args.max_pressure
-    if not (max_pressure > 0 and math.isfinite(max_pressure)):
-        raise SoftcathError(f"--max-pressure {max_pressure} Pa must be positive")
+    design = load_design(args.design)   # a wrong name or file is one line here, not a node that fails to start
+    check_rung_names([args.model])
+    max_pressure = (min(STEERING_MAX_PRESSURE, design.max_pressure) if args.max_pressure is None
+                    else lowered_max_pressure(args.max_pressure, design))
     rig = steering_rig_params()
     mode = "open_loop" if args.open_loop else args.mode
     name = f"steer_{args.trajectory}_{mode}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"

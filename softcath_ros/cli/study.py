@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from ..core import json_output
 from ..core.errors import SoftcathError
@@ -74,6 +75,7 @@ def run(args) -> int:
             extra[key] = value
     if args.workers is not None and args.workers < 1:
         raise SoftcathError(f"--workers {args.workers}: need at least 1")
+    Path(args.out).mkdir(parents=True, exist_ok=True)   # a folder that cannot be made fails now, not after the run
     executor, where = make_executor(args.workers, args.scheduler)
     ctx = StudyContext(rung=args.model, options=options, pressure=pressure, workers=args.workers,
                        executor=executor, cache=not args.no_cache, progress=not args.quiet)

@@ -11,9 +11,10 @@ from __future__ import annotations
 import json
 import sys
 import time
+from pathlib import Path
 
 from ..core.errors import SoftcathError
-from .common import add_option_argument, parse_model_options
+from .common import add_option_argument, bounded_int, parse_model_options
 
 
 def register(sub) -> None:
@@ -24,7 +25,8 @@ def register(sub) -> None:
     b.add_argument("--out", default=None, help="also write the table to this file (.npz)")
     b.add_argument("--shipped", action="store_true",
                    help="rebuild every shipped design's table into the package (config/surrogate_tables)")
-    b.add_argument("--workers", type=int, default=None, help="build processes (default: the machine's cores)")
+    b.add_argument("--workers", type=bounded_int(1, 256), default=None,
+                   help="build processes (default: the machine's cores)")
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     c = actions.add_parser("check", help="is a current table there (shipped, cached or --table)? exit 0/1")
     c.add_argument("design", nargs="?", help="design YAML file or shipped design name")
@@ -70,6 +72,8 @@ def run(args) -> int:
     if args.action == "build":
         if args.shipped and args.out:
             raise SoftcathError("--out names one table; --shipped writes each into the package")
+        if args.out:   # a folder that cannot be made fails now, not after the build
+            Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         out = []
         for name in _designs(args):
             t0 = time.perf_counter()

@@ -19,7 +19,7 @@ import numpy as np
 from ..core import json_output
 from ..core.errors import SoftcathError
 from .common import (PA_PER_BAR, add_model_argument, add_option_argument, bounded_int, check_pressure_limits,
-                     finite_float, parse_model_options, positive_float)
+                     checked_length, finite_float, parse_model_options, positive_float)
 
 MAX_STEPS = 10_000   # a sweep's rows are held in memory and plotted
 
@@ -34,7 +34,9 @@ def register(sub) -> None:
                    help=f"number of pressures, ends included, 2-{MAX_STEPS} (default 11)")
     p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --from/--to (default Pa)")
     p.add_argument("--channel", type=bounded_int(0, 63), default=0, help="which channel ramps (0-based; default 0)")
-    p.add_argument("--length", type=positive_float, default=None, help="actuated length in m (default: the design's)")
+    p.add_argument("--length", type=positive_float, default=None,
+                   help="actuated length in m (default: the design's); rungs that solve the whole body (rod, fe3d) "
+                        "solve one of this length")
     p.add_argument("--out", default=None, help="output prefix: writes PREFIX.csv, PREFIX.json, PREFIX.png "
                                                "(default: sweep_<design>_<model>)")
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached (rungs that cache)")
@@ -52,10 +54,7 @@ def run(args) -> int:
     from ..core.prediction import predict
 
     design = load_design(args.design)
-    if args.length is not None:
-        if args.length <= 0:
-            raise SoftcathError(f"--length {args.length}: must be positive (m)")
-        design = design.with_length(args.length)
+    length = checked_length(design, args.length)
     if args.steps < 2:
         raise SoftcathError(f"--steps {args.steps}: need at least 2")
     if not 0 <= args.channel < design.n_channels:
@@ -74,7 +73,7 @@ def run(args) -> int:
     options = {**run_options(args.model, progress=True, cache=not args.no_cache),
                **parse_model_options(args.model, args.option)}
     model = build_model(args.model, design, calibration, **options)
-    results = predict(model, pressures, design.length)
+    results = predict(model, pressures, length)
     rows = []
     for p, r in zip(levels, results):
         ok = r.converged
@@ -91,7 +90,7 @@ def run(args) -> int:
             "reason": "" if ok else r.reason})
     prefix = Path(args.out or f"sweep_{design.name}_{args.model}")
     prefix.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"model": model.name, "design": design.name, "length_m": design.length, "channel": args.channel,
+    doc = {"model": model.name, "design": design.name, "length_m": length, "channel": args.channel,
            "results": rows}
     Path(f"{prefix}.json").write_text(json_output.dumps(doc, indent=2))
     with open(f"{prefix}.csv", "w", newline="") as f:
@@ -101,7 +100,7 @@ def run(args) -> int:
     written = [f"{prefix}.csv", f"{prefix}.json"]
     if not args.no_plot:
         written.append(plot_sweep(rows, f"{prefix}.png", f"{design.name}, {model.name}, "
-                                  f"L = {design.length * 1e3:.0f} mm, channel {args.channel}"))
+                                  f"L = {length * 1e3:.0f} mm, channel {args.channel}"))
     if args.json:
         json_output.dump(doc, sys.stdout, indent=2)
         print()

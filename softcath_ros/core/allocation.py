@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
+from .design import PLAUSIBLE_PRESSURE, pressure_guess
 from .errors import ModelError, SoftcathError
 from .kinematics import curvature_for_tip, tip_pose_single
 from .models.base import BendModel
@@ -109,6 +110,19 @@ def _wrap(angle: float) -> float:
     return angle % TWO_PI
 
 
+def lowered_max_pressure(max_pressure: float, design) -> float:
+    """A pressure limit (Pa) a user lowers the design's to: positive, finite, at most the design's
+    max_pressure, and not a limit in bar given as Pa; else a one-line AllocationError."""
+    top = float(design.max_pressure)
+    if not (math.isfinite(max_pressure) and 0 < max_pressure <= top):
+        raise AllocationError(f"max_pressure {max_pressure:g} Pa must be positive and at most design "
+                              f"'{design.name}''s {top:g} Pa")
+    if max_pressure < PLAUSIBLE_PRESSURE[0]:
+        raise AllocationError(f"max_pressure {max_pressure:g} Pa is implausible (below {PLAUSIBLE_PRESSURE[0]:g} Pa): "
+                              f"it is in pascals; {pressure_guess(max_pressure)}?")
+    return float(max_pressure)
+
+
 class Allocator:
     """Inverse of one model for one design; keeps the active sector between calls (hysteresis)."""
 
@@ -123,10 +137,7 @@ class Allocator:
         self.n_channels = model.n_channels
         self.max_pressure = float(self.design.max_pressure)
         if max_pressure is not None:
-            if not 0 < max_pressure <= self.max_pressure:
-                raise AllocationError(f"max_pressure {max_pressure} Pa must be positive and at most the design's "
-                                      f"{self.max_pressure:g} Pa")
-            self.max_pressure = float(max_pressure)
+            self.max_pressure = lowered_max_pressure(max_pressure, self.design)
         self.max_pressure = min(self.max_pressure, float(model.pressure_range[1]))
         self.hysteresis = math.radians(hysteresis_deg)
         self.direction_tolerance = math.radians(direction_tolerance_deg)

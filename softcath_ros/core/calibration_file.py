@@ -21,6 +21,7 @@ scaled design. The safety limit stays the design's ``max_pressure`` on the comma
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import math
 from dataclasses import asdict, dataclass, replace
@@ -197,6 +198,10 @@ def calibration_from_dict(data, source: str = "calibration") -> Calibration:
                   "modulus): re-run softcath calibrate on its recording")
     if out.get("schema", SCHEMA_VERSION) != SCHEMA_VERSION:
         raise bad("schema", out["schema"], f"this softcath reads schema {SCHEMA_VERSION}")
+    from .models import RUNGS
+
+    if out["rung"] not in RUNGS:
+        raise bad("rung", out["rung"], f"not a rung of this softcath; rungs: {sorted(RUNGS)}")
     if not SHIFT_RANGE[0] <= out["pressure_shift"] <= SHIFT_RANGE[1]:
         raise bad("pressure_shift", out["pressure_shift"], f"must lie in {list(SHIFT_RANGE)}")
     if not SCALE_RANGE[0] <= out["material_scale"] <= SCALE_RANGE[1]:
@@ -221,6 +226,8 @@ def load_calibration(path) -> Calibration:
     from .yaml_io import load_yaml_file
 
     source = f"calibration {path}"
+    if Path(path).is_dir():
+        raise CalibrationError(f"{source}: a folder, not a calibration file")
     if not Path(path).is_file():
         raise CalibrationError(f"{source}: no such file")
     return calibration_from_dict(load_yaml_file(path, source), source=source)
@@ -278,6 +285,16 @@ class CalibratedModel(BendModel):
         if self.factor > 0:
             lo, hi = lo / self.factor, hi / self.factor
         return lo, min(hi, float(self.design.max_pressure))
+
+    def at_length(self, length: float) -> BendModel:
+        """The calibrated rung for a body of actuated length ``length`` (m): ``inner`` at that length."""
+        inner = self.inner.at_length(length)
+        if inner is self.inner:
+            return self
+        other = copy.copy(self)
+        other.inner = inner
+        other.design = self.design.with_length(length)
+        return other
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
         return self.inner.evaluate(pressures * self.factor)

@@ -107,7 +107,7 @@ class Design:
         return 0.5 * self.outer_diameter
 
     def with_length(self, length: float) -> "Design":
-        return replace(self, length=_positive(length, "length"))
+        return replace(self, length=plausible_length(_positive(length, "length")))
 
     def to_dict(self) -> dict:
         """The design as a plain mapping in the design-file schema (round-trips through load)."""
@@ -170,7 +170,7 @@ def _plausible_pascals(value: float, field_name: str, bounds: tuple[float, float
     return value
 
 
-def _pressure_guess(v: float) -> str:
+def pressure_guess(v: float) -> str:
     return f"{v * 1e5:g} ({v:g} bar)" if v <= 20 else f"{v * 1e3:g} ({v:g} kPa)"
 
 
@@ -178,12 +178,17 @@ def _modulus_guess(v: float) -> str:
     return f"{v * 1e3:g} ({v:g} kPa)" if v >= 1 else f"{v * 1e6:g} ({v:g} MPa)"
 
 
+def plausible_length(value: float) -> float:
+    """A body length (m) a catheter-scale actuator can have, else the slip named (mm for m)."""
+    if value < PLAUSIBLE_LENGTH[0]:
+        raise DesignError("length", value, f"{value:g} m length is implausible (below "
+                                           f"{PLAUSIBLE_LENGTH[0] * 1e3:g} mm): lengths are in metres")
+    return _plausible_size(value, "length", PLAUSIBLE_LENGTH[1])
+
+
 def check_plausible(design: "Design") -> None:
     """Refuse magnitudes no catheter-scale actuator has, naming field, value and the likely slip."""
-    if design.length < PLAUSIBLE_LENGTH[0]:
-        raise DesignError("length", design.length, f"{design.length:g} m length is implausible (below "
-                                                   f"{PLAUSIBLE_LENGTH[0] * 1e3:g} mm): design files are in metres")
-    _plausible_size(design.length, "length", PLAUSIBLE_LENGTH[1])
+    plausible_length(design.length)
     sizes = [("outer_diameter", design.outer_diameter), ("cap_thickness", design.cap_thickness),
              ("min_wall_thickness", design.min_wall_thickness)]
     holes = [(f"channels[{i}]", c) for i, c in enumerate(design.channels)]
@@ -199,7 +204,7 @@ def check_plausible(design: "Design") -> None:
         sizes += [("device.diameter", design.device.diameter)]
     for name, v in sizes:
         _plausible_size(v, name)
-    _plausible_pascals(design.max_pressure, "limits.max_pressure", PLAUSIBLE_PRESSURE, _pressure_guess)
+    _plausible_pascals(design.max_pressure, "limits.max_pressure", PLAUSIBLE_PRESSURE, pressure_guess)
     moduli = [("material.c1", design.material.c1)]
     if design.limiting_fibre is not None:
         moduli.append(("limiting_fibre.material.c1", design.limiting_fibre.material.c1))

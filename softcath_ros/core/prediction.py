@@ -49,10 +49,13 @@ class Prediction:
 def predict(model: BendModel, pressures: np.ndarray, length: float | None = None) -> list[Prediction]:
     """Evaluate ``model`` on a batch (N, C) of pressures (Pa); ``length`` overrides the design's (m).
 
-    The tip pose is the constant-curvature arc's, unless the rung solves the backbone itself
+    The rung answers for that length (``model.at_length``: the rod solves a rod of that length; a rung
+    that solves a body of the design's length only, fe3d, refuses another). The tip pose is the
+    constant-curvature arc's at ``length``, unless the rung solves the backbone itself
     (``info.solves_backbone``: the rod under loads, whose tip pose no single arc reproduces)."""
-    own_length = length is None
-    length = model.design.length if length is None else length
+    length = model.design.length if length is None else float(length)
+    model = model.at_length(length)
+    own_length = math.isclose(length, model.design.length, rel_tol=1e-12)   # the body the rung solved
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
     elapsed = (time.perf_counter() - t0) / max(len(pressures), 1)

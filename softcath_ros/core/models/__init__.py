@@ -69,7 +69,9 @@ def make_model(name: str, design: Design, **options) -> BendModel:
     ``"auto"`` picks a rung for ``scene=`` (registered by core/model_selection.py)."""
     if name in CHOOSERS:
         return CHOOSERS[name](design, **options)
-    return rung_class(name)(design, **options)
+    model = rung_class(name)(design, **options)
+    model.made_with = dict(options)
+    return model
 
 
 __all__ = ["BendModel", "BendState", "CHOOSERS", "RUNGS", "RungInfo", "SolverDiagnostics",

@@ -12,6 +12,7 @@ constructor takes. Callers read that declaration (or the registry's ``rung_info`
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -35,6 +36,8 @@ class RungInfo:
                                      # where it refuses (the surrogate's pair tables; the allocator's Newton)
     solves_backbone: bool = False    # its own backbone and tip pose (BendState.backbone, .tip) replace the arc's,
                                      # and it answers ``solve(pressure, length, loads)`` (planar loads)
+    depends_on_length: bool = False  # its answers are of a body of the design's length (end effects, a solved
+                                     # backbone), not per section: another length is another body (``at_length``)
     options: tuple[Option, ...] = ()
     more_options: str = ""           # where options not listed go (e.g. "passed to the source rung"); "" = refused
     needs: str = ""                  # optional dependency ("fe" extra), "" = none
@@ -132,6 +135,7 @@ class BendModel:
     info = RungInfo(summary="abstract rung")
     built_now = False   # True when the constructor built a table the cache did not hold (surrogate)
     solver_version: str | None = None   # bumped when the rung's answers change: part of every cache key
+    made_with: dict | None = None       # the options make_model built it with (what ``at_length`` rebuilds with)
 
     def __init__(self, design: Design):
         self.design = design
@@ -172,6 +176,21 @@ class BendModel:
         """Largest principal stretch in the silicone at a solved command (Pa), for rungs that resolve
         the section's strain field; None for the others."""
         return None
+
+    def at_length(self, length: float) -> "BendModel":
+        """This rung for a body of actuated length ``length`` (m). A rung answering per section
+        (``info.depends_on_length`` False) is itself: its arc is laid out at that length. One that
+        solves a body of the design's length is built again for that length with the options
+        ``make_model`` built it with (a rung constructed directly, without them, refuses)."""
+        if not self.info.depends_on_length or math.isclose(length, self.design.length, rel_tol=1e-12):
+            return self
+        if self.made_with is None:
+            raise ModelError(f"model '{self.name}' solves a body of design '{self.design.name}''s length "
+                             f"({self.design.length * 1e3:.4g} mm), not {length * 1e3:.4g} mm: build it for a "
+                             f"design of length {length:.6g} m")
+        other = type(self)(self.design.with_length(length), **self.made_with)
+        other.made_with = dict(self.made_with)
+        return other
 
 
 def lumen_fill_fraction(value, rung: str) -> float | None:

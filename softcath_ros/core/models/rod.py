@@ -20,6 +20,7 @@ the reason.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import replace
 
@@ -38,6 +39,7 @@ from ..units import PA_PER_BAR
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 _PLANE_TOL = 1e-9
+MIN_SEGMENTS, MAX_SEGMENTS = 4, 1000   # a dense Newton per solve: its memory and time grow as n^2 and n^3
 # Pa: the pressure ramp of a body in contact (steps of at most half the law's table step, cut to 1/16 of it)
 CONTACT_STEPS = StepControl(initial_step=1250.0, max_step=1250.0, min_step=1250.0 / 16)
 
@@ -48,12 +50,13 @@ class RodModel(BendModel):
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
+        depends_on_length=True,
         options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
                  Option("loads", "object", "a Loads (tip force, gravity, contact); or the three below"),
                  Option("tip_force", "object", "[fx, fy, fz] N in softcath_base"),
                  Option("gravity", "object", "[gx, gy, gz] m/s^2 in softcath_base"),
                  Option("contact", "object", "a TipPlaneContact"),
-                 Option("n_segments", "int", "rod segments (at least 4)"),
+                 Option("n_segments", "int", "rod segments (4 to 1000)"),
                  Option("grid", "object", "LawGrid: where the section law is tabulated"),
                  Option("cache", "object", "True (the project cache), a cache root directory, or False: "
                                            "where the section law is kept"),
@@ -74,8 +77,8 @@ class RodModel(BendModel):
         self.loads = loads if loads is not None else Loads(
             tip_force=None if tip_force is None else tuple(float(v) for v in tip_force),
             gravity=None if gravity is None else tuple(float(v) for v in gravity), contact=contact)
-        if n_segments < 4:
-            raise ModelError(f"model 'rod': n_segments {n_segments} must be at least 4")
+        if not MIN_SEGMENTS <= n_segments <= MAX_SEGMENTS:
+            raise ModelError(f"model 'rod': n_segments {n_segments} must lie in [{MIN_SEGMENTS}, {MAX_SEGMENTS}]")
         self.n_segments = int(n_segments)
         body = replace(design, device=None)
         section = transformed_section(body)
@@ -102,6 +105,16 @@ class RodModel(BendModel):
             self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
         self.weight_per_length = design.material.density * section.silicone_area
         self.planar = self._planar_loads(self.loads)
+
+    def at_length(self, length: float) -> "RodModel":
+        """The rod of actuated length ``length`` (m): the same law (it depends on the section only)
+        and loads; a contact plane at the rest tip moves to this length's rest tip."""
+        if math.isclose(length, self.design.length, rel_tol=1e-12):
+            return self
+        other = copy.copy(self)
+        other.design = self.design.with_length(length)
+        other.planar = other._planar_loads(other.loads)
+        return other
 
     # ------------------------------------------------------------------ loads in the bending plane
     def _in_plane(self, v, what: str) -> tuple[float, float]:

@@ -42,7 +42,7 @@ import logging
 import math
 import time
 from bisect import bisect_right
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -152,6 +152,11 @@ class SurrogateModel(BendModel):
             raise ModelError(f"model 'surrogate': {exc}; settings: {list(SurrogateSettings.__annotations__)}") from None
         if self.settings.source == "surrogate":
             raise ModelError("model 'surrogate': source 'surrogate' would tabulate itself")
+        from . import rung_info
+
+        if rung_info(self.settings.source).depends_on_length:   # an unknown source: refused here, before a build
+            # a table of a body of the design's length (fe3d, rod): another length is another table
+            self.info = replace(self.info, depends_on_length=True)
         if self.settings.pairs not in ("auto", "each", "rotated"):
             raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'auto', 'each' or 'rotated'")
         if not self.settings.pressure_step > 0:

@@ -34,6 +34,9 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+SCHEDULER_TIMEOUT_S = 10.0   # to reach a Dask scheduler before refusing the address
+
+
 def make_executor(workers: int | None = None, scheduler: str | None = None) -> tuple[Executor | None, str]:
     """(executor, description). ``scheduler``: address of a Dask distributed scheduler (imported
     only then); ``workers == 1``: None (solve in this process, no pool); otherwise a local
@@ -45,8 +48,8 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> t
             raise SoftcathError(f"--scheduler {scheduler}: Dask distributed is not installed; "
                                 "install it with pip install 'softcath_ros[cluster]'") from None
         try:
-            client = Client(scheduler)
-        except (OSError, TimeoutError) as exc:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
             raise SoftcathError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         return client.get_executor(), f"dask scheduler {scheduler}"
     n = workers or os.cpu_count() or 1
