@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import sys
@@ -33,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import RESULTS, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
+from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -97,8 +99,12 @@ def run(args) -> int:
     checkpoints = np.round(np.arange(args.step, args.to + 1e-9, args.step), 6) * PA_PER_BAR
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
+    control = default_step_control()
+    if args.max_step is not None:
+        control = dataclasses.replace(control, max_step=args.max_step * PA_PER_BAR)
     model = Fe3dModel(design, mesh_size=args.mesh_size, half=not args.full, cache=False, progress=True,
-                      threads=args.threads, mirror_mesh=args.full and args.mirror_mesh, **contact)
+                      threads=args.threads, mirror_mesh=args.full and args.mirror_mesh, step_control=control,
+                      **contact)
     prof = Profile()
     t0 = time.perf_counter()
     problem = model.problem_for(np.asarray(direction))
@@ -133,6 +139,7 @@ def run(args) -> int:
             "mirror_mesh": model.mirror_mesh,
             "mirror_rotation_deg": math.degrees(getattr(problem, "rotation", 0.0)),
             "threads": args.threads, "contact_distance": model.contact_distance,
+            "step_settings": dataclasses.asdict(model.step_control),
             "setup_s": t_setup, "total_s": total, "ramp_wall_s": ramp.wall_time if ramp else None,
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
@@ -197,6 +204,7 @@ def main(argv=None) -> int:
     ap.add_argument("--step", type=float, default=0.05, help="checkpoint spacing, bar")
     ap.add_argument("--mesh-size", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--max-step", type=float, default=None, help="largest load step, bar (default: the rung's)")
     ap.add_argument("--full", action="store_true", help="the full body (default: the half body when the "
                                                          "direction lies on a mirror plane)")
     ap.add_argument("--mirror-mesh", action="store_true", help="with --full: the full body meshed as the half "

@@ -112,3 +112,15 @@ def test_a_point_beyond_the_references_ramp_boundary_is_no_reference():
     (another branch): that point has no reference, so no error is recorded there."""
     results = {"section D/20": {**FAKE["section D/20"], "boundary_pa": 30000.0}}
     assert ladder.reference_labels(results) == ["section D/20"] * 3 + [None]
+
+
+def test_fe3d_runs_the_three_channel_cases_on_a_mirror_plane_on_the_half_body():
+    """One channel and an equal pair lie on a mirror plane: fe3d gets half=True there (a new key for
+    those rows only); the 2:1 pair and the 1-channel cases keep their options (and cached rows)."""
+    from softcath_ros.core.ladder import CASES, FE3D, fe3d_options
+
+    by_name = {c.name: fe3d_options(c, FE3D[2]) for c in CASES}
+    assert by_name["3ch one channel"] == {**FE3D[2], "half": True}
+    assert by_name["3ch pair equal"] == {**FE3D[2], "half": True}
+    assert by_name["3ch pair 2:1"] == FE3D[2]
+    assert all(by_name[c.name] == FE3D[2] for c in CASES if c.family == "length")
