@@ -124,19 +124,6 @@ class LumenContact:
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
         self.boundary.AddEnergy(scale * weight * barrier_cf(gap / self.d_hat))
-        if problem.half:
-            # the half wall against its mirror image across x = 0 (the other half of the lumen, not
-            # meshed; a lumen pressed to a slit along the plane closes there): the partner of
-            # X + u is its mirror image, the same barrier and windows on that pair
-            pos = X + u
-            sep_m = ng.CF((-2.0 * pos[0], 0.0, 0.0))
-            gap_m = sep_m * normal
-            cos_m = gap_m / ng.sqrt(sep_m * sep_m + (1e-6 * self.d_hat) ** 2)
-            weight_m = smooth_step_cf((ng.IfPos(cos_m, cos_m, -cos_m) - COS_LOW) / (COS_HIGH - COS_LOW))
-            ref_m = 2.0 * ng.IfPos(ng.x, ng.x, -ng.x) / lumen.radius
-            weight_m = weight_m * smooth_step_cf((ref_m - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
-            problem.a += ng.Variation(scale * weight_m * barrier_cf(gap_m / self.d_hat)
-                                      * ng.ds("lumen", bonus_intorder=intorder - 4))
         # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
         # Newton can backtrack from a step that adds to it (backtrack_on_overlap)
         self.check = ng.ContactBoundary(wall, wall, volume=False)
