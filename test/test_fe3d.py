@@ -141,7 +141,7 @@ def test_results_are_cached_by_design_mesh_and_settings(short_design):
     first = Fe3dModel(short_design, mesh=COARSE).evaluate(p)
     again = Fe3dModel(short_design, mesh=COARSE)
     second = again.evaluate(p)
-    assert again._problem is None  # answered from the cache, nothing was built
+    assert not again._problems  # answered from the cache, nothing was built
     np.testing.assert_allclose(second.curvature, first.curvature)
     finer = Fe3dModel(short_design, mesh=COARSE.scaled(0.8))
     assert finer.cache_key != again.cache_key
@@ -283,3 +283,54 @@ def test_lumen_contact_keeps_the_walls_apart_at_every_step(short_design):
     assert np.all(gaps >= -pb.contact.tolerance), gaps
     assert gaps[-1] < d_hat            # the walls are within the barrier's range: contact is active
     assert gaps[0] > 5 * d_hat         # and were far apart at the start
+
+
+def test_mirror_planes_of_the_three_channel_design():
+    """One channel (or channels 1 and 2 equal) lies on the y-z plane; channels 0 and 1 equal on the
+    plane through channel 2 (-30 deg), which the section is turned by 120 deg to put on x = 0; a 2:1
+    pair lies on none. In the turned half model the unmeshed channel takes its partner's volume."""
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.fe3d.mesh import channel_shares, mirror_plane, rotated_section
+
+    design = load_design("three_channel_5mm")
+    assert math.degrees(mirror_plane(design, (1.0, 0.0, 0.0))) == pytest.approx(90.0)
+    assert math.degrees(mirror_plane(design, (0.0, 1.0, 1.0))) == pytest.approx(90.0)
+    assert math.degrees(mirror_plane(design, (1.0, 1.0, 0.0))) == pytest.approx(-30.0)
+    assert mirror_plane(design, (1.0, 0.5, 0.0)) is None
+    turned = rotated_section(design, math.radians(120.0))
+    assert turned.channels[2].center == (0.0, pytest.approx(design.channels[0].center[1]))
+    assert channel_shares(turned, True) == [(1, 1.0), (1, 1.0), (2, 2.0)]
+    assert channel_shares(design, True) == [(0, 2.0), (2, 1.0), (2, 1.0)]
+    assert channel_shares(design, False) == [(0, 1.0), (1, 1.0), (2, 1.0)]
+
+
+def test_half_model_on_a_mirror_plane_equals_the_mirrored_full_model():
+    """Channels 0 and 1 equal (the plane through channel 2, turned onto x = 0): the half body with
+    the symmetry condition gives the full body's answer on the same (mirrored) mesh, R_C and tip
+    angle within 0.2 % (the displacements agree to solver tolerance), and reports the whole
+    body's channel volumes; the bend points away from the pair (-30 deg)."""
+    from softcath_ros.core.design import load_design
+
+    design = load_design("three_channel_5mm").with_length(0.010)
+    p = np.array([[8000.0, 8000.0, 0.0]])
+    steps = default_step_control(step=4000.0)   # two steps: the test is about the symmetry, not the ramp
+    half_model = Fe3dModel(design, mesh=COARSE, cache=False, threads=1, half=True, step_control=steps,
+                           contact_distance=None)   # far from closing: the barrier is zero
+    problem = half_model.problem_for(p[0] / p[0].max())
+    assert problem.half and math.degrees(problem.rotation) == pytest.approx(120.0)
+    half = half_model.evaluate(p)
+    full_model = Fe3dModel(design, mesh=COARSE, cache=False, threads=1, half=False, mirror_mesh=True,
+                           contact_distance=None,
+                           step_control=steps)
+    assert not full_model.problem_for(p[0] / p[0].max()).half
+    full = full_model.evaluate(p)
+    assert half.converged.all() and full.converged.all(), (half.message, full.message)
+    assert half.radius_l_over_theta[0] == pytest.approx(full.radius_l_over_theta[0], rel=2e-3)
+    assert half.tip.angle[0] == pytest.approx(full.tip.angle[0], rel=2e-3)
+    np.testing.assert_allclose(half.tip.position, full.tip.position, atol=1e-3 * design.length)
+    np.testing.assert_allclose(half.diagnostics.channel_volume, full.diagnostics.channel_volume, rtol=1e-6)
+    v_open = design.channels[0].area * (design.length - design.cap_thickness)
+    vol = half.diagnostics.channel_volume[0]
+    assert vol[0] == pytest.approx(vol[1]) and vol[0] > vol[2] > 0.9 * v_open
+    kx, ky = half.curvature[0]
+    assert math.degrees(math.atan2(ky, kx)) == pytest.approx(-30.0, abs=0.5)

@@ -169,3 +169,15 @@ def test_a_case_loads_its_design_once(monkeypatch):
     assert ladder.is_cached(case, "rod", LINEAR_ROD) and ladder.is_cached(case, "closed_form", {}) is False
     assert ladder._key_parts(case, "rod", LINEAR_ROD)[0] == real(SHORT.design).with_length(SHORT.length).content_hash()
     assert loads == [SHORT.design]
+
+
+def test_fe3d_runs_the_three_channel_cases_on_a_mirror_plane_on_the_half_body():
+    """One channel and an equal pair lie on a mirror plane: fe3d gets half=True there (a new key for
+    those rows only); the 2:1 pair and the 1-channel cases keep their options (and cached rows)."""
+    from softcath_ros.core.ladder import CASES, FE3D, fe3d_options
+
+    by_name = {c.name: fe3d_options(c, FE3D[2]) for c in CASES}
+    assert by_name["3ch one channel"] == {**FE3D[2], "half": True}
+    assert by_name["3ch pair equal"] == {**FE3D[2], "half": True}
+    assert by_name["3ch pair 2:1"] == FE3D[2]
+    assert all(by_name[c.name] == FE3D[2] for c in CASES if c.family == "length")

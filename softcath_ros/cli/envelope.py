@@ -24,7 +24,8 @@ def register(sub) -> None:
                    help="also write the rows as STEM.csv (what `softcath chart` draws) and STEM.json (with metadata)")
     p.add_argument("--no-fe3d", action="store_true", help="no fe3d runs: the reference is section D/20 (the section rung with lumen contact)")
     p.add_argument("--fe3d-three-channel", action="store_true",
-                   help="run fe3d on the 3-channel cases too (a full model: tens of minutes per direction); without it, "
+                   help="run fe3d on the 3-channel cases too (minutes per direction: the half body about the "
+                        "direction's mirror plane, the full body off them); without it, "
                         "only cases measured before (in the cache) get fe3d")
     p.add_argument("--refresh", nargs="*", default=None, metavar="RUNG",
                    help="recompute cached results of these rungs (no names: all)")
@@ -77,7 +78,7 @@ def run(args) -> int:
         meta = {"cases": [dataclasses.asdict(c) for c in cases], "references": references,
                 "note": "R_C = l / theta. Reference per point (column reference): fe3d where it converged, "
                         "else section D/20 (lumen contact); 3-channel cases: fe3d with --fe3d-three-channel "
-                        "(a full model) or where cached", **machine_meta(load_before)}
+                        "(half body on a mirror plane) or where cached", **machine_meta(load_before)}
         stem.with_suffix(".json").write_text(json_output.dumps({"meta": meta, "results": rows}, indent=2))
         with open(stem.with_suffix(".csv"), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))

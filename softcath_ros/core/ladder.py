@@ -6,9 +6,11 @@ Cases (``CASES``), 0.05..0.5 bar in steps of 0.05 bar (the design limit, max_pre
   blocking-force sample).
 - family ``direction``: the 3-channel design (three_channel_5mm, 40 mm) bent by one channel
   (on a channel), by two channels at equal pressure (between two) and by a pair at 2:1 (off
-  every mirror plane); the pressure is the largest channel's. fe3d needs a full model there, so
-  it runs on these cases only when asked for (``fe3d_three_channel``); a case it was run on before
-  (in the cache, same solver version) uses that result.
+  every mirror plane); the pressure is the largest channel's. fe3d runs on the half body about
+  the direction's mirror plane for the first two (option ``half``: ``fe3d_options``), on the full
+  body for the third; being slow there (minutes per case), it runs on these cases only when asked
+  for (``fe3d_three_channel``); a case it was run on before (in the cache, same solver version and
+  options) uses that result.
 
 The reference is chosen per point (the row's ``reference``): fe3d at its default mesh (mesh_size
 1.0, threads=1) where it converged at that pressure, else the section rung with lumen contact at
@@ -248,6 +250,19 @@ def errors(p: dict, r: dict) -> dict:
             "direction_error_deg": abs(math.degrees((d + math.pi) % (2 * math.pi) - math.pi))}
 
 
+def fe3d_options(case: Case, options: dict) -> dict:
+    """fe3d's options for a case: with ``half`` True where the case's direction lies on a mirror
+    plane of a design that is not symmetric about x = 0 as a whole (the 3-channel design bent by one
+    channel or by an equal pair: the half body about that plane); the others as given (so their
+    cached rows keep their key)."""
+    from .fe3d.mesh import can_use_half_model, mirror_plane
+
+    design = case.sample
+    if can_use_half_model(design) or mirror_plane(design, case.direction) is None:
+        return options
+    return {**options, "half": True}
+
+
 def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channel: bool = False,
              refresh: tuple = (), say=print) -> tuple[list[dict], str]:
     """Rows (one per setting and pressure) for one case, and its reference label. ``refresh``:
@@ -257,7 +272,9 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
         if rung not in RUNGS:
             say(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
             continue
-        # fe3d on the 3-channel cases (a full model) when asked for, or when measured before (cached)
+        if rung == "fe3d":
+            options = fe3d_options(case, options)
+        # fe3d on the 3-channel cases (minutes each) when asked for, or when measured before (cached)
         if rung == "fe3d" and (not fe3d or (case.family == "direction" and not fe3d_three_channel
                                             and not is_cached(case, rung, options))):
             continue

@@ -30,8 +30,10 @@ def _evaluate(problem, pts: np.ndarray) -> np.ndarray:
     return np.asarray(vals).reshape(len(pts), 3)
 
 
-def _mirror(pts: np.ndarray) -> np.ndarray:
-    m = pts.copy()
+def _mirror(pts: np.ndarray, off_plane: np.ndarray) -> np.ndarray:
+    """The half model's points and the mirror images about x = 0 of those ``off_plane``; a point
+    on the plane once (as in the full body: twice would weigh it double in the tip's fit)."""
+    m = pts[off_plane].copy()
     m[:, 0] *= -1.0
     return np.vstack([pts, m])
 
@@ -84,13 +86,19 @@ def measure(problem) -> dict:
     tip_ref = tip_ref[solid]
     tip_cur = tip_ref + _evaluate(problem, tip_ref)
     if problem.half:
-        tip_ref, tip_cur = _mirror(tip_ref), _mirror(tip_cur)
+        off = np.abs(tip_ref[:, 0]) > 1e-12
+        tip_ref, tip_cur = _mirror(tip_ref, off), _mirror(tip_cur, off)
     rot = best_fit_rotation(tip_ref, tip_cur)
     axis_tip = np.array([0.0, 0.0, length])
     if _axis_in_solid(problem):
         tip = axis_tip + _evaluate(problem, axis_tip[None, :])[0]
     else:   # the axis runs through an empty lumen (e.g. a central one): carry it with the tip face's fit
         tip = tip_cur.mean(axis=0) + rot @ (axis_tip - tip_ref.mean(axis=0))
+    turn = getattr(problem, "rotation", 0.0)   # a half model about a mirror plane turned to x = 0
+    if turn:   # back to the design's frame
+        c, s = math.cos(-turn), math.sin(-turn)
+        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        tip, rot = rz @ tip, rz @ rot @ rz.T
     theta, direction = bending_from_tip(rot, tip)
     # --- arc length through the deformed tip of the body axis
     if theta > 1e-9:
@@ -113,19 +121,24 @@ def measure(problem) -> dict:
 
 
 def channel_area(problem, i: int) -> float:
-    """Area of channel i's deformed section at mid-length of its open part (Newell's formula)."""
+    """Area of channel i's deformed section at mid-length of its open part (Newell's formula).
+    In the half model a channel the plane cuts is closed by its mirror image; one not meshed
+    (at x < 0) has its mirror partner's area."""
     prism = problem.prism
     sec = prism.section
+    source, factor = prism.channel_shares[i]
+    if source != i:
+        return channel_area(problem, source)
     hole = problem.design.channels[i]
     z_mid = prism.z_levels[prism.n_layers_channel // 2]
     on = np.abs(np.hypot(sec.points[:, 0] - hole.center[0], sec.points[:, 1] - hole.center[1])
                 - hole.radius) < 0.1 * hole.radius
     pts2 = sec.points[on]
     ang = np.arctan2(pts2[:, 1] - hole.center[1], pts2[:, 0] - hole.center[0])
-    order = np.argsort(ang)  # counter-clockwise; the half model (x >= 0) runs -90 -> +90 deg
+    order = np.argsort(ang)  # counter-clockwise; a cut channel (x >= 0) runs -90 -> +90 deg
     ref = np.column_stack([pts2[order], np.full(len(order), z_mid)])
     cur = ref + _evaluate(problem, ref)
-    if problem.half:
+    if factor == 2.0:
         back = cur[::-1].copy()
         back[:, 0] *= -1.0
         cur = np.vstack([cur, back])

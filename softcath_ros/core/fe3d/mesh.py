@@ -50,6 +50,97 @@ def can_use_half_model(design: Design) -> bool:
     return all(abs(c[0]) < 1e-12 for c in centres)
 
 
+def _features(design: Design, direction=None) -> list[tuple[str, tuple[float, float], float, float]]:
+    """(kind, centre, radius, pressure per unit) of every hole and the fibre: what a mirror must map
+    onto its like."""
+    d = [0.0] * design.n_channels if direction is None else [float(v) for v in direction]
+    out = [("channel", c.center, c.radius, p) for c, p in zip(design.channels, d)]
+    if design.lumen is not None:
+        out.append(("lumen", design.lumen.center, design.lumen.radius, 0.0))
+    if design.limiting_fibre is not None:
+        f = design.limiting_fibre
+        out.append(("fibre", f.center, 0.5 * f.diameter, 0.0))
+    return out
+
+
+def _reflect(point, angle: float) -> np.ndarray:
+    """``point`` mirrored about the plane through the body axis along (cos angle, sin angle)."""
+    e = np.array([math.cos(angle), math.sin(angle)])
+    p = np.asarray(point, dtype=float)
+    return 2.0 * (p @ e) * e - p
+
+
+def mirror_partners(design: Design, angle: float, direction=None, tol: float = 1e-9) -> list[int] | None:
+    """For the mirror plane through the axis along ``angle`` (rad from +x): the channel each
+    channel maps onto (itself when the plane cuts it), or None when the section (holes, fibre
+    and, if given, the channel pressures per unit ``direction``) is not symmetric about it."""
+    feats = _features(design, direction)
+    scale = tol * design.outer_radius
+    partner = []
+    for kind, centre, radius, p in feats:
+        image = _reflect(centre, angle)
+        match = [j for j, (k2, c2, r2, p2) in enumerate(feats)
+                 if k2 == kind and abs(r2 - radius) <= scale and np.hypot(*(image - c2)) <= scale
+                 and abs(p2 - p) <= tol * max(1.0, abs(p))]
+        if not match:
+            return None
+        partner.append(match[0])
+    return partner[:design.n_channels]
+
+
+def mirror_plane(design: Design, direction=None) -> float | None:
+    """The angle (rad from +x) of a plane through the body axis about which the section and the
+    channel pressures ``direction`` are mirror symmetric (the y-z plane, pi/2, when it is one), or
+    None. Candidates: the planes through each off-axis feature's centre and the bisectors between
+    pairs of them (a mirror maps a feature onto itself, then the plane runs through its centre,
+    or onto another at the same distance from the axis)."""
+    centres = [np.asarray(c) for _, c, _, _ in _features(design, direction)]
+    off_axis = [c for c in centres if np.hypot(*c) > 1e-9 * design.outer_radius]
+    candidates = [math.pi / 2]
+    candidates += [math.atan2(c[1], c[0]) for c in off_axis]
+    bisectors = [0.5 * (math.atan2(a[1], a[0]) + math.atan2(b[1], b[0])) for i, a in enumerate(off_axis)
+                 for b in off_axis[i + 1:]]
+    candidates += bisectors + [b + math.pi / 2 for b in bisectors]
+    for angle in candidates:
+        if mirror_partners(design, angle, direction) is not None:
+            return angle
+    return None
+
+
+def rotated_section(design: Design, angle: float) -> Design:
+    """The design with its section rotated by ``angle`` (rad, counter-clockwise) about the body
+    axis: every hole and the fibre moved; the body (a circle, hoop reinforcement) is unchanged."""
+    from dataclasses import replace
+
+    c, s = math.cos(angle), math.sin(angle)
+
+    def turn(p):   # a centre that lands on a plane through the axis lands there exactly
+        q = (c * p[0] - s * p[1], s * p[0] + c * p[1])
+        return tuple(0.0 if abs(v) < 1e-12 * design.outer_radius else v for v in q)
+
+    return replace(design, channels=tuple(replace(h, center=turn(h.center)) for h in design.channels),
+                   lumen=None if design.lumen is None else replace(design.lumen, center=turn(design.lumen.center)),
+                   limiting_fibre=None if design.limiting_fibre is None else
+                   replace(design.limiting_fibre, center=turn(design.limiting_fibre.center)))
+
+
+def channel_shares(design: Design, half: bool) -> list[tuple[int, float]]:
+    """How each channel's whole volume follows from the model's: V_i = factor * v_source, with v
+    the volume enclosed by the channel's walls in the model. Full model: (i, 1). Half model about
+    x = 0: a channel the plane cuts (i, 2); one inside x > 0 (i, 1); one at x < 0, not meshed,
+    its mirror partner's volume (partner, 1)."""
+    if not half:
+        return [(i, 1.0) for i in range(design.n_channels)]
+    partners = mirror_partners(design, math.pi / 2)
+    if partners is None:
+        raise ValueError(f"{design.name}: the section is not mirror symmetric about x = 0")
+    out = []
+    for i, ch in enumerate(design.channels):
+        x = ch.center[0]
+        out.append((i, 2.0) if abs(x) <= 1e-9 * design.outer_radius else (i, 1.0) if x > 0 else (partners[i], 1.0))
+    return out
+
+
 @dataclass
 class SectionMesh:
     points: np.ndarray      # (P, 2) m
@@ -67,7 +158,8 @@ def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionM
         disk = disk * Rectangle(2 * big_r, 4 * big_r).Face().Move((0, -2 * big_r, 0))
     parts = []
     body = disk
-    holes = [(f"channel{i}", c.center, c.radius) for i, c in enumerate(design.channels)]
+    holes = [(f"channel{i}", c.center, c.radius) for i, c in enumerate(design.channels)
+             if not half or c.center[0] > -1e-9 * big_r]   # the half model keeps x >= 0
     if design.lumen is not None:
         holes.append(("lumen", design.lumen.center, design.lumen.radius))
     if design.limiting_fibre is not None:
@@ -128,6 +220,25 @@ def _snap_circles(section: SectionMesh, design: Design, holes, half: bool) -> No
         pts[idx] = np.asarray(centre) + (pts[idx] - np.asarray(centre)) * math.sqrt(exact / polygon)
 
 
+def mirrored_section(half: SectionMesh, design: Design) -> SectionMesh:
+    """The full section as the half section (x >= 0) and its mirror image: a full mesh with
+    x = 0 as a mirror plane, so a full model and the half model share their discretisation
+    (a channel's image carries its mirror partner's name)."""
+    partners = mirror_partners(design, math.pi / 2)
+    if partners is None:
+        raise ValueError(f"{design.name}: the section is not mirror symmetric about x = 0")
+    pts = half.points
+    on_plane = np.abs(pts[:, 0]) < 1e-12
+    image = np.arange(len(pts))
+    off = np.nonzero(~on_plane)[0]
+    image[off] = len(pts) + np.arange(len(off))
+    mirrored = pts[off] * np.array([-1.0, 1.0])
+    tris = image[half.triangles][:, [0, 2, 1]]   # a mirror reverses the orientation
+    names = [f"channel{partners[int(r[7:])]}" if r.startswith("channel") else r for r in half.region]
+    return SectionMesh(points=np.vstack([pts, mirrored]), triangles=np.vstack([half.triangles, tris]),
+                       region=list(half.region) + names)
+
+
 @dataclass
 class PrismMesh:
     ngmesh: object            # netgen.meshing.Mesh
@@ -135,6 +246,7 @@ class PrismMesh:
     section: SectionMesh
     half: bool
     n_layers_channel: int     # layers below the cap
+    channel_shares: list      # (source channel, factor) per channel: see channel_shares()
 
 
 def z_levels(design: Design, settings: MeshSettings) -> tuple[np.ndarray, int]:
@@ -173,16 +285,21 @@ def z_levels_with_rings(design: Design, settings: MeshSettings) -> tuple[np.ndar
     return z, int(np.argmin(np.abs(z - l_open)))
 
 
-def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None,
+def build_mesh(design: Design, settings: MeshSettings, half: bool | str | None = None,
                lumen_fill: bool = False, rings: bool = False) -> PrismMesh:
-    """The 3D prism mesh (netgen Mesh with named regions and boundaries). ``lumen_fill``:
+    """The 3D prism mesh (netgen Mesh with named regions and boundaries). ``half``: the half
+    body x >= 0 (True), the full body (False), the full body meshed as the half section and its
+    mirror image ("mirror"), None: half when the design allows. ``lumen_fill``:
     mesh the (empty) lumen as a ``fill`` region. ``rings``: resolve the reinforcement's
     discrete rings along z; the outer faces under a ring are the boundary ``ring``."""
     import netgen.meshing as nm
 
     if half is None:
         half = can_use_half_model(design)
-    sec = mesh_section(design, settings, half)
+    if half == "mirror":
+        sec, half = mirrored_section(mesh_section(design, settings, True), design), False
+    else:
+        sec = mesh_section(design, settings, bool(half))
     rings = rings and design.reinforcement is not None
     z, n_open = z_levels_with_rings(design, settings) if rings else z_levels(design, settings)
     z_mid = 0.5 * (z[:-1] + z[1:])
@@ -282,4 +399,5 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | None = None,
         if reg.startswith("channel"):
             # The cap's inner face, seen from the channel below: normal -z out of the cap.
             m.Add(nm.Element2D(bc(reg), [pid(a, n_open), pid(c, n_open), pid(b, n_open)]))
-    return PrismMesh(ngmesh=m, z_levels=z, section=sec, half=half, n_layers_channel=n_open)
+    return PrismMesh(ngmesh=m, z_levels=z, section=sec, half=half, n_layers_channel=n_open,
+                     channel_shares=channel_shares(design, half))

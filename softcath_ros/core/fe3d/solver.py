@@ -224,8 +224,10 @@ class Fe3dProblem:
         self.q.Set(self.bulk_cf * (self.J - 1.0))
 
     def channel_volumes(self) -> np.ndarray:
-        """Enclosed volume of each channel (whole body, mirrored in the half model), m^3."""
-        return self.mirror * np.array([bv.Energy(self.gf.vec) for bv in self.volume_forms])
+        """Enclosed volume of each channel (whole body: in the half model a cut channel's doubled,
+        an unmeshed one's its mirror partner's), m^3."""
+        v = [bv.Energy(self.gf.vec) for bv in self.volume_forms]
+        return np.array([factor * v[j] for j, factor in self.prism.channel_shares])
 
     def min_jacobian_ok(self) -> bool:
         """No element inverted or degenerate: det F > 0.02 at every integration point tested

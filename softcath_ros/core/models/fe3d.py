@@ -32,7 +32,7 @@ DEFAULT_CONTACT_DISTANCE = 0.01   # of the lumen diameter: 15 um on the implemen
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-3"   # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-4"   # bump when a change alters results, so old cache entries are not reused
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True,
@@ -41,10 +41,13 @@ class Fe3dModel(BendModel):
                  Option("newton", "object", "NewtonSettings"),
                  Option("step_control", "object", "a continuation StepControl"),
                  Option("tangent_predictor", "bool", "predict each step along the tangent"),
-                 Option("half", "bool", "half model by symmetry (default: when the design allows)"),
+                 Option("half", "bool", "half model by symmetry (default: when the whole design is symmetric "
+                                         "about x = 0; True: for every direction on a mirror plane)"),
                  Option("cache", "object", "True (the project cache), a cache root directory, or False"),
                  Option("progress", "bool", "a progress bar per ramp"),
                  Option("threads", "int", "solver threads"),
+                 Option("mirror_mesh", "bool", "a full model meshed as the half section and its mirror image "
+                                              "(shares the half model's discretisation; for comparisons)"),
                  Option("lumen_fill", "float", "fill the lumen with a soft solid of this fraction of the "
                                                    "silicone's shear modulus"),
                  Option("formulation", "str", "'mixed' (default) or 'displacement'"),
@@ -56,7 +59,8 @@ class Fe3dModel(BendModel):
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache=True, progress: bool = False, threads: int = 2,
                  lumen_fill: float | None = None, formulation: str = "mixed",
-                 reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE):
+                 reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
+                 mirror_mesh: bool = False):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
         ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
         load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
@@ -70,7 +74,12 @@ class Fe3dModel(BendModel):
         ``contact_distance``: the empty lumen wall's frictionless self-contact (core/fe3d/contact.py),
         its barrier distance as a fraction of the lumen diameter; None switches it off (the ramp
         then stops where the lumen's shoulders fold, about 0.25 bar). Ignored where the lumen is
-        not empty (a device, a fill)."""
+        not empty (a device, a fill). ``half``: None (default) the half body when the whole design is
+        mirror symmetric about x = 0; True: for each direction on a mirror plane of the section (the
+        3-channel design: one channel, or two equal), the half body about that plane, the section
+        turned so that it is x = 0 (core/fe3d/mesh.py ``mirror_plane``), the full body for the
+        others; False: the full body. ``mirror_mesh``: the full body meshed as the half section and
+        its mirror image (so a full model shares the half model's discretisation: comparisons)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -85,7 +94,7 @@ class Fe3dModel(BendModel):
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
-        self.half = can_use_half_model(design) if half is None else half
+        self.half = (can_use_half_model(design) and not mirror_mesh) if half is None else half
         self.lumen_fill = lumen_fill_fraction(lumen_fill, "fe3d")
         if formulation not in ("mixed", "displacement"):
             raise ModelError(f"fe3d: formulation = {formulation!r} must be 'mixed' or 'displacement'")
@@ -94,10 +103,13 @@ class Fe3dModel(BendModel):
             raise ModelError(f"fe3d: reinforcement = {reinforcement!r} must be 'membrane' or 'rings'")
         self.reinforcement = reinforcement
         self.contact_distance = _contact_distance(contact_distance, design, self.lumen_fill)
+        self.mirror_mesh = bool(mirror_mesh)
+        if self.mirror_mesh and self.half is True:
+            raise ModelError("fe3d: mirror_mesh meshes the full body: it needs half = False")
         self.store = store_for(cache)
         self.use_cache = self.store is not None
         self.progress = progress
-        self._problem = None
+        self._problems = {}   # (half, rotation rad) -> Fe3dProblem
         self.last_ramps = []
         self._cache_parts = [design.content_hash(), asdict(self.mesh_settings), asdict(self.newton_settings),
                              asdict(self.step_control), tangent_predictor, self.half,
@@ -105,20 +117,61 @@ class Fe3dModel(BendModel):
                              *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
                              *([] if formulation == "mixed" else [{"formulation": formulation}]),
                              *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]),
-                             {"contact_distance": self.contact_distance}]
+                             {"contact_distance": self.contact_distance},
+                             *([] if not self.mirror_mesh else [{"mirror_mesh": True}])]
         self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
     @property
     def problem(self):
-        if self._problem is None:
-            from ..fe3d.solver import Fe3dProblem
+        """The problem of a direction-independent model: the half body when the whole design is
+        symmetric about x = 0 and ``half`` allows, else the full body."""
+        from ..fe3d.mesh import can_use_half_model
 
-            self._problem = Fe3dProblem(self.design, self.mesh_settings, self.newton_settings, self.half,
-                                        lumen_fill=self.lumen_fill, formulation=self.formulation,
-                                        reinforcement=self.reinforcement,
-                                        contact_distance=self.contact_distance)
-        return self._problem
+        if self.mirror_mesh:
+            return self.problem_for(None)
+        return self._problem_on(bool(self.half) and can_use_half_model(self.design), 0.0)
+
+    def mirror_rotation(self, direction) -> float | None:
+        """With ``half`` True: the rotation (rad) that turns a mirror plane of the section and of
+        the channel pressures ``direction`` onto x = 0, where the half model's symmetry condition
+        is (0 when x = 0 is one); None when the direction lies on no mirror plane (full model)."""
+        from ..fe3d.mesh import can_use_half_model, mirror_plane
+
+        if not self.half and not self.mirror_mesh:
+            return None
+        if can_use_half_model(self.design):
+            return 0.0
+        angle = mirror_plane(self.design, direction)
+        return None if angle is None else math.pi / 2 - angle
+
+    def problem_for(self, direction):
+        """The problem a ramp along ``direction`` (pressure per unit, per channel) runs on: the half
+        body about the direction's mirror plane (the section turned so that it is x = 0) when
+        ``half`` is True and there is one, else the full body (``mirror_mesh``: meshed mirror
+        symmetric about the direction's mirror plane, or one of the section's)."""
+        turn = self.mirror_rotation(direction)
+        if self.mirror_mesh:
+            if turn is None:
+                turn = self.mirror_rotation(None)
+            if turn is None:
+                raise ModelError(f"fe3d: mirror_mesh: {self.design.name}'s section has no mirror plane")
+            return self._problem_on("mirror", turn)
+        return self._problem_on(turn is not None, turn or 0.0)
+
+    def _problem_on(self, half: bool, turn: float):
+        from ..fe3d.mesh import rotated_section
+        from ..fe3d.solver import Fe3dProblem
+
+        key = (half, round(turn, 12))
+        if key not in self._problems:
+            design = rotated_section(self.design, turn) if turn else self.design
+            problem = Fe3dProblem(design, self.mesh_settings, self.newton_settings, half,
+                                  lumen_fill=self.lumen_fill, formulation=self.formulation,
+                                  reinforcement=self.reinforcement, contact_distance=self.contact_distance)
+            problem.rotation = turn   # measure() turns its results back into the design's frame
+            self._problems[key] = problem
+        return self._problems[key]
 
     def _load_cache(self) -> dict:
         if not self.use_cache:
@@ -188,7 +241,7 @@ class Fe3dModel(BendModel):
             bar = tqdm(total=max(loads), unit="Pa", desc=f"fe3d {self.design.name}",
                        bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} Pa [{elapsed}<{remaining}{postfix}]")
         try:
-            return run_ramp(self.problem, direction, loads, self.step_control,
+            return run_ramp(self.problem_for(direction), direction, loads, self.step_control,
                             tangent_predictor=self.tangent_predictor, progress=bar)
         finally:
             if bar is not None:
