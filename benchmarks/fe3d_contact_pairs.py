@@ -59,14 +59,14 @@ def main(argv=None) -> int:
             if p >= args.start - 1e-9:
                 for kind, v in pb.contact.pair_census().items():
                     row[f"{kind}_area_mm2"] = v["area_m2"] * 1e6
-                    for k in ("x", "y", "z", "gap"):
+                    for k in ("x", "y", "z", "gap"):   # None when no pair of the kind
                         row[f"{kind}_{k}_{'um' if k == 'gap' else 'mm'}"] = \
-                            v.get(k, float("nan")) * (1e6 if k == "gap" else 1e3)
+                            v[k] * (1e6 if k == "gap" else 1e3) if k in v else None
             rows.append(row)
             print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()}, flush=True)
 
     ramp = run_ramp(pb, [1.0], [args.to * PA_PER_BAR], progress=Census())
-    keys = sorted({k for r in rows for k in r}, key=lambda k: (k not in rows[-1], list(rows[-1]).index(k) if k in rows[-1] else 0))
+    keys = list(dict.fromkeys(k for r in rows for k in r))   # every column, rows before --from lack the census
     rows = [{k: r.get(k) for k in keys} for r in rows]
     meta = {"length_m": args.length, "mesh": "test coarse" if args.mesh_size is None else args.mesh_size,
             "ndof": pb.fes.ndof, "d_hat_m": pb.contact.d_hat, "threads": 1, "converged": ramp.converged,
