@@ -99,6 +99,8 @@ class LumenContact:
         # search the pairs again at convergence and iterate on until they no longer change
         # (False: the pairs of the step's start hold for the whole step)
         self.settle = True
+        # at most this many searches at convergence per solve (each with max_iterations of its own)
+        self.max_searches = 6
         # backtrack from a Newton step that adds to overlap_area(): off, since on the coarse
         # 10 mm body it stopped the ramp at the same pressure (0.2439 bar) and cost time
         self.backtrack_on_overlap = False
@@ -113,23 +115,42 @@ class LumenContact:
         cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
         normal = cof_n / ng.Norm(cof_n)
         gap = sep * normal
-        # |cos| of the angle between the separation and the normal: a pair across the lumen is
-        # along the normal; a neighbour on a sharply curved wall (a shoulder) is found at the
-        # shared edge, nearly in the tangent plane, and must not count as contact
+        # cos of the angle between the separation and the normal: a pair across the lumen is
+        # along the normal, in front of the primary (cos > 0); a neighbour on a sharply curved
+        # wall (a shoulder) is found at the shared edge, nearly in the tangent plane, and a
+        # wall point behind the primary (cos < 0: through the silicone, found where the wall
+        # creases) is no partner either: such pairs, counted with their negative gap, made the
+        # energy jump by orders of magnitude when the search added or dropped them and Newton
+        # cycle between pairings (docs/models/fe3d.md, "Where it fails"). Walls that really
+        # pass through each other are caught by the geometric check instead (min_gap)
         cos = gap / ng.sqrt(sep * sep + (1e-6 * self.d_hat) ** 2)
-        weight = smooth_step_cf((ng.IfPos(cos, cos, -cos) - COS_LOW) / (COS_HIGH - COS_LOW))
+        weight = smooth_step_cf((cos - COS_LOW) / (COS_HIGH - COS_LOW))
         # and the two points must be apart on the reference wall: a neighbour along the wall
         # is not a contact partner (the section rung's exclusion of incident segments)
         ref = ng.Norm(X.Other() - X) / lumen.radius
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
-        self.boundary.AddEnergy(scale * weight * barrier_cf(gap / self.d_hat))
+        # compiled: the same values, several times faster to assemble
+        self.boundary.AddEnergy((scale * weight * barrier_cf(gap / self.d_hat)).Compile())
         # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
         # Newton can backtrack from a step that adds to it (backtrack_on_overlap)
         self.check = ng.ContactBoundary(wall, wall, volume=False)
         self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
         self.check_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
+        # a census of the current pairs (pair_census): those in the barrier's range, and those
+        # whose partner lies behind the primary (cos < -COS_LOW, apart on the wall), which
+        # the energy ignores; area (m^2) and area-weighted x, y, z and gap of each
+        one = ng.IfPos(ref - NEAR_HIGH, 1.0, 0.0)
+        kinds = {"in_range": one * ng.IfPos(cos - COS_LOW, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
+                 "behind": one * ng.IfPos(-cos - COS_LOW, 1.0, 0.0)}
+        self._census = []
+        for kind, mask in kinds.items():
+            for what, f in (("area", mask), ("x", mask * ng.x), ("y", mask * ng.y), ("z", mask * ng.z),
+                            ("gap", mask * gap)):
+                cb = ng.ContactBoundary(wall, wall, volume=False)
+                cb.AddEnergy(f)
+                self._census.append((kind, what, cb, ng.BilinearForm(problem.fes)))
 
     def update(self) -> None:
         """Search the contact pairs for the current displacement (before each Newton iteration)."""
@@ -141,6 +162,21 @@ class LumenContact:
         """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat
         (the pairs of the last update with backtrack_on_overlap on)."""
         return self.check_form.Energy(self.problem.gf.vec)
+
+    def pair_census(self) -> dict:
+        """The pairs of a fresh search at the current state: for "in_range" (in front of the
+        primary, gap below d_hat) and "behind" (partner behind the primary, ignored by the
+        energy) the model's wall area (m^2), its centroid (m) and mean gap (m)."""
+        self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
+        raw: dict = {}
+        for kind, what, cb, form in self._census:
+            cb.Update(self.problem.u, form, self.intorder, self.maxdist, other=self.boundary)
+            raw.setdefault(kind, {})[what] = form.Energy(self.problem.gf.vec)
+        out = {}
+        for kind, v in raw.items():
+            a = v["area"]
+            out[kind] = {"area_m2": a, **({k: v[k] / a for k in ("x", "y", "z", "gap")} if a > 0 else {})}
+        return out
 
     def min_gap(self) -> float:
         """The smallest distance (m) between two wall points of one section that are not

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..continuation import MATERIAL_RANGE, Correction, StepControl, ramp
+from ..continuation import MATERIAL_RANGE, Correction, StepControl, ramp, stop_tag
 from ..energy import yeoh_convexity_limit
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
@@ -130,7 +130,7 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
                       extrapolate=predictor if control.adaptive else None,
                       describe=describe_pressure, on_step=on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
-        out.message = f"{result.message} [stop: {result.stop_reason}]" if not result.converged else ""
+        out.message = f"{result.message} {stop_tag(result.stop_reason)}" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
     except KeyboardInterrupt:
         done = out.points[-1].load if out.points else 0.0

@@ -333,7 +333,10 @@ class Fe3dProblem:
                 e0 = self.energy()
             if self.contact is not None:
                 self.contact.update()
-            for it in range(1, st.max_iterations + 1):
+            # max_iterations per pairing: a new search (at convergence) starts a fresh budget
+            budget, searches, it = st.max_iterations, 0, 0
+            while it < budget:
+                it += 1
                 t_it = time.perf_counter()
                 self.a.Apply(self.gf.vec, self.res)
                 rnorm = ng.Norm(self.res)
@@ -359,6 +362,10 @@ class Fe3dProblem:
                         ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
                     else:
                         ok = self.min_jacobian_ok()
+                    if ok and self.contact is not None and self.contact.min_gap() < -self.contact.tolerance:
+                        # a step through the other wall jumps over the barrier (it acts only at
+                        # the pairs' points, and only in front of the primary): halve it
+                        ok = False
                     if ok and self.contact is not None and self.contact.backtrack_on_overlap:
                         # no step into the barrier's continuation (the walls' overlap must not grow)
                         ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
@@ -378,7 +385,14 @@ class Fe3dProblem:
                           alpha, time.perf_counter() - t_it)
                 if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
                     if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
-                        continue   # converged for the old pairs: iterate on with the new ones
+                        # converged for the old pairs: iterate on with the new ones
+                        searches += 1
+                        if searches > self.contact.max_searches:
+                            raise NewtonFailure(f"the contact pairs did not settle in {searches} searches", it)
+                        budget = it + st.max_iterations
+                        if st.line_search:
+                            e0 = self.energy()   # the new pairs' energy
+                        continue
                     if self.contact is not None:
                         gap = self.contact.min_gap()
                         if gap < -self.contact.tolerance:
@@ -388,7 +402,7 @@ class Fe3dProblem:
                         self.last_min_gap_state = self.get_state()   # measure() reuses the gap of this state
                     return it
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
-                                f"(last |du.r| = {work:.2e} J)", st.max_iterations)
+                                f"(last |du.r| = {work:.2e} J)", it)
 
 
 class CorotationalPredictor:
