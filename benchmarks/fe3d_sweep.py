@@ -31,6 +31,7 @@ from harness import save_figure, write_results  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
+from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
@@ -51,6 +52,8 @@ def main(argv=None) -> int:
     ap.add_argument("--contact-distance", default=None,
                     help="lumen contact's barrier distance as a fraction of the lumen diameter "
                          "(default: the rung's, 0.01); 'none' switches contact off")
+    ap.add_argument("--energy-tol", type=float, default=None,
+                    help="Newton's |du.r| tolerance relative to c1 x volume (default: the solver's, 1e-9)")
     ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m (default: wall_h)")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
     ap.add_argument("--name", default="fe3d_sweep")
@@ -68,7 +71,8 @@ def main(argv=None) -> int:
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
     mesh = dataclasses.replace(MeshSettings(), lumen_h=args.lumen_h).scaled(args.mesh_size)
-    model = Fe3dModel(design, mesh=mesh, step_control=control, cache=False, progress=True,
+    newton = NewtonSettings(threads=args.threads, **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
+    model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
                       tangent_predictor=args.fixed_steps is None, threads=args.threads, **contact)
     t0 = time.perf_counter()
     ndof = model.problem.fes.ndof
@@ -115,6 +119,7 @@ def main(argv=None) -> int:
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
             "contact_distance": model.contact_distance, "lumen_h": args.lumen_h,
+            "newton": dataclasses.asdict(model.newton_settings),
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,
             "newton_iterations_total": ramp.iterations if ramp else 0,
