@@ -494,11 +494,9 @@ class SectionModel(BendModel):
         just past a limit point, which the limit-point probe steps back from; ``_evaluate_batch``
         never answers with one."""
         count = corr.info["negative_directions"]
-        s = self.settings
         if self.problem.fill is None and not self.problem.contact_active(corr.state):
             return corr
-        stable, here = leave_saddle(self.problem, corr.state, pressures, tol=s.tol, max_iterations=ESCAPE_ITERATIONS,
-                                    linear=self.linear)
+        stable, here = self._escape(corr.state, pressures)
         if here == 0:          # stable at the state itself (the count was the iterate's before it)
             corr.info["negative_directions"] = 0
             return corr
@@ -507,8 +505,6 @@ class SectionModel(BendModel):
                               message=f"the equilibrium at {where} is a saddle ({count} direction(s) of negative "
                                       "stiffness at the closed lumen's wall) and minimising the potential from "
                                       "it finds no stable state below it")
-        self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
-                                  "energy_drop": stable.info["energy_drop"]})
         stable.iterations += corr.iterations
         stable.info["restart_predictor"] = True     # the secant through the saddle's branch would overshoot
         return stable
@@ -516,13 +512,18 @@ class SectionModel(BendModel):
     def _stable_answer(self, x: np.ndarray, pressures: np.ndarray) -> tuple[np.ndarray, int]:
         """(state, negative directions) to answer with at the saddle ``x``: the stable state next to
         it (``solver.leave_saddle``) with 0, or ``x`` itself with its count when there is none."""
+        stable, count = self._escape(x, pressures)
+        return (x, count) if stable is None else (stable.state, 0)
+
+    def _escape(self, x: np.ndarray, pressures: np.ndarray):
+        """``solver.leave_saddle`` at ``x`` with this rung's settings, a stable state found recorded in
+        ``left_saddles``: (its Correction or None, the negative directions at ``x``)."""
         stable, count = leave_saddle(self.problem, x, pressures, tol=self.settings.tol,
                                      max_iterations=ESCAPE_ITERATIONS, linear=self.linear)
-        if stable is None:
-            return x, count
-        self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(), "negative_directions": count,
-                                  "energy_drop": stable.info["energy_drop"]})
-        return stable.state, 0
+        if stable is not None:
+            self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(),
+                                      "negative_directions": count, "energy_drop": stable.info["energy_drop"]})
+        return stable, count
 
     def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
         """A ramp that failed for no named reason, looked at closer: creep on from its last state
