@@ -42,12 +42,7 @@ class MeshSettings:
 
 def can_use_half_model(design: Design) -> bool:
     """Mirror symmetry about the y-z plane: every hole and the fibre centred on x = 0."""
-    centres = [c.center for c in design.channels]
-    if design.lumen is not None:
-        centres.append(design.lumen.center)
-    if design.limiting_fibre is not None:
-        centres.append(design.limiting_fibre.center)
-    return all(abs(c[0]) < 1e-12 for c in centres)
+    return all(abs(centre[0]) < 1e-12 for _, centre, _, _ in _features(design))
 
 
 def _features(design: Design, direction=None) -> list[tuple[str, tuple[float, float], float, float]]:
@@ -124,6 +119,14 @@ def rotated_section(design: Design, angle: float) -> Design:
                    replace(design.limiting_fibre, center=turn(design.limiting_fibre.center)))
 
 
+def _partners_about_yz(design: Design) -> list[int]:
+    """``mirror_partners`` about x = 0, which a half model's section must have."""
+    partners = mirror_partners(design, math.pi / 2)
+    if partners is None:
+        raise ValueError(f"{design.name}: the section is not mirror symmetric about x = 0")
+    return partners
+
+
 def channel_shares(design: Design, half: bool) -> list[tuple[int, float]]:
     """How each channel's whole volume follows from the model's: V_i = factor * v_source, with v
     the volume enclosed by the channel's walls in the model. Full model: (i, 1). Half model about
@@ -131,9 +134,7 @@ def channel_shares(design: Design, half: bool) -> list[tuple[int, float]]:
     its mirror partner's volume (partner, 1)."""
     if not half:
         return [(i, 1.0) for i in range(design.n_channels)]
-    partners = mirror_partners(design, math.pi / 2)
-    if partners is None:
-        raise ValueError(f"{design.name}: the section is not mirror symmetric about x = 0")
+    partners = _partners_about_yz(design)
     out = []
     for i, ch in enumerate(design.channels):
         x = ch.center[0]
@@ -224,9 +225,7 @@ def mirrored_section(half: SectionMesh, design: Design) -> SectionMesh:
     """The full section as the half section (x >= 0) and its mirror image: a full mesh with
     x = 0 as a mirror plane, so a full model and the half model share their discretisation
     (a channel's image carries its mirror partner's name)."""
-    partners = mirror_partners(design, math.pi / 2)
-    if partners is None:
-        raise ValueError(f"{design.name}: the section is not mirror symmetric about x = 0")
+    partners = _partners_about_yz(design)
     pts = half.points
     on_plane = np.abs(pts[:, 0]) < 1e-12
     image = np.arange(len(pts))
