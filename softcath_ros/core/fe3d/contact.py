@@ -31,8 +31,10 @@ import math
 
 import numpy as np
 
-# energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c
-KAPPA = 0.25
+from ..section_fe.terms.contact import KAPPA_SCALE, barrier
+
+# energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c, the section rung's
+KAPPA = KAPPA_SCALE
 # below xi = g / d_hat = XI_MIN the barrier is continued quadratically (C2)
 XI_MIN = 0.02
 # a pair counts fully when its separation is within acos(COS_HIGH) of the normal, not at all
@@ -48,12 +50,9 @@ SAMPLES = 4
 
 
 def _barrier_parts(xi: float):
-    """beta, beta', beta'' at xi (floats), from b(s) = -(s - 1)^2 ln s with s = xi^2."""
+    """beta, beta', beta'' at xi (floats): the section rung's b(s) with s_hat = 1 on s = xi^2."""
     s = xi * xi
-    ln = math.log(s)
-    b = -(s - 1) ** 2 * ln
-    b1 = -2 * (s - 1) * ln - (s - 1) ** 2 / s
-    b2 = -2 * ln - 4 * (s - 1) / s + (s - 1) ** 2 / (s * s)
+    b, b1, b2 = (float(v) for v in barrier(s, 1.0))
     return b, 2 * xi * b1, 4 * s * b2 + 2 * b1
 
 
