@@ -94,7 +94,7 @@ def measure(problem) -> dict:
         tip = axis_tip + _evaluate(problem, axis_tip[None, :])[0]
     else:   # the axis runs through an empty lumen (e.g. a central one): carry it with the tip face's fit
         tip = tip_cur.mean(axis=0) + rot @ (axis_tip - tip_ref.mean(axis=0))
-    turn = getattr(problem, "rotation", 0.0)   # a half model about a mirror plane turned to x = 0
+    turn = problem.rotation   # a half model about a mirror plane turned to x = 0
     if turn:   # back to the design's frame
         c, s = math.cos(-turn), math.sin(-turn)
         rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -70,6 +70,10 @@ def _ng():
 class Fe3dProblem:
     """Everything NGSolve needs for one design and mesh; holds the current state."""
 
+    # rad: how far the model turned the design's section to put a mirror plane at x = 0 (the half
+    # body about it); measure() turns its results back by it
+    rotation: float = 0.0
+
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
                  lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
