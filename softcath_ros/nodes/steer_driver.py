@@ -90,22 +90,20 @@ class SteerDriver(Node):
 
     def _tick(self) -> None:
         now = time.monotonic()
-        if self.state in ("waiting", "priming"):
-            if now - self.t_wait > self.wait_timeout:
-                self.get_logger().error(f"no rig/controller answering within {self.wait_timeout:g} s "
-                                        f"(stopped while {self.state})")
-                self.state = "failed"
-                return
-            if self.state == "waiting":
-                return
-            t = 0.0
-        elif self.state != "running":
+        if self.state in ("waiting", "priming") and now - self.t_wait > self.wait_timeout:
+            self.get_logger().error(f"no rig/controller answering within {self.wait_timeout:g} s "
+                                    f"(stopped while {self.state})")
+            self.state = "failed"
             return
-        else:
+        if self.state == "priming":
+            t = 0.0
+        elif self.state == "running":
             t = now - self.t0
             if t > self.duration:
                 self.state = "done"
                 return
+        else:
+            return
         msg = PointStamped()
         msg.header.frame_id = topics.FRAME_ID
         msg.header.stamp = self.get_clock().now().to_msg()
