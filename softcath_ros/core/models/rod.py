@@ -176,23 +176,21 @@ class RodModel(BendModel):
         """Per pressure its RodSolution or the LawRangeError that refused it: directly where nothing is
         touched (or p <= 0), else from one contact ramp through the sorted positive pressures."""
         ramped = loads.contact is not None
+        on_ramp = [i for i, p in enumerate(pressures) if ramped and p > 0]
         out: list = [None] * len(pressures)
-        for i, p in enumerate(pressures):
-            if not (ramped and p > 0):
-                try:
-                    out[i] = solve_rod(self._slice(float(p)), length, loads, self.n_segments)
-                except LawRangeError as exc:
-                    out[i] = exc
-        targets = sorted({float(p) for p in pressures if ramped and p > 0})
-        if not targets:
+        for i in sorted(set(range(len(pressures))) - set(on_ramp)):
+            try:
+                out[i] = solve_rod(self._slice(float(pressures[i])), length, loads, self.n_segments)
+            except LawRangeError as exc:
+                out[i] = exc
+        if not on_ramp:
             return out
-        result, failed, refusal = self._contact_ramp(targets, length, loads)
+        result, failed, refusal = self._contact_ramp(sorted({float(pressures[i]) for i in on_ramp}), length, loads)
         reached = {pt.load: pt.state for pt in result.points}
-        for i, p in enumerate(pressures):
-            if not (ramped and p > 0):
-                continue
-            if float(p) in reached:
-                out[i] = reached[float(p)]
+        for i in on_ramp:
+            p = float(pressures[i])
+            if p in reached:
+                out[i] = reached[p]
             elif refusal is not None:        # the ramp stopped below p: where and why
                 out[i] = LawRangeError(result.message)
             else:
