@@ -222,10 +222,12 @@ class Fe3dProblem:
         self.gf.vec.FV().NumPy()[:] = values
 
     def _update_pressure_field(self) -> None:
-        """Element-wise optimum of q for the current u (L2 projection onto constants)."""
+        """Element-wise optimum of q for the current u (L2 projection onto constants), with the
+        energy's quadrature: the default one of ``Set`` (exact for constants only) put the
+        condensed energy of a bent 20 mm body 10x off (-1.03e-2 J instead of -1.01e-3 J at 0.24 bar)."""
         if self.formulation == "displacement":
             return
-        self.q.Set(self.bulk_cf * (self.J - 1.0))
+        self.q.Set(self.bulk_cf * (self.J - 1.0), bonus_intorder=4)
 
     def channel_volumes(self) -> np.ndarray:
         """Enclosed volume of each channel (whole body: in the half model a cut channel's doubled,
