@@ -337,3 +337,31 @@ def test_half_model_on_a_mirror_plane_equals_the_mirrored_full_model():
     assert vol[0] == pytest.approx(vol[1]) and vol[0] > vol[2] > 0.9 * v_open
     kx, ky = half.curvature[0]
     assert math.degrees(math.atan2(ky, kx)) == pytest.approx(-30.0, abs=0.5)
+
+
+def test_shifted_tangent_step_descends_and_newton_ends_on_the_plain_state(short_design):
+    """The Newton safeguard (NewtonSettings.shifted_tangent): its term 0.5 sigma |grad(u - u_k)|^2
+    adds nothing at sigma = 0 (the same solve with and without it); a shifted step from a state
+    short of equilibrium lowers the condensed energy and stays admissible, and Newton then converges,
+    on a plain step, to the state it had found (coarse 10 mm body, 0.05 bar, no contact)."""
+    runs = {}
+    for shifted in (False, True):
+        model = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=None,
+                          newton=NewtonSettings(threads=1, shifted_tangent=shifted))
+        pb = model.problem
+        pb.set_direction([1.0])
+        pb.set_state(np.zeros(pb.fes.ndof))
+        pb.load.Set(5000.0)
+        pb.newton()
+        runs[shifted] = (pb, pb.get_state())
+    pb, solved = runs[True]
+    nu = pb.fes.components[0].ndof
+    np.testing.assert_allclose(solved[:nu], runs[False][1][:nu], rtol=0, atol=1e-12)
+    assert pb.shifted_total == 0             # a plain solve never needed it
+    pb.set_state(0.6 * solved)               # a smooth, admissible state away from equilibrium
+    e0 = pb._condensed_energy()
+    slope = pb._shifted_step(pb.get_state(), 1)
+    assert slope > 0 and pb.sigma > 0 and pb.shift.Get() == 0.0
+    assert pb._condensed_energy() < e0 and pb._rejection() == ""
+    pb.newton()                              # starts plain (sigma 0 at a new solve)
+    np.testing.assert_allclose(pb.get_state()[:nu], solved[:nu], rtol=0, atol=1e-8 * short_design.length)

@@ -50,6 +50,14 @@ class NewtonSettings:
     line_search: bool = False   # backtrack on the condensed energy (q reset to its optimum); experimental:
                                 # in trials it stalled where plain Newton converged
     threads: int = 2
+    # where the Newton step is no descent direction of the energy, or every step length is
+    # rejected (an indefinite tangent: past a saddle), step with the tangent shifted by
+    # sigma x (the H1 seminorm's form), sigma growing until the step descends the condensed energy
+    # and stays admissible (Fe3dProblem._shifted_step); converged only on an unshifted step.
+    # Off: on the 20 mm ramp the stop is the wall crossing itself, which it cannot pass, and it
+    # made that ramp 5x slower (docs/models/fe3d.md, "Where it fails")
+    shifted_tangent: bool = False
+    shifted_steps: int = 12     # shifted steps per solve, on top of max_iterations
 
 
 class NewtonFailure(Exception):
@@ -127,6 +135,18 @@ class Fe3dProblem:
             bv = ng.BilinearForm(fes, symmetric=True)
             bv += ng.Variation(vol_i * ng.ds(f"channel{i}"))
             self.volume_forms.append(bv)
+
+        self.shift = None
+        if newton.shifted_tangent:
+            # 0.5 sigma |grad (u - u_k)|^2 with sigma a Parameter (0 but in a shifted step) and
+            # u_k the step's start: at u = u_k it adds sigma x the H1 seminorm's form to the
+            # tangent and nothing to the residual or energy
+            self.shift = ng.Parameter(0.0)
+            self.shift_origin = ng.GridFunction(fes)
+            g = ng.Grad(u) - ng.Grad(self.shift_origin.components[0])
+            a += ng.Variation((0.5 * self.shift * ng.InnerProduct(g, g)).Compile() * ng.dx)
+        self.sigma = 0.0             # the last shifted step's shift, Pa (0: plain Newton)
+        self.shifted_total = 0
 
         self.contact = None
         if contact_distance is not None and "lumen" in mesh.GetBoundaries():
@@ -222,10 +242,12 @@ class Fe3dProblem:
         self.gf.vec.FV().NumPy()[:] = values
 
     def _update_pressure_field(self) -> None:
-        """Element-wise optimum of q for the current u (L2 projection onto constants)."""
+        """Element-wise optimum of q for the current u (L2 projection onto constants), with the
+        energy's quadrature: the default one of ``Set`` (exact for constants only) put the
+        condensed energy of a bent 20 mm body 10x off (-1.03e-2 J instead of -1.01e-3 J at 0.24 bar)."""
         if self.formulation == "displacement":
             return
-        self.q.Set(self.bulk_cf * (self.J - 1.0))
+        self.q.Set(self.bulk_cf * (self.J - 1.0), bonus_intorder=4)
 
     def channel_volumes(self) -> np.ndarray:
         """Enclosed volume of each channel (whole body: in the half model a cut channel's doubled,
@@ -339,6 +361,7 @@ class Fe3dProblem:
                 self.contact.update()
             # max_iterations per pairing: a new search (at convergence) starts a fresh budget
             budget, searches, it = st.max_iterations, 0, 0
+            self.sigma, self._shifted_in_solve = 0.0, 0
             while it < budget:
                 it += 1
                 t_it = time.perf_counter()
@@ -349,10 +372,20 @@ class Fe3dProblem:
                 self._factorize()
                 self._solve(self.res, self.du)
                 self.a.Apply(self.gf.vec, self.res)   # (condensation overwrote it)
-                work = abs(ng.InnerProduct(self.du, self.res))
+                slope = ng.InnerProduct(self.du, self.res)   # > 0: -du descends the energy
+                work = abs(slope)
                 if not math.isfinite(work):
                     raise NewtonFailure("Newton increment is not finite", it)
                 base = self.get_state()
+                if self.shift is not None and (self.sigma > 0.0 or slope < -st.energy_tol * self.energy_scale):
+                    # past a saddle: the plain step only once it descends the energy again
+                    if not (slope > 0.0 and self._plain_step_descends(base, slope)):
+                        work = self._shifted_step(base, it)
+                        budget = self._extend_budget(budget, it)
+                        if st.line_search:
+                            e0 = self.energy()
+                        continue
+                    self.sigma = 0.0   # Newton recovered
                 overlap0 = self.contact.overlap_area() if self.contact is not None and \
                     self.contact.backtrack_on_overlap else 0.0
                 alpha = 1.0
@@ -376,16 +409,24 @@ class Fe3dProblem:
                     if ok:
                         break
                     alpha *= 0.5
+                    if alpha < st.min_step and self.shift is not None:
+                        break
                     if alpha < st.min_step:
-                        where = "" if st.line_search and self.min_jacobian_ok() else f"; {self.worst_element()}"
-                        raise NewtonFailure("line search failed: every step length raises the energy, "
-                                            "pushes the lumen walls into each other or "
-                                            f"inverts an element (det F <= 0{where})", it)
+                        why = self._rejection() or "raises the energy"
+                        raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}",
+                                            it)
+                if alpha < st.min_step:   # every length rejected: the shifted tangent's step instead
+                    work = self._shifted_step(base, it)
+                    budget = self._extend_budget(budget, it)
+                    if st.line_search:
+                        self._update_pressure_field()
+                        e0 = self.energy()
+                    continue
                 if st.line_search:
                     e0 = e
                 self.iterations_total += 1
                 self.last_work = work
-                log.debug("load %.1f Pa it %d |du.r| %.3e alpha %g (%.2f s)", self.load.Get(), it, work,
+                log.debug("load %.1f Pa it %d du.r %.3e alpha %g (%.2f s)", self.load.Get(), it, slope,
                           alpha, time.perf_counter() - t_it)
                 if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
                     if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
@@ -408,6 +449,99 @@ class Fe3dProblem:
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
                                 f"(last |du.r| = {work:.2e} J)", it)
 
+
+    # ------------------------------------------------------------------ shifted tangent
+    # the first shift relative to the shear modulus 2 c1, its growth factor and its largest value
+    # (beyond it the step is a crawl along the gradient: the solve fails instead)
+    SHIFT_START, SHIFT_GROW, SHIFT_MAX = 1e-3, 4.0, 1e3
+    ARMIJO = 1e-4
+
+    def _extend_budget(self, budget: int, it: int) -> int:
+        """A shifted step does not use up the iterations of the plain Newton steps that follow."""
+        self._shifted_in_solve += 1
+        if self._shifted_in_solve > self.newton_settings.shifted_steps:
+            raise NewtonFailure(f"no stable state in {self._shifted_in_solve - 1} shifted-tangent steps "
+                                f"(shift {self.sigma:.3g} Pa)", it)
+        return budget + 1
+
+    def _condensed_energy(self) -> float:
+        """The energy of the current u with q at its optimum for u (module docstring): the merit
+        function of the shifted steps."""
+        self._update_pressure_field()
+        return self.energy()
+
+    def _rejection(self) -> str:
+        """Why the current state is not admissible ("" when it is): an inverted element, or the
+        lumen wall crossing itself by more than the contact's tolerance (0.5 d_hat)."""
+        if not self.min_jacobian_ok():
+            return f"inverts an element (det F <= 0.02; {self.worst_element()})"
+        if self.contact is not None:
+            gap = self.contact.min_gap()
+            if gap < -self.contact.tolerance:
+                return (f"carries the lumen wall through itself by {-gap * 1e6:.1f} um "
+                        f"(tolerance {self.contact.tolerance * 1e6:.1f} um)")
+        return ""
+
+    def _plain_step_descends(self, base: np.ndarray, slope: float) -> bool:
+        """After shifted steps: does the full Newton step (self.du) lower the condensed energy
+        (Armijo) and stay admissible? It may head for the saddle just left, which lies higher.
+        Leaves the state at ``base``."""
+        self.set_state(base)
+        e0 = self._condensed_energy()
+        self.gf.vec.data -= self.du
+        e = self._condensed_energy()
+        ok = math.isfinite(e) and e <= e0 - self.ARMIJO * slope + 1e-12 * abs(e0) and not self._rejection()
+        self.set_state(base)
+        return ok
+
+    def _shifted_step(self, base: np.ndarray, it: int) -> float:
+        """From ``base``, the step of the tangent shifted by sigma x (the H1 seminorm's form),
+        sigma growing from a quarter of the last one (or SHIFT_START x 2 c1) by SHIFT_GROW
+        until the step descends the condensed energy (Armijo) and stays admissible: for sigma
+        above the tangent's most negative eigenvalue the step descends, and leaves a saddle
+        along its negative directions. The contact pairs stay the solve's (a search here gave
+        a far more indefinite tangent). Leaves the state at the step's end, q at its optimum;
+        returns the step's du . r (J). Raises NewtonFailure when no sigma up to SHIFT_MAX
+        x 2 c1 works, naming what rejected the last trial."""
+        ng = _ng()
+        mu = 2.0 * self.design.material.c1
+        sigma = max(0.25 * self.sigma, self.SHIFT_START * mu)
+        self.set_state(base)
+        e0 = self._condensed_energy()
+        start = self.get_state()
+        self.shift_origin.vec.data = self.gf.vec
+        why = "raises the energy"
+        try:
+            while sigma <= self.SHIFT_MAX * mu:
+                self.shift.Set(sigma)
+                self.set_state(start)
+                self._factorize()
+                self.a.Apply(self.gf.vec, self.res)
+                self._solve(self.res, self.du)
+                self.a.Apply(self.gf.vec, self.res)
+                slope = ng.InnerProduct(self.du, self.res)
+                if math.isfinite(slope) and slope > 0.0:
+                    self.gf.vec.data -= self.du
+                    self.shift.Set(0.0)
+                    e = self._condensed_energy()
+                    why = self._rejection() if math.isfinite(e) else "gives a non-finite energy"
+                    if not why and e > e0 - self.ARMIJO * slope + 1e-12 * abs(e0):
+                        why = "raises the energy"
+                    log.debug("   shift %.3g Pa: du.r %.3e, dE %.3e %s", sigma, slope, e - e0, why)
+                    if not why:
+                        self.sigma = sigma
+                        self.shifted_total += 1
+                        self.iterations_total += 1
+                        log.debug("load %.1f Pa it %d shifted step: shift %.3g Pa, du.r %.3e, dE %.3e",
+                                  self.load.Get(), it, sigma, slope, e - e0)
+                        return slope
+                sigma *= self.SHIFT_GROW
+        finally:
+            self.shift.Set(0.0)
+            self.inverse = None              # the last factorisation was the shifted tangent's
+        self.set_state(start)
+        raise NewtonFailure(f"line search failed: every Newton step length and every shifted-tangent step "
+                            f"(shift up to {self.SHIFT_MAX:g} x 2 c1) is rejected; the last {why}", it)
 
 class CorotationalPredictor:
     """Secant predictor in a bent frame: each state is split into an arc of constant
