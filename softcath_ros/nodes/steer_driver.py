@@ -6,7 +6,10 @@ trajectory's first target until the controller answers it (the first non-zero
 targets it never got must not count against it). From that moment it publishes the trajectory's
 targets on /softcath/tip_target at ``target_rate`` for ``duration`` s, records the
 steering topics (topics.STEERING_RECORDED) to an MCAP bag, and scores the true tip against the
-target (bench/steering_sim.metrics). Ends by itself and prints ``summary: {json}`` with the
+target (bench/steering_sim.metrics). Each true tip is scored at its stamp (when the rig took it),
+not when this node got to it: on a loaded machine callbacks run late, and a tip read late must
+not count against a later target. After the last target it waits for the tips stamped up to the
+end of the run (at most DRAIN_TIMEOUT_S). Ends by itself and prints ``summary: {json}`` with the
 metrics, the recording and the time series file (``<recording>/series.npz``).
 
 The targets lie on the true workspace: they are built from the same truth the rig plays
@@ -23,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
+from rclpy.time import Time
 from std_msgs.msg import Float64MultiArray
 
 from .. import topics
@@ -36,6 +40,9 @@ from .parameters import declare
 from .qos import stream_qos
 from .recorder import TopicRecorder
 from .runtime import run_node
+
+# s: after the last target, how long to wait for the rig's tips stamped up to the run's end
+DRAIN_TIMEOUT_S = 5.0
 
 
 class SteerDriver(Node):
@@ -65,7 +72,8 @@ class SteerDriver(Node):
         self.pub = self.create_publisher(PointStamped, topics.TIP_TARGET, qos)
         self.create_subscription(PoseStamped, topics.TIP_TRUE, self._on_true, 100)
         self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self._on_command, qos)
-        self.t0: float | None = None
+        self.t0_ns: int | None = None     # ROS time (ns) of the controller's first answer: t = 0
+        self.t_drain = 0.0
         self.t_wait = time.monotonic()
         self.state = "waiting"
         self.samples: list[tuple] = []
@@ -75,9 +83,15 @@ class SteerDriver(Node):
         if self.state == "waiting" and self.count_subscribers(topics.TIP_TARGET) > 0:
             self.state = "priming"
             self.get_logger().info("rig and controller found: sending the first target until the controller answers")
-        if self.state != "running":
+        if self.state not in ("running", "draining"):
             return
-        t = time.monotonic() - self.t0
+        t = (Time.from_msg(msg.header.stamp).nanoseconds - self.t0_ns) * 1e-9
+        if t < 0.0:
+            return               # taken before the run started
+        if t > self.duration:
+            if self.state == "draining":
+                self.state = "done"
+            return
         q = msg.pose.position
         self.samples.append((t, *self.path(t), q.x, q.y, q.z))
 
@@ -85,7 +99,7 @@ class SteerDriver(Node):
         # Every trajectory starts away from the straight tip, so the controller's first answer to
         # the first target is a non-zero pressure.
         if self.state == "priming" and any(v > 0.0 for v in msg.data):
-            self.state, self.t0 = "running", time.monotonic()
+            self.state, self.t0_ns = "running", self.get_clock().now().nanoseconds
             self.get_logger().info(f"controller answered: {self.kind} for {self.duration:g} s")
 
     def _tick(self) -> None:
@@ -95,12 +109,16 @@ class SteerDriver(Node):
                                     f"(stopped while {self.state})")
             self.state = "failed"
             return
+        if self.state == "draining" and now - self.t_drain > DRAIN_TIMEOUT_S:
+            self.get_logger().warning(f"no tip stamped after the run's end within {DRAIN_TIMEOUT_S:g} s: "
+                                      "scoring the tips received")
+            self.state = "done"
         if self.state == "priming":
             t = 0.0
         elif self.state == "running":
-            t = now - self.t0
+            t = (self.get_clock().now().nanoseconds - self.t0_ns) * 1e-9
             if t > self.duration:
-                self.state = "done"
+                self.state, self.t_drain = "draining", now
                 return
         else:
             return
