@@ -4,10 +4,13 @@ with the section rung's clamped log-barrier on the normal gap.
 NGSolve pairs every integration point of the lumen wall (primary) with the closest point of
 the lumen wall (secondary) whose normal faces it (its own and its neighbours' do not while
 the wall is smooth; the wall across a closing slit, or across a fold at its shoulders, does),
-within ``maxdist``. The pairs are searched again before every Newton iteration
-(``ContactBoundary.Update``, as NGSolve expects); between searches they are fixed and the
-energy is differentiated exactly by NGSolve, so the tangent is the consistent one of the
-fixed pairing. The gap is the normal one,
+within ``maxdist``. The pairs are searched again (``ContactBoundary.Update``) before every
+Newton iteration until Newton is close to convergence, then fixed, and searched again at
+convergence (Fe3dProblem.newton). Between searches the energy is differentiated exactly by
+NGSolve, so the tangent is the consistent one of the fixed pairing (checked by finite
+differences of the residual). Pairs kept from a distant iterate are stale: the walls slide, a
+fixed partner drifts off the closest point, and that energy is so nonconvex that full Newton
+steps cycle (fe3d-4's stall, docs/models/fe3d.md "Where it fails"). The gap is the normal one,
 
     g = ((X' + u') - (X + u)) . n,      n the primary's deformed normal (into the lumen),
 
@@ -100,6 +103,12 @@ class LumenContact:
         self.settle = True
         # at most this many searches at convergence per solve (each with max_iterations of its own)
         self.max_searches = 6
+        # the pairs are searched again before every Newton iteration while |du.r| is at least this
+        # many times Newton's tolerance, then fixed (Newton quadratic on them) until convergence
+        self.search_above = 1e3
+        # the pairs count as settled when a search at convergence leaves a residual force below
+        # this fraction of the pressure load (Fe3dProblem._contact_pairs_settled)
+        self.settle_force = 1e-3
         # backtrack from a Newton step that adds to overlap_area(): off, since on the coarse
         # 10 mm body it stopped the ramp at the same pressure (0.2439 bar) and cost time
         self.backtrack_on_overlap = False
