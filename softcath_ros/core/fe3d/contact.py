@@ -40,9 +40,12 @@ from ..section_fe.terms.contact import KAPPA_SCALE, barrier
 KAPPA = KAPPA_SCALE
 # below xi = g / d_hat = XI_MIN the barrier is continued quadratically (C2)
 XI_MIN = 0.02
-# a pair counts fully when its separation is within acos(COS_HIGH) of the normal, not at all
-# beyond acos(COS_LOW) (C2 in between)
-COS_LOW, COS_HIGH = 0.3, 0.7
+# a pair counts fully when its partner lies within OFF_LOW d_hat of the primary's normal line
+# (its offset along the wall, |sep - g n|), not at all beyond OFF_HIGH d_hat (C2 in between)
+OFF_LOW, OFF_HIGH = 2.0, 5.0
+# and when it lies in front of the primary or at most BEHIND_HIGH d_hat behind it, not at all
+# beyond BEHIND_LOW d_hat behind it (through the silicone, where the wall creases)
+BEHIND_LOW, BEHIND_HIGH = -2.0, -1.0
 # and when its two points lie at least NEAR_HIGH lumen radii apart in the reference state, not at
 # all below NEAR_LOW (neighbours along the wall, found at a sharply curved shoulder)
 NEAR_LOW, NEAR_HIGH = 0.25, 0.5
@@ -123,16 +126,20 @@ class LumenContact:
         cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
         normal = cof_n / ng.Norm(cof_n)
         gap = sep * normal
-        # cos of the angle between the separation and the normal: a pair across the lumen is
-        # along the normal, in front of the primary (cos > 0); a neighbour on a sharply curved
-        # wall (a shoulder) is found at the shared edge, nearly in the tangent plane, and a
-        # wall point behind the primary (cos < 0: through the silicone, found where the wall
-        # creases) is no partner either: such pairs, counted with their negative gap, made the
-        # energy jump by orders of magnitude when the search added or dropped them and Newton
-        # cycle between pairings (docs/models/fe3d.md, "Where it fails"). Walls that really
-        # pass through each other are caught by the geometric check instead (min_gap)
-        cos = gap / ng.sqrt(sep * sep + (1e-6 * self.d_hat) ** 2)
-        weight = smooth_step_cf((cos - COS_LOW) / (COS_HIGH - COS_LOW))
+        # a pair across the lumen has its partner near the primary's normal line, in front of it.
+        # Windows in lengths (d_hat), not in the angle: with the pairs fixed between searches the
+        # walls slide by microns, and a window on the angle (fe3d-4: cos 0.3 -> 0.7) switched a
+        # pair off once it had slid by about its gap, a few microns, which made the fixed
+        # pairing's energy so nonconvex that full Newton steps cycled (docs/models/fe3d.md,
+        # "Where it fails"). The offset window drops a neighbour on a sharply curved wall (a
+        # shoulder), found at the shared edge nearly in the tangent plane; the behind window a wall
+        # point behind the primary (through the silicone, found where the wall creases): such pairs,
+        # counted with their negative gap, made the energy jump by orders of magnitude when the
+        # search added or dropped them (fe3d-3). Walls that really pass through each other are
+        # caught by the geometric check instead (min_gap)
+        offset2 = (sep * sep - gap * gap) / (self.d_hat * self.d_hat)
+        weight = smooth_step_cf((OFF_HIGH ** 2 - offset2) / (OFF_HIGH ** 2 - OFF_LOW ** 2))
+        weight = weight * smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
         # and the two points must be apart on the reference wall: a neighbour along the wall
         # is not a contact partner (the section rung's exclusion of incident segments)
         ref = ng.Norm(X.Other() - X) / lumen.radius
@@ -145,13 +152,17 @@ class LumenContact:
         self.check = ng.ContactBoundary(wall, wall, volume=False)
         self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
         self.check_form = ng.BilinearForm(problem.fes)
+        # the contact energy alone on the same pairs: its gradient is the wall's contact force
+        self.force_boundary = ng.ContactBoundary(wall, wall, volume=False)
+        self.force_boundary.AddEnergy((scale * weight * barrier_cf(gap / self.d_hat)).Compile())
+        self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
         # a census of the current pairs (pair_census): those in the barrier's range, and those
-        # whose partner lies behind the primary (cos < -COS_LOW, apart on the wall), which
+        # whose partner lies behind the primary (beyond BEHIND_LOW d_hat, apart on the wall), which
         # the energy ignores; area (m^2) and area-weighted x, y, z and gap of each
         one = ng.IfPos(ref - NEAR_HIGH, 1.0, 0.0)
-        kinds = {"in_range": one * ng.IfPos(cos - COS_LOW, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
-                 "behind": one * ng.IfPos(-cos - COS_LOW, 1.0, 0.0)}
+        kinds = {"in_range": ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
+                 "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - gap, 1.0, 0.0)}
         self._census = []
         for kind, mask in kinds.items():
             for what, f in (("area", mask), ("x", mask * ng.x), ("y", mask * ng.y), ("z", mask * ng.z),
@@ -165,6 +176,14 @@ class LumenContact:
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         if self.backtrack_on_overlap:
             self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+
+    def force_norm(self, free) -> float:
+        """Euclidean norm over the ``free`` unknowns of the contact's nodal forces (N) on the pairs of
+        the last update."""
+        self.force_boundary.Update(self.problem.u, self.force_form, self.intorder, self.maxdist, other=self.boundary)
+        out = self.problem.gf.vec.CreateVector()
+        self.force_form.Apply(self.problem.gf.vec, out)
+        return float(np.linalg.norm(out.FV().NumPy()[free]))
 
     def overlap_area(self) -> float:
         """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat

@@ -313,7 +313,9 @@ class Fe3dProblem:
         self.a.Apply(self.gf.vec, self.res)
         work = abs(ng.InnerProduct(du, self.res))
         load = self._load_norm()
-        log.debug("pair search at convergence: |du.r| %.3e J, |r| %.3e of the load", work, force / load)
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("pair search at convergence: |du.r| %.3e J, |r| %.3e of the load, %.3e of the contact force",
+                      work, force / load, force / max(self.contact.force_norm(self.free_mask), 1e-300))
         return math.isfinite(work) and (work < self.newton_settings.energy_tol * self.energy_scale
                                         or force < self.contact.settle_force * load)
 
@@ -364,9 +366,12 @@ class Fe3dProblem:
             while it < budget:
                 it += 1
                 t_it = time.perf_counter()
-                if self.contact is not None and it > 1 and work >= self.contact.search_above * tol:
+                if self.contact is not None and it > 1 and searches == 0 and work >= self.contact.search_above * tol:
                     # far from convergence the pairs of an earlier iterate are stale (the walls slide):
-                    # fixed, they make the energy so nonconvex that full Newton steps cycle
+                    # fixed, they make the energy so nonconvex that full Newton steps cycle. After a
+                    # search at convergence the pairs are fresh and stay fixed: searched again at every
+                    # iteration, they led back to the pairing of a neighbouring state, whose solution
+                    # was the state just left (a 5-iteration cycle on the coarse body at 0.3155 bar)
                     self.contact.update()
                 self.a.Apply(self.gf.vec, self.res)
                 rnorm = ng.Norm(self.res)
