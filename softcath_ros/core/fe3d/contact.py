@@ -191,9 +191,10 @@ class LumenContact:
         return self.check_form.Energy(self.problem.gf.vec)
 
     def pair_census(self) -> dict:
-        """The pairs of a fresh search at the current state: for "in_range" (in front of the
-        primary, gap below d_hat) and "behind" (partner behind the primary, ignored by the
-        energy) the model's wall area (m^2), its centroid (m) and mean gap (m)."""
+        """The pairs of a fresh search at the current state: for "in_range" (counted by the
+        energy's windows, gap below d_hat) and "behind" (partner more than 2 d_hat behind the
+        primary, ignored by the energy) the model's wall area (m^2), its centroid (m) and mean
+        gap (m)."""
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         raw: dict = {}
         for kind, what, cb, form in self._census:
