@@ -394,16 +394,22 @@ class Fe3dProblem:
                         # merit: the energy with q at its optimum for u (see module docstring)
                         self._update_pressure_field()
                         e = self.energy()
-                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
+                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0)
+                        cut = "raises the energy"
                     else:
-                        ok = self.min_jacobian_ok()
-                    if ok and self.contact is not None and self.contact.min_gap() < -self.contact.tolerance:
-                        # a step through the other wall jumps over the barrier (it acts only at
-                        # the pairs' points, and only in front of the primary): halve it
-                        ok = False
+                        ok = True
+                    if ok and not self.min_jacobian_ok():
+                        ok, cut = False, "inverts an element"
+                    if ok and self.contact is not None:
+                        gap = self.contact.min_gap()
+                        if gap < -self.contact.tolerance:
+                            # a step through the other wall jumps over the barrier (it acts only at
+                            # the pairs' points): halve it
+                            ok, cut = False, f"the lumen wall crosses itself by {-gap * 1e6:.1f} um"
                     if ok and self.contact is not None and self.contact.backtrack_on_overlap:
                         # no step into the barrier's continuation (the walls' overlap must not grow)
                         ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
+                        cut = "pushes paired walls past the barrier's log range"
                     if ok:
                         break
                     alpha *= 0.5
@@ -411,7 +417,7 @@ class Fe3dProblem:
                         where = "" if st.line_search and self.min_jacobian_ok() else f"; {self.worst_element()}"
                         raise NewtonFailure("line search failed: every step length raises the energy, "
                                             "pushes the lumen walls into each other or "
-                                            f"inverts an element (det F <= 0{where})", it)
+                                            f"inverts an element (the shortest step tried {cut}; det F <= 0{where})", it)
                 if st.line_search:
                     e0 = e
                 self.iterations_total += 1
