@@ -4,8 +4,8 @@ stall in docs/models/fe3d.md, "Where it fails").
 Ramps a body (default: the coarse 10 mm body of test/test_fe3d.py) with lumen contact and,
 at every accepted step from ``--from`` bar on, searches the pairs afresh and reports
 (LumenContact.pair_census) the wall area of the pairs in the barrier's range and of those
-whose partner lies behind the primary (through the silicone, ignored by the energy since
-fe3d-4), with where they are, and the wall's smallest gap.
+whose partner lies more than 2 d_hat behind the primary (through the silicone, ignored by the
+energy), with where they are, and the wall's smallest gap.
 
     .venv/bin/python benchmarks/fe3d_contact_pairs.py --to 0.30 --name fe3d_contact_pairs_10mm
 """

@@ -270,7 +270,7 @@ def test_lumen_contact_keeps_the_walls_apart_at_every_step(short_design):
     0.255 bar, beyond the 0.252 bar where the ramp stops without contact: the contact barrier is
     active (the wall's smallest gap below the barrier distance, here 0.02 of the lumen diameter,
     30 um) and at every accepted step the wall never crosses itself beyond the tolerance (min gap
-    >= -0.5 d_hat). 57-110 s at load 3-4: the steps after the walls engage are slow."""
+    >= -0.5 d_hat). 37 s at load 1.5-2 (fe3d-4: 57-110 s at load 3-4)."""
     from softcath_ros.core.fe3d.ramp import run_ramp
 
     model = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02)

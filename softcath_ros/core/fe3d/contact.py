@@ -4,10 +4,13 @@ with the section rung's clamped log-barrier on the normal gap.
 NGSolve pairs every integration point of the lumen wall (primary) with the closest point of
 the lumen wall (secondary) whose normal faces it (its own and its neighbours' do not while
 the wall is smooth; the wall across a closing slit, or across a fold at its shoulders, does),
-within ``maxdist``. The pairs are searched again before every Newton iteration
-(``ContactBoundary.Update``, as NGSolve expects); between searches they are fixed and the
-energy is differentiated exactly by NGSolve, so the tangent is the consistent one of the
-fixed pairing. The gap is the normal one,
+within ``maxdist``. The pairs are searched again (``ContactBoundary.Update``) before every
+Newton iteration until Newton is close to convergence, then fixed, and searched again at
+convergence (Fe3dProblem.newton). Between searches the energy is differentiated exactly by
+NGSolve, so the tangent is the consistent one of the fixed pairing (checked by finite
+differences of the residual). Pairs kept from a distant iterate are stale: the walls slide, a
+fixed partner drifts off the closest point, and that energy is so nonconvex that full Newton
+steps cycle (fe3d-4's stall, docs/models/fe3d.md "Where it fails"). The gap is the normal one,
 
     g = ((X' + u') - (X + u)) . n,      n the primary's deformed normal (into the lumen),
 
@@ -37,9 +40,12 @@ from ..section_fe.terms.contact import KAPPA_SCALE, barrier
 KAPPA = KAPPA_SCALE
 # below xi = g / d_hat = XI_MIN the barrier is continued quadratically (C2)
 XI_MIN = 0.02
-# a pair counts fully when its separation is within acos(COS_HIGH) of the normal, not at all
-# beyond acos(COS_LOW) (C2 in between)
-COS_LOW, COS_HIGH = 0.3, 0.7
+# a pair counts fully when its partner lies within OFF_LOW d_hat of the primary's normal line
+# (its offset along the wall, |sep - g n|), not at all beyond OFF_HIGH d_hat (C2 in between)
+OFF_LOW, OFF_HIGH = 2.0, 5.0
+# and when it lies in front of the primary or at most BEHIND_HIGH d_hat behind it, not at all
+# beyond BEHIND_LOW d_hat behind it (through the silicone, where the wall creases)
+BEHIND_LOW, BEHIND_HIGH = -2.0, -1.0
 # and when its two points lie at least NEAR_HIGH lumen radii apart in the reference state, not at
 # all below NEAR_LOW (neighbours along the wall, found at a sharply curved shoulder)
 NEAR_LOW, NEAR_HIGH = 0.25, 0.5
@@ -102,6 +108,12 @@ class LumenContact:
         self.settle = True
         # at most this many searches at convergence per solve (each with max_iterations of its own)
         self.max_searches = 6
+        # the pairs are searched again before every Newton iteration while |du.r| is at least this
+        # many times Newton's tolerance, then fixed (Newton quadratic on them) until convergence
+        self.search_above = 1e3
+        # the pairs count as settled when a search at convergence leaves a residual force below
+        # this fraction of the pressure load (Fe3dProblem._contact_pairs_settled)
+        self.settle_force = 1e-3
         # backtrack from a Newton step that adds to overlap_area(): off, since on the coarse
         # 10 mm body it stopped the ramp at the same pressure (0.2439 bar) and cost time
         self.backtrack_on_overlap = False
@@ -116,16 +128,20 @@ class LumenContact:
         cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
         normal = cof_n / ng.Norm(cof_n)
         gap = sep * normal
-        # cos of the angle between the separation and the normal: a pair across the lumen is
-        # along the normal, in front of the primary (cos > 0); a neighbour on a sharply curved
-        # wall (a shoulder) is found at the shared edge, nearly in the tangent plane, and a
-        # wall point behind the primary (cos < 0: through the silicone, found where the wall
-        # creases) is no partner either: such pairs, counted with their negative gap, made the
-        # energy jump by orders of magnitude when the search added or dropped them and Newton
-        # cycle between pairings (docs/models/fe3d.md, "Where it fails"). Walls that really
-        # pass through each other are caught by the geometric check instead (min_gap)
-        cos = gap / ng.sqrt(sep * sep + (1e-6 * self.d_hat) ** 2)
-        weight = smooth_step_cf((cos - COS_LOW) / (COS_HIGH - COS_LOW))
+        # a pair across the lumen has its partner near the primary's normal line, in front of it.
+        # Windows in lengths (d_hat), not in the angle: with the pairs fixed between searches the
+        # walls slide by microns, and a window on the angle (fe3d-4: cos 0.3 -> 0.7) switched a
+        # pair off once it had slid by about its gap, a few microns, which made the fixed
+        # pairing's energy so nonconvex that full Newton steps cycled (docs/models/fe3d.md,
+        # "Where it fails"). The offset window drops a neighbour on a sharply curved wall (a
+        # shoulder), found at the shared edge nearly in the tangent plane; the behind window a wall
+        # point behind the primary (through the silicone, found where the wall creases): such pairs,
+        # counted with their negative gap, made the energy jump by orders of magnitude when the
+        # search added or dropped them (fe3d-3). Walls that really pass through each other are
+        # caught by the geometric check instead (min_gap)
+        offset2 = (sep * sep - gap * gap) / (self.d_hat * self.d_hat)
+        weight = smooth_step_cf((OFF_HIGH ** 2 - offset2) / (OFF_HIGH ** 2 - OFF_LOW ** 2))
+        weight = weight * smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
         # and the two points must be apart on the reference wall: a neighbour along the wall
         # is not a contact partner (the section rung's exclusion of incident segments)
         ref = ng.Norm(X.Other() - X) / lumen.radius
@@ -138,13 +154,17 @@ class LumenContact:
         self.check = ng.ContactBoundary(wall, wall, volume=False)
         self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
         self.check_form = ng.BilinearForm(problem.fes)
+        # the contact energy alone on the same pairs: its gradient is the wall's contact force
+        self.force_boundary = ng.ContactBoundary(wall, wall, volume=False)
+        self.force_boundary.AddEnergy((scale * weight * barrier_cf(gap / self.d_hat)).Compile())
+        self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
         # a census of the current pairs (pair_census): those in the barrier's range, and those
-        # whose partner lies behind the primary (cos < -COS_LOW, apart on the wall), which
+        # whose partner lies behind the primary (beyond BEHIND_LOW d_hat, apart on the wall), which
         # the energy ignores; area (m^2) and area-weighted x, y, z and gap of each
         one = ng.IfPos(ref - NEAR_HIGH, 1.0, 0.0)
-        kinds = {"in_range": one * ng.IfPos(cos - COS_LOW, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
-                 "behind": one * ng.IfPos(-cos - COS_LOW, 1.0, 0.0)}
+        kinds = {"in_range": ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
+                 "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - gap, 1.0, 0.0)}
         self._census = []
         for kind, mask in kinds.items():
             for what, f in (("area", mask), ("x", mask * ng.x), ("y", mask * ng.y), ("z", mask * ng.z),
@@ -159,15 +179,24 @@ class LumenContact:
         if self.backtrack_on_overlap:
             self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
 
+    def force_norm(self, free) -> float:
+        """Euclidean norm over the ``free`` unknowns of the contact's nodal forces (N) on the pairs of
+        the last update."""
+        self.force_boundary.Update(self.problem.u, self.force_form, self.intorder, self.maxdist, other=self.boundary)
+        out = self.problem.gf.vec.CreateVector()
+        self.force_form.Apply(self.problem.gf.vec, out)
+        return float(np.linalg.norm(out.FV().NumPy()[free]))
+
     def overlap_area(self) -> float:
         """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat
         (the pairs of the last update with backtrack_on_overlap on)."""
         return self.check_form.Energy(self.problem.gf.vec)
 
     def pair_census(self) -> dict:
-        """The pairs of a fresh search at the current state: for "in_range" (in front of the
-        primary, gap below d_hat) and "behind" (partner behind the primary, ignored by the
-        energy) the model's wall area (m^2), its centroid (m) and mean gap (m)."""
+        """The pairs of a fresh search at the current state: for "in_range" (counted by the
+        energy's windows, gap below d_hat) and "behind" (partner more than 2 d_hat behind the
+        primary, ignored by the energy) the model's wall area (m^2), its centroid (m) and mean
+        gap (m)."""
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         raw: dict = {}
         for kind, what, cb, form in self._census:

@@ -159,6 +159,7 @@ class Fe3dProblem:
         self.energy_scale = design.material.c1 * self.reference_volume
         free = fes.FreeDofs(True)
         self.free = free
+        self.free_mask = np.array(list(fes.FreeDofs(False)), dtype=bool)   # every free unknown, q too
         self.res = self.gf.vec.CreateVector()
         self.du = self.gf.vec.CreateVector()
         self.inverse = None
@@ -317,21 +318,31 @@ class Fe3dProblem:
 
     def _contact_pairs_settled(self) -> bool:
         """Search the contact pairs again at the converged state; True when the new pairs leave
-        it in equilibrium (the Newton increment for them, with the last factorisation, below
-        the tolerance). Between searches the pairs are fixed, so Newton is quadratic on them."""
+        it in equilibrium: the Newton increment for them (with the last factorisation) below the
+        tolerance, or their residual force below ``contact.settle_force`` of the pressure load
+        (both as Euclidean norms over the free unknowns). The search is not a smooth function of
+        the state (NGSolve's closest point is a few steps of an approximate projection, and the
+        P2 wall has kinks at element edges), so once the walls touch a fresh search at a
+        converged state leaves a residual of 1e-5 to 2e-4 of the load (|du.r| 1e-11 to 1e-10 J
+        on the coarse 10 mm body, above the tolerance of 2e-12 J) however often it is repeated.
+        Between searches the pairs are fixed, so Newton is quadratic on them."""
         ng = _ng()
         self.contact.update()
         self.a.Apply(self.gf.vec, self.res)
+        force = float(np.linalg.norm(self.res.FV().NumPy()[self.free_mask]))
         du = self.gf.vec.CreateVector()
         self._solve(self.res, du)
         self.a.Apply(self.gf.vec, self.res)
         work = abs(ng.InnerProduct(du, self.res))
-        return math.isfinite(work) and work < self.newton_settings.energy_tol * self.energy_scale
+        load = self._load_norm()
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("pair search at convergence: |du.r| %.3e J, |r| %.3e of the load, %.3e of the contact force",
+                      work, force / load, force / max(self.contact.force_norm(self.free_mask), 1e-300))
+        return math.isfinite(work) and (work < self.newton_settings.energy_tol * self.energy_scale
+                                        or force < self.contact.settle_force * load)
 
-    def tangent(self) -> np.ndarray:
-        """du/ds at the current (converged) state: K du/ds = sum_i d_i dV_i/du."""
-        if self.inverse is None:
-            self._factorize()
+    def _load_vector(self):
+        """sum_i d_i dV_i/du (m^2): the channel pressures' nodal forces per unit load factor s (Pa)."""
         rhs = self.gf.vec.CreateVector()
         tmp = self.gf.vec.CreateVector()
         rhs[:] = 0.0
@@ -339,6 +350,17 @@ class Fe3dProblem:
             if d.Get() != 0.0:
                 bv.Apply(self.gf.vec, tmp)
                 rhs.data += d.Get() * tmp
+        return rhs
+
+    def _load_norm(self) -> float:
+        """Euclidean norm over the free unknowns of the channel pressures' nodal forces (N)."""
+        return abs(self.load.Get()) * float(np.linalg.norm(self._load_vector().FV().NumPy()[self.free_mask]))
+
+    def tangent(self) -> np.ndarray:
+        """du/ds at the current (converged) state: K du/ds = sum_i d_i dV_i/du."""
+        if self.inverse is None:
+            self._factorize()
+        rhs = self._load_vector()
         out = self.gf.vec.CreateVector()
         self._solve(rhs, out)
         return np.array(out.FV().NumPy(), copy=True)
@@ -362,9 +384,18 @@ class Fe3dProblem:
             # max_iterations per pairing: a new search (at convergence) starts a fresh budget
             budget, searches, it = st.max_iterations, 0, 0
             self.sigma, self._shifted_in_solve = 0.0, 0
+            tol = st.energy_tol * self.energy_scale
+            work = math.inf
             while it < budget:
                 it += 1
                 t_it = time.perf_counter()
+                if self.contact is not None and it > 1 and searches == 0 and work >= self.contact.search_above * tol:
+                    # far from convergence the pairs of an earlier iterate are stale (the walls slide):
+                    # fixed, they make the energy so nonconvex that full Newton steps cycle. After a
+                    # search at convergence the pairs are fresh and stay fixed: searched again at every
+                    # iteration, they led back to the pairing of a neighbouring state, whose solution
+                    # was the state just left (a 5-iteration cycle on the coarse body at 0.3155 bar)
+                    self.contact.update()
                 self.a.Apply(self.gf.vec, self.res)
                 rnorm = ng.Norm(self.res)
                 if not math.isfinite(rnorm):
@@ -396,23 +427,29 @@ class Fe3dProblem:
                         # merit: the energy with q at its optimum for u (see module docstring)
                         self._update_pressure_field()
                         e = self.energy()
-                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0) and self.min_jacobian_ok()
+                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0)
+                        cut = "raises the energy"
                     else:
-                        ok = self.min_jacobian_ok()
-                    if ok and self.contact is not None and self.contact.min_gap() < -self.contact.tolerance:
-                        # a step through the other wall jumps over the barrier (it acts only at
-                        # the pairs' points, and only in front of the primary): halve it
-                        ok = False
+                        ok = True
+                    if ok and not self.min_jacobian_ok():
+                        ok, cut = False, "inverts an element"
+                    if ok and self.contact is not None:
+                        gap = self.contact.min_gap()
+                        if gap < -self.contact.tolerance:
+                            # a step through the other wall jumps over the barrier (it acts only at
+                            # the pairs' points): halve it
+                            ok, cut = False, f"the lumen wall crosses itself by {-gap * 1e6:.1f} um"
                     if ok and self.contact is not None and self.contact.backtrack_on_overlap:
                         # no step into the barrier's continuation (the walls' overlap must not grow)
                         ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
+                        cut = "pushes paired walls past the barrier's log range"
                     if ok:
                         break
                     alpha *= 0.5
                     if alpha < st.min_step and self.shift is not None:
                         break
                     if alpha < st.min_step:
-                        why = self._rejection() or "raises the energy"
+                        why = self._rejection() or cut
                         raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}",
                                             it)
                 if alpha < st.min_step:   # every length rejected: the shifted tangent's step instead
@@ -428,7 +465,7 @@ class Fe3dProblem:
                 self.last_work = work
                 log.debug("load %.1f Pa it %d du.r %.3e alpha %g (%.2f s)", self.load.Get(), it, slope,
                           alpha, time.perf_counter() - t_it)
-                if alpha == 1.0 and work < st.energy_tol * self.energy_scale:
+                if alpha == 1.0 and work < tol:
                     if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
                         # converged for the old pairs: iterate on with the new ones
                         searches += 1
