@@ -148,22 +148,24 @@ class LumenContact:
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
         # compiled: the same values, several times faster to assemble
-        self.boundary.AddEnergy((scale * weight * barrier_cf(gap / self.d_hat)).Compile())
+        energy = (scale * weight * barrier_cf(gap / self.d_hat)).Compile()
+        self.boundary.AddEnergy(energy)
+        paired = ng.IfPos(weight - 1e-12, 1.0, 0.0)   # the pairs the energy counts at all
         # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
         # Newton can backtrack from a step that adds to it (backtrack_on_overlap)
         self.check = ng.ContactBoundary(wall, wall, volume=False)
-        self.check.AddEnergy(ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
+        self.check.AddEnergy(paired * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
         self.check_form = ng.BilinearForm(problem.fes)
         # the contact energy alone on the same pairs: its gradient is the wall's contact force
         self.force_boundary = ng.ContactBoundary(wall, wall, volume=False)
-        self.force_boundary.AddEnergy((scale * weight * barrier_cf(gap / self.d_hat)).Compile())
+        self.force_boundary.AddEnergy(energy)
         self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
         # a census of the current pairs (pair_census): those in the barrier's range, and those
         # whose partner lies behind the primary (beyond BEHIND_LOW d_hat, apart on the wall), which
         # the energy ignores; area (m^2) and area-weighted x, y, z and gap of each
         one = ng.IfPos(ref - NEAR_HIGH, 1.0, 0.0)
-        kinds = {"in_range": ng.IfPos(weight - 1e-12, 1.0, 0.0) * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
+        kinds = {"in_range": paired * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
                  "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - gap, 1.0, 0.0)}
         self._census = []
         for kind, mask in kinds.items():

@@ -431,14 +431,11 @@ class Fe3dProblem:
                         cut = "raises the energy"
                     else:
                         ok = True
-                    if ok and not self.min_jacobian_ok():
-                        ok, cut = False, "inverts an element"
-                    if ok and self.contact is not None:
-                        gap = self.contact.min_gap()
-                        if gap < -self.contact.tolerance:
-                            # a step through the other wall jumps over the barrier (it acts only at
-                            # the pairs' points): halve it
-                            ok, cut = False, f"the lumen wall crosses itself by {-gap * 1e6:.1f} um"
+                    if ok:
+                        # an inverted element, or a step through the other wall, which jumps over
+                        # the barrier (it acts only at the pairs' points): halve it
+                        cut = self._rejection(locate=False)
+                        ok = not cut
                     if ok and self.contact is not None and self.contact.backtrack_on_overlap:
                         # no step into the barrier's continuation (the walls' overlap must not grow)
                         ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
@@ -446,9 +443,9 @@ class Fe3dProblem:
                     if ok:
                         break
                     alpha *= 0.5
-                    if alpha < st.min_step and self.shift is not None:
-                        break
                     if alpha < st.min_step:
+                        if self.shift is not None:
+                            break
                         why = self._rejection() or cut
                         raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}",
                                             it)
@@ -507,11 +504,12 @@ class Fe3dProblem:
         self._update_pressure_field()
         return self.energy()
 
-    def _rejection(self) -> str:
-        """Why the current state is not admissible ("" when it is): an inverted element, or the
-        lumen wall crossing itself by more than the contact's tolerance (0.5 d_hat)."""
+    def _rejection(self, locate: bool = True) -> str:
+        """Why the current state is not admissible ("" when it is): an inverted element (with
+        ``locate``, where: the most compressed one), or the lumen wall crossing itself by more
+        than the contact's tolerance (0.5 d_hat)."""
         if not self.min_jacobian_ok():
-            return f"inverts an element (det F <= 0.02; {self.worst_element()})"
+            return f"inverts an element (det F <= 0.02; {self.worst_element()})" if locate else "inverts an element"
         if self.contact is not None:
             gap = self.contact.min_gap()
             if gap < -self.contact.tolerance:
