@@ -25,6 +25,7 @@ import numpy as np
 from harness import write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import angle_per_length
 from softcath_ros.core.scene import load_scene
 from softcath_ros.core.units import PA_PER_BAR
 
@@ -68,8 +69,8 @@ def section_rows(repeats):
     shuffled = np.array([6, 0, 5, 1, 4, 2, 3])
 
     def rc(state):
-        theta = np.hypot(*np.asarray(state.curvature).reshape(-1, 2).T) * np.asarray(state.axial_stretch).reshape(-1)
-        return np.where(np.asarray(state.converged).reshape(-1), 1.0 / theta, np.nan)
+        per_length = angle_per_length(state, make_model("closed_form", design))   # theta / l, the cap straight
+        return np.where(np.asarray(state.converged).reshape(-1), 1.0 / per_length, np.nan)
 
     t_batch, batch = timed(lambda: make_model("section", design).evaluate(p), repeats)
     t_mixed, mixed = timed(lambda: make_model("section", design).evaluate(p[shuffled]), repeats)

@@ -34,6 +34,7 @@ from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.core.prediction import angle_per_length  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 PUBLISHED_40MM = {15000.0: 31.13e-3, 20000.0: 16.86e-3}   # docs/actuator.md: R_C of the published FE
@@ -80,14 +81,16 @@ def main(argv=None) -> int:
     state, ramp = model.sweep(checkpoints[:, None])
     total = time.perf_counter() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    # the section rung at the same pressures, as the same R_C = L / theta (= 1 / (|k| lambda)):
-    # the section-vs-3D comparison of issue 3 (after the fe3d timing and memory were read)
+    # the section rung at the same pressures, as the same R_C = L / theta (its arc over the channelled
+    # part, the tip cap straight: angle_per_length): the section-vs-3D comparison (after the fe3d timing
+    # and memory were read)
     if args.no_section:
         section_rc = [None] * len(checkpoints)
     else:
-        section = make_model("section", design).evaluate(checkpoints[:, None])
-        section_rc = [1.0 / (float(np.hypot(*k)) * lam) if ok and np.hypot(*k) > 0 else None
-                      for k, lam, ok in zip(section.curvature, section.axial_stretch, section.converged)]
+        section_model = make_model("section", design)
+        section = section_model.evaluate(checkpoints[:, None])
+        section_rc = [1.0 / float(a) if ok and a > 0 else None
+                      for a, ok in zip(angle_per_length(section, section_model), section.converged)]
     gaps = {pt.load: pt.measured.get("lumen_min_gap_m") for pt in (ramp.points if ramp else [])}
     rows = []
     for i, p in enumerate(checkpoints):

@@ -106,6 +106,7 @@ def main() -> int:
 
     from softcath_ros.core.design import load_design
     from softcath_ros.core.kinematics import tip_pose
+    from softcath_ros.core.prediction import arc_and_cap
     from softcath_ros.core.models import make_model
     from softcath_ros.nodes.qos import stream_qos
     from softcath_ros.tools.pacing import run_paced
@@ -117,7 +118,8 @@ def main() -> int:
     n_total = n_warm + n_meas
     pressures = command_pressures(n_total, design.n_channels, top_pressure(model))
     state = model.evaluate(pressures[:RESIDUES])
-    expected_tip, _ = tip_pose(state.curvature, design.length * state.axial_stretch)
+    arc, cap = arc_and_cap(model, design.length)
+    expected_tip, _ = tip_pose(state.curvature, arc * state.axial_stretch, cap)
 
     rclpy.init()
     node = rclpy.create_node("softcath_latency_probe")

@@ -73,18 +73,20 @@ def main() -> int:
 
     from softcath_ros.core.design import load_design
     from softcath_ros.core.kinematics import backbone_poses
+    from softcath_ros.core.prediction import arc_and_cap
     from softcath_ros.core.models import make_model
     from softcath_ros.nodes.live_view import LiveView
     from softcath_ros.nodes.qos import stream_qos
 
     design = load_design("implemented_5mm")
     model = make_model("closed_form", design)
+    arc, cap = arc_and_cap(model, design.length)
     rng = np.random.default_rng(0)
     pressures = rng.uniform(0, design.max_pressure, size=(args.frames, 1))
     states = []
     for p in pressures:
         k, stretch = model.curvature_single(p)
-        pos, quat = backbone_poses(k, design.length * stretch, args.points)
+        pos, quat = backbone_poses(k, arc * stretch, args.points, cap)
         states.append((time.time_ns(), pos, quat, p))
     me = psutil.Process()
     rows = []

@@ -18,6 +18,7 @@ from harness import RESULTS, save_figure, time_loops, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose, tip_pose_single
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import arc_and_cap
 
 
 def main() -> None:
@@ -29,6 +30,7 @@ def main() -> None:
 
     design = load_design(args.design)
     model = make_model(args.model, design)
+    arc, cap = arc_and_cap(model, design.length)
     rng = np.random.default_rng(0)
     p1 = rng.uniform(0, design.max_pressure, design.n_channels)
     rows = []
@@ -47,11 +49,11 @@ def main() -> None:
         record("curvature_single (fast path)", 1,
                time_loops(lambda: model.curvature_single(p1), args.repeats, 20000))
     record("evaluate + tip_pose (single)", 1,
-           time_loops(lambda: tip_pose(model.evaluate(p1).curvature, design.length), args.repeats, 5000))
+           time_loops(lambda: tip_pose(model.evaluate(p1).curvature, arc, cap), args.repeats, 5000))
     if model.info.linear_gain:
         def fast_pose():
             k, stretch = model.curvature_single(p1)
-            return tip_pose_single(k[0], k[1], design.length * stretch)
+            return tip_pose_single(k[0], k[1], arc * stretch, cap)
         record("curvature_single + tip_pose_single", 1, time_loops(fast_pose, args.repeats, 20000))
     for n in (1_000, 100_000, 1_000_000):
         batch = rng.uniform(0, design.max_pressure, (n, design.n_channels))

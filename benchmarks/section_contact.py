@@ -23,13 +23,16 @@ import numpy as np
 from harness import save_figure, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import angle_per_length
 from softcath_ros.core.units import PA_PER_BAR
 
 MESH_DIVISIONS = (12, 16, 20, 24, 30, 40)
 
 
-def radius_l_over_theta(k, lam) -> float:
-    return float(1.0 / (np.hypot(*k) * lam))
+def radius_l_over_theta(model, state) -> np.ndarray:
+    """R_C = l / theta (m) of every command of ``state`` (the tip cap straight: angle_per_length)."""
+    with np.errstate(divide="ignore"):
+        return 1.0 / angle_per_length(state, model)
 
 
 def sweep(design, ps, **options):
@@ -64,8 +67,7 @@ def main() -> None:
             cpus.append(c)
         ok = state.converged
         gaps = [model.problem.contact_min_gap(model._states[(float(p),)]) for p in ps[ok, 0]]
-        rc = [radius_l_over_theta(k, s) if c and p > 0 else None
-              for k, s, c, p in zip(state.curvature, state.axial_stretch, ok, ps[:, 0])]
+        rc = [float(r) if c and p > 0 else None for r, c, p in zip(radius_l_over_theta(model, state), ok, ps[:, 0])]
         rows.append({"case": f"0-0.5 bar, 21 commands, {length * 1e3:.0f} mm, D/20", "mesh_division": 20,
                      "mesh_nodes": model.mesh.n_nodes, "pressure_bar": 0.5, "converged": int(ok.sum()),
                      "commands": len(ps), "median_sweep_s": statistics.median(times), "min_sweep_s": min(times),
@@ -84,7 +86,7 @@ def main() -> None:
         rows.append({"case": f"0.35 bar, D/{n}", "mesh_division": n, "mesh_nodes": model.mesh.n_nodes,
                      "pressure_bar": 0.35, "converged": int(ok), "commands": 1, "median_sweep_s": t,
                      "min_sweep_s": t, "max_sweep_s": t, "median_sweep_cpu_s": c, "repeats": 1,
-                     "R_C_l_over_theta_mm_at_0.35": radius_l_over_theta(k, state.axial_stretch[0]) * 1e3 if ok else None,
+                     "R_C_l_over_theta_mm_at_0.35": float(radius_l_over_theta(model, state)[0]) * 1e3 if ok else None,
                      "R_C_l_over_theta_mm_at_0.5": None,
                      "min_wall_gap_um": 1e6 * model.problem.contact_min_gap(model._states[(0.35 * PA_PER_BAR,)]) if ok else None,
                      "newton_iterations": int(state.diagnostics.newton_iterations.sum()),
@@ -101,7 +103,7 @@ def main() -> None:
                      "mesh_nodes": model.mesh.n_nodes, "pressure_bar": 0.5, "converged": int(ok.sum()),
                      "commands": len(ps), "median_sweep_s": t, "min_sweep_s": t, "max_sweep_s": t,
                      "median_sweep_cpu_s": c, "repeats": 1, "R_C_l_over_theta_mm_at_0.35": None,
-                     "R_C_l_over_theta_mm_at_0.5": radius_l_over_theta(k, state.axial_stretch[-1]) * 1e3 if ok[-1] else None,
+                     "R_C_l_over_theta_mm_at_0.5": float(radius_l_over_theta(model, state)[-1]) * 1e3 if ok[-1] else None,
                      "min_wall_gap_um": None, "newton_iterations": int(state.diagnostics.newton_iterations.sum()),
                      "message": f"bend direction at 0.5 bar {np.degrees(np.arctan2(k[1], k[0])):.6f} deg"
                                 if ok[-1] else state.message.split(";")[0], **_stability(model, state)})

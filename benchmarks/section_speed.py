@@ -22,6 +22,7 @@ import numpy as np
 from harness import save_figure, write_results
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import angle_per_length
 from softcath_ros.core.units import PA_PER_BAR
 
 PUBLISHED_RC_MM = {0.15: 31.13, 0.20: 16.86}   # 3D FE, 40 mm (docs/actuator.md)
@@ -88,14 +89,15 @@ def main() -> None:
               f"(min {r['min_sweep_s']:.2f}, CPU {r['median_sweep_cpu_s']:.2f}), setup {r['median_setup_s']:.2f} s, "
               f"{r['converged']}/{len(ps)} converged, peak {r['peak_traced_MB']:.1f} MB traced")
         curves[case] = {"pressure_bar": (ps[:, 0] / PA_PER_BAR).tolist(),
-                        "radius_of_curvature_mm": [1e3 / (float(np.hypot(*k)) * lam) if c and np.hypot(*k) > 0 else None
-                                                   for k, lam, c in zip(state.curvature, state.axial_stretch, ok)]}
+                        "radius_of_curvature_mm": [1e3 / float(a) if c and a > 0 else None
+                                                   for a, c in zip(angle_per_length(state, model), ok)]}
         if (~ok).any():
             print(f"    {state.message.split(';')[0]}")
-    closed = make_model("closed_form", design).evaluate(sweep)
+    closed_model = make_model("closed_form", design)
+    closed = closed_model.evaluate(sweep)
     curves["closed_form"] = {"pressure_bar": (sweep[:, 0] / PA_PER_BAR).tolist(),
-                             "radius_of_curvature_mm": [1e3 / (float(np.hypot(*k)) * lam) if np.hypot(*k) > 0 else None
-                                                        for k, lam in zip(closed.curvature, closed.axial_stretch)]}
+                             "radius_of_curvature_mm": [1e3 / float(a) if a > 0 else None
+                                                        for a in angle_per_length(closed, closed_model)]}
     meta = {"design": args.design, "target_sweep_s": 2.0, "curves": curves,
             "note": "times under load: other engineers' jobs share the 2 cores"}
     stem = write_results("section_speed", meta, rows)

@@ -271,7 +271,7 @@ def test_allocate_bend_angle_includes_stretch(three):
     for deg_dir, deg_angle in [(0, 5), (45, 12), (200, 17)]:
         res = allocator.allocate_bend(math.radians(deg_dir), math.radians(deg_angle))
         k = res.achieved_curvature
-        angle = np.hypot(*k) * three.length * res.axial_stretch
+        angle = np.hypot(*k) * (three.length - three.cap_thickness) * res.axial_stretch   # the cap stays straight
         assert angle == pytest.approx(math.radians(deg_angle), rel=1e-9)
         assert res.axial_stretch > 1.0  # the stretch was not ignored
         assert math.remainder(math.degrees(math.atan2(k[1], k[0])) - deg_dir, 360) == pytest.approx(0, abs=1e-9)
@@ -284,7 +284,8 @@ def test_allocate_tip_recovers_forward_pressures(three):
     allocator = Allocator(model)
     for p in ([0.0, 30e3, 10e3], [20e3, 0.0, 0.0], [45e3, 0.0, 5e3]):
         state = model.evaluate(p)
-        tip, _ = tip_pose(state.curvature, three.length * state.axial_stretch)
+        tip, _ = tip_pose(state.curvature, (three.length - three.cap_thickness) * state.axial_stretch,
+                          three.cap_thickness)
         res = allocator.allocate_tip(tip)
         assert res.extras["tip_reachable"] and res.extras["tip_error_m"] < 1e-9
         np.testing.assert_allclose(res.pressures, p, atol=1e-6 * three.max_pressure)

@@ -290,15 +290,16 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
             phi = math.radians(deg)
             k = 6.0 * np.array([math.cos(phi), math.sin(phi)])
             state = model_cf.evaluate(allocator.allocate(k).pressures)
-            expected, _ = tip_pose(state.curvature, design.length * state.axial_stretch)
+            arc = design.length - design.cap_thickness   # the tip cap stays straight
+            expected, _ = tip_pose(state.curvature, arc * state.axial_stretch, design.cap_thickness)
             mark = len(tips)
             op.stream_bend(k, 0.3)
             assert op.spin(15.0, until=lambda: any(np.allclose(t, expected, atol=1e-9) for t in tips[mark:])), \
                 (deg, tips[-1], expected)
             got = next(t for t in tips[mark:] if np.allclose(t, expected, atol=1e-9))
             # The pose that came back over DDS bends the commanded way: direction within 0.5 deg
-            # and curvature within 1% (the arc through the received tip, constant curvature).
-            k_back = curvature_for_tip(np.array(got), design.length).curvature
+            # and curvature within 1% (the arc that ends, with the straight cap, at the received tip).
+            k_back = curvature_for_tip(np.array(got), arc, cap=design.cap_thickness).curvature
             assert abs(math.degrees(math.remainder(math.atan2(got[1], got[0]) - phi, 2 * math.pi))) < 0.5
             assert np.hypot(*k_back) == pytest.approx(6.0, rel=0.01)
         # Stream stops: vent, the tip goes back to straight.

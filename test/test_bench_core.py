@@ -16,6 +16,7 @@ from softcath_ros.bench.protocol import (ProtocolError, ProtocolRunner, expand_s
                                          protocol_from_dict)
 from softcath_ros.bench.sim_rig import RigParams, SimulatedRig
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import angle_per_length
 
 BAR = 1e5
 
@@ -100,8 +101,9 @@ def test_rig_regulator_lag_gauge_error_and_biases(implemented_design):
     assert r.pressures[0] == pytest.approx(30000.0 + rig.gauge_bias[0], rel=1e-6)
     state = model.evaluate(np.array([30000.0 * 0.75]))
     k_true = np.hypot(*state.curvature)
-    # the sample's arc is stretched: theta = |k| stretch l
-    assert r.angle == pytest.approx(k_true * state.axial_stretch * 0.02 * 0.95 * math.cos(0.15), rel=1e-6)
+    # the sample's arc is stretched and ends at the straight tip cap: theta = |k| stretch (l - cap)
+    arc = 0.02 - model.design.cap_thickness
+    assert r.angle == pytest.approx(k_true * state.axial_stretch * arc * 0.95 * math.cos(0.15), rel=1e-6)
     assert r.angle < k_true * 0.02  # friction and out-of-plane bending under-read
     rig.mount("force", 0.017)
     f = rig.read()
@@ -241,13 +243,14 @@ def test_report_on_a_recording_with_known_values(tmp_path, implemented_design):
     result = write_report(path)
     top = [s for s in result["stats"] if s.bench == "angle" and s.level == 30000.0][0]
     state = model.evaluate(top.pressure_mean)
-    k = float(np.hypot(*state.curvature)) * float(state.axial_stretch)   # theta / l
+    k = float(angle_per_length(state, model, top.length)[0])   # theta / l
     assert top.curvature_mean == pytest.approx(k, rel=1e-5)   # mean over samples; f(mean p) to 2nd order
     assert top.model["closed_form"]["radius"] == pytest.approx(1 / k, rel=1e-9)   # R_C = l / theta
     assert top.radius_mean == pytest.approx(1 / k, rel=1e-3)  # mean of l/theta over slightly varying p
-    # Noise-free rig: the spread in theta / l = g p (1 + a p) is its slope times the spread in pressure.
+    # Noise-free rig: the spread in theta / l = g p (1 + a p) (l - cap) / l is its slope times the spread in
+    # pressure.
     g, a = float(np.hypot(*model.curvature_per_pa[:, 0])), float(model.stretch_per_pa[0])
-    slope = g * (1 + 2 * a * top.pressure_mean[0])
+    slope = g * (1 + 2 * a * top.pressure_mean[0]) * (top.length - model.design.cap_thickness) / top.length
     assert top.curvature_std == pytest.approx(slope * top.pressure_std[0], rel=1e-3)
     text = open(result["report"]).read()
     assert f"| {top.curvature_mean:.2f} ± {top.curvature_std:.2f} |" in text and "Hysteresis" in text
@@ -289,7 +292,7 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     rig.advance(10.0, [0.9 * top])   # regulator settled
     inside = rig.read()
     state = model.evaluate([0.9 * top * (1 - rig.params.pressure_shift)])
-    theta = float(np.hypot(*np.ravel(state.curvature))) * float(np.ravel(state.axial_stretch)[0]) * rig.length
+    theta = float(angle_per_length(state, model, rig.length)[0]) * rig.length
     assert math.isfinite(inside.angle) and inside.angle == pytest.approx(
         theta * 0.95 * math.cos(rig.params.out_of_plane_tilt), rel=1e-6)
     three = load_design("three_channel_5mm")

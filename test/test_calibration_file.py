@@ -68,16 +68,16 @@ def test_round_trip_recovers_the_truth_within_the_stated_95_percent_intervals(tr
     for r in rows:
         state = model.evaluate(r.pressure)
         if r.bench == "angle":
-            measured, predicted = r.curvature, float(angle_per_length(state)[0])
+            measured, predicted = r.curvature, float(angle_per_length(state, model, r.length)[0])
             noise = params.angle_noise / r.length
         else:
             measured, predicted = r.force, float(force.from_curvature(state.curvature, r.length))
             noise = math.sqrt(2) * params.force_noise        # a reading minus its tare reading
         # the gauge's noise moves the reading's pressure away from the one that bent the sample
-        slope = abs(float(angle_per_length(model.evaluate(r.pressure + 100.0))[0])
-                    - float(angle_per_length(state)[0])) / 100.0
+        slope = abs(float(angle_per_length(model.evaluate(r.pressure + 100.0), model, r.length)[0])
+                    - float(angle_per_length(state, model, r.length)[0])) / 100.0
         if r.bench == "force":
-            slope *= abs(predicted) / max(float(angle_per_length(state)[0]), 1e-9)
+            slope *= abs(predicted) / max(float(angle_per_length(state, model, r.length)[0]), 1e-9)
         sigma = math.hypot(noise, slope * params.gauge_noise)
         assert abs(predicted - measured) <= 4.0 * sigma, (r.bench, r.level, predicted, measured, sigma)
     assert cal.rms_after < 1.5 < cal.rms_before
@@ -145,7 +145,8 @@ def test_band95_matches_sampling_the_covariance(implemented_design):
     p = np.array([[20000.0], [35000.0]])
 
     def rc(c):
-        return 1.0 / angle_per_length(build_model("closed_form", implemented_design, c).evaluate(p))
+        model = build_model("closed_form", implemented_design, c)
+        return 1.0 / angle_per_length(model.evaluate(p), model)
 
     half = band95(cal, rc)
     rng = np.random.default_rng(0)
@@ -172,7 +173,8 @@ def test_calibrate_writes_the_file_and_predict_applies_it_with_a_band(truth_run,
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["model"] == "closed_form calibrated" and res["calibration"]["pressure_shift"] == cal.pressure_shift
-    want = 1.0 / angle_per_length(build_model("closed_form", design, cal).evaluate(np.array([[3e4]])))[0]
+    calibrated = build_model("closed_form", design, cal)
+    want = 1.0 / angle_per_length(calibrated.evaluate(np.array([[3e4]])), calibrated)[0]
     top = res["results"][1]
     assert top["radius_of_curvature_m"] == pytest.approx(want)
     band = top["band95"]
@@ -205,8 +207,9 @@ def test_report_and_sweep_apply_a_calibration(truth_run, tmp_path, capsys):
                  "--json"]) == 0
     doc = json.loads(capsys.readouterr().out.split("\nwrote")[0])
     assert doc["model"] == "closed_form calibrated"
-    want = build_model("closed_form", design.with_length(0.02), cal).evaluate(np.array([[3e4]]))
-    assert doc["results"][-1]["radius_of_curvature_m"] == pytest.approx(1 / angle_per_length(want)[0])
+    short = build_model("closed_form", design.with_length(0.02), cal)
+    want = short.evaluate(np.array([[3e4]]))
+    assert doc["results"][-1]["radius_of_curvature_m"] == pytest.approx(1 / angle_per_length(want, short)[0])
 
 
 def test_model_node_applies_a_calibration_parameter(implemented_design, tmp_path):

@@ -27,8 +27,8 @@ def test_predict_json_matches_model():
     assert bent["pressures_pa"] == [20000.0]
     assert bent["curvature_per_m"] == pytest.approx(k.tolist())
     stretch = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4]).axial_stretch
-    # R_C = l / theta (theta = |k| l stretch); 1/|k| under its own name
-    assert bent["radius_of_curvature_m"] == pytest.approx(1 / (abs(k[1]) * stretch))
+    # R_C = l / theta (theta = |k| (l - cap) stretch: the tip cap stays straight); 1/|k| under its own name
+    assert bent["radius_of_curvature_m"] == pytest.approx(0.04 / (abs(k[1]) * stretch * 0.039))
     assert bent["radius_of_curvature_m"] == pytest.approx(0.04 / bent["bending_angle_rad"])
     assert bent["centreline_radius_m"] == pytest.approx(1 / abs(k[1]))
     assert bent["converged"] is True and len(bent["tip_orientation_xyzw"]) == 4
@@ -38,7 +38,11 @@ def test_predict_json_matches_model():
 def test_predict_length_override_and_table():
     r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "20000", "--length", "0.02")
     assert r.returncode == 0, r.stderr
-    assert "length 20.0 mm" in r.stdout and "50.12" in r.stdout   # R_C does not depend on length
+    # 1/|k| does not depend on the length; R_C = l / theta does, through the straight 1 mm cap
+    state = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4])
+    k, stretch = float(np.ravel(state.curvature)[1]), float(np.ravel(state.axial_stretch)[0])
+    assert "length 20.0 mm" in r.stdout and f"{1e3 / abs(k):.2f}" in r.stdout
+    assert f"{1e3 * 0.02 / (abs(k) * stretch * 0.019):.2f}" in r.stdout
 
 
 @pytest.mark.parametrize("args,fragment", [
@@ -79,9 +83,9 @@ def test_predict_reports_the_rods_own_tip_and_contact_force():
     assert r.converged and abs(r.tip_position_m[1]) < 1e-9 and r.contact_force_n > 0.005
     assert "contact_force_n" in r.to_json()
     # what model_node publishes: the solved backbone, its last pose on the scale
-    from softcath_ros.core.prediction import state_backbone
+    from softcath_ros.core.prediction import arc_and_cap, state_backbone
 
-    positions, quats = state_backbone(rod.evaluate(np.array([10000.0])), bench.design.length, 20)
+    positions, quats = state_backbone(rod.evaluate(np.array([10000.0])), *arc_and_cap(rod, bench.design.length), 20)
     # held at the tip, the body bows away from the scale (y > 0) between base and tip
     assert positions.shape == (20, 3) and abs(positions[-1, 1]) < 1e-9 and positions[:, 1].max() > 1e-5
     np.testing.assert_allclose(np.linalg.norm(quats, axis=1), 1.0)
@@ -158,7 +162,8 @@ def test_predict_at_another_length_reports_the_rod_solved_at_that_length(loads):
         np.testing.assert_allclose(r.tip_position_m, tip, rtol=0, atol=1e-12)
         assert r.radius_of_curvature_m == pytest.approx(length / abs(theta), rel=1e-9)
         assert r.centreline_radius_m == pytest.approx(solved.arc_length / abs(theta), rel=1e-9)
-        assert r.axial_stretch == pytest.approx(solved.arc_length / length, rel=1e-9)
+        # the stretch of the channelled part (the rigid tip cap excluded)
+        assert r.axial_stretch == pytest.approx(solved.arc_length / (length - design.cap_thickness), rel=1e-9)
         if "contact" in loads:   # held on the scale at the rest tip of this length
             assert abs(r.tip_position_m[1]) < 1e-9 and r.tip_position_m[2] < length and r.contact_force_n > 0
         elif loads:              # under a load no single arc has the rod's tip

@@ -131,3 +131,49 @@ def test_planar_backbone_poses_reproduce_an_arc():
     np.testing.assert_allclose(quat, ref_quat, atol=1e-5)
     straight, q0 = planar_backbone_poses(np.column_stack([np.zeros(5), np.zeros(5), np.linspace(0, 0.02, 5)]), 3)
     np.testing.assert_allclose(q0, [[0, 0, 0, 1]] * 3, atol=1e-12)
+
+
+CAP = 0.001
+
+
+@pytest.mark.parametrize("k", [[0.0, 0.0], [1e-9, 0.0], [0.0, -40.0], [30.0, 55.0], [-120.0, 10.0]])
+def test_straight_cap_continues_the_arc_along_its_end_tangent(k):
+    """The tip is the arc's end plus the cap along the end tangent (the arc's end orientation turns z
+    onto it); the orientation is the arc's; the backbone's last pose is the tip, its points in the cap
+    on that line; the scalar tip is the vectorised one; the inverse with the cap returns the arc."""
+    from softcath_ros.core.kinematics import arc_tangent, tip_pose_single
+
+    from scipy.spatial.transform import Rotation
+
+    k = np.array(k, dtype=float)
+    arc = L - CAP
+    end, q_end = tip_pose(k, arc)
+    tip, q_tip = tip_pose(k, arc, CAP)
+    t = arc_tangent(k, arc)
+    assert np.linalg.norm(t) == pytest.approx(1.0, rel=1e-12)
+    np.testing.assert_allclose(t, Rotation.from_quat(q_end).apply([0.0, 0.0, 1.0]), atol=1e-12)
+    np.testing.assert_allclose(tip, end + CAP * t, atol=1e-15)
+    np.testing.assert_allclose(q_tip, q_end, atol=0)
+    np.testing.assert_allclose(tip_pose_single(k[0], k[1], arc, CAP)[0], tip, rtol=1e-13, atol=1e-17)
+    pos, quats = backbone_poses(k, arc, 41, CAP)
+    np.testing.assert_allclose(pos[-1], tip, atol=1e-15)
+    in_cap = np.linspace(0.0, L, 41) > arc
+    np.testing.assert_allclose(np.cross(pos[in_cap] - end, t), 0.0, atol=1e-15)
+    np.testing.assert_allclose(quats[in_cap], np.broadcast_to(q_end, quats[in_cap].shape), atol=1e-15)
+    inv = curvature_for_tip(tip, arc, cap=CAP)
+    assert inv.reachable and inv.arc_length == pytest.approx(arc, rel=1e-10)
+    np.testing.assert_allclose(inv.curvature, k, rtol=1e-9, atol=1e-9)
+
+
+def test_inverse_with_a_cap_on_a_batch_and_off_the_workspace():
+    ks = np.array([[0.0, 0.0], [20.0, 0.0], [0.0, -150.0]])
+    arcs = np.array([0.02, 0.039, 0.016])
+    caps = np.full(3, CAP)
+    tips, _ = tip_pose(ks, arcs, caps)
+    inv = curvature_for_tip(tips, arcs, cap=caps)
+    assert inv.reachable.all()
+    np.testing.assert_allclose(inv.curvature, ks, rtol=1e-9, atol=1e-9)
+    # a point behind the base has no arc; one too close to it needs a shorter arc than the body has
+    assert not curvature_for_tip(np.array([0.0, 0.0, -0.01]), L, cap=CAP).reachable
+    short = curvature_for_tip(np.array([0.002, 0.0, 0.01]), L - CAP, cap=CAP)
+    assert not short.reachable and short.arc_length < L - CAP

@@ -117,7 +117,8 @@ def test_poses_arrive_match_core_and_backbone_ends_at_tip(start_node, preparatio
     backbone = np.array(pt.backbone_m)
     assert backbone.shape == (7, 3)
     k, stretch = MODEL.curvature_single(np.array([30000.0]))
-    np.testing.assert_allclose(backbone, backbone_poses(k, DESIGN.length * stretch, 7)[0], atol=1e-12)
+    arc = DESIGN.length - DESIGN.cap_thickness     # the channelled part bends; the tip cap stays straight
+    np.testing.assert_allclose(backbone, backbone_poses(k, arc * stretch, 7, DESIGN.cap_thickness)[0], atol=1e-12)
     np.testing.assert_allclose(backbone[0], [0, 0, 0], atol=1e-15)
     np.testing.assert_allclose(backbone[-1], pt.tip_position_m, rtol=0, atol=0)
     # Bending towards -y for the channel at +y, and a unit quaternion.

@@ -73,7 +73,8 @@ def test_flood_on_a_slow_rung_answers_the_newest_command_and_diagnostics_keep_co
         c = node.counters
         assert c.accepted + c.superseded + c.rejected == n, vars(c)
         assert c.superseded >= n // 2 and c.accepted < n // 2, vars(c)
-        positions, _ = state_backbone(SlowRung(node.design).evaluate([last_pressure]), node.length, node.n_points)
+        positions, _ = state_backbone(SlowRung(node.design).evaluate([last_pressure]), node.arc_length, node.cap,
+                                      node.n_points)
         assert tips and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9), \
             "the last answer must be for the newest command"
         assert took < 5.0
@@ -140,7 +141,7 @@ def test_flood_on_the_closed_form_answers_the_newest_and_counts_the_rest():
         curvature, stretch = node._fast([5.0 * n])
         from softcath_ros.core.kinematics import backbone_poses
 
-        positions, _ = backbone_poses(curvature, node.length * stretch, node.n_points)
+        positions, _ = backbone_poses(curvature, node.arc_length * stretch, node.n_points, node.cap)
         assert tips and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9)
     finally:
         stop.set()

@@ -8,7 +8,9 @@ import pytest
 
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.models import make_model
-from softcath_ros.core.rod.law import LawRangeError
+from softcath_ros.core.prediction import predict
+from softcath_ros.core.rod.law import LawRangeError, LinearLaw
+from softcath_ros.core.rod.statics import PlanarLoads, solve_rod
 from softcath_ros.core.rod.loads import TipPlaneContact
 from softcath_ros.core.rod.section_law import LawGrid
 from softcath_ros.core.section_fe.moment import HeldSection
@@ -65,9 +67,27 @@ def test_unloaded_rod_is_its_source_rung(design, free_rod):
     assert a.converged.all()
     np.testing.assert_allclose(a.curvature, b.curvature, rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
-    # the backbone is the source's arc: tip angle = |k| * arc length, and it bends to -y
-    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
+    # the backbone is the source's arc over the channelled part and the straight cap beyond it:
+    # tip angle = |k| * its arc length, the tip where the section rung's prediction puts it; it bends to -y
+    cap = design.cap_thickness
+    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * (L - cap), rel=2e-3)
+    np.testing.assert_allclose(a.tip.position[2], predict(sec, p[2:])[0].tip_position_m, rtol=0, atol=2e-3 * L)
     assert a.tip.position[2, 1] < 0 and a.contact_force is None   # nothing to touch
+
+
+@pytest.mark.parametrize("cap_share", [0.0, 0.25, 0.5])
+def test_rigid_tip_cap_matches_beam_theory(cap_share):
+    """A linear rod of length L whose last c is rigid, a small tip force F: the tip deflects by
+    F / EI (a^3 / 3 + a^2 c + a c^2) with a = L - c (the cantilever a, loaded at its end by F and by
+    the moment F c, the cap turning with its end), not F L^3 / (3 EI) (c / L = 0.5: 12.5 % less)."""
+    ei, f = 2e-6, 1e-5
+    law = LinearLaw(ei, lambda p: 0.0, source="linear law")
+    c = cap_share * L
+    a = L - c
+    sol = solve_rod(law.at(0.0), L, PlanarLoads(tip_force=(0.0, f)), n_segments=200, cap=c)
+    assert sol.converged
+    assert sol.positions[-1, 1] == pytest.approx(f / ei * (a ** 3 / 3 + a ** 2 * c + a * c ** 2), rel=2e-3)
+    assert sol.positions[-1, 0] == pytest.approx(L, rel=1e-4)     # small deflection: the tip stays at L
 
 
 def test_small_tip_force_matches_linear_beam_theory(design, free_rod):
@@ -239,6 +259,7 @@ def test_blocked_rod_ramps_on_the_shared_continuation_with_the_former_loops_answ
 
     monkeypatch.setattr(rod_module, "ramp", counted)
     rod = _rod(design, blocking_law)
+    rod.cap = 0.0   # the former loop's body had no rigid tip cap (rod-2)
     before = {17500.0: 0.02575718456740408, 26250.0: 0.03760976720104275, 35000.0: 0.05364625338616207}
     for p, force in before.items():
         sol = rod.solve(p, L, bench_contact(L))

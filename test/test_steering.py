@@ -41,6 +41,19 @@ def test_bend_of_tip_inverts_the_arc():
     assert np.all(bend_of_tip([0.0, 0.0, 0.04]) == 0.0)
 
 
+@pytest.mark.parametrize("theta", [1e-6, 0.4, 2.5, 4.0])
+def test_bend_of_tip_inverts_the_arc_with_a_straight_cap(theta):
+    """The tip of an arc of 39 mm continued by a 1 mm straight cap: the bend is the arc's angle,
+    not that of the arc through the tip (which differs by about cap / length)."""
+    arc, cap = 0.039, 0.001
+    k = theta / arc
+    tip = tip_pose_single(k * math.cos(-0.7), k * math.sin(-0.7), arc, cap)[0]
+    b = bend_of_tip(tip, cap)
+    assert math.hypot(*b) == pytest.approx(theta, rel=1e-10)
+    assert math.atan2(b[1], b[0]) == pytest.approx(-0.7, rel=1e-10)
+    assert math.hypot(*bend_of_tip(tip)) != pytest.approx(theta, rel=1e-3)
+
+
 @pytest.mark.parametrize("mode", ["integral", "adaptive"])
 def test_closed_loop_converges_on_a_plant_with_known_mismatch(built, mode):
     """Truth: 25% pressure shift and material scale 1.2 (gain 0.625), 50 ms latency, 20% dropped."""

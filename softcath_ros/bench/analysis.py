@@ -339,7 +339,7 @@ def model_quantities(stats: list[StepStats], model) -> dict[str, np.ndarray]:
     p = np.array([s.pressure_mean for s in stats])
     state = model.evaluate(np.clip(p, 0.0, None))
     k = np.atleast_2d(state.curvature)
-    per_length = angle_per_length(state)   # theta / l: what the angle bench reads as curvature
+    per_length = angle_per_length(state, model, [s.length for s in stats])   # theta / l: what the angle bench reads as curvature
     conv = np.atleast_1d(state.converged)
     with np.errstate(divide="ignore"):
         radius = np.where(conv & (per_length > 0), 1.0 / per_length, math.nan)

@@ -3,7 +3,8 @@
 The blocking-force bench holds the cantilevered actuator horizontally with a scale under its
 tip, touching it at p = 0 (the reading there is tared). The force is the reaction of a
 frictionless plane through the tip of the straight body, normal to the bending direction, on
-a clamped Kirchhoff rod (``core/rod/statics.py``); the tip may slide and rotate on the scale.
+a clamped Kirchhoff rod with its rigid tip cap (``core/rod/statics.py``); the tip may slide and
+rotate on the scale.
 What the sections carry:
 - the model is the ``rod`` rung: its own moment-curvature law (from the section rung by
   default: M(kappa, p) of the section held at each curvature, so the stiffening and the wall
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.prediction import arc_and_cap
 from ..core.rod.law import LinearLaw
 from ..core.rod.statics import PlanarLoads, PlaneContact, solve_rod
 from ..core.section_properties import transformed_section
@@ -49,7 +51,8 @@ class BlockingForce:
                 continue
             e = ki / mag
             law = LinearLaw(float(e @ self.stiffness @ e), lambda p, mag=mag: mag, source="linear law")
-            out[i] = solve_rod(law.at(0.0), length, bench_contact(length), N_SEGMENTS).contact_force
+            out[i] = solve_rod(law.at(0.0), length, bench_contact(length), N_SEGMENTS,
+                               cap=arc_and_cap(self.model, length)[1]).contact_force
         return out if np.ndim(curvature) > 1 else out[0]
 
     def __call__(self, pressures, length: float) -> np.ndarray:

@@ -104,7 +104,7 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
         force = BlockingForce(model)
         f = np.array([force.from_curvature(k[i], lengths[i]) if not is_angle[i] else 0.0 for i in range(len(use))])
         f = f + np.where(group >= 0, offsets[np.maximum(group, 0)] if len(offsets) else 0.0, 0.0)
-        pred = np.where(is_angle, angle_per_length(state), f)
+        pred = np.where(is_angle, angle_per_length(state, model, lengths), f)
         conv = np.atleast_1d(state.converged)
         return np.where(conv, pred, np.nan)
 

@@ -35,7 +35,7 @@ from dataclasses import replace, dataclass, fields
 import numpy as np
 
 from .blocking import BlockingForce
-from ..core.prediction import angle_per_length
+from ..core.prediction import angle_per_length, arc_and_cap
 from ..core.kinematics import tip_pose_single
 from ..core.models import make_model
 from ..core.units import PA_PER_BAR
@@ -136,7 +136,8 @@ class SimulatedRig:
         """True tip position (m) and quaternion (x, y, z, w) in softcath_base, for the mounted length."""
         state = self.true_state()
         kx, ky = (float(v) for v in state.curvature)
-        position, quat = tip_pose_single(kx, ky, self.length * float(state.axial_stretch))
+        arc, cap = arc_and_cap(self.model, self.length)
+        position, quat = tip_pose_single(kx, ky, arc * float(state.axial_stretch), cap)
         return np.array(position), np.array(quat)
 
     def read(self) -> RigReading:
@@ -149,7 +150,7 @@ class SimulatedRig:
             k = np.full(2, np.nan)
             state = replace(state, curvature=k, axial_stretch=np.nan)
         if self.bench == "angle":
-            angle = float(angle_per_length(state)[0]) * self.length * keep * math.cos(p.out_of_plane_tilt)
+            angle = float(angle_per_length(state, self.model, self.length)[0]) * self.length * keep * math.cos(p.out_of_plane_tilt)
             force = 0.0
         else:
             angle = 0.0

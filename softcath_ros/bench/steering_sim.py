@@ -17,7 +17,6 @@ import numpy as np
 
 from ..core.allocation import Allocator
 from ..core.design import load_design
-from ..core.kinematics import tip_pose_single
 from ..core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringParams, make_steering_model,
                              rung_options, steering_design)
 from .sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
@@ -71,8 +70,7 @@ class TargetPath:
 def _true_tip(truth_alloc: Allocator, direction: float, fraction: float) -> np.ndarray:
     res = truth_alloc.allocate_bend(direction, 1e3)          # saturates: the reach in that direction
     res = truth_alloc.allocate_bend(direction, fraction * res.extras["max_angle_rad"])
-    kx, ky = (float(v) for v in res.achieved_curvature)
-    return np.array(tip_pose_single(kx, ky, truth_alloc.design.length * res.axial_stretch)[0])
+    return truth_alloc.tip_position(res)
 
 
 def targets_for(kind: str, duration: float, truth_model_, truth_max_pressure: float) -> TargetPath:
@@ -88,8 +86,7 @@ def targets_for(kind: str, duration: float, truth_model_, truth_max_pressure: fl
     tips = []
     for d in np.linspace(0.0, 2 * math.pi, 360, endpoint=False):
         res = alloc.allocate_bend(float(d), CIRCLE_FRACTION * reach)
-        kx, ky = (float(v) for v in res.achieved_curvature)
-        tips.append(tip_pose_single(kx, ky, alloc.design.length * res.axial_stretch)[0])
+        tips.append(alloc.tip_position(res))
     return TargetPath(kind, duration, np.array(tips), np.array([0.0]))
 
 

@@ -12,6 +12,7 @@ import sys
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
+from ..core.prediction import arc_and_cap
 from .common import PA_PER_BAR, add_model_argument, bounded_int, finite_float, positive_float
 
 MAX_DIRECTIONS = 3600   # 0.1 deg apart; each direction is one bisection on the model
@@ -75,7 +76,7 @@ def run(args) -> int:
         result.max_curvature = allocator.max_curvature(direction)
     out = {"model": allocator.model.name, "design": design.name, "max_pressure_pa": allocator.max_pressure,
            **result.to_json(),
-           "max_bending_angle_rad": result.max_curvature * design.length * result.axial_stretch}
+           "max_bending_angle_rad": result.max_curvature * arc_and_cap(model, design.length)[0] * result.axial_stretch}
     if args.reachable_set > 0:
         rs = allocator.reachable_set(args.reachable_set)
         out["reachable_set"] = {"directions_deg": [math.degrees(d) for d in rs.directions],
@@ -87,20 +88,21 @@ def run(args) -> int:
         json_output.dump(out, sys.stdout, indent=2)
         print()
     else:
-        _print_human(out, design.length)
+        _print_human(out, arc_and_cap(model, design.length)[0])
     if not result.reachable or not result.converged:
         print(f"softcath allocate: {result.message}", file=sys.stderr)
         return 1
     return 0
 
 
-def _print_human(out: dict, length: float) -> None:
+def _print_human(out: dict, arc_length: float) -> None:
+    """``arc_length``: the reference length of the bent arc (m, the channelled part)."""
     print(f"model {out['model']}, design {out['design']}")
     print("pressures [bar]: " + ", ".join(f"{p / PA_PER_BAR:.4f}" for p in out["pressures_pa"]))
     kx, ky = out["achieved_curvature_per_m"]
     kappa = math.hypot(kx, ky)
     print(f"achieved curvature [1/m]: ({kx:.4f}, {ky:.4f}), direction {math.degrees(math.atan2(ky, kx)):.2f} deg, "
-          f"angle {math.degrees(kappa * length * out['axial_stretch']):.2f} deg")
+          f"angle {math.degrees(kappa * arc_length * out['axial_stretch']):.2f} deg")
     print(f"max curvature in this direction [1/m]: {out['max_curvature_per_m']:.4f}"
           + ("  (SATURATED: request beyond reach)" if out["saturated"] else ""))
     if "tip_error_m" in out:

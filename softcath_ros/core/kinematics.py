@@ -9,6 +9,11 @@ is an arc of angle theta = |k| s. Written without dividing by |k| or normalising
 
 f1, f2, g are entire functions evaluated through np.sinc, so every formula is exact
 and smooth through k = 0 and never flips direction for tiny curvature.
+
+The body: the channelled part bends as that arc; the tip cap beyond the channel's end (``cap``,
+m; the design's ``cap_thickness``) carries no moment when the tip is free, so it stays straight
+and unstretched along the arc's end tangent t = (k s f1(theta), cos theta). Every tip and backbone
+function takes the arc length of the channelled part and the cap's length.
 """
 from __future__ import annotations
 
@@ -52,23 +57,42 @@ def arc_poses(curvature, arc_length):
     return position, quat
 
 
-def tip_pose(curvature, length):
-    """Tip position (m) and quaternion (x, y, z, w) of a backbone of arc length ``length``."""
-    return arc_poses(curvature, length)
+def arc_tangent(curvature, arc_length):
+    """Unit tangent (..., 3) at arc length ``arc_length`` of the arc of curvature ``curvature``."""
+    k = np.asarray(curvature, dtype=float)
+    s = np.asarray(arc_length, dtype=float)
+    theta = np.hypot(k[..., 0], k[..., 1]) * s
+    ksf = s * _sinc(theta)
+    return np.stack(np.broadcast_arrays(k[..., 0] * ksf, k[..., 1] * ksf, np.cos(theta)), axis=-1)
 
 
-def backbone_poses(curvature, length, n_points: int):
-    """Poses at ``n_points`` equally spaced arc lengths from base (0) to tip (``length``).
+def tip_pose(curvature, arc_length, cap=0.0):
+    """Tip position (m) and quaternion (x, y, z, w) of a body whose channelled part is an arc of
+    length ``arc_length`` (m, deformed) followed by a straight cap of ``cap`` (m)."""
+    pos, quat = arc_poses(curvature, arc_length)
+    if np.any(np.asarray(cap) != 0):
+        pos = pos + np.asarray(cap, dtype=float)[..., None] * arc_tangent(curvature, arc_length)
+    return pos, quat
+
+
+def backbone_poses(curvature, arc_length, n_points: int, cap=0.0):
+    """Poses at ``n_points`` equally spaced arc lengths from base (0) to tip (``arc_length`` + ``cap``).
 
     For a single curvature (2,) returns (n_points, 3) and (n_points, 4); for a batch
     (N, 2) with lengths (N,), (N, n_points, 3) and (N, n_points, 4).
     """
     if n_points < 2:
         raise ValueError(f"n_points = {n_points}: a backbone needs at least base and tip (2)")
-    k = np.asarray(curvature, dtype=float)
+    k = np.asarray(curvature, dtype=float)[..., None, :]
+    arc = np.asarray(arc_length, dtype=float)[..., None]
     fractions = np.linspace(0.0, 1.0, n_points)
-    s = np.asarray(length, dtype=float)[..., None] * fractions
-    return arc_poses(k[..., None, :], s)
+    s = (arc + np.asarray(cap, dtype=float)[..., None]) * fractions
+    on_arc = np.minimum(s, arc)
+    pos, quat = arc_poses(k, on_arc)
+    beyond = s - on_arc
+    if np.any(beyond > 0):
+        pos = pos + beyond[..., None] * arc_tangent(k, on_arc)
+    return pos, quat
 
 
 def bending_angle(curvature, length):
@@ -84,15 +108,8 @@ class TipInverse:
     reachable: np.ndarray   # (...) bool: arc length within tolerance of the backbone length
 
 
-def curvature_for_tip(tip, length, rtol: float = 1e-3) -> TipInverse:
-    """Inverse kinematics: the constant-curvature arc that ends at ``tip`` (m).
-
-    Through a point there is exactly one circular arc tangent to z at the origin:
-    k = 2 (x, y) / |tip|^2 and angle theta = 2 atan2(rho, z). That arc's length must
-    equal ``length`` (within ``rtol``) for the point to be reachable; otherwise the
-    result says ``reachable = False`` and gives the arc length the point would need.
-    """
-    p = np.asarray(tip, dtype=float)
+def _arc_through(p):
+    """(curvature (..., 2), arc length (...)) of the arc tangent to z at the origin ending at p."""
     x, y, z = p[..., 0], p[..., 1], p[..., 2]
     r2 = x * x + y * y + z * z
     rho = np.hypot(x, y)
@@ -104,8 +121,38 @@ def curvature_for_tip(tip, length, rtol: float = 1e-3) -> TipInverse:
         arc = np.where(rho > 1e-12 * np.sqrt(safe_r2), theta * r2 / (2.0 * np.where(rho > 0, rho, 1.0)),
                        np.where(z > 0, z, np.inf))
     arc = np.where(r2 > 0, arc, np.inf)
+    return np.where(r2[..., None] > 0, k, 0.0), arc
+
+
+def curvature_for_tip(tip, length, rtol: float = 1e-3, cap=0.0) -> TipInverse:
+    """Inverse kinematics: the constant-curvature arc whose end, continued by a straight ``cap``
+    (m) along its end tangent, is ``tip`` (m).
+
+    Through a point there is exactly one circular arc tangent to z at the origin:
+    k = 2 (x, y) / |tip|^2 and angle theta = 2 atan2(rho, z). With a cap the arc ends at
+    tip - cap t(theta), found by fixed-point iteration (a contraction: the cap is short against
+    the arc). That arc's length must equal ``length`` (within ``rtol``) for the point to be
+    reachable; otherwise the result says ``reachable = False`` and gives the arc length the point
+    would need.
+    """
+    p = np.asarray(tip, dtype=float)
+    cap = np.asarray(cap, dtype=float)
+    k, arc = _arc_through(p)
+    if np.any(cap != 0):
+        for _ in range(100):
+            ok = np.isfinite(arc)
+            t = arc_tangent(k, np.where(ok, arc, 0.0))
+            k_new, arc_new = _arc_through(p - cap[..., None] * t)
+            k_new = np.where(ok[..., None], k_new, k)
+            arc_new = np.where(ok, arc_new, arc)
+            with np.errstate(invalid="ignore"):
+                done = np.all(~ok | ((np.abs(arc_new - arc) <= 1e-14 * np.abs(arc))
+                                     & np.all(np.abs(k_new - k) <= 1e-14 * np.abs(k) + 1e-300, axis=-1)))
+            k, arc = k_new, arc_new
+            if done:
+                break
     reachable = np.isfinite(arc) & (np.abs(arc - length) <= rtol * np.asarray(length))
-    return TipInverse(curvature=np.where(r2[..., None] > 0, k, 0.0), arc_length=arc, reachable=reachable)
+    return TipInverse(curvature=k, arc_length=arc, reachable=reachable)
 
 
 def _sinc_scalar(t: float) -> float:
@@ -113,7 +160,7 @@ def _sinc_scalar(t: float) -> float:
     return 1.0 - t * t / 6.0 if abs(t) < 1e-4 else math.sin(t) / t
 
 
-def tip_pose_single(kx: float, ky: float, arc_length: float):
+def tip_pose_single(kx: float, ky: float, arc_length: float, cap: float = 0.0):
     """``tip_pose`` for one backbone with plain floats: ((x, y, z), (qx, qy, qz, qw)).
 
     Same formulas without numpy's per-call overhead (about 10x faster for one pose),
@@ -125,7 +172,8 @@ def tip_pose_single(kx: float, ky: float, arc_length: float):
     sinc_half = _sinc_scalar(half)
     s2f2 = s * s * 0.5 * sinc_half * sinc_half
     sg = s * 0.5 * sinc_half
-    return ((kx * s2f2, ky * s2f2, s * _sinc_scalar(theta)),
+    ksf = cap * s * _sinc_scalar(theta)   # the cap along the end tangent
+    return ((kx * (s2f2 + ksf), ky * (s2f2 + ksf), s * _sinc_scalar(theta) + cap * math.cos(theta)),
             (-ky * sg, kx * sg, 0.0, math.cos(half)))
 
 

@@ -46,7 +46,7 @@ from .continuation import STOP_REASONS, tagged_stop
 from .design import Design, load_design
 from .errors import ModelError
 from .models import RUNGS, make_model, rung_class, rung_info
-from .prediction import predict
+from .prediction import KINEMATICS_VERSION, predict
 from .units import PA_PER_BAR
 
 
@@ -171,6 +171,8 @@ def _key_parts(case: Case, rung: str, options: dict) -> list:
     version = rung_class(rung).solver_version
     if rung == "surrogate":     # its answers are its source rung's: a new source version is a new table
         version += "/" + rung_class(options.get("source", "section")).solver_version
+    if not rung_class(rung).info.arc_spans_cap:   # its R_C and tip come through the arc and the straight cap
+        version += "/" + KINEMATICS_VERSION
     return [case.sample.content_hash(), rung, version, options, case.pressures.tolist()]
 
 

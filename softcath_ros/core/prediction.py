@@ -51,10 +51,12 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
 
     The rung answers for that length (``model.at_length``: the rod solves a rod of that length; a rung
     that solves a body of the design's length only, fe3d, refuses another). The tip pose is the
-    constant-curvature arc's at ``length``, unless the rung solves the backbone itself
-    (``info.solves_backbone``: the rod under loads, whose tip pose no single arc reproduces)."""
+    constant-curvature arc's of the channelled part with the straight cap beyond (``arc_and_cap``),
+    unless the rung solves the backbone itself (``info.solves_backbone``: the rod under loads, whose tip
+    pose no single arc reproduces)."""
     length = model.design.length if length is None else float(length)
     model = model.at_length(length)
+    arc_length, cap = arc_and_cap(model, length)
     own_length = math.isclose(length, model.design.length, rel_tol=1e-12)   # the body the rung solved
     t0 = time.perf_counter()
     state = model.evaluate(np.atleast_2d(pressures))
@@ -65,8 +67,8 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             quat = np.asarray(state.tip.orientation_xyzw, dtype=float)
             angle = np.asarray(state.tip.angle, dtype=float)
         else:
-            arc = length * state.axial_stretch
-            pos, quat = tip_pose(state.curvature, arc)
+            arc = arc_length * state.axial_stretch
+            pos, quat = tip_pose(state.curvature, arc, cap)
             angle = np.hypot(state.curvature[:, 0], state.curvature[:, 1]) * arc
     contact = state.contact_force
     negative = None if state.diagnostics is None else state.diagnostics.negative_directions
@@ -99,23 +101,39 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     return out
 
 
-def angle_per_length(state) -> np.ndarray:
-    """theta / l of a constant-curvature state (batched): |k| x axial stretch, 1/m. What a bench reads
-    as curvature (tip angle over sample length); its inverse is R_C = l / theta."""
+# bump when how a bend state becomes a tip pose, angle or R_C changes (part of cached predictions' keys)
+KINEMATICS_VERSION = "arc-cap-1"   # 1: the tip cap straight beyond the channelled part's arc
+
+
+def arc_and_cap(model: BendModel, length: float) -> tuple[float, float]:
+    """(reference length of the arc, length of the straight cap beyond it), m, of ``model``'s body of
+    ``length``: the channelled part bends, the tip cap (the design's ``cap_thickness``) carries no moment
+    and stays straight; a rung whose arc is fitted to the whole body's tip (``info.arc_spans_cap``, fe3d)
+    has no cap beyond its arc."""
+    cap = 0.0 if model.info.arc_spans_cap else model.design.cap_thickness
+    return length - cap, cap
+
+
+def angle_per_length(state, model: BendModel, length: float | None = None) -> np.ndarray:
+    """theta / l of a constant-curvature state (batched) of ``model``'s body of ``length`` (m, or one
+    per command; default the design's): |k| x axial stretch x the arc's share of the length (``arc_and_cap``), 1/m. What a bench
+    reads as curvature (tip angle over sample length); its inverse is R_C = l / theta."""
+    length = np.asarray(model.design.length if length is None else length, dtype=float)
+    arc, _ = arc_and_cap(model, length)
     k = np.atleast_2d(state.curvature)
-    return np.hypot(k[:, 0], k[:, 1]) * np.atleast_1d(state.axial_stretch)
+    return np.hypot(k[:, 0], k[:, 1]) * np.atleast_1d(state.axial_stretch) * arc / length
 
 
-def state_backbone(state, length: float, n_points: int, index: int = 0):
+def state_backbone(state, arc_length: float, cap: float, n_points: int, index: int = 0):
     """Backbone poses (n_points, 3), (n_points, 4) of one command of ``state``: the rung's own
     solved backbone when it has one (the rod under loads), else the constant-curvature arc of
-    arc length ``length`` x stretch."""
+    arc length ``arc_length`` x stretch and the straight ``cap`` beyond (``arc_and_cap``)."""
     if state.backbone is not None:
         solved = np.asarray(state.backbone)
         return planar_backbone_poses(solved.reshape(-1, *solved.shape[-2:])[index], n_points)
     k = np.asarray(state.curvature).reshape(-1, 2)[index]
     stretch = float(np.asarray(state.axial_stretch).reshape(-1)[index])
-    return backbone_poses(k, length * stretch, n_points)
+    return backbone_poses(k, arc_length * stretch, n_points, cap)
 
 
 def format_mm(value_m: float | None) -> str:

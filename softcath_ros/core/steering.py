@@ -52,6 +52,8 @@ import numpy as np
 from .allocation import Allocator
 from .command_shaping import CommandWatchdog, RateLimiter
 from .errors import SoftcathError
+from .kinematics import curvature_for_tip
+from .prediction import arc_and_cap
 
 MODES = ("integral", "adaptive", "open_loop")
 # Steering range of the 3-channel body: on the section rung one channel at 0.3 bar bends it past
@@ -125,14 +127,14 @@ def make_steering_model(rung: str, design):
     return make_model(rung, design, **rung_options(rung))
 
 
-def bend_of_tip(tip) -> np.ndarray:
-    """Bend vector theta (cos phi, sin phi), rad, of the arc from the base through ``tip`` (m)."""
-    x, y, z = (float(v) for v in tip)
-    rho = math.hypot(x, y)
-    if rho == 0.0:
+def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
+    """Bend vector theta (cos phi, sin phi), rad, of the body whose arc from the base, continued by a
+    straight ``cap`` (m) along its end tangent, ends at ``tip`` (m)."""
+    p = np.asarray(tip, dtype=float)
+    if math.hypot(p[0], p[1]) == 0.0:
         return np.zeros(2)
-    theta = 2.0 * math.atan2(rho, z)
-    return np.array([theta * x / rho, theta * y / rho])
+    inv = curvature_for_tip(p, 1.0, cap=cap)
+    return np.asarray(inv.curvature, dtype=float) * float(inv.arc_length)
 
 
 @dataclass
@@ -163,7 +165,8 @@ class SteeringController:
         self.allocator = allocator
         self.params = params or SteeringParams()
         self.max_pressure = allocator.max_pressure
-        self.length = allocator.design.length
+        # the arc's reference length (the channelled part) and the straight cap beyond it
+        self.length, self.cap = arc_and_cap(allocator.model, allocator.design.length)
         n = allocator.n_channels
         self.limiter = RateLimiter(n, self.params.max_pressure_rate)
         self.watchdog = CommandWatchdog(self.params.command_timeout)
@@ -203,7 +206,7 @@ class SteeringController:
         if p[2] <= 0 and math.hypot(p[0], p[1]) == 0:
             raise SteeringError(f"tip target {p.tolist()} m: no bending arc ends there (on or behind the base)")
         self.target_tip = p
-        self.target_bend = bend_of_tip(p)
+        self.target_bend = bend_of_tip(p, self.cap)
         theta = math.hypot(*self.target_bend)
         if theta > 1e-4:   # below, the direction is noise: keep the frame
             self._frame = (self.target_bend[0] / theta, self.target_bend[1] / theta)
@@ -232,7 +235,7 @@ class SteeringController:
         self._last_stamp, self._last_tip = stamp, p
         self._consistent += 1
         c.accepted += 1
-        bend = bend_of_tip(p)
+        bend = bend_of_tip(p, self.cap)
         self.measured_bend = bend
         if prm.mode == "open_loop":
             return "accepted"

@@ -45,7 +45,7 @@ from ..core.answer_load import AnswerLoad
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
-from ..core.prediction import state_backbone
+from ..core.prediction import arc_and_cap, state_backbone
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
@@ -109,6 +109,7 @@ class ModelNode(Node):
             self.model = self._make_model(model_name)
         self.n_channels = self.design.n_channels
         self.length = self.design.length
+        self.arc_length, self.cap = arc_and_cap(self.model, self.length)   # the channelled part, the straight cap
         self.n_points = int(n_points)
         # The safety limit comes from the design only: an override is ignored (and said so).
         self.max_pressure = self.design.max_pressure
@@ -291,7 +292,7 @@ class ModelNode(Node):
                                    throttle_duration_sec=WARN_THROTTLE_S)
         if self._fast is not None:
             curvature, stretch = self._fast(check.pressures)
-            positions, quats = backbone_poses(curvature, self.length * stretch, self.n_points)
+            positions, quats = backbone_poses(curvature, self.arc_length * stretch, self.n_points, self.cap)
         else:
             try:
                 state = self.model.evaluate(check.pressures)
@@ -299,7 +300,7 @@ class ModelNode(Node):
                 return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
             if not bool(state.converged):
                 return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
-            positions, quats = state_backbone(state, self.length, self.n_points)
+            positions, quats = state_backbone(state, self.arc_length, self.cap, self.n_points)
         if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
             return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
         c.accepted += 1

@@ -4,9 +4,9 @@
 
 Sends one command at a time on /softcath/pressure_cmd and waits for the node's
 /softcath/tip_pose and /softcath/backbone answer before the next one (lock-step, so
-every pose belongs to a known command). R_C and the bending angle are recovered from
-the received tip position alone (core.kinematics.curvature_for_tip), so the table shows
-what the topics say, not a second computation. Reusable: ``SweepClient.run(pressures)``.
+every pose belongs to a known command). The bending angle is read from the received tip
+orientation and 1/|k| from the tip position (core.kinematics.curvature_for_tip, with the
+design's straight tip cap), so the table shows what the topics say, not a second computation. Reusable: ``SweepClient.run(pressures)``.
 """
 from __future__ import annotations
 
@@ -34,15 +34,16 @@ class SweepPoint:
     backbone_m: list[list[float]]       # (points, 3) positions, base to tip
     stamp_ns: int
 
-    def radius_and_angle(self) -> tuple[float, float]:
-        """(1/|k| of the arc through the tip in m, inf when straight; bending angle theta in rad).
-        R_C = l / theta needs the sample's unstretched length l (``print_table``)."""
+    def radius_and_angle(self, cap: float = 0.0) -> tuple[float, float]:
+        """(1/|k| in m of the arc that ends ``cap`` (m, the straight tip cap) before the tip, inf when
+        straight; bending angle theta in rad, the tip orientation's rotation). R_C = l / theta needs the
+        sample's unstretched length l (``print_table``)."""
         from ..core.kinematics import curvature_for_tip
 
-        x, y, z = self.tip_position_m
-        inv = curvature_for_tip(np.array(self.tip_position_m), 1.0)
+        inv = curvature_for_tip(np.array(self.tip_position_m), 1.0, cap=cap)
         kappa = float(np.hypot(*inv.curvature))
-        return (1.0 / kappa if kappa > 0 else math.inf), 2.0 * math.atan2(math.hypot(x, y), z)
+        qx, qy, qz, qw = self.tip_orientation_xyzw
+        return (1.0 / kappa if kappa > 0 else math.inf), 2.0 * math.atan2(math.sqrt(qx * qx + qy * qy + qz * qz), abs(qw))
 
 
 class SweepClient:
@@ -118,8 +119,9 @@ def sweep_commands(start: float, stop: float, steps: int, n_channels: int, chann
     return p
 
 
-def print_table(points: list[SweepPoint | None], commands, length: float, file=sys.stdout) -> None:
-    """One line per command: R_C = l / theta (``length`` l in m, the design's), 1/|k|, angle, tip."""
+def print_table(points: list[SweepPoint | None], commands, length: float, cap: float = 0.0, file=sys.stdout) -> None:
+    """One line per command: R_C = l / theta (``length`` l and the tip ``cap`` in m, the design's), 1/|k|,
+    angle, tip."""
     print(f"{'pressure [bar]':>16} {'R_C=l/theta [mm]':>17} {'1/|k| [mm]':>11} {'angle [deg]':>12} "
           f"{'tip x, y, z [mm]':>28}", file=file)
     for cmd, pt in zip(commands, points):
@@ -127,7 +129,7 @@ def print_table(points: list[SweepPoint | None], commands, length: float, file=s
         if pt is None:
             print(f"{ps:>16}  no pose (rejected by the node or timed out; see /diagnostics)", file=file)
             continue
-        centreline, angle = pt.radius_and_angle()
+        centreline, angle = pt.radius_and_angle(cap)
         tip = ", ".join(f"{v * 1e3:7.2f}" for v in pt.tip_position_m)
         rc_s = "inf" if angle == 0 else f"{length / abs(angle) * 1e3:.2f}"
         k_s = "inf" if math.isinf(centreline) else f"{centreline * 1e3:.2f}"
@@ -171,6 +173,8 @@ def main(argv=None) -> int:
     ap.add_argument("--channels", type=bounded_int(1, 64), default=1, help="channels of the node's design")
     ap.add_argument("--length", type=positive_float, default=0.040,
                     help="the node's design length in m, for R_C = l / theta (default 0.040: implemented_5mm)")
+    ap.add_argument("--cap", type=finite_float, default=0.001,
+                    help="the design's tip cap in m, straight beyond the bent arc (default 0.001: implemented_5mm)")
     ap.add_argument("--channel", type=bounded_int(0, 63), default=0, help="channel that is swept")
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
     ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
@@ -178,6 +182,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.steps < 1 or not 0 <= args.channel < args.channels:
         ap.error("need --steps >= 1 and 0 <= --channel < --channels")
+    if not 0.0 <= args.cap < args.length:
+        ap.error(f"--cap {args.cap} m must be in [0, --length {args.length} m)")
     scale = PA_PER_BAR if args.unit == "bar" else 1.0
     commands = sweep_commands(args.start * scale, args.stop * scale, args.steps, args.channels, args.channel)
 
@@ -200,7 +206,7 @@ def main(argv=None) -> int:
         if client is not None:
             client.close()
         rclpy.try_shutdown()
-    print_table(points, commands, args.length)
+    print_table(points, commands, args.length, args.cap)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json_output.dumps([p.__dict__ if p else None for p in points], indent=1))

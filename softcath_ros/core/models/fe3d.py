@@ -35,7 +35,7 @@ class Fe3dModel(BendModel):
     solver_version = "fe3d-6"   # bump when a change alters results, so old cache entries are not reused
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
-        models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True,
+        models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
         options=(Option("mesh_size", "float", "scales the default mesh (0.5 = twice as fine)"),
                  Option("mesh", "object", "an explicit MeshSettings"),
                  Option("newton", "object", "NewtonSettings"),

@@ -11,6 +11,11 @@ exactly the source rung's arc.
 Moment balance about joint j, with m_i = M(kappa_i, p) the moment in segment i and G_i the force
 the distal part exerts on segment i's middle (tip force + contact reaction + distal weight):
     m_j - m_{j+1} = (Delta r_j x G_j + Delta r_{j+1} x G_{j+1}) / 2,        m_{N+1} = 0.
+Tip cap: the last ``cap`` (m) of the body has no channel; it is a rigid straight piece along the last
+joint's angle theta_N (the section law is the channelled part's, and a cap of a few percent of the
+length carries only the moment of the loads on it), so the tip is r_N + cap t(theta_N), the loads at
+the tip act on joint N through the arm cap t, the cap's weight through cap t / 2, and an unloaded
+body is the source rung's arc with the straight cap beyond it (core/prediction.arc_and_cap).
 Tip contact with a plane (frictionless, the tip free to rotate): n . (r_tip - c) >= 0, with the
 reaction R n, R >= 0, and R (n . (r_tip - c)) = 0 (solved as: free first; if the tip would cross
 the plane, with the constraint active, R as an unknown).
@@ -58,9 +63,9 @@ class PlanarLoads:
 @dataclass
 class RodSolution:
     theta: np.ndarray        # (N+1,) rad, section angles at the joints (theta_0 = 0)
-    positions: np.ndarray    # (N+1, 2) m, joints in (a, b)
+    positions: np.ndarray    # (N+1, 2) m, joints in (a, b), and the tip (N+2) when the body has a cap
     kappa: np.ndarray        # (N,) 1/m per reference length, per segment
-    arc_length: float        # m, deformed
+    arc_length: float        # m, deformed, of the channelled part (the cap excluded)
     contact_force: float     # N, normal reaction of the plane (0 without contact)
     converged: bool
     message: str = ""
@@ -84,12 +89,16 @@ class _Rod:
     equations and Jacobian for a choice of unknowns (phi free or not, R free or not) and equations
     (the hinge's moment on joint 0 or not, the tip on the plane or not)."""
 
-    def __init__(self, law: LawSlice, length: float, loads: PlanarLoads, n: int):
-        self.law, self.L, self.n = law, float(length), int(n)
+    def __init__(self, law: LawSlice, length: float, loads: PlanarLoads, n: int, cap: float = 0.0):
+        """``length``: the body's reference length (m), of which the last ``cap`` is the rigid tip cap."""
+        self.law, self.n, self.cap = law, int(n), float(cap)
+        self.L = float(length) - self.cap            # the channelled part, cut into segments
         self.h = self.L / self.n
         z_mid = (np.arange(self.n) + 0.5) * self.h
-        self.G0 = np.asarray(loads.tip_force, float)[None, :] + np.outer(self.L - z_mid,
-                                                                         np.asarray(loads.weight_per_length, float))
+        weight = np.asarray(loads.weight_per_length, float)
+        self.tip_load = np.asarray(loads.tip_force, float)
+        self.cap_weight = self.cap * weight
+        self.G0 = (self.tip_load + self.cap_weight)[None, :] + np.outer(self.L - z_mid, weight)
         self.contact = loads.contact
         self.normal = np.zeros(2) if loads.contact is None else np.asarray(loads.contact.normal, float)
         # segment i joins joints i and i + 1 (joint 0 the base): kappa = B th / h, mid angle = A th
@@ -112,11 +121,15 @@ class _Rod:
         tp = np.stack([-np.sin(mid), np.cos(mid)], -1)
         return kap, ell, dell, t, tp, lam
 
+    def tip(self, th, ell, t):
+        """The tip (a, b): the last joint and the cap along its angle."""
+        return ell @ t + self.cap * np.array([np.cos(th[-1]), np.sin(th[-1])])
+
     def gap(self, th) -> float:
         if self.contact is None:
             return np.inf
         _, ell, _, t, _, _ = self.geometry(th)
-        return float(self.normal @ (ell @ t - np.asarray(self.contact.point, float)))
+        return float(self.normal @ (self.tip(th, ell, t) - np.asarray(self.contact.point, float)))
 
     def clamp_moment(self, th, R: float = 0.0, load_scale: float = 1.0) -> float:
         """The moment the base carries (N m, the law's sign): the clamp's (or the hinge's) reaction."""
@@ -137,16 +150,26 @@ class _Rod:
         A, B, h = self.A, self.B, self.h
         F = B.T @ m - A.T @ (ell * tpG)
         J = (B.T * (S / h)) @ B + (A.T * (ell * tG)) @ A - (A.T * (dell * tpG / h)) @ B
+        if self.cap > 0:   # the tip's loads and the cap's weight on the last joint, through the rigid cap
+            c, s = np.cos(th[-1]), np.sin(th[-1])
+            g_cap = load_scale * (self.tip_load + 0.5 * self.cap_weight) + R * self.normal
+            F[-1] -= self.cap * (-s * g_cap[0] + c * g_cap[1])
+            J[-1, -1] += self.cap * (c * g_cap[0] + s * g_cap[1])
         rows = np.arange(0 if hinge_moment is not None else 1, self.n + 1)
         cols = np.arange(0 if free_phi else 1, self.n + 1)
         if hinge_moment is not None:
             F[0] += hinge_moment
         F, J = F[rows], J[np.ix_(rows, cols)]
+        tp_tip = np.array([-np.sin(th[-1]), np.cos(th[-1])])
         if free_R:
-            J = np.column_stack([J, (-A.T @ (ell * (tp @ self.normal)))[rows]])
+            dR = -A.T @ (ell * (tp @ self.normal))
+            dR[-1] -= self.cap * (tp_tip @ self.normal)
+            J = np.column_stack([J, dR[rows]])
         if gap_row:
-            dg = (A.T @ (ell * (tp @ self.normal)) + B.T @ (dell * (t @ self.normal) / h))[cols]
-            F = np.append(F, self.normal @ (ell @ t - np.asarray(self.contact.point, float)))
+            dg = A.T @ (ell * (tp @ self.normal)) + B.T @ (dell * (t @ self.normal) / h)
+            dg[-1] += self.cap * (tp_tip @ self.normal)
+            dg = dg[cols]
+            F = np.append(F, self.normal @ (self.tip(th, ell, t) - np.asarray(self.contact.point, float)))
             J = np.vstack([J, np.append(dg, 0.0) if free_R else dg])
         return F, J
 
@@ -182,6 +205,8 @@ class _Rod:
                  hinge_moment: float | None = None) -> RodSolution:
         kap, ell, _, t, _, lam = self.geometry(th)
         pos = np.vstack([[0.0, 0.0], np.cumsum(ell[:, None] * t, 0)])
+        if self.cap > 0:
+            pos = np.vstack([pos, self.tip(th, ell, t)])
         return RodSolution(theta=np.array(th, dtype=float), positions=pos, kappa=kap,
                            arc_length=float(np.sum(lam) * self.h), contact_force=float(max(R, 0.0)),
                            converged=converged, message=message, iterations=iterations,
@@ -198,12 +223,13 @@ class _Stop(Exception):
 
 
 def solve_rod(law: LawSlice, length: float, loads: PlanarLoads = PlanarLoads(), n_segments: int = 40,
-              guess: RodSolution | None = None, hinge: bool = True) -> RodSolution:
+              guess: RodSolution | None = None, hinge: bool = True, cap: float = 0.0) -> RodSolution:
     """Static equilibrium of the clamped rod; raises ``LawRangeError`` when the solution needs
     curvatures outside the law's table (``converged=False`` and a ``stop_reason`` for a solve that
     failed otherwise).
 
-    ``guess``: a converged solution at a nearby load (pressure continuation: ``RodModel.solve``
+    ``length``: the body's reference length (m), of which the last ``cap`` is the tip cap, rigid and
+    straight (no channel). ``guess``: a converged solution at a nearby load (pressure continuation: ``RodModel.solve``
     ramps the pressure of a blocked body so that it stays on the branch the bench follows, the tip
     on the plane from p = 0). ``hinge``: when the base would have to carry more than the section's
     limit moment (bent back; ``LawSlice.limit_moment_if_peaked``) or bend past its limit curvature,
@@ -211,7 +237,7 @@ def solve_rod(law: LawSlice, length: float, loads: PlanarLoads = PlanarLoads(), 
     ``hinge_rotation``: a plastic hinge (the section's moment is flat about its peak, so the extra
     rotation is a kink at the clamp whose moment, not its length, enters the statics;
     docs/models/rod.md)."""
-    rod = _Rod(law, length, loads, n_segments)
+    rod = _Rod(law, length, loads, n_segments, cap)
     limit = law.limit_moment_if_peaked() if hinge else None
     m_lim = None if limit is None else limit[0]
     try:
@@ -221,7 +247,7 @@ def solve_rod(law: LawSlice, length: float, loads: PlanarLoads = PlanarLoads(), 
         z = np.arange(n_segments + 1) * rod.h
         k_free = law.free_curvature()
         if k_free is None and np.isfinite(law.kappa_hi):
-            # the tip carries no moment, so its segment is at the free curvature whatever the loads
+            # the tip carries no moment, so its segment is at (with a cap, near) the free curvature whatever the loads
             raise LawRangeError(f"{law.source}: at p = {law.pressure / PA_PER_BAR:.4f} bar the free curvature is beyond "
                                 f"the moment-curvature table ({law.kappa_lo:.4g}..{law.kappa_hi:.4g} 1/m)")
         free = k_free * z if k_free is not None else np.zeros(n_segments + 1)

@@ -16,7 +16,7 @@ from ..cache import CacheStore
 from ..design import design_from_dict
 
 # Bump when what a case records changes (it is part of every case's cache key).
-STUDY_CODE_VERSION = "studies-2"   # 2: radius_of_curvature_m is l / theta (was 1/|k|)
+STUDY_CODE_VERSION = "studies-3"   # 2: radius_of_curvature_m is l / theta (was 1/|k|); 3: the tip cap straight
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,7 @@ def solve_case(spec: CaseSpec) -> dict:
     stretch, converged, message, and for the section rung the largest principal stretch in
     the silicone (``max_principal_stretch``), the strain measure the optimiser limits."""
     from ..models import make_model
+    from ..prediction import angle_per_length
 
     design = design_from_dict(spec.design)
     pressures = np.asarray(spec.pressures, dtype=float)
@@ -66,13 +67,14 @@ def solve_case(spec: CaseSpec) -> dict:
     state = model.evaluate(pressures)
     elapsed = time.perf_counter() - t0
     messages = _split_messages(state.message, int(np.sum(~np.asarray(state.converged))))
+    per_length = angle_per_length(state, model)   # theta / l
     results = []
     j = 0
     for i, p in enumerate(pressures):
         ok = bool(state.converged[i])
         k = state.curvature[i]
         kappa = float(np.hypot(*k)) if ok else float("nan")
-        theta_per_length = kappa * float(state.axial_stretch[i]) if ok else float("nan")
+        theta_per_length = float(per_length[i]) if ok else float("nan")
         row = {"pressures_pa": [float(v) for v in p], "converged": ok,
                "curvature_per_m": [float(v) for v in k] if ok else None,
                "radius_of_curvature_m": (1.0 / theta_per_length) if ok and kappa > 0 else None,
