@@ -116,8 +116,9 @@ def arc_and_cap(model: BendModel, length: float) -> tuple[float, float]:
 
 def angle_per_length(state, model: BendModel, length: float | None = None) -> np.ndarray:
     """theta / l of a constant-curvature state (batched) of ``model``'s body of ``length`` (m, or one
-    per command; default the design's): |k| x axial stretch x the arc's share of the length (``arc_and_cap``), 1/m. What a bench
-    reads as curvature (tip angle over sample length); its inverse is R_C = l / theta."""
+    per command; default the design's): |k| x axial stretch x the arc's share of the length
+    (``arc_and_cap``), 1/m. What a bench reads as curvature (tip angle over sample length); its
+    inverse is R_C = l / theta."""
     length = np.asarray(model.design.length if length is None else length, dtype=float)
     arc, _ = arc_and_cap(model, length)
     k = np.atleast_2d(state.curvature)

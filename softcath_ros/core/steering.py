@@ -166,7 +166,7 @@ class SteeringController:
         self.params = params or SteeringParams()
         self.max_pressure = allocator.max_pressure
         # the arc's reference length (the channelled part) and the straight cap beyond it
-        self.length, self.cap = arc_and_cap(allocator.model, allocator.design.length)
+        self.arc_length, self.cap = arc_and_cap(allocator.model, allocator.design.length)
         n = allocator.n_channels
         self.limiter = RateLimiter(n, self.params.max_pressure_rate)
         self.watchdog = CommandWatchdog(self.params.command_timeout)
@@ -339,7 +339,7 @@ class SteeringController:
         if result.saturated:
             # Saturate along the target's direction; back-calculate the integral to that edge.
             result = self._allocate(u * math.hypot(*command))
-            edge = np.asarray(result.achieved_curvature, dtype=float) * self.length * result.axial_stretch
+            edge = np.asarray(result.achieved_curvature, dtype=float) * self.arc_length * result.axial_stretch
             if self.closed:
                 self.integral = edge * self.gain - self.target_bend
         pressures = np.asarray(result.pressures, dtype=float)
@@ -356,7 +356,7 @@ class SteeringController:
         """Pressures for a bend vector (rad): its curvature on the last axial stretch (the integral
         absorbs the small change of stretch), one allocator call."""
         b = np.asarray(bend, dtype=float)
-        res = self.allocator.allocate(b / (self.length * self._stretch))
+        res = self.allocator.allocate(b / (self.arc_length * self._stretch))
         if not res.converged or not res.reachable:
             raise SteeringError(f"allocation failed for bend {b.tolist()} rad: {res.message}")
         return res
@@ -380,7 +380,7 @@ class SteeringController:
         """The model's bend vector (rad) at ``pressures`` (Pa)."""
         state = self.allocator.model.evaluate(np.asarray(pressures, dtype=float))
         k = np.asarray(state.curvature, dtype=float) - self._rest_curvature
-        return k * self.length * float(state.axial_stretch)
+        return k * self.arc_length * float(state.axial_stretch)
 
     def _set_state(self, state: str, reason: str) -> None:
         self.state, self.reason = state, reason
