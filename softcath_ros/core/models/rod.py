@@ -46,10 +46,11 @@ CONTACT_STEPS = StepControl(initial_step=1250.0, max_step=1250.0, min_step=1250.
 
 class RodModel(BendModel):
     name = "rod"
-    solver_version = f"rod-3/{LAW_VERSION}"   # bump rod-N when the statics change an answer (2: base hinge, 3: tip cap)
+    solver_version = f"rod-2/{LAW_VERSION}"   # bump rod-N when the statics change an answer (2: base hinge)
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
+        arc_spans_cap=True,
         depends_on_length=True,
         options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
                  Option("loads", "object", "a Loads (tip force, gravity, contact); or the three below"),
@@ -104,7 +105,9 @@ class RodModel(BendModel):
 
             self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
         self.weight_per_length = design.material.density * section.silicone_area
-        self.cap = design.cap_thickness   # the tip cap: rigid and straight (core/rod/statics.py)
+        # the tip cap bends with the body (no rigid cap, core/rod/statics.py): with it the blocked
+        # ramp's hinged branch stopped at 0.28 bar (docs/models/rod.md)
+        self.cap = 0.0
         self.planar = self._planar_loads(self.loads)
 
     def at_length(self, length: float) -> "RodModel":
