@@ -251,6 +251,27 @@ def test_contact_barrier_is_c2_and_zero_beyond_its_distance():
         assert f(XI_MIN * (1 + 1e-7)) == pytest.approx(f(XI_MIN * (1 - 1e-7)), rel=1e-4)
 
 
+def test_lumen_wall_stretch_reads_a_homogeneous_deformation(short_design):
+    """lumen_wall_stretch (the creasing diagnostic): under u = ((s - 1) x, (s - 1)(y - y_c), (a - 1) z)
+    the lumen wall's hoop stretch is s and its axial stretch a everywhere; the smaller is the
+    smallest principal surface stretch, and the normal stretch is 1 / (s a)."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.measure import lumen_wall_stretch
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1).problem
+    yc = short_design.lumen.center[1]
+    for s, a in ((0.8, 1.1), (1.2, 0.9)):
+        pb.u.Set(ng.CF(((s - 1) * ng.x, (s - 1) * (ng.y - yc), (a - 1) * ng.z)))
+        w = lumen_wall_stretch(pb)
+        assert w["min_hoop_stretch"] == pytest.approx(s, rel=1e-9)
+        assert w["axial_stretch_there"] == pytest.approx(a, rel=1e-9)
+        assert w["min_principal_stretch"] == pytest.approx(min(s, a), rel=1e-9)
+        assert w["other_principal_there"] == pytest.approx(max(s, a), rel=1e-9)
+        assert w["normal_stretch_there"] == pytest.approx(s, rel=1e-9)   # det F = s^2 a over s a
+        assert w["min_det_f"] == pytest.approx(s * s * a, rel=1e-9)
+
+
 def test_contact_option_checked(short_design):
     assert Fe3dModel(short_design, mesh=COARSE).contact_distance == 0.01   # on by default with a lumen
     assert Fe3dModel(short_design, mesh=COARSE, contact_distance=None).contact_distance is None

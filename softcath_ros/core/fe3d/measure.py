@@ -144,3 +144,51 @@ def channel_area(problem, i: int) -> float:
         cur = np.vstack([cur, back])
     nxt = np.roll(cur, -1, axis=0)
     return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))
+
+
+def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
+    """The lumen wall's surface stretches at the current state, sampled at ``per_edge`` points per
+    wall edge of the section on every mesh level and mid-layer (a hair inside the silicone):
+    the hoop stretch |F t| (t the wall edge's reference direction in the section), the axial one |F e_z| and
+    the surface's principal stretches (of the 2x2 surface Cauchy-Green tensor on t, e_z). A
+    neo-Hookean surface under plane-strain compression creases at a surface stretch of about 0.65
+    (Hong, Zhao & Suo 2009), wrinkles (Biot) at 0.54. Returns the smallest hoop and principal
+    stretches with where (reference x, y, z in m), the wall's normal stretch there (det F over the
+    product of the principal ones) and the smallest det F at the wall."""
+    lumen = problem.design.lumen
+    sec = problem.prism.section
+    c = np.asarray(lumen.center, dtype=float)
+    r = lumen.radius
+    on = np.abs(np.hypot(sec.points[:, 0] - c[0], sec.points[:, 1] - c[1]) - r) < 0.1 * r
+    pts2 = sec.points[on]
+    pts2 = pts2[np.argsort(np.arctan2(pts2[:, 1] - c[1], pts2[:, 0] - c[0]))]
+    nxt = pts2[1:] if problem.half else np.roll(pts2, -1, axis=0)
+    start = pts2[:-1] if problem.half else pts2
+    t = (np.arange(per_edge) + 0.5) / per_edge   # inside each edge: the wall is a chord there
+    xy = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
+    chord = np.repeat((nxt - start) / np.linalg.norm(nxt - start, axis=1)[:, None], per_edge, axis=0)
+    tangent = np.column_stack([chord, np.zeros(len(chord))])
+    xy = c + (xy - c) * (1.0 + 1e-3)   # a hair inside the silicone (the lumen is not meshed)
+    z = problem.prism.z_levels
+    levels = np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))
+    levels = np.clip(levels, 1e-9, problem.design.length - 1e-9)   # inside the mesh
+    import ngsolve as ng
+
+    grad = ng.Grad(problem.u)
+    pts = np.vstack([np.column_stack([xy, np.full(len(xy), zk)]) for zk in levels])
+    tan = np.tile(tangent, (len(levels), 1))
+    g = np.asarray(grad(problem.mesh(pts[:, 0], pts[:, 1], pts[:, 2]))).reshape(len(pts), 3, 3)
+    F = np.eye(3)[None] + g
+    ft = np.einsum("nij,nj->ni", F, tan)
+    fz = F[:, :, 2]
+    c11, c22, c12 = (ft * ft).sum(1), (fz * fz).sum(1), (ft * fz).sum(1)
+    mean, dev = 0.5 * (c11 + c22), np.sqrt(0.25 * (c11 - c22) ** 2 + c12 ** 2)
+    lam_min, lam_max = np.sqrt(np.maximum(mean - dev, 0.0)), np.sqrt(mean + dev)
+    hoop = np.sqrt(c11)
+    det = np.linalg.det(F)
+    i, k = int(np.argmin(hoop)), int(np.argmin(lam_min))
+    return {"min_hoop_stretch": float(hoop[i]), "min_hoop_at_m": pts[i],
+            "axial_stretch_there": float(np.sqrt(c22[i])),
+            "min_principal_stretch": float(lam_min[k]), "other_principal_there": float(lam_max[k]),
+            "normal_stretch_there": float(det[k] / (lam_min[k] * lam_max[k])), "min_principal_at_m": pts[k],
+            "min_det_f": float(det.min()), "min_det_f_at_m": pts[int(np.argmin(det))]}

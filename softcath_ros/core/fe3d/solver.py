@@ -85,7 +85,7 @@ class Fe3dProblem:
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
                  lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
-                 contact_distance: float | None = None):
+                 contact_distance: float | None = None, pressure_order: int = 0):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
         silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
         "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
@@ -103,7 +103,7 @@ class Fe3dProblem:
         self.mirror = 2.0 if self.half else 1.0
         mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
         v = ng.VectorH1(mesh, order=2, dirichlet="base", dirichletx="sym" if self.half else "")
-        q = ng.L2(mesh, order=0)
+        q = ng.L2(mesh, order=pressure_order)
         self.fes = fes = v * q
         self.gf = ng.GridFunction(fes)
         self.u, self.q = self.gf.components
