@@ -3,8 +3,9 @@
 The blocking-force bench holds the cantilevered actuator horizontally with a scale under its
 tip, touching it at p = 0 (the reading there is tared). The force is the reaction of a
 frictionless plane through the tip of the straight body, normal to the bending direction, on
-a clamped Kirchhoff rod with its rigid tip cap (``core/rod/statics.py``); the tip may slide and
-rotate on the scale.
+a clamped Kirchhoff rod (``core/rod/statics.py``; for the linear law its tip cap is rigid where
+the rung keeps the cap straight, ``core/prediction.arc_and_cap``); the tip may slide and rotate
+on the scale.
 What the sections carry:
 - the model is the ``rod`` rung: its own moment-curvature law (from the section rung by
   default: M(kappa, p) of the section held at each curvature, so the stiffening and the wall
@@ -42,6 +43,7 @@ class BlockingForce:
         """From free curvatures (..., 2) 1/m, through the linear law about each of them."""
         k = np.atleast_2d(np.asarray(curvature, dtype=float))
         out = np.zeros(len(k))
+        cap = arc_and_cap(self.model, length)[1]
         for i, ki in enumerate(k):
             mag = float(np.hypot(*ki))
             if not np.isfinite(mag):
@@ -51,8 +53,7 @@ class BlockingForce:
                 continue
             e = ki / mag
             law = LinearLaw(float(e @ self.stiffness @ e), lambda p, mag=mag: mag, source="linear law")
-            out[i] = solve_rod(law.at(0.0), length, bench_contact(length), N_SEGMENTS,
-                               cap=arc_and_cap(self.model, length)[1]).contact_force
+            out[i] = solve_rod(law.at(0.0), length, bench_contact(length), N_SEGMENTS, cap=cap).contact_force
         return out if np.ndim(curvature) > 1 else out[0]
 
     def __call__(self, pressures, length: float) -> np.ndarray:

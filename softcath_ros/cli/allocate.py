@@ -74,9 +74,10 @@ def run(args) -> int:
         result = allocator.allocate_bend(direction, math.radians(args.angle))
     if not math.isfinite(result.max_curvature) and result.reachable:
         result.max_curvature = allocator.max_curvature(direction)
+    arc_length = arc_and_cap(model, design.length)[0]   # the bent arc's reference length
     out = {"model": allocator.model.name, "design": design.name, "max_pressure_pa": allocator.max_pressure,
            **result.to_json(),
-           "max_bending_angle_rad": result.max_curvature * arc_and_cap(model, design.length)[0] * result.axial_stretch}
+           "max_bending_angle_rad": result.max_curvature * arc_length * result.axial_stretch}
     if args.reachable_set > 0:
         rs = allocator.reachable_set(args.reachable_set)
         out["reachable_set"] = {"directions_deg": [math.degrees(d) for d in rs.directions],
@@ -88,7 +89,7 @@ def run(args) -> int:
         json_output.dump(out, sys.stdout, indent=2)
         print()
     else:
-        _print_human(out, arc_and_cap(model, design.length)[0])
+        _print_human(out, arc_length)
     if not result.reachable or not result.converged:
         print(f"softcath allocate: {result.message}", file=sys.stderr)
         return 1

@@ -221,14 +221,9 @@ def wall_sampling(problem):
     """Reference points of the lumen wall, per mesh level: SAMPLES points per wall edge of the
     section, in order around the lumen (the half model's half wall mirrored later), and the
     reference arc length of each, for excluding neighbours along the wall."""
-    prism = problem.prism
-    sec = prism.section
-    lumen = problem.design.lumen
-    on = np.abs(np.hypot(sec.points[:, 0] - lumen.center[0], sec.points[:, 1] - lumen.center[1])
-                - lumen.radius) < 0.1 * lumen.radius
-    pts = sec.points[on]
-    ang = np.arctan2(pts[:, 1] - lumen.center[1], pts[:, 0] - lumen.center[0])
-    pts = pts[np.argsort(ang)]
+    from .measure import lumen_wall_nodes
+
+    pts, levels = lumen_wall_nodes(problem)
     closed = not problem.half
     nxt = np.roll(pts, -1, axis=0) if closed else pts[1:]
     start = pts if closed else pts[:-1]
@@ -236,9 +231,6 @@ def wall_sampling(problem):
     ring = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
     if not closed:
         ring = np.vstack([ring, pts[-1:]])
-    # levels: every mesh level and the middle of every layer (the P2 field is curved along z too)
-    z = prism.z_levels
-    levels = np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))   # the base does not move
     return ring, levels
 
 

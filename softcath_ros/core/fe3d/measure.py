@@ -146,6 +146,20 @@ def channel_area(problem, i: int) -> float:
     return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))
 
 
+def lumen_wall_nodes(problem):
+    """The section's mesh points on the lumen wall (m), in order around the lumen (the half model's
+    half wall), and the z levels (m) at which the wall is sampled: every mesh level above the base
+    (which does not move) and the middle of every layer (the P2 field is curved along z too)."""
+    lumen = problem.design.lumen
+    sec = problem.prism.section
+    c = np.asarray(lumen.center, dtype=float)
+    on = np.abs(np.hypot(sec.points[:, 0] - c[0], sec.points[:, 1] - c[1]) - lumen.radius) < 0.1 * lumen.radius
+    pts = sec.points[on]
+    pts = pts[np.argsort(np.arctan2(pts[:, 1] - c[1], pts[:, 0] - c[0]))]
+    z = problem.prism.z_levels
+    return pts, np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))
+
+
 def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
     """The lumen wall's surface stretches at the current state, sampled at ``per_edge`` points per
     wall edge of the section on every mesh level and mid-layer (a hair inside the silicone):
@@ -155,13 +169,8 @@ def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
     (Hong, Zhao & Suo 2009), wrinkles (Biot) at 0.54. Returns the smallest hoop and principal
     stretches with where (reference x, y, z in m), the wall's normal stretch there (det F over the
     product of the principal ones) and the smallest det F at the wall."""
-    lumen = problem.design.lumen
-    sec = problem.prism.section
-    c = np.asarray(lumen.center, dtype=float)
-    r = lumen.radius
-    on = np.abs(np.hypot(sec.points[:, 0] - c[0], sec.points[:, 1] - c[1]) - r) < 0.1 * r
-    pts2 = sec.points[on]
-    pts2 = pts2[np.argsort(np.arctan2(pts2[:, 1] - c[1], pts2[:, 0] - c[0]))]
+    c = np.asarray(problem.design.lumen.center, dtype=float)
+    pts2, levels = lumen_wall_nodes(problem)
     nxt = pts2[1:] if problem.half else np.roll(pts2, -1, axis=0)
     start = pts2[:-1] if problem.half else pts2
     t = (np.arange(per_edge) + 0.5) / per_edge   # inside each edge: the wall is a chord there
@@ -169,8 +178,6 @@ def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
     chord = np.repeat((nxt - start) / np.linalg.norm(nxt - start, axis=1)[:, None], per_edge, axis=0)
     tangent = np.column_stack([chord, np.zeros(len(chord))])
     xy = c + (xy - c) * (1.0 + 1e-3)   # a hair inside the silicone (the lumen is not meshed)
-    z = problem.prism.z_levels
-    levels = np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))
     levels = np.clip(levels, 1e-9, problem.design.length - 1e-9)   # inside the mesh
     import ngsolve as ng
 

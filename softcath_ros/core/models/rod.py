@@ -50,6 +50,8 @@ class RodModel(BendModel):
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
+        # its tip cap bends with the body (solve_rod's rigid cap unused: with it the blocked ramp's hinged
+        # branch stopped at 0.28 bar, docs/models/rod.md)
         arc_spans_cap=True,
         depends_on_length=True,
         options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
@@ -105,9 +107,6 @@ class RodModel(BendModel):
 
             self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
         self.weight_per_length = design.material.density * section.silicone_area
-        # the tip cap bends with the body (no rigid cap, core/rod/statics.py): with it the blocked
-        # ramp's hinged branch stopped at 0.28 bar (docs/models/rod.md)
-        self.cap = 0.0
         self.planar = self._planar_loads(self.loads)
 
     def at_length(self, length: float) -> "RodModel":
@@ -174,7 +173,7 @@ class RodModel(BendModel):
             if isinstance(out[0], LawRangeError):
                 raise out[0]
             return out[0]
-        return [_refused(s, self.n_segments, self.cap) if isinstance(s, LawRangeError) else s for s in out]
+        return [_refused(s, self.n_segments) if isinstance(s, LawRangeError) else s for s in out]
 
     def _solutions(self, pressures: np.ndarray, length: float, loads: PlanarLoads) -> list:
         """Per pressure its RodSolution or the LawRangeError that refused it: directly where nothing is
@@ -184,7 +183,7 @@ class RodModel(BendModel):
         out: list = [None] * len(pressures)
         for i in sorted(set(range(len(pressures))) - set(on_ramp)):
             try:
-                out[i] = solve_rod(self._slice(float(pressures[i])), length, loads, self.n_segments, cap=self.cap)
+                out[i] = solve_rod(self._slice(float(pressures[i])), length, loads, self.n_segments)
             except LawRangeError as exc:
                 out[i] = exc
         if not on_ramp:
@@ -208,7 +207,7 @@ class RodModel(BendModel):
 
         def corrector(guess, t, previous) -> Correction:
             try:
-                sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess, cap=self.cap)
+                sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess)
             except LawRangeError as exc:
                 last["refusal"] = exc
                 return Correction(state=None, converged=False, message=str(exc), outside_domain=True,
@@ -232,7 +231,7 @@ class RodModel(BendModel):
         curvature = np.full((n, 2), np.nan)
         stretch = np.full(n, np.nan)
         converged = np.zeros(n, dtype=bool)
-        backbone = np.full((n, self.n_segments + 1 + (self.cap > 0), 3), np.nan)
+        backbone = np.full((n, self.n_segments + 1, 3), np.nan)
         tip_q = np.full((n, 4), np.nan)
         force = np.full(n, np.nan)
         angle = np.full(n, np.nan)
@@ -243,7 +242,7 @@ class RodModel(BendModel):
                 continue
             th = sol.theta[-1]
             curvature[i] = e * th / sol.arc_length
-            stretch[i] = sol.arc_length / (self.design.length - self.cap)
+            stretch[i] = sol.arc_length / self.design.length
             converged[i] = True
             a, b = sol.positions[:, 0], sol.positions[:, 1]
             backbone[i] = np.column_stack([b * e[0], b * e[1], a])
@@ -259,9 +258,9 @@ class RodModel(BendModel):
                          diagnostics=SolverDiagnostics(law=self.law.source))
 
 
-def _refused(exc: LawRangeError, n_segments: int, cap: float) -> RodSolution:
+def _refused(exc: LawRangeError, n_segments: int) -> RodSolution:
     """A solution the law refused: no numbers, its message and stop reason."""
-    return RodSolution(theta=np.full(n_segments + 1, np.nan), positions=np.full((n_segments + 1 + (cap > 0), 2), np.nan),
+    return RodSolution(theta=np.full(n_segments + 1, np.nan), positions=np.full((n_segments + 1, 2), np.nan),
                        kappa=np.full(n_segments, np.nan), arc_length=math.nan, contact_force=math.nan,
                        converged=False, message=str(exc), stop_reason=exc.stop_reason)
 
