@@ -2,10 +2,11 @@
 
 Targets (issue 12): 0 -> 0.5 bar converged at the default mesh (D/20) at 20 and 40 mm, the sweep
 in <= 2 s; R_C at 0.35 bar within 1 % over meshes D/12 .. D/40. The section rung is the
-long-actuator limit, so R_C does not depend on the length: both lengths are run to show it.
+long-actuator limit, so its curvature does not depend on the length; R_C does only through the
+straight tip cap (l / (l - cap)): both lengths are run to show it.
 Sweep times are medians over repeats with a fresh model; the machine is shared (load average
 in the JSON). Every answer is a stable state (``negative_directions`` 0: the tangent's LDL^T has no
-negative pivot); ``saddles_left`` counts the saddles a ramp met and left for a stable state. R_C is l / theta (1 / (|k| lambda)); 1/|k| is reported beside it.
+negative pivot); ``saddles_left`` counts the saddles a ramp met and left for a stable state. R_C is l / theta, theta = |k| lambda (l - cap); 1/|k| is reported beside it.
 
     .venv/bin/python benchmarks/section_contact.py [--repeats 3]
 

@@ -57,10 +57,10 @@ def test_table_cached_by_design_content(one_channel, tmp_path):
     again = make_model("surrogate", m.design, cache=m.store.root, shipped=False)
     assert again.meta == m.meta                     # loaded, not rebuilt
     assert m.built_now and not again.built_now      # what model_node reports at start-up
-    softer = replace(m.design, length=0.03)
-    assert softer.content_hash() != m.design.content_hash()
+    softer = replace(m.design, material=replace(m.design.material, c1=0.8 * m.design.material.c1))
+    assert softer.per_section_hash() != m.design.per_section_hash()
     other = make_model("surrogate", softer, cache=tmp_path, source="closed_form")
-    assert other.path != m.path and other.meta["design_hash"] == softer.content_hash()
+    assert other.path != m.path and other.meta["design_hash"] == softer.per_section_hash()
 
 
 @pytest.mark.parametrize("pairs", ["rotated", "each"])
@@ -171,6 +171,24 @@ def test_shipped_tables_are_current_for_every_shipped_design():
             pytest.fail(f"{exc}: run `softcath surrogate build --shipped`")
         assert m.origin == "shipped" and not m.built_now and m.table_path.parent.name == "surrogate_tables"
         assert m.meta["source_version"] == m._cache_parts()[2]
+
+
+def test_a_table_of_a_per_section_source_serves_every_length(tmp_path):
+    """The section rung answers per section, so its shipped table serves the design at another
+    length (a scene's length) without a build (a whole-body source's table stays keyed on it)."""
+    d = load_design("implemented_5mm")
+    short = d.with_length(0.02)
+    m = make_model("surrogate", short, build=False, cache=False)
+    assert m.origin == "shipped" and not m.built_now
+    assert m._design_hash() == d.per_section_hash() != short.content_hash()
+    longer = make_model("surrogate", d, build=False, cache=False)
+    np.testing.assert_array_equal(m.evaluate([30000.0]).curvature, longer.evaluate([30000.0]).curvature)
+    # another section (a thicker wall) is another table
+    assert replace(d, cap_thickness=2 * d.cap_thickness).per_section_hash() != d.per_section_hash()
+    # a table built into the cache at one length is found at another
+    make_model("surrogate", d, source="closed_form", cache=tmp_path, shipped=False)
+    again = make_model("surrogate", short, source="closed_form", cache=tmp_path, shipped=False, build=False)
+    assert again.origin == "cache"
 
 
 def test_stale_shipped_table_is_rebuilt_into_the_cache_with_a_log_line(tmp_path, monkeypatch, caplog):

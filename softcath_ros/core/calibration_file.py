@@ -71,7 +71,7 @@ def pressure_only(name: str) -> bool:
 
 def section_hash(design) -> str:
     """The design's content hash with the length and max_pressure left out (16 hex digits)."""
-    return replace(design, length=1.0, max_pressure=1.0).content_hash()
+    return replace(design, max_pressure=1.0).per_section_hash()
 
 
 def file_sha256(path) -> str:

@@ -136,6 +136,11 @@ class Design:
         blob = json.dumps(self.to_dict(), sort_keys=True, default=float).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
+    def per_section_hash(self) -> str:
+        """The content hash with the length left out (set to 1 m): what an answer per section
+        (the section rung, the closed form, their tables) depends on."""
+        return replace(self, length=1.0).content_hash()
+
 
 def _material_dict(m: YeohMaterial) -> dict:
     return {"model": "yeoh", "c1": m.c1, "c2": m.c2, "c3": m.c3,

@@ -217,7 +217,12 @@ class SurrogateModel(BendModel):
             source_version = rung_class(self.settings.source).solver_version
         except ModelError:
             source_version = None   # an unknown source: refused when the table is built
-        return [self.design.content_hash(), asdict(self.settings), source_version]
+        return [self._design_hash(), asdict(self.settings), source_version]
+
+    def _design_hash(self) -> str:
+        """The design's hash a table is keyed on: without the length when the source answers per
+        section (a table serves every length), with it when the source solves a whole body."""
+        return self.design.content_hash() if self.info.depends_on_length else self.design.per_section_hash()
 
     def _cache_name(self) -> str:
         return f"{self.design.name}_{self.settings.source}"
@@ -270,7 +275,7 @@ class SurrogateModel(BendModel):
                 raise
             pool.close()
         meta.update({"version": SURROGATE_VERSION, "key": self.key, "design": self.design.name,
-                     "design_hash": self.design.content_hash(), "kind": self.kind, "rotated": self.rotated,
+                     "design_hash": self._design_hash(), "kind": self.kind, "rotated": self.rotated,
                      "settings": asdict(self.settings), "source_version": self._cache_parts()[2],
                      "build_seconds": time.perf_counter() - t0, "workers": self.workers})
         return table, meta
@@ -521,7 +526,7 @@ class SurrogateModel(BendModel):
         return None
 
     def _stale_reason(self, meta: dict) -> str:
-        if meta.get("design_hash") != self.design.content_hash():
+        if meta.get("design_hash") != self._design_hash():
             return f"built for another design content (hash {meta.get('design_hash')})"
         if meta.get("version") != SURROGATE_VERSION:
             return f"built by {meta.get('version')}, this is {SURROGATE_VERSION}"
