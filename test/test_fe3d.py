@@ -272,6 +272,24 @@ def test_lumen_wall_stretch_reads_a_homogeneous_deformation(short_design):
         assert w["min_det_f"] == pytest.approx(s * s * a, rel=1e-9)
 
 
+def test_pair_census_counts_the_walls_of_a_lumen_pressed_to_a_slit(short_design):
+    """pair_census (the contact diagnosis): an open lumen has no pair in the barrier's range; squeezed
+    to a slit narrower than d_hat (u_y = -(1 - eps)(y - y_c)), most of its wall is in range with a mean
+    gap below d_hat, and no partner lies behind the primary."""
+    import ngsolve as ng
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02).problem
+    wall_area = ng.Integrate(ng.CF(1.0), pb.mesh, ng.BND, definedon=pb.mesh.Boundaries("lumen"))
+    census = pb.contact.pair_census()
+    assert census["in_range"]["area_m2"] == 0.0 and census["behind"]["area_m2"] == 0.0
+    yc = short_design.lumen.center[1]
+    pb.u.Set(ng.CF((0.0, -(1.0 - 0.005) * (ng.y - yc), 0.0)))   # slit 1 % of the radius wide: d_hat / 4
+    census = pb.contact.pair_census()
+    assert 0.5 * wall_area < census["in_range"]["area_m2"] <= 1.001 * wall_area
+    assert 0.0 < census["in_range"]["gap"] < pb.contact.d_hat
+    assert census["behind"]["area_m2"] < 1e-3 * wall_area
+
+
 def test_contact_option_checked(short_design):
     assert Fe3dModel(short_design, mesh=COARSE).contact_distance == 0.01   # on by default with a lumen
     assert Fe3dModel(short_design, mesh=COARSE, contact_distance=None).contact_distance is None

@@ -161,19 +161,27 @@ class LumenContact:
         self.force_boundary.AddEnergy(energy)
         self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
-        # a census of the current pairs (pair_census): those in the barrier's range, and those
-        # whose partner lies behind the primary (beyond BEHIND_LOW d_hat, apart on the wall), which
-        # the energy ignores; area (m^2) and area-weighted x, y, z and gap of each
-        one = ng.IfPos(ref - NEAR_HIGH, 1.0, 0.0)
-        kinds = {"in_range": paired * ng.IfPos(self.d_hat - gap, 1.0, 0.0),
-                 "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - gap, 1.0, 0.0)}
-        self._census = []
-        for kind, mask in kinds.items():
-            for what, f in (("area", mask), ("x", mask * ng.x), ("y", mask * ng.y), ("z", mask * ng.z),
-                            ("gap", mask * gap)):
-                cb = ng.ContactBoundary(wall, wall, volume=False)
-                cb.AddEnergy(f)
-                self._census.append((kind, what, cb, ng.BilinearForm(problem.fes)))
+        self._wall, self._gap, self._ref, self._paired = wall, gap, ref, paired
+        self._census = None   # pair_census's forms, built on its first call (diagnosis only)
+
+    def _census_forms(self) -> list:
+        """The census's forms: for "in_range" (counted by the energy's windows, gap below d_hat)
+        and "behind" (partner beyond BEHIND_LOW d_hat behind the primary, apart on the wall: the
+        energy ignores them) the area (m^2) and area-weighted x, y, z and gap."""
+        if self._census is None:
+            import ngsolve as ng
+
+            one = ng.IfPos(self._ref - NEAR_HIGH, 1.0, 0.0)
+            kinds = {"in_range": self._paired * ng.IfPos(self.d_hat - self._gap, 1.0, 0.0),
+                     "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - self._gap, 1.0, 0.0)}
+            self._census = []
+            for kind, mask in kinds.items():
+                for what, f in (("area", mask), ("x", mask * ng.x), ("y", mask * ng.y), ("z", mask * ng.z),
+                                ("gap", mask * self._gap)):
+                    cb = ng.ContactBoundary(self._wall, self._wall, volume=False)
+                    cb.AddEnergy(f)
+                    self._census.append((kind, what, cb, ng.BilinearForm(self.problem.fes)))
+        return self._census
 
     def update(self) -> None:
         """Search the contact pairs for the current displacement (before each Newton iteration)."""
@@ -201,7 +209,7 @@ class LumenContact:
         gap (m)."""
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         raw: dict = {}
-        for kind, what, cb, form in self._census:
+        for kind, what, cb, form in self._census_forms():
             cb.Update(self.problem.u, form, self.intorder, self.maxdist, other=self.boundary)
             raw.setdefault(kind, {})[what] = form.Energy(self.problem.gf.vec)
         out = {}
