@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -274,3 +275,28 @@ def test_all_three_channels_pressurised_answered_within_the_measured_error_or_re
         got = m.evaluate(near)
         assert got.converged.all()
         assert _rc_error(got.curvature, make_model("section", d).evaluate(near).curvature)[0] <= tol
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_build_workers_die_with_the_process_that_started_them():
+    """A node killed while it builds a table (SIGKILL: no clean-up runs) leaves no worker solving on."""
+    parent = subprocess.Popen([sys.executable, "-c", """
+import multiprocessing, os, sys, time
+from concurrent.futures import ProcessPoolExecutor
+from softcath_ros.core.models.surrogate_build import _quiet_worker
+pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_quiet_worker)
+print(pool.submit(os.getpid).result(), flush=True)
+pool.submit(time.sleep, 60)
+time.sleep(60)
+"""], stdout=subprocess.PIPE, text=True)
+    worker = int(parent.stdout.readline())
+    os.kill(parent.pid, 9)
+    parent.wait(10)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and Path(f"/proc/{worker}").exists() \
+            and "Z" not in Path(f"/proc/{worker}/stat").read_text().split()[2]:
+        time.sleep(0.1)
+    alive = Path(f"/proc/{worker}").exists() and "Z" not in Path(f"/proc/{worker}/stat").read_text().split()[2]
+    if alive:
+        os.kill(worker, 9)
+    assert not alive

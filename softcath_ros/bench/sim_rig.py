@@ -75,11 +75,17 @@ class RigReading:
 
 def truth_model(rung: str, design, params: RigParams, **options):
     """The rung that plays the true actuator: ``design`` with its material scaled by
-    ``params.material_scale`` (``options`` go to the rung)."""
+    ``params.material_scale`` (``options`` go to the rung). A rung that answers for pressures
+    alone reads the design's own answers at p / m (exact: every modulus scales by m), so no
+    table is built for the scaled design; one that takes loads is built on the scaled design."""
+    from ..core.calibration_file import CalibratedModel, pressure_only
     from .calibration import scaled_design
 
-    if params.material_scale != 1.0:
-        design = scaled_design(design, params.material_scale)
+    m = params.material_scale
+    if m != 1.0 and pressure_only(rung):
+        return CalibratedModel(make_model(rung, design, **options), 0.0, material_scale=m)
+    if m != 1.0:
+        design = scaled_design(design, m)
     return make_model(rung, design, **options)
 
 

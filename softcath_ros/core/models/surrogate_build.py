@@ -25,6 +25,7 @@ import math
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
@@ -40,6 +41,19 @@ def default_workers() -> int:
 def _quiet_worker() -> None:
     # Ctrl-C goes to the whole process group: the parent stops the pool, workers say nothing
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
+
+
+def _die_with_parent() -> None:
+    """On Linux, SIGTERM this worker when the process that started it dies: a node killed while it
+    builds a table (a test's clean-up, a supervisor) must not leave its workers solving on."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
 
 
 def solve_ray(design: Design, source: str, source_options: dict, commands: np.ndarray) -> dict:
