@@ -8,6 +8,7 @@ import pytest
 
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import predict
 from softcath_ros.core.rod.law import LawRangeError, LinearLaw
 from softcath_ros.core.rod.statics import PlanarLoads, solve_rod
 from softcath_ros.core.rod.loads import TipPlaneContact
@@ -66,9 +67,11 @@ def test_unloaded_rod_is_its_source_rung(design, free_rod):
     assert a.converged.all()
     np.testing.assert_allclose(a.curvature, b.curvature, rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
-    # the backbone is the source's arc laid over the whole length (the rod's cap bends with it): tip
-    # angle = |k| * arc length, and it bends to -y
-    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
+    # the backbone is the source's arc over the channelled part and the straight cap beyond it:
+    # tip angle = |k| * its arc length, the tip where the section rung's prediction puts it; it bends to -y
+    cap = design.cap_thickness
+    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * (L - cap), rel=2e-3)
+    np.testing.assert_allclose(a.tip.position[2], predict(sec, p[2:])[0].tip_position_m, rtol=0, atol=2e-3 * L)
     assert a.tip.position[2, 1] < 0 and a.contact_force is None   # nothing to touch
 
 
@@ -256,6 +259,7 @@ def test_blocked_rod_ramps_on_the_shared_continuation_with_the_former_loops_answ
 
     monkeypatch.setattr(rod_module, "ramp", counted)
     rod = _rod(design, blocking_law)
+    rod.cap = 0.0   # the former loop's body had no rigid tip cap (rod-2)
     before = {17500.0: 0.02575718456740408, 26250.0: 0.03760976720104275, 35000.0: 0.05364625338616207}
     for p, force in before.items():
         sol = rod.solve(p, L, bench_contact(L))
