@@ -364,7 +364,7 @@ def test_a_blocked_segment_past_the_laws_fold_snaps_to_the_outer_branch(design):
     assert np.all(np.diff(f[:i]) > 0) and np.all(np.diff(f[i:]) > 0) and 0.99 * f[i - 1] < f[i] < f[i - 1]
     sl = law.at(ps[i])                                              # ... and the snap predicts where to
     r = statics._Rod(sl, L, loads, rod.n_segments, rod.cap)
-    start = statics._snap(r, sl, sl.snap_fold(), before.theta, before.contact_force, set())
+    start = statics._snap(r, sl, sl.snap_fold(), before.theta, set())
     assert start is not None and r.geometry(start)[0][0] < k_dip
     th, R, ok, _, _ = r.newton(start, before.contact_force, free_R=True, gap_row=True)
     assert ok and R == pytest.approx(after.contact_force, rel=1e-9)

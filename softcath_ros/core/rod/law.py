@@ -120,14 +120,18 @@ class LawSlice:
         return float(k[i_fold]), float(k[i_dip]), float(k_lim)
 
     def outer_branch_curvature(self, moment: float, n: int = 401) -> float | None:
-        """The curvature with this (bent-back) moment on the outer branch, between the dip and the
-        limit (``snap_fold``), where |M| rises with |kappa|; None without a dip or if |moment| is
-        outside |M| there."""
+        """The curvature with this (bent-back) moment on the outer branch, where |M| rises with
+        |kappa| up to the limit: between the dip and the limit (``snap_fold``), or, without a dip,
+        between 0 and the limit. None without a limit or if |moment| is outside |M| there."""
         fold = self.snap_fold(n)
-        if fold is None:
-            return None
-        _, k_dip, k_lim = fold
-        k = np.linspace(k_dip, k_lim, n)
+        if fold is not None:
+            _, k_start, k_lim = fold
+        else:
+            limit = self.limit_moment_if_peaked(n)
+            if limit is None:
+                return None
+            k_start, k_lim = min(0.0, self.kappa_hi), limit[1]
+        k = np.linspace(k_start, k_lim, n)
         m = np.abs(np.asarray(self.moment(k), dtype=float))
         target = abs(float(moment))
         if not m[0] <= target <= m[-1]:
