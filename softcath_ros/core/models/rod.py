@@ -12,9 +12,10 @@ weight (rho A g per reference length; the device's and the fluid's weight are no
 frictionless tip contact with a plane. The rod is planar: loads and the plane's normal must lie
 in the bending plane (the base axis and the bending direction e); one-channel designs only.
 
-``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length) along e,
-axial_stretch = deformed arc length of the channelled part / (length - cap): the tip cap
-(``cap_thickness``) is rigid and straight, as in the arc rungs (``core/prediction.arc_and_cap``), ``backbone`` (N, n+1, 3) joint positions, ``tip``
+``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length of the
+channelled part) along e, axial_stretch = that arc length / (length - cap) (the tip cap,
+``cap_thickness``, is rigid and straight, as in the arc rungs: ``core/prediction.arc_and_cap``,
+``info.arc_spans_cap`` False), ``backbone`` (N, n+2, 3) joint positions and the tip, ``tip``
 (position (N, 3), orientation_xyzw (N, 4), angle (N,) rad) and, when there is a contact plane,
 ``contact_force`` (N,) N. A command outside the law's table is answered with converged=False and
 the reason.
