@@ -8,6 +8,7 @@ import pytest
 
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.models import make_model
+from softcath_ros.core.prediction import predict
 from softcath_ros.core.rod.law import LawRangeError, LinearLaw
 from softcath_ros.core.rod.statics import PlanarLoads, solve_rod
 from softcath_ros.core.rod.loads import TipPlaneContact
@@ -66,10 +67,27 @@ def test_unloaded_rod_is_its_source_rung(design, free_rod):
     assert a.converged.all()
     np.testing.assert_allclose(a.curvature, b.curvature, rtol=2e-3, atol=1e-6)
     np.testing.assert_allclose(a.axial_stretch, b.axial_stretch, rtol=1e-4)
-    # the backbone is the source's arc laid over the whole length (the rod's cap bends with it): tip
-    # angle = |k| * arc length, and it bends to -y
-    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * L, rel=2e-3)
+    # the backbone is the source's arc over the channelled part and the straight cap beyond it:
+    # tip angle = |k| * its arc length, the tip where the section rung's prediction puts it; it bends to -y
+    cap = design.cap_thickness
+    assert a.tip.angle[2] == pytest.approx(-b.curvature[2, 1] * b.axial_stretch[2] * (L - cap), rel=2e-3)
+    np.testing.assert_allclose(a.tip.position[2], predict(sec, p[2:])[0].tip_position_m, rtol=0, atol=2e-3 * L)
     assert a.tip.position[2, 1] < 0 and a.contact_force is None   # nothing to touch
+
+
+@pytest.mark.parametrize("length", [0.020, 0.040])
+def test_unloaded_rod_has_the_section_rungs_tip_angle_and_rc_with_the_same_straight_cap(design, free_rod, length):
+    """rod-3: same law, same rigid straight cap as the arc rungs, so an unloaded rod of any length has
+    the section rung's tip angle theta = |k| lambda (l - cap) and R_C = l / theta: to the law's
+    interpolation (1e-4) at its grid pressures (2500, 7500 Pa) and between them (11250 Pa). A cap that bent
+    with the body would be cap / (l - cap) off: 5.3 % at 20 mm, 2.6 % at 40 mm."""
+    sec = make_model("section", design, **COARSE)
+    for p in (2500.0, 7500.0, 11250.0):
+        a, b = predict(free_rod, np.array([[p]]), length)[0], predict(sec, np.array([[p]]), length)[0]
+        assert a.converged and b.converged
+        assert a.bending_angle_rad == pytest.approx(b.bending_angle_rad, rel=1e-4)   # coarse law: <= 1.3e-5
+        assert a.radius_of_curvature_m == pytest.approx(b.radius_of_curvature_m, rel=1e-4)
+        np.testing.assert_allclose(a.tip_position_m, b.tip_position_m, rtol=0, atol=1e-4 * length)
 
 
 @pytest.mark.parametrize("cap_share", [0.0, 0.25, 0.5])
@@ -256,6 +274,7 @@ def test_blocked_rod_ramps_on_the_shared_continuation_with_the_former_loops_answ
 
     monkeypatch.setattr(rod_module, "ramp", counted)
     rod = _rod(design, blocking_law)
+    rod.cap = 0.0   # the former loop's body had no rigid tip cap (rod-2)
     before = {17500.0: 0.02575718456740408, 26250.0: 0.03760976720104275, 35000.0: 0.05364625338616207}
     for p, force in before.items():
         sol = rod.solve(p, L, bench_contact(L))
@@ -294,3 +313,62 @@ def test_a_batch_with_the_tip_on_the_scale_is_one_ramp_with_each_commands_answer
     assert len(ramps) == 1 and f.tolist() == pytest.approx(bench[::-1], rel=1e-9)
     shifted = BlockingForce(CalibratedModel(rod, 0.25))(np.array([[35000.0], [11666.666666666666]]), L)
     assert len(ramps) == 2 and shifted.tolist() == pytest.approx(bench[::-1], rel=1e-9)
+
+
+# --------------------------------------------------------------------------- the lumen's snap across the dip
+
+def _dip_law(ei=9e-6):
+    """A tabulated law whose bent-back |M| = ei (kappa_free(p) + h(-kappa)) rises (h = -kappa), folds at
+    -kappa ~ 40 1/m, dips (the lumen closing) to ~52 1/m, rises to its limit at ~103 1/m and falls; on
+    the positive side it is linear (kappa_free = 100 1/m at 0.35 bar)."""
+    from scipy.interpolate import CubicSpline
+
+    from softcath_ros.core.rod.law import TabulatedLaw
+    from softcath_ros.core.section_fe.moment import MomentTable
+
+    h = CubicSpline([0, 10, 20, 30, 40, 50, 60, 80, 100, 120, 150], [0, 10, 20, 26, 28, 27, 27.5, 31, 33, 32, 29],
+                    bc_type=((1, 1.0), (1, 0.0)))
+    ks, ps = np.arange(-150.0, 300.0 + 1e-9, 5.0), np.arange(0.0, 35000.0 + 1e-9, 2500.0)
+    kf = 100.0 * ps / 35000.0
+    m = np.where(ks[:, None] < 0, -ei * (kf[None, :] + h(np.maximum(-ks, 0.0))[:, None]), ei * (ks[:, None] - kf[None, :]))
+    return TabulatedLaw(MomentTable(curvatures=ks, pressures=ps, moment=m, stretch=np.ones_like(m), messages=[]),
+                        source="dip law")
+
+
+def test_a_blocked_segment_past_the_laws_fold_snaps_to_the_outer_branch(design):
+    """The bent-back law folds before its limit (the lumen closing): ``snap_fold`` finds fold, dip and
+    limit; a segment's snap (``statics._snap``) moves it to the outer branch with the same moment, and
+    Newton from there converges to the state the blocked ramp reaches, with the base past the dip."""
+    from softcath_ros.bench.blocking import bench_contact
+    from softcath_ros.core.rod import statics
+
+    law = _dip_law()
+    sl = law.at(22500.0)
+    k_fold, k_dip, k_lim = sl.snap_fold()
+    assert -45 < k_fold < -35 and -60 < k_dip < -45 and -110 < k_lim < -95
+    k_out = sl.outer_branch_curvature(sl.moment(-38.0))
+    assert k_lim < k_out < k_dip and sl.moment(k_out) == pytest.approx(sl.moment(-38.0), rel=1e-4)
+    assert sl.outer_branch_curvature(sl.moment(-5.0)) is None         # below the dip: one branch only
+    assert law.at(0.0).snap_fold() is not None and _dip_law().at(35000.0).limit_moment_if_peaked()[1] == k_lim
+
+    rod = _rod(design, law)
+    loads = bench_contact(L)
+    ps = np.arange(20000.0, 22500.0 + 1e-9, 125.0)
+    sols = rod.solve(ps, L, loads)
+    assert all(s.converged for s in sols)
+    i = next(i for i, s in enumerate(sols) if s.kappa[0] < k_dip)   # the base segment snaps on the ramp ...
+    before, after = sols[i - 1], sols[i]
+    assert k_dip < before.kappa[0] < 0 and k_lim < after.kappa[0] < k_dip
+    # the force grows on either side; at the snap the base softens and, the tip held, it drops a little
+    f = np.array([s.contact_force for s in sols])
+    assert np.all(np.diff(f[:i]) > 0) and np.all(np.diff(f[i:]) > 0) and 0.99 * f[i - 1] < f[i] < f[i - 1]
+    sl = law.at(ps[i])                                              # ... and the snap predicts where to
+    r = statics._Rod(sl, L, loads, rod.n_segments, rod.cap)
+    start = statics._snap(r, sl, sl.snap_fold(), before.theta, set())
+    assert start is not None and r.geometry(start)[0][0] < k_dip
+    th, R, ok, _, _ = r.newton(start, before.contact_force, free_R=True, gap_row=True)
+    assert ok and R == pytest.approx(after.contact_force, rel=1e-9)
+    np.testing.assert_allclose(th, after.theta, atol=1e-9)
+    # the ramp goes on to 0.35 bar with the base hinged at the limit moment
+    end = rod.solve(35000.0, L, loads)
+    assert end.converged and end.hinge_moment is not None and end.hinge_rotation < 0

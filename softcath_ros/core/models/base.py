@@ -38,9 +38,8 @@ class RungInfo:
                                      # and it answers ``solve(pressure, length, loads)`` (planar loads)
     depends_on_length: bool = False  # its answers are of a body of the design's length (end effects, a solved
                                      # backbone), not per section: another length is another body (``at_length``)
-    arc_spans_cap: bool = False      # its curvature spans the whole body, the cap included (fe3d: fitted to the
-                                     # tip; the rod: its cap bends with it); else of the channelled part, the
-                                     # tip cap straight beyond it
+    arc_spans_cap: bool = False      # its curvature is of an arc fitted to the whole body's tip, the cap included
+                                     # (fe3d); else of the channelled part, the tip cap straight beyond it
     options: tuple[Option, ...] = ()
     more_options: str = ""           # where options not listed go (e.g. "passed to the source rung"); "" = refused
     needs: str = ""                  # optional dependency ("fe" extra), "" = none

@@ -12,8 +12,10 @@ weight (rho A g per reference length; the device's and the fluid's weight are no
 frictionless tip contact with a plane. The rod is planar: loads and the plane's normal must lie
 in the bending plane (the base axis and the bending direction e); one-channel designs only.
 
-``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length) along e,
-axial_stretch = deformed arc length / length, ``backbone`` (N, n+1, 3) joint positions, ``tip``
+``evaluate`` returns curvature = the mean curvature (tip angle / deformed arc length of the
+channelled part) along e, axial_stretch = that arc length / (length - cap) (the tip cap,
+``cap_thickness``, is rigid and straight, as in the arc rungs: ``core/prediction.arc_and_cap``,
+``info.arc_spans_cap`` False), ``backbone`` (N, n+2, 3) joint positions and the tip, ``tip``
 (position (N, 3), orientation_xyzw (N, 4), angle (N,) rad) and, when there is a contact plane,
 ``contact_force`` (N,) N. A command outside the law's table is answered with converged=False and
 the reason.
@@ -46,13 +48,10 @@ CONTACT_STEPS = StepControl(initial_step=1250.0, max_step=1250.0, min_step=1250.
 
 class RodModel(BendModel):
     name = "rod"
-    solver_version = f"rod-2/{LAW_VERSION}"   # bump rod-N when the statics change an answer (2: base hinge)
+    solver_version = f"rod-3/{LAW_VERSION}"   # bump rod-N when the statics change an answer (2: base hinge, 3: rigid tip cap)
     info = RungInfo(
         summary="Kirchhoff rod statics with a moment-curvature law from a higher rung, under loads",
         models=("free_bending", "device_stiffness", "tip_load", "contact", "gravity"), solves_backbone=True,
-        # its tip cap bends with the body (solve_rod's rigid cap unused: with it the blocked ramp's hinged
-        # branch stopped at 0.28 bar, docs/models/rod.md)
-        arc_spans_cap=True,
         depends_on_length=True,
         options=(Option("source", "str", "the rung whose law the sections carry (default section)"),
                  Option("loads", "object", "a Loads (tip force, gravity, contact); or the three below"),
@@ -107,6 +106,7 @@ class RodModel(BendModel):
 
             self.law = LinearLaw(ei, free_curvature, (0.0, design.max_pressure), source=f"linear law from '{source}'")
         self.weight_per_length = design.material.density * section.silicone_area
+        self.cap = design.cap_thickness   # the tip cap: rigid and straight, as in the arc rungs (arc_and_cap)
         self.planar = self._planar_loads(self.loads)
 
     def at_length(self, length: float) -> "RodModel":
@@ -173,7 +173,7 @@ class RodModel(BendModel):
             if isinstance(out[0], LawRangeError):
                 raise out[0]
             return out[0]
-        return [_refused(s, self.n_segments) if isinstance(s, LawRangeError) else s for s in out]
+        return [_refused(s, self.n_segments, self.cap) if isinstance(s, LawRangeError) else s for s in out]
 
     def _solutions(self, pressures: np.ndarray, length: float, loads: PlanarLoads) -> list:
         """Per pressure its RodSolution or the LawRangeError that refused it: directly where nothing is
@@ -183,7 +183,7 @@ class RodModel(BendModel):
         out: list = [None] * len(pressures)
         for i in sorted(set(range(len(pressures))) - set(on_ramp)):
             try:
-                out[i] = solve_rod(self._slice(float(pressures[i])), length, loads, self.n_segments)
+                out[i] = solve_rod(self._slice(float(pressures[i])), length, loads, self.n_segments, cap=self.cap)
             except LawRangeError as exc:
                 out[i] = exc
         if not on_ramp:
@@ -207,7 +207,7 @@ class RodModel(BendModel):
 
         def corrector(guess, t, previous) -> Correction:
             try:
-                sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess)
+                sol = solve_rod(self._slice(t), length, loads, self.n_segments, guess=guess, cap=self.cap)
             except LawRangeError as exc:
                 last["refusal"] = exc
                 return Correction(state=None, converged=False, message=str(exc), outside_domain=True,
@@ -231,7 +231,7 @@ class RodModel(BendModel):
         curvature = np.full((n, 2), np.nan)
         stretch = np.full(n, np.nan)
         converged = np.zeros(n, dtype=bool)
-        backbone = np.full((n, self.n_segments + 1, 3), np.nan)
+        backbone = np.full((n, self.n_segments + 1 + (self.cap > 0), 3), np.nan)
         tip_q = np.full((n, 4), np.nan)
         force = np.full(n, np.nan)
         angle = np.full(n, np.nan)
@@ -242,7 +242,7 @@ class RodModel(BendModel):
                 continue
             th = sol.theta[-1]
             curvature[i] = e * th / sol.arc_length
-            stretch[i] = sol.arc_length / self.design.length
+            stretch[i] = sol.arc_length / (self.design.length - self.cap)
             converged[i] = True
             a, b = sol.positions[:, 0], sol.positions[:, 1]
             backbone[i] = np.column_stack([b * e[0], b * e[1], a])
@@ -258,9 +258,9 @@ class RodModel(BendModel):
                          diagnostics=SolverDiagnostics(law=self.law.source))
 
 
-def _refused(exc: LawRangeError, n_segments: int) -> RodSolution:
+def _refused(exc: LawRangeError, n_segments: int, cap: float) -> RodSolution:
     """A solution the law refused: no numbers, its message and stop reason."""
-    return RodSolution(theta=np.full(n_segments + 1, np.nan), positions=np.full((n_segments + 1, 2), np.nan),
+    return RodSolution(theta=np.full(n_segments + 1, np.nan), positions=np.full((n_segments + 1 + (cap > 0), 2), np.nan),
                        kappa=np.full(n_segments, np.nan), arc_length=math.nan, contact_force=math.nan,
                        converged=False, message=str(exc), stop_reason=exc.stop_reason)
 

@@ -96,6 +96,49 @@ class LawSlice:
         i = int(np.argmax(m[:fell[0]]))
         return (float(self.moment(k[i])), float(k[i])) if i > 0 else None
 
+    def snap_fold(self, n: int = 401) -> tuple[float, float, float] | None:
+        """Where the bent-back section snaps before its limit: (kappa_fold, kappa_dip, kappa_lim).
+
+        Bent back, |M| may peak first at kappa_fold, dip to kappa_dip (the lumen closing) and rise
+        again to the limit at kappa_lim (``limit_moment_if_peaked``). A segment asked for more than
+        |M(kappa_fold)| cannot stay on the inner branch (kappa_fold < kappa < 0): it snaps across the
+        dip to the outer one (kappa_lim < kappa < kappa_dip), where the lumen's contact stiffens it.
+        None when |M| rises without a dip up to the limit, or there is no limit."""
+        limit = self.limit_moment_if_peaked(n)
+        if limit is None:
+            return None
+        k_lim = limit[1]
+        k = np.linspace(min(0.0, self.kappa_hi), k_lim, n)
+        m = np.abs(np.asarray(self.moment(k), dtype=float))
+        falls = np.flatnonzero(m < np.maximum.accumulate(m) * (1 - 1e-4))   # past interpolation noise
+        if not len(falls):
+            return None
+        i_fold = int(np.argmax(m[:falls[0]]))
+        i_dip = i_fold + int(np.argmin(m[i_fold:]))
+        if i_dip == len(k) - 1:
+            return None
+        return float(k[i_fold]), float(k[i_dip]), float(k_lim)
+
+    def outer_branch_curvature(self, moment: float, n: int = 401) -> float | None:
+        """The curvature with this (bent-back) moment on the outer branch, where |M| rises with
+        |kappa| up to the limit: between the dip and the limit (``snap_fold``), or, without a dip,
+        between 0 and the limit. None without a limit or if |moment| is outside |M| there."""
+        fold = self.snap_fold(n)
+        if fold is not None:
+            _, k_start, k_lim = fold
+        else:
+            limit = self.limit_moment_if_peaked(n)
+            if limit is None:
+                return None
+            k_start, k_lim = min(0.0, self.kappa_hi), limit[1]
+        k = np.linspace(k_start, k_lim, n)
+        m = np.abs(np.asarray(self.moment(k), dtype=float))
+        target = abs(float(moment))
+        if not m[0] <= target <= m[-1]:
+            return None
+        m = np.maximum.accumulate(m)       # monotone for the lookup (it is, to interpolation noise)
+        return float(np.interp(target, m, k))
+
     def free_curvature(self) -> float | None:
         """The curvature with zero moment (the free body), None if it is outside the range."""
         roots = getattr(self._moment, "roots", None)

@@ -28,6 +28,12 @@ equation, F_0 = M_lim - m_1 - (Delta r_1 x G_1) / 2 = 0 (a plastic hinge: becaus
 about its peak, the force depends on M_lim, not on how long the kink is). Admissible while phi <= 0,
 R >= 0 and no segment is bent past the limit curvature; otherwise a named stop.
 
+Snap: bent back, |M| can fold, dip (the lumen closing) and rise again to the limit
+(LawSlice.snap_fold). A segment whose moment grows past the fold snaps to the outer branch; Newton
+from the inner branch cycles about the fold, so a blocked solve that fails is retried with the most
+loaded inner segment moved to the outer branch (``_newton_snapping``), and a hinged state with a
+segment on the falling side of the flat peak from that segment on the rising side.
+
 Newton with the exact Jacobian on the N (+2) unknowns (dense, N ~ 40: tens of microseconds per
 solve of the linear system); why not
 shooting: the law is a table, and a clamped-free problem with a contact is a two-point problem
@@ -333,6 +339,83 @@ def _admissible(rod: _Rod, law: LawSlice, limit, th, R, its) -> None:
     _check(law, kap, limit)
 
 
+def _snap(rod: _Rod, law: LawSlice, fold, th, snapped: set):
+    """The state ``th`` with one more segment snapped across the lumen's dip (``LawSlice.snap_fold``):
+    of the segments on the inner branch whose moment also has a curvature on the outer one, the most
+    loaded (the one nearest the fold), its curvature set to the outer branch's with the same moment
+    and the joints beyond it turned with it. None when no segment can snap."""
+    _, k_dip, _ = fold
+    kap = rod.geometry(th)[0]
+    m = np.abs(np.asarray(law.moment(kap), float))
+    inner = [i for i in np.argsort(-m) if k_dip < kap[i] < 0 and i not in snapped]
+    for i in inner:
+        k_out = law.outer_branch_curvature(m[i])
+        if k_out is not None:
+            kap = kap.copy()
+            kap[i] = k_out
+            out = np.array(th, dtype=float)
+            out[1:] = th[0] + rod.h * np.cumsum(kap)
+            snapped.add(int(i))
+            return out
+    return None
+
+
+def _rising_side(rod: _Rod, law: LawSlice, th, k_lim: float):
+    """``th`` with every segment bent back past the limit curvature put on the rising side of the
+    law with the same moment (``LawSlice.outer_branch_curvature``), the joints beyond turned with
+    it; None when no segment is past the limit or one has no such curvature."""
+    kap = rod.geometry(th)[0]
+    past = np.flatnonzero(kap < k_lim - 1e-9)
+    if not len(past):
+        return None
+    kap = kap.copy()
+    for i in past:
+        k_in = law.outer_branch_curvature(float(law.moment(kap[i])))
+        if k_in is None:
+            return None
+        kap[i] = k_in
+    out = np.array(th, dtype=float)
+    out[1:] = th[0] + rod.h * np.cumsum(kap)
+    return out
+
+
+def _newton_snapping(rod: _Rod, law: LawSlice, th0, R0, max_snaps: int = 3, k_lim: float | None = None, **kw):
+    """``rod.newton`` from (th0, R0); if it fails, again after snapping segments across the lumen's
+    dip one by one (the most loaded first, at most ``max_snaps``); if it converges with a segment
+    bent back past the limit curvature ``k_lim`` (the falling side: |M| is flat about its peak, so
+    a moment just under the limit has a curvature on either side), again from that segment on the
+    rising side, with the same moment.
+
+    Bent back, the section's |M| can rise to a fold, dip where the lumen closes and rise again to
+    its limit (``LawSlice.snap_fold``). A segment whose moment grows past the fold has no state on
+    its branch nearby: the section snaps (the lumen closes) to the outer branch with the same
+    moment. Newton started on the inner branch cycles about the fold (the segment's slope changes
+    sign from one iterate to the next) instead of crossing the dip; started with that segment on
+    the outer branch it converges. The dip is shallow (under 1 % of the moment), so the segment
+    snaps within a fraction of a pressure step of its fold. A state still past the limit is
+    returned as converged: the caller names it (a second kink)."""
+    th, R, ok, its, msg = rod.newton(th0, R0, **kw)
+    if ok and k_lim is not None:
+        start = _rising_side(rod, law, th, k_lim)
+        if start is not None:
+            t2, R2, ok2, n_it, _ = rod.newton(start, R, **kw)
+            its += n_it
+            if ok2 and float(rod.geometry(t2)[0].min()) >= k_lim - 1e-9:
+                return t2, R2, True, its, ""
+        return th, R, ok, its, msg
+    fold = None if ok else law.snap_fold()
+    start, snapped = np.array(th0, dtype=float), set()
+    for _ in range(max_snaps if fold is not None else 0):
+        start = _snap(rod, law, fold, start, snapped)
+        if start is None:
+            break
+        th, R, ok, n_it, msg = rod.newton(start, R0, **kw)
+        its += n_it
+        if ok:
+            break
+    return th, R, ok, its, msg
+
+
 def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
     """The blocked state from one at a nearby pressure: clamped or hinged, as the guess was first;
     the other when the clamped base passes the limit moment or the hinge would open forwards."""
@@ -344,7 +427,7 @@ def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
         if mode == "clamped":
             start = th0.copy()
             start[0] = 0.0
-            th, R, ok, n_it, msg = rod.newton(start, R0, free_R=True, gap_row=True)
+            th, R, ok, n_it, msg = _newton_snapping(rod, law, start, R0, free_R=True, gap_row=True)
             its += n_it
             if ok and R >= 0 and not _over(rod, th, R, limit):
                 _check(law, rod.geometry(th)[0], limit)
@@ -352,8 +435,8 @@ def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
             reasons.append("clamped: " + (msg if not ok else f"the contact pulls ({R:.3g} N)" if R < 0
                                           else "past the limit moment"))
         else:
-            th, R, ok, n_it, msg = rod.newton(th0, R0, hinge_moment=limit[0], free_phi=True, free_R=True,
-                                              gap_row=True)
+            th, R, ok, n_it, msg = _newton_snapping(rod, law, th0, R0, k_lim=limit[1], hinge_moment=limit[0],
+                                                    free_phi=True, free_R=True, gap_row=True)
             its += n_it
             if ok and th[0] <= 1e-12 and R >= 0:
                 _admissible(rod, law, limit, th, R, its)
