@@ -50,8 +50,10 @@ class Fe3dRamp:
 
 
 def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
-             tangent_predictor: bool = True, progress=None, corotational: bool = False) -> Fe3dRamp:
-    """Ramp from the straight state through increasing ``checkpoints`` (Pa).
+             tangent_predictor: bool = True, progress=None, corotational: bool = False,
+             start: tuple[float, np.ndarray] | None = None) -> Fe3dRamp:
+    """Ramp from the straight state (or ``start``: a load, Pa, and a state to continue from, e.g. a
+    converged state with an imperfection added) through increasing ``checkpoints`` (Pa).
 
     ``progress``: an object with ``update(n)`` and ``set_postfix_str(s)`` (a tqdm bar).
     ``corotational``: extrapolate in the bent frame (CorotationalPredictor) instead of along
@@ -60,7 +62,8 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
     control = control or default_step_control()
     direction = np.asarray(direction, dtype=float)
     problem.set_direction(direction)
-    problem.set_state(np.zeros(problem.fes.ndof))
+    t0 = 0.0 if start is None else float(start[0])
+    problem.set_state(np.zeros(problem.fes.ndof) if start is None else np.asarray(start[1], dtype=float))
     out = Fe3dRamp()
     t_start = time.perf_counter()
     targets = [float(c) for c in checkpoints]
@@ -122,11 +125,11 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
             shown[0] = t
             progress.set_postfix_str(f"{t / PA_PER_BAR:.3f} bar, {corr.iterations} it")
 
-    if targets and targets[0] <= 0.0:  # the straight state needs no solve
+    if start is None and targets and targets[0] <= 0.0:  # the straight state needs no solve
         out.points.append(Fe3dPoint(0.0, 0.0 * direction, measure(problem), 0, 0.0))
-        targets = [t for t in targets if t > 0.0]
+    targets = [t for t in targets if t > t0]
     try:
-        result = ramp(corrector, problem.get_state(), targets, control, start=0.0,
+        result = ramp(corrector, problem.get_state(), targets, control, start=t0,
                       extrapolate=predictor if control.adaptive else None,
                       describe=describe_pressure, on_step=on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
