@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..continuation import MATERIAL_RANGE, Correction, StepControl, ramp, stop_tag
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, UNSTABLE, Correction, StepControl,
+                            ramp, stop_tag)
 from ..energy import yeoh_convexity_limit
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
@@ -43,21 +44,53 @@ class Fe3dRamp:
     interrupted: bool = False
     stop_reason: str = ""           # empty when converged, else one of core/continuation.py's reasons
     min_gap_m: list = field(default_factory=list)   # (load Pa, lumen wall's min gap m) per accepted step
+    stability: object = None        # a failed ramp's Stability at its last converged state (stability.py)
     steps: int = 0
     cuts: int = 0
     iterations: int = 0
     wall_time: float = 0.0
 
 
+# the condensed tangent's smallest eigenvalue over 2 c1 below which a failed ramp's last converged
+# state counts as singular (a limit point or a bifurcation); the unloaded coarse 10 mm body's is 0.13
+SINGULAR_BELOW = 1e-3
+
+
+def _name_the_stop(problem: Fe3dProblem, result, threshold: float):
+    """(Stability, stop reason, message tail) at the ramp's last converged state: LIMIT_POINT when
+    its smallest eigenvalue lies in [0, threshold), UNSTABLE below 0, else NUMERICAL_FAILURE. The
+    problem is left at that state."""
+    problem.set_state(result.last_state)
+    problem.load.Set(result.last_load)
+    if problem.contact is not None:
+        problem.contact.update()   # the last converged state's pairs, not the failed attempt's
+    try:
+        s = problem.stability(k=1)
+    except Exception as exc:  # noqa: BLE001 - the failure stays named as it was
+        return None, NUMERICAL_FAILURE, f"; its stability not measured ({exc})"
+    problem.set_state(result.last_state)
+    lam = s.smallest
+    reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold else NUMERICAL_FAILURE
+    kind = {UNSTABLE: "negative: a saddle", LIMIT_POINT: f"below {threshold:g}: singular"}.get(reason, "not singular")
+    return s, reason, (f"; at the last converged state the condensed tangent's smallest eigenvalue is "
+                       f"{lam:.3g} x 2 c1 ({kind}; load share of its mode {s.load_share:.2g}), "
+                       f"its mode largest at the {s.where}")
+
+
 def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
              tangent_predictor: bool = True, progress=None, corotational: bool = False,
-             start: tuple[float, np.ndarray] | None = None) -> Fe3dRamp:
+             start: tuple[float, np.ndarray] | None = None,
+             singular_below: float | None = SINGULAR_BELOW) -> Fe3dRamp:
     """Ramp from the straight state (or ``start``: a load, Pa, and a state to continue from, e.g. a
     converged state with an imperfection added) through increasing ``checkpoints`` (Pa).
 
     ``progress``: an object with ``update(n)`` and ``set_postfix_str(s)`` (a tqdm bar).
     ``corotational``: extrapolate in the bent frame (CorotationalPredictor) instead of along
     the tangent; experimental (in trials it predicted no better than the tangent).
+    ``singular_below``: where the corrector fails for no named reason, the condensed tangent's
+    smallest eigenvalue at the last converged state (once, ``Fe3dProblem.stability``) names the stop:
+    below this fraction of 2 c1 a LIMIT_POINT (an unstable one, negative: UNSTABLE), else it stays
+    NUMERICAL_FAILURE; the message gives the eigenvalue and where its mode lives. None: no check.
     """
     control = control or default_step_control()
     direction = np.asarray(direction, dtype=float)
@@ -133,7 +166,10 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
                       extrapolate=predictor if control.adaptive else None,
                       describe=describe_pressure, on_step=on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
-        out.message = f"{result.message} {stop_tag(result.stop_reason)}" if not result.converged else ""
+        why = ""
+        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and singular_below is not None:
+            out.stability, out.stop_reason, why = _name_the_stop(problem, result, singular_below)
+        out.message = f"{result.message}{why} {stop_tag(out.stop_reason)}" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
     except KeyboardInterrupt:
         done = out.points[-1].load if out.points else 0.0
