@@ -51,29 +51,50 @@ class Fe3dRamp:
     wall_time: float = 0.0
 
 
-# the condensed tangent's smallest eigenvalue over 2 c1 below which a failed ramp's last converged
-# state counts as singular (a limit point or a bifurcation); the unloaded coarse 10 mm body's is 0.13
+# a failed ramp's last converged state counts as singular (a limit point or a bifurcation) when the
+# condensed tangent's smallest eigenvalue over 2 c1 is below SINGULAR_BELOW there (the unloaded
+# coarse 10 mm body's is 0.13), or when its straight line through the last two converged states
+# reaches zero within SINGULAR_WITHIN of the last converged load (the step control cannot step
+# closer than its smallest step, where the eigenvalue may still be a tenth of its unloaded value)
 SINGULAR_BELOW = 1e-3
+SINGULAR_WITHIN = 0.01
 
 
-def _name_the_stop(problem: Fe3dProblem, result, threshold: float):
-    """(Stability, stop reason, message tail) at the ramp's last converged state: LIMIT_POINT when
-    its smallest eigenvalue lies in [0, threshold), UNSTABLE below 0, else NUMERICAL_FAILURE. The
-    problem is left at that state."""
-    problem.set_state(result.last_state)
-    problem.load.Set(result.last_load)
-    if problem.contact is not None:
-        problem.contact.update()   # the last converged state's pairs, not the failed attempt's
+def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float = SINGULAR_WITHIN):
+    """(Stability, stop reason, message tail) at the ramp's last converged state: UNSTABLE when its
+    smallest eigenvalue is negative, LIMIT_POINT when it is singular (see SINGULAR_BELOW), else
+    NUMERICAL_FAILURE. The problem is left at that state."""
+    def at(load, state):
+        problem.set_state(state)
+        problem.load.Set(load)
+        if problem.contact is not None:
+            problem.contact.update()   # that state's pairs, not the failed attempt's
+        return problem.stability(k=1)
+
     try:
-        s = problem.stability(k=1)
+        s = at(result.last_load, result.last_state)
+        before = result.previous
+        lam0 = at(*before).smallest if before is not None and before[0] < result.last_load else None
     except Exception as exc:  # noqa: BLE001 - the failure stays named as it was
+        problem.set_state(result.last_state)
+        problem.load.Set(result.last_load)
         return None, NUMERICAL_FAILURE, f"; its stability not measured ({exc})"
     problem.set_state(result.last_state)
+    problem.load.Set(result.last_load)
     lam = s.smallest
-    reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold else NUMERICAL_FAILURE
-    kind = {UNSTABLE: "negative: a saddle", LIMIT_POINT: f"below {threshold:g}: singular"}.get(reason, "not singular")
-    return s, reason, (f"; at the last converged state the condensed tangent's smallest eigenvalue is "
-                       f"{lam:.3g} x 2 c1 ({kind}; load share of its mode {s.load_share:.2g}), "
+    zero = None   # the load where the eigenvalue's line through the last two states reaches 0
+    trend = ""
+    if lam0 is not None:
+        slope = (lam - lam0) / (result.last_load - before[0])
+        if slope < 0.0:
+            zero = result.last_load - lam / slope
+        trend = f", {lam0:.3g} at {describe_pressure(before[0])}" + (
+            f": zero by {describe_pressure(zero)} on their line" if zero is not None else ": not falling")
+    near = zero is not None and zero - result.last_load <= within * result.last_load
+    reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold or near else NUMERICAL_FAILURE
+    kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation"}.get(reason, "not singular")
+    return s, reason, (f"; the condensed tangent's smallest eigenvalue at the last converged state is "
+                       f"{lam:.3g} x 2 c1{trend} ({kind}; load share of its mode {s.load_share:.2g}), "
                        f"its mode largest at the {s.where}")
 
 
@@ -88,9 +109,10 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
     ``corotational``: extrapolate in the bent frame (CorotationalPredictor) instead of along
     the tangent; experimental (in trials it predicted no better than the tangent).
     ``singular_below``: where the corrector fails for no named reason, the condensed tangent's
-    smallest eigenvalue at the last converged state (once, ``Fe3dProblem.stability``) names the stop:
-    below this fraction of 2 c1 a LIMIT_POINT (an unstable one, negative: UNSTABLE), else it stays
-    NUMERICAL_FAILURE; the message gives the eigenvalue and where its mode lives. None: no check.
+    smallest eigenvalue at the last two converged states (only then, ``Fe3dProblem.stability``)
+    names the stop: singular (below this fraction of 2 c1, or falling to zero within SINGULAR_WITHIN
+    of the load) a LIMIT_POINT, negative UNSTABLE, else it stays NUMERICAL_FAILURE; the message gives
+    the eigenvalues and where the mode lives. None: no check.
     """
     control = control or default_step_control()
     direction = np.asarray(direction, dtype=float)
