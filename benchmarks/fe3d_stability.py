@@ -32,7 +32,7 @@ from harness import save_figure, write_results  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
-from softcath_ros.core.fe3d.ramp import run_ramp  # noqa: E402
+from softcath_ros.core.fe3d.ramp import default_step_control, run_ramp  # noqa: E402
 from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonSettings  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -56,6 +56,7 @@ def main(argv=None) -> int:
     ap.add_argument("--from", dest="start", type=float, default=0.15, help="bar: eigenvalues from here on")
     ap.add_argument("--to", type=float, default=0.35, help="bar")
     ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
+    ap.add_argument("--initial-step", type=float, default=None, help="bar (default: the ramp's, 0.01)")
     ap.add_argument("--k", type=int, default=3, help="eigenvalues per state")
     ap.add_argument("--resume", default=None, help="continue this run's last converged state (see above)")
     ap.add_argument("--amplitude", type=float, default=0.0, help="imperfection / wall thickness (with --resume)")
@@ -121,7 +122,9 @@ def main(argv=None) -> int:
             record()
 
     cps = np.round(np.arange(args.step, args.to + 1e-9, args.step), 6) * PA_PER_BAR
-    r = run_ramp(pb, [1.0], cps, progress=Progress(), start=start)
+    control = default_step_control() if args.initial_step is None else \
+        default_step_control(step=args.initial_step * PA_PER_BAR)
+    r = run_ramp(pb, [1.0], cps, control, progress=Progress(), start=start)
     meta.update(converged=r.converged, message=r.message, stop_reason=r.stop_reason, steps=r.steps,
                 cuts=r.cuts, newton_iterations=r.iterations, total_s=time.perf_counter() - t0,
                 last_converged_bar=(shown[0] or (start[0] if start else 0.0)) / PA_PER_BAR)
