@@ -189,7 +189,11 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
                       describe=describe_pressure, on_step=on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
         why = ""
-        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and singular_below is not None:
+        # (a given start state, e.g. with an imperfection, is not known to be converged)
+        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and singular_below is not None \
+                and (start is None or result.steps > 0):
+            if start is not None and result.steps == 1:
+                result.previous = None   # that was the given start state
             out.stability, out.stop_reason, why = _name_the_stop(problem, result, singular_below)
         out.message = f"{result.message}{why} {stop_tag(out.stop_reason)}" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
