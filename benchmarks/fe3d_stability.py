@@ -153,8 +153,8 @@ def plot(rows, args, meta):
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("pressure (bar)")
     ax.set_ylabel("eigenvalue of K v = lam M v over 2 c1 (M: H1 seminorm)")
-    ax.set_title(f"fe3d {args.length * 1e3:.0f} mm, P2/P{args.order}: stop {meta['last_converged_bar']:.4f} bar",
-                 fontsize=9)
+    ax.set_title(f"fe3d {args.length * 1e3:.0f} mm, P2/P{args.order}: "
+                 f"last converged {meta['last_converged_bar']:.4f} bar", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, args.name)
