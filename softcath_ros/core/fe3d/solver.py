@@ -310,7 +310,7 @@ class Fe3dProblem:
         return self.a.Energy(self.gf.vec)
 
     def stability(self, k: int = 3):
-        """The k smallest eigenvalues of the condensed tangent relative to the H1 seminorm, over
+        """The k eigenvalues nearest 0 of the condensed tangent relative to the H1 seminorm, over
         2 c1, with their modes and where the first lives (core/fe3d/stability.py). Opt-in: not
         part of Newton or the ramp's accepted steps."""
         from .stability import stability
