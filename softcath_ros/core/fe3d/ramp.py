@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..continuation import MATERIAL_RANGE, Correction, StepControl, ramp, stop_tag
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, UNSTABLE, Correction, StepControl,
+                            ramp, stop_tag)
 from ..energy import yeoh_convexity_limit
 from .measure import measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
@@ -43,24 +44,81 @@ class Fe3dRamp:
     interrupted: bool = False
     stop_reason: str = ""           # empty when converged, else one of core/continuation.py's reasons
     min_gap_m: list = field(default_factory=list)   # (load Pa, lumen wall's min gap m) per accepted step
+    stability: object = None        # a failed ramp's Stability at its last converged state (stability.py)
     steps: int = 0
     cuts: int = 0
     iterations: int = 0
     wall_time: float = 0.0
 
 
+# a failed ramp's last converged state counts as singular (a limit point or a bifurcation) when the
+# condensed tangent's smallest eigenvalue over 2 c1 is below SINGULAR_BELOW there (the unloaded
+# coarse 10 mm body's is 0.13), or when its straight line through the last two converged states
+# reaches zero within SINGULAR_WITHIN of the last converged load (the step control cannot step
+# closer than its smallest step, where the eigenvalue may still be a tenth of its unloaded value)
+SINGULAR_BELOW = 1e-3
+SINGULAR_WITHIN = 0.01
+
+
+def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float = SINGULAR_WITHIN):
+    """(Stability, stop reason, message tail) at the ramp's last converged state: UNSTABLE when its
+    smallest eigenvalue is negative, LIMIT_POINT when it is singular (see SINGULAR_BELOW), else
+    NUMERICAL_FAILURE. The problem is left at that state."""
+    def at(load, state):
+        problem.set_state(state)
+        problem.load.Set(load)
+        if problem.contact is not None:
+            problem.contact.update()   # that state's pairs, not the failed attempt's
+        return problem.stability(k=1)
+
+    try:
+        s = at(result.last_load, result.last_state)
+        before = result.previous
+        lam0 = at(*before).smallest if before is not None and before[0] < result.last_load else None
+    except Exception as exc:  # noqa: BLE001 - the failure stays named as it was
+        problem.set_state(result.last_state)
+        problem.load.Set(result.last_load)
+        return None, NUMERICAL_FAILURE, f"; its stability not measured ({exc})"
+    problem.set_state(result.last_state)
+    problem.load.Set(result.last_load)
+    lam = s.smallest
+    zero = None   # the load where the eigenvalue's line through the last two states reaches 0
+    trend = ""
+    if lam0 is not None:
+        slope = (lam - lam0) / (result.last_load - before[0])
+        if slope < 0.0:
+            zero = result.last_load - lam / slope
+        trend = f", {lam0:.3g} at {describe_pressure(before[0])}" + (
+            f": zero by {describe_pressure(zero)} on their line" if zero is not None else ": not falling")
+    near = zero is not None and zero - result.last_load <= within * result.last_load
+    reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold or near else NUMERICAL_FAILURE
+    kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation"}.get(reason, "not singular")
+    return s, reason, (f"; the condensed tangent's smallest eigenvalue at the last converged state is "
+                       f"{lam:.3g} x 2 c1{trend} ({kind}; load share of its mode {s.load_share:.2g}), "
+                       f"its mode largest at the {s.where}")
+
+
 def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
-             tangent_predictor: bool = True, progress=None, corotational: bool = False) -> Fe3dRamp:
-    """Ramp from the straight state through increasing ``checkpoints`` (Pa).
+             tangent_predictor: bool = True, progress=None, corotational: bool = False,
+             start: tuple[float, np.ndarray] | None = None,
+             singular_below: float | None = SINGULAR_BELOW) -> Fe3dRamp:
+    """Ramp from the straight state (or ``start``: a load, Pa, and a state to continue from, e.g. a
+    converged state with an imperfection added) through increasing ``checkpoints`` (Pa).
 
     ``progress``: an object with ``update(n)`` and ``set_postfix_str(s)`` (a tqdm bar).
     ``corotational``: extrapolate in the bent frame (CorotationalPredictor) instead of along
     the tangent; experimental (in trials it predicted no better than the tangent).
+    ``singular_below``: where the corrector fails for no named reason, the condensed tangent's
+    smallest eigenvalue at the last two converged states (only then, ``Fe3dProblem.stability``)
+    names the stop: singular (below this fraction of 2 c1, or falling to zero within SINGULAR_WITHIN
+    of the load) a LIMIT_POINT, negative UNSTABLE, else it stays NUMERICAL_FAILURE; the message gives
+    the eigenvalues and where the mode lives. None: no check.
     """
     control = control or default_step_control()
     direction = np.asarray(direction, dtype=float)
     problem.set_direction(direction)
-    problem.set_state(np.zeros(problem.fes.ndof))
+    t0 = 0.0 if start is None else float(start[0])
+    problem.set_state(np.zeros(problem.fes.ndof) if start is None else np.asarray(start[1], dtype=float))
     out = Fe3dRamp()
     t_start = time.perf_counter()
     targets = [float(c) for c in checkpoints]
@@ -122,15 +180,22 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
             shown[0] = t
             progress.set_postfix_str(f"{t / PA_PER_BAR:.3f} bar, {corr.iterations} it")
 
-    if targets and targets[0] <= 0.0:  # the straight state needs no solve
+    if start is None and targets and targets[0] <= 0.0:  # the straight state needs no solve
         out.points.append(Fe3dPoint(0.0, 0.0 * direction, measure(problem), 0, 0.0))
-        targets = [t for t in targets if t > 0.0]
+    targets = [t for t in targets if t > t0]
     try:
-        result = ramp(corrector, problem.get_state(), targets, control, start=0.0,
+        result = ramp(corrector, problem.get_state(), targets, control, start=t0,
                       extrapolate=predictor if control.adaptive else None,
                       describe=describe_pressure, on_step=on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
-        out.message = f"{result.message} {stop_tag(result.stop_reason)}" if not result.converged else ""
+        why = ""
+        # (a given start state, e.g. with an imperfection, is not known to be converged)
+        if not result.converged and result.stop_reason == NUMERICAL_FAILURE and singular_below is not None \
+                and (start is None or result.steps > 0):
+            if start is not None and result.steps == 1:
+                result.previous = None   # that was the given start state
+            out.stability, out.stop_reason, why = _name_the_stop(problem, result, singular_below)
+        out.message = f"{result.message}{why} {stop_tag(out.stop_reason)}" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
     except KeyboardInterrupt:
         done = out.points[-1].load if out.points else 0.0

@@ -287,8 +287,14 @@ class Fe3dProblem:
         mean_j.Set(self.J - self._jacobian_floor())   # lowest margin over the region's floor
         values = mean_j.vec.FV().NumPy()
         i = int(np.argmin(values))
+        floor = 1e-4 if self.mesh[ng.ElementId(ng.VOL, i)].mat == "fill" else 0.02
+        return f"most compressed: {self.describe_element(i, f'mean det F {values[i] + floor:.3f}')}"
+
+    def describe_element(self, i: int, what: str) -> str:
+        """Volume element i as a failure names it: region, centre (mm), the nearest surface (which
+        hole's wall, or the outside), then ``what``."""
+        ng = _ng()
         el = self.mesh[ng.ElementId(ng.VOL, i)]
-        floor = 1e-4 if el.mat == "fill" else 0.02
         centre = np.mean([self.mesh[v].point for v in el.vertices], axis=0)
         d = self.design
         surfaces = {f"channel{k} wall": (c.center, c.radius) for k, c in enumerate(d.channels)}
@@ -297,11 +303,19 @@ class Fe3dProblem:
         surfaces["outer surface"] = ((0.0, 0.0), d.outer_radius)
         near = min(surfaces, key=lambda n: abs(math.hypot(centre[0] - surfaces[n][0][0],
                                                           centre[1] - surfaces[n][0][1]) - surfaces[n][1]))
-        return (f"most compressed: {el.mat} element at x = {centre[0] * 1e3:.2f}, y = {centre[1] * 1e3:.2f}, "
-                f"z = {centre[2] * 1e3:.1f} mm, next to the {near}, mean det F {values[i] + floor:.3f}")
+        return (f"{el.mat} element at x = {centre[0] * 1e3:.2f}, y = {centre[1] * 1e3:.2f}, "
+                f"z = {centre[2] * 1e3:.1f} mm, next to the {near}, {what}")
 
     def energy(self) -> float:
         return self.a.Energy(self.gf.vec)
+
+    def stability(self, k: int = 3):
+        """The k eigenvalues nearest 0 of the condensed tangent relative to the H1 seminorm, over
+        2 c1, with their modes and where the first lives (core/fe3d/stability.py). Opt-in: not
+        part of Newton or the ramp's accepted steps."""
+        from .stability import stability
+
+        return stability(self, k)
 
     # ------------------------------------------------------------------ Newton
     def _factorize(self):

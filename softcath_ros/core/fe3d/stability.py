@@ -1,0 +1,157 @@
+"""How stable a converged 3D state is: the smallest eigenvalues of the condensed tangent.
+
+The condensed tangent K (Fe3dProblem.a.mat after AssembleLinearization: the displacement
+unknowns, the element pressure eliminated) is compared with the H1 seminorm's form M on the
+displacement, m(v, v) = int |grad v|^2 dX, over the free unknowns:
+
+    K v = lam M v,        lam / (2 c1)  (dimensionless; 2 c1 the silicone's shear modulus)
+
+lam is a stiffness in Pa: the energy's second variation per |grad v|^2, so it does not scale
+with the mesh (a mass form would give Pa / m^2 and a nodal norm a mesh-dependent number), and
+it is the shift at which NewtonSettings(shifted_tangent=True)'s shifted tangent K + sigma M turns
+singular: sigma = -lam. lam -> 0 along a ramp at a limit point or a bifurcation; lam < 0 is a
+saddle. The eigenvalues nearest zero come from ARPACK in shift-invert mode on NGSolve's sparse
+Cholesky factorisation of K (its LDL^T also factorises an indefinite K), so they are the
+smallest in magnitude, which is the smallest algebraically while at most the eigenvalues found
+are negative. Opt-in: one factorisation and a few dozen solves, not part of the Newton loop.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Stability:
+    eigenvalues: np.ndarray      # (k,) lam / (2 c1), ascending
+    modes: np.ndarray            # (k, ndof) eigenvectors in the state's layout (u and q), unit in M (J-free: m)
+    max_displacement_m: np.ndarray   # (k,) the largest displacement of each unit mode at the mesh vertices
+    where: str                   # the element where the first mode's |grad v|^2 is largest, and its nearest surface
+    at_m: np.ndarray             # that element's centre (reference, m)
+    lumen_share: float           # the first mode's share of M within ``near`` of the lumen wall (nan: no lumen)
+    load_share: float            # |f . v| / (|f|_M* |v|_M) of the first mode: ~1 a limit point, ~0 a bifurcation
+
+    @property
+    def smallest(self) -> float:
+        return float(self.eigenvalues[0])
+
+
+def _reference_form(problem):
+    """M: the H1 seminorm's form on the displacement (q has none), assembled once per problem."""
+    m = getattr(problem, "_h1_form", None)
+    if m is None:
+        import ngsolve as ng
+
+        (u, _), (v, _) = problem.fes.TnT()
+        m = ng.BilinearForm(problem.fes, symmetric=False)
+        m += ng.InnerProduct(ng.Grad(u), ng.Grad(v)) * ng.dx
+        m.Assemble()
+        problem._h1_form = m
+    return m
+
+
+def _csr(mat, idx):
+    import scipy.sparse as sp
+
+    data, cols, rows = mat.CSR()
+    full = sp.csr_matrix((np.array(data), np.array(cols), np.array(rows)), shape=(mat.height, mat.width))
+    if sp.triu(full, 1).nnz == 0:   # a symmetric NGSolve matrix stores its lower triangle only
+        full = full + sp.tril(full, -1).T
+    return full[idx][:, idx].tocsr()
+
+
+def condensed_matrices(problem):
+    """(K, M, idx): the condensed tangent at the current state and the reference form, as scipy CSR
+    matrices over the free coupling unknowns ``idx`` (the displacement's; q is condensed). Factorises K
+    (problem.inverse then holds it; ``Fe3dProblem.tangent`` reuses it at a converged state)."""
+    import ngsolve as ng
+
+    with ng.TaskManager():
+        problem.a.AssembleLinearization(problem.gf.vec)
+        problem.inverse = problem.a.mat.Inverse(problem.free, inverse="sparsecholesky")
+    idx = np.nonzero(np.array(list(problem.free), dtype=bool))[0]
+    return _csr(problem.a.mat, idx), _csr(_reference_form(problem).mat, idx), idx
+
+
+def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> Stability:
+    """The ``k`` eigenvalues of K v = lam M v nearest zero at the current state (module docstring),
+    over 2 c1, their modes, and where the first mode lives."""
+    import ngsolve as ng
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    K, M, idx = condensed_matrices(problem)
+    n = len(idx)
+    inv = problem.inverse
+    rhs = problem.a.mat.CreateColVector()
+    out = problem.a.mat.CreateColVector()
+
+    def solve(x):
+        v = rhs.FV().NumPy()
+        v[:] = 0.0
+        v[idx] = np.ravel(x)
+        out.data = inv * rhs
+        return np.array(out.FV().NumPy()[idx], copy=True)
+
+    op = LinearOperator((n, n), matvec=solve, dtype=float)
+    rng = np.random.default_rng(0)
+    lam, vec = eigsh(K, k=k, M=M, sigma=0.0, which="LM", OPinv=op, tol=tol, v0=rng.standard_normal(n))
+    order = np.argsort(lam)
+    lam, vec = lam[order], vec[:, order]
+    for j in range(k):   # unit in M (ARPACK's are, to its tolerance), sign: largest entry positive
+        vec[:, j] /= math.sqrt(vec[:, j] @ (M @ vec[:, j]))
+        if vec[np.argmax(np.abs(vec[:, j])), j] < 0:
+            vec[:, j] *= -1.0
+    modes = np.zeros((k, problem.fes.ndof))
+    full = problem.gf.vec.CreateVector()
+    with ng.TaskManager():
+        for j in range(k):
+            fv = full.FV().NumPy()
+            fv[:] = 0.0
+            fv[idx] = vec[:, j]
+            full.data += problem.a.harmonic_extension * full   # the condensed unknowns' response (q)
+            modes[j] = full.FV().NumPy()
+    mu = 2.0 * problem.design.material.c1
+    where, at, share, peak = _locate(problem, modes, near)
+    f = problem._load_vector().FV().NumPy()[idx]
+    # the load's dual norm in M: sqrt(f . M^-1 f)
+    from scipy.sparse.linalg import splu
+
+    try:
+        f_dual = math.sqrt(abs(f @ splu(M.tocsc()).solve(f)))
+    except Exception:  # noqa: BLE001 - an unloaded state
+        f_dual = 0.0
+    load_share = abs(f @ vec[:, 0]) / f_dual if f_dual > 0 else 0.0
+    return Stability(eigenvalues=lam / mu, modes=modes, max_displacement_m=peak, where=where, at_m=at,
+                     lumen_share=share, load_share=float(load_share))
+
+
+def _locate(problem, modes, near):
+    """Where the first mode's |grad v|^2 (its density in M) is largest: that element's centre and
+    nearest surface (as Fe3dProblem.worst_element names it); the share of the mode's M within ``near``
+    of the lumen wall (element centres); each mode's largest displacement at the mesh vertices."""
+    import ngsolve as ng
+
+    mesh = problem.mesh
+    gf = ng.GridFunction(problem.fes)
+    dens = ng.GridFunction(ng.L2(mesh, order=0))
+    gf.vec.FV().NumPy()[:] = modes[0]
+    v = gf.components[0]
+    dens.Set(ng.InnerProduct(ng.Grad(v), ng.Grad(v)), bonus_intorder=2)
+    d = dens.vec.FV().NumPy()
+    volumes = np.array(ng.Integrate(ng.CF(1.0), mesh, element_wise=True))
+    centres = np.array([np.mean([mesh[p].point for p in el.vertices], axis=0) for el in mesh.Elements(ng.VOL)])
+    i = int(np.argmax(d))
+    lumen = problem.design.lumen
+    if lumen is not None:
+        dist = np.abs(np.hypot(centres[:, 0] - lumen.center[0], centres[:, 1] - lumen.center[1]) - lumen.radius)
+        w = d * volumes
+        share = float(w[dist < near].sum() / w.sum())
+    else:
+        share = float("nan")
+    where = problem.describe_element(i, f"mode density {d[i] / max(np.mean(d), 1e-300):.3g} x its mean")
+    # H1's vertex unknowns are the field's values there (NGSolve's basis is hierarchical)
+    dofs = np.array([problem.fes.GetDofNrs(ng.NodeId(ng.VERTEX, j))[:3] for j in range(mesh.nv)])
+    peak = np.array([float(np.max(np.linalg.norm(m[dofs], axis=1))) for m in modes])
+    return where, centres[i], share, peak
