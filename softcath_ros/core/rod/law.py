@@ -119,18 +119,24 @@ class LawSlice:
             return None
         return float(k[i_fold]), float(k[i_dip]), float(k_lim)
 
-    def outer_branch_curvature(self, moment: float, n: int = 401) -> float | None:
-        """The curvature with this (bent-back) moment on the outer branch, where |M| rises with
-        |kappa| up to the limit: between the dip and the limit (``snap_fold``), or, without a dip,
-        between 0 and the limit. None without a limit or if |moment| is outside |M| there."""
+    def outer_branch(self, n: int = 401) -> tuple[float, float] | None:
+        """(kappa_start, kappa_lim): the outer branch, where bent back |M| rises with |kappa| up to
+        the limit: from the dip (``snap_fold``), or, without a dip, from 0. None without a limit."""
         fold = self.snap_fold(n)
         if fold is not None:
-            _, k_start, k_lim = fold
-        else:
-            limit = self.limit_moment_if_peaked(n)
-            if limit is None:
-                return None
-            k_start, k_lim = min(0.0, self.kappa_hi), limit[1]
+            return fold[1], fold[2]
+        limit = self.limit_moment_if_peaked(n)
+        return None if limit is None else (min(0.0, self.kappa_hi), limit[1])
+
+    def outer_branch_curvature(self, moment: float, n: int = 401,
+                               branch: tuple[float, float] | None = None) -> float | None:
+        """The curvature with this (bent-back) moment on the outer branch (``branch``, as
+        ``outer_branch`` gives it; found here when not given). None without a limit or if |moment|
+        is outside |M| there."""
+        branch = self.outer_branch(n) if branch is None else branch
+        if branch is None:
+            return None
+        k_start, k_lim = branch
         k = np.linspace(k_start, k_lim, n)
         m = np.abs(np.asarray(self.moment(k), dtype=float))
         target = abs(float(moment))

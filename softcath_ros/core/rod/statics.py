@@ -344,20 +344,25 @@ def _snap(rod: _Rod, law: LawSlice, fold, th, snapped: set):
     of the segments on the inner branch whose moment also has a curvature on the outer one, the most
     loaded (the one nearest the fold), its curvature set to the outer branch's with the same moment
     and the joints beyond it turned with it. None when no segment can snap."""
-    _, k_dip, _ = fold
+    _, k_dip, k_lim = fold
     kap = rod.geometry(th)[0]
     m = np.abs(np.asarray(law.moment(kap), float))
     inner = [i for i in np.argsort(-m) if k_dip < kap[i] < 0 and i not in snapped]
     for i in inner:
-        k_out = law.outer_branch_curvature(m[i])
+        k_out = law.outer_branch_curvature(m[i], branch=(k_dip, k_lim))
         if k_out is not None:
             kap = kap.copy()
             kap[i] = k_out
-            out = np.array(th, dtype=float)
-            out[1:] = th[0] + rod.h * np.cumsum(kap)
             snapped.add(int(i))
-            return out
+            return _with_curvatures(rod, th, kap)
     return None
+
+
+def _with_curvatures(rod: _Rod, th, kap):
+    """The joint angles of ``th`` (its base angle kept) with the segments' curvatures ``kap``."""
+    out = np.array(th, dtype=float)
+    out[1:] = th[0] + rod.h * np.cumsum(kap)
+    return out
 
 
 def _rising_side(rod: _Rod, law: LawSlice, th, k_lim: float):
@@ -366,17 +371,16 @@ def _rising_side(rod: _Rod, law: LawSlice, th, k_lim: float):
     it; None when no segment is past the limit or one has no such curvature."""
     kap = rod.geometry(th)[0]
     past = np.flatnonzero(kap < k_lim - 1e-9)
-    if not len(past):
+    branch = law.outer_branch() if len(past) else None
+    if branch is None:
         return None
     kap = kap.copy()
     for i in past:
-        k_in = law.outer_branch_curvature(float(law.moment(kap[i])))
+        k_in = law.outer_branch_curvature(float(law.moment(kap[i])), branch=branch)
         if k_in is None:
             return None
         kap[i] = k_in
-    out = np.array(th, dtype=float)
-    out[1:] = th[0] + rod.h * np.cumsum(kap)
-    return out
+    return _with_curvatures(rod, th, kap)
 
 
 def _newton_snapping(rod: _Rod, law: LawSlice, th0, R0, max_snaps: int = 3, k_lim: float | None = None, **kw):
