@@ -404,6 +404,22 @@ def test_shifted_tangent_step_descends_and_newton_ends_on_the_plain_state(short_
     assert pb._condensed_energy() < e0 and pb._rejection() == ""
     pb.newton()                              # starts plain (sigma 0 at a new solve)
     np.testing.assert_allclose(pb.get_state()[:nu], solved[:nu], rtol=0, atol=1e-8 * short_design.length)
+    # inside Newton: when every plain step length is rejected, the iteration is a shifted step (outside
+    # the plain steps' budget; shifted ones follow until the full plain step descends), and Newton then
+    # converges to the same state
+    rejection, shifted_step, blocked = pb._rejection, pb._shifted_step, [True]
+    pb._rejection = lambda locate=True: "rejected by the test" if blocked[0] and not locate else rejection(locate)
+
+    def shifted_once(base, it):
+        blocked[0] = False
+        return shifted_step(base, it)
+
+    pb._shifted_step = shifted_once
+    pb.set_state(0.6 * solved)
+    before = pb.shifted_total
+    pb.newton()
+    assert pb.shifted_total > before and not blocked[0] and pb.sigma == 0.0
+    np.testing.assert_allclose(pb.get_state()[:nu], solved[:nu], rtol=0, atol=1e-8 * short_design.length)
 
 
 def test_stability_eigenpairs_of_the_condensed_tangent(short_design):

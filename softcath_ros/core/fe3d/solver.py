@@ -390,6 +390,7 @@ class Fe3dProblem:
             if not self.min_jacobian_ok():
                 raise NewtonFailure("the predictor inverted an element (det F <= 0; "
                                     f"{self.worst_element()})", 0)
+            e0 = None   # the line search's reference energy
             if st.line_search:
                 self._update_pressure_field()
                 e0 = self.energy()
@@ -425,10 +426,7 @@ class Fe3dProblem:
                 if self.shift is not None and (self.sigma > 0.0 or slope < -st.energy_tol * self.energy_scale):
                     # past a saddle: the plain step only once it descends the energy again
                     if not (slope > 0.0 and self._plain_step_descends(base, slope)):
-                        work = self._shifted_step(base, it)
-                        budget = self._extend_budget(budget, it)
-                        if st.line_search:
-                            e0 = self.energy()
+                        work, budget, e0 = self._shifted_iteration(base, it, budget, e0)
                         continue
                     self.sigma = 0.0   # Newton recovered
                 overlap0 = self.contact.overlap_area() if self.contact is not None and \
@@ -464,11 +462,7 @@ class Fe3dProblem:
                         raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}",
                                             it)
                 if alpha < st.min_step:   # every length rejected: the shifted tangent's step instead
-                    work = self._shifted_step(base, it)
-                    budget = self._extend_budget(budget, it)
-                    if st.line_search:
-                        self._update_pressure_field()
-                        e0 = self.energy()
+                    work, budget, e0 = self._shifted_iteration(base, it, budget, e0)
                     continue
                 if st.line_search:
                     e0 = e
@@ -504,13 +498,17 @@ class Fe3dProblem:
     SHIFT_START, SHIFT_GROW, SHIFT_MAX = 1e-3, 4.0, 1e3
     ARMIJO = 1e-4
 
-    def _extend_budget(self, budget: int, it: int) -> int:
-        """A shifted step does not use up the iterations of the plain Newton steps that follow."""
+    def _shifted_iteration(self, base: np.ndarray, it: int, budget: int, e0):
+        """One Newton iteration taken by the shifted tangent (``_shifted_step``) in place of the plain
+        step. A shifted step does not use up the iterations of the plain steps that follow, but at most
+        ``shifted_steps`` per solve. Returns (its du . r, the iteration budget, the line search's
+        reference energy: the condensed energy at the step's end, or ``e0`` without line search)."""
+        work = self._shifted_step(base, it)
         self._shifted_in_solve += 1
         if self._shifted_in_solve > self.newton_settings.shifted_steps:
             raise NewtonFailure(f"no stable state in {self._shifted_in_solve - 1} shifted-tangent steps "
                                 f"(shift {self.sigma:.3g} Pa)", it)
-        return budget + 1
+        return work, budget + 1, self._condensed_energy() if self.newton_settings.line_search else e0
 
     def _condensed_energy(self) -> float:
         """The energy of the current u with q at its optimum for u (module docstring): the merit

@@ -126,10 +126,7 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
     where, at, share, peak = _locate(problem, modes, near)
     f = problem._load_vector().FV().NumPy()[idx]
     # the load's dual norm in M: sqrt(f . M^-1 f) (M's factorisation kept with M: it does not change)
-    try:
-        f_dual = math.sqrt(abs(f @ _reference_factor(problem, M).solve(f)))
-    except Exception:  # noqa: BLE001 - an unloaded state
-        f_dual = 0.0
+    f_dual = math.sqrt(abs(f @ _reference_factor(problem, M).solve(f))) if f.any() else 0.0   # 0: no direction set
     load_share = abs(f @ vec[:, 0]) / f_dual if f_dual > 0 else 0.0
     return Stability(eigenvalues=lam / mu, modes=modes, max_displacement_m=peak, where=where, at_m=at,
                      lumen_share=share, load_share=float(load_share))
