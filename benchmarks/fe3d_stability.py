@@ -61,6 +61,10 @@ def main(argv=None) -> int:
     ap.add_argument("--resume", default=None, help="continue this run's last converged state (see above)")
     ap.add_argument("--amplitude", type=float, default=0.0, help="imperfection / wall thickness (with --resume)")
     ap.add_argument("--shifted", action="store_true", help="NewtonSettings(shifted_tangent=True)")
+    ap.add_argument("--max-searches", type=int, default=None, help="contact pair searches per solve (default: LumenContact's)")
+    ap.add_argument("--settle-force", type=float, default=None,
+                    help="pairs settled below this fraction of the pressure load (default: LumenContact's)")
+    ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--name", required=True)
     args = ap.parse_args(argv)
 
@@ -68,10 +72,21 @@ def main(argv=None) -> int:
     mesh = COARSE if args.mesh_size == "coarse" else MeshSettings().scaled(float(args.mesh_size))
     pb = Fe3dProblem(design, mesh, NewtonSettings(threads=1, shifted_tangent=args.shifted), None,
                      contact_distance=args.contact_distance, pressure_order=args.order)
+    if args.debug:
+        import logging
+
+        logging.basicConfig(level=logging.WARNING, format="%(message)s")
+        logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
+    if pb.contact is not None:
+        if args.max_searches is not None:
+            pb.contact.max_searches = args.max_searches
+        if args.settle_force is not None:
+            pb.contact.settle_force = args.settle_force
     start = None
     meta = {"design": args.design, "length_m": args.length, "pressure_order": args.order,
             "mesh_size": args.mesh_size, "contact_distance": args.contact_distance, "ndof": pb.fes.ndof,
             "threads": 1, "shifted_tangent": args.shifted, "k": args.k,
+            "max_searches": pb.contact and pb.contact.max_searches, "settle_force": pb.contact and pb.contact.settle_force,
             "command": "benchmarks/fe3d_stability.py " + " ".join(sys.argv[1:] if argv is None else argv)}
     if args.resume:
         saved = np.load(_cache(args.resume))
