@@ -12,7 +12,8 @@ axial stretches and det F (core/fe3d/measure.py surface_stretch), the smallest g
 (element, nearest surface), its share within 0.5 mm of the lumen wall, its load share (~1 limit
 point, ~0 bifurcation), its extent (the elements holding 90 % of its M: count, reference r, angle
 and z ranges) and the outer surface's smallest principal stretch within that angular range.
-Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs pressure) and keeps the last two accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz.
+Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs pressure) and keeps the last two
+accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz.
 
 ``--resume NAME``: continue NAME's ramp from its last converged state plus ``--amplitude`` x the
 lumen wall's thickness (0.6 mm) times its first mode scaled to a largest displacement of 1
