@@ -5,11 +5,15 @@ to tell a bifurcation or limit point (lam -> 0 at the stop) from a numerical fai
     .venv/bin/python benchmarks/fe3d_stability.py --length 0.02 --order 0 --from 0.15 --name fe3d_stability_20mm_p0
     .venv/bin/python benchmarks/fe3d_stability.py --resume fe3d_stability_20mm_p1 --amplitude 1e-2 --name ...
 
-Per accepted step from ``--from`` bar: the k eigenvalues nearest zero over 2 c1, where the first
-mode is largest (element, nearest surface), its share within 0.5 mm of the lumen wall, its load
-share (~1 limit point, ~0 bifurcation), R_C = L/theta, the lumen wall's smallest hoop stretch and
-det F, the smallest gap, wall time. Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs
-pressure) and keeps the last two accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz.
+Per accepted step: R_C = L/theta, the lumen wall's smallest hoop stretch and det F, the outer
+surface's smallest principal surface stretch (where, the other one there), its smallest hoop and
+axial stretches and det F (core/fe3d/measure.py surface_stretch), the smallest gap, wall time; from
+``--from`` bar also the k eigenvalues nearest zero over 2 c1, where the first mode is largest
+(element, nearest surface), its share within 0.5 mm of the lumen wall, its load share (~1 limit
+point, ~0 bifurcation), its extent (the elements holding 90 % of its M: count, reference r, angle
+and z ranges) and the outer surface's smallest principal stretch within that angular range.
+Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs pressure) and keeps the last two
+accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz.
 
 ``--resume NAME``: continue NAME's ramp from its last converged state plus ``--amplitude`` x the
 lumen wall's thickness (0.6 mm) times its first mode scaled to a largest displacement of 1
@@ -30,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
-from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure  # noqa: E402
+from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure, outer_surface_stretch  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control, run_ramp  # noqa: E402
 from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonSettings  # noqa: E402
@@ -107,10 +111,19 @@ def main(argv=None) -> int:
         load = shown[0]
         m = measure(pb)
         w = lumen_wall_stretch(pb)
+        o = outer_surface_stretch(pb, samples=True)
         th = m["bending_angle_rad"]
+        at = o["min_principal_at_m"] * 1e3
         row = {"pressure_bar": load / PA_PER_BAR, "R_C_mm": args.length / th * 1e3 if th > 0 else float("inf"),
                "lumen_min_gap_um": m.get("lumen_min_gap_m", float("nan")) * 1e6,
-               "min_hoop_stretch": w["min_hoop_stretch"], "min_det_f_wall": w["min_det_f"]}
+               "min_hoop_stretch": w["min_hoop_stretch"], "min_det_f_wall": w["min_det_f"],
+               "outer_min_principal_stretch": o["min_principal_stretch"],
+               "outer_other_principal_there": o["other_principal_there"],
+               "outer_min_principal_at_x_mm": at[0], "outer_min_principal_at_y_mm": at[1],
+               "outer_min_principal_at_z_mm": at[2],
+               "outer_min_principal_at_deg": float(np.degrees(np.arctan2(at[1], at[0]))),
+               "outer_min_hoop_stretch": o["min_hoop_stretch"], "outer_axial_stretch_there": o["axial_stretch_there"],
+               "outer_min_axial_stretch": float(o["axial_stretch"].min()), "outer_min_det_f": o["min_det_f"]}
         state = pb.get_state()
         if load >= args.start * PA_PER_BAR - 1e-6:
             ts = time.perf_counter()
@@ -118,8 +131,17 @@ def main(argv=None) -> int:
             pb.set_state(state)
             for j, lam in enumerate(s.eigenvalues):
                 row[f"lambda{j + 1}_over_mu"] = float(lam)
+            e = s.extent
+            # the outer surface's samples in the first mode's angular range (where 90 % of its M is)
+            ang = np.degrees(np.arctan2(o["points_m"][:, 1], o["points_m"][:, 0]))
+            inside = (ang >= e["angle_deg"][0]) & (ang <= e["angle_deg"][1])
+            lam_there = o["principal_stretches"][inside, 0] if inside.any() else np.array([np.nan])
             row.update(mode_where=s.where, mode_x_mm=s.at_m[0] * 1e3, mode_y_mm=s.at_m[1] * 1e3,
                        mode_z_mm=s.at_m[2] * 1e3, mode_lumen_share=s.lumen_share, mode_load_share=s.load_share,
+                       mode_elements_90=e["elements"], mode_r_min_mm=e["r_m"][0] * 1e3, mode_r_max_mm=e["r_m"][1] * 1e3,
+                       mode_deg_min=e["angle_deg"][0], mode_deg_max=e["angle_deg"][1],
+                       mode_z_min_mm=e["z_m"][0] * 1e3, mode_z_max_mm=e["z_m"][1] * 1e3,
+                       outer_min_principal_in_mode=float(np.min(lam_there)),
                        stability_s=time.perf_counter() - ts)
             np.savez(_cache(args.name), state=state, load=load, mode=s.modes[0], mode_peak=s.max_displacement_m[0],
                      previous_state=kept[-1][1] if kept else state,

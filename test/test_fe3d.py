@@ -272,6 +272,38 @@ def test_lumen_wall_stretch_reads_a_homogeneous_deformation(short_design):
         assert w["min_det_f"] == pytest.approx(s * s * a, rel=1e-9)
 
 
+@pytest.mark.parametrize("half", [True, False])
+def test_outer_surface_stretch_reads_a_homogeneous_deformation(short_design, half):
+    """outer_surface_stretch (the outer surface's creasing diagnostic): unloaded every stretch is 1;
+    under u = ((s - 1) x, (s - 1) y, (a - 1) z) the hoop stretch is s and the axial one a all round,
+    the smaller the smallest principal surface stretch, the normal stretch 1 / (s a) x det F = s.
+    Its samples lie just inside the outer surface and go round it (the half model's half)."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.measure import outer_surface_stretch
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, half=half).problem
+    w = outer_surface_stretch(pb, samples=True)
+    for key in ("min_hoop_stretch", "axial_stretch_there", "min_principal_stretch", "other_principal_there",
+                "normal_stretch_there", "min_det_f"):
+        assert w[key] == pytest.approx(1.0, abs=1e-12), key
+    r = np.hypot(w["points_m"][:, 0], w["points_m"][:, 1])
+    big_r = short_design.outer_radius
+    assert np.all(r < big_r * 1.01) and np.all(r > 0.97 * big_r)   # a hair inside the (snapped) polygon
+    angle = np.degrees(np.arctan2(w["points_m"][:, 1], w["points_m"][:, 0]))
+    assert np.ptp(angle) > (170.0 if half else 340.0)
+    assert (np.all(w["points_m"][:, 0] > 0.0) if half else np.any(w["points_m"][:, 0] < 0.0))
+    for s, a in ((0.8, 1.1), (1.2, 0.9)):
+        pb.u.Set(ng.CF(((s - 1) * ng.x, (s - 1) * ng.y, (a - 1) * ng.z)))
+        w = outer_surface_stretch(pb)
+        assert w["min_hoop_stretch"] == pytest.approx(s, rel=1e-9)
+        assert w["axial_stretch_there"] == pytest.approx(a, rel=1e-9)
+        assert w["min_principal_stretch"] == pytest.approx(min(s, a), rel=1e-9)
+        assert w["other_principal_there"] == pytest.approx(max(s, a), rel=1e-9)
+        assert w["normal_stretch_there"] == pytest.approx(s, rel=1e-9)
+        assert w["min_det_f"] == pytest.approx(s * s * a, rel=1e-9)
+
+
 def test_pair_census_counts_the_walls_of_a_lumen_pressed_to_a_slit(short_design):
     """pair_census (the contact diagnosis): an open lumen has no pair in the barrier's range; squeezed
     to a slit narrower than d_hat (u_y = -(1 - eps)(y - y_c)), most of its wall is in range with a mean

@@ -146,38 +146,65 @@ def channel_area(problem, i: int) -> float:
     return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))
 
 
+def _curve_nodes(problem, surface: str) -> tuple[np.ndarray, np.ndarray]:
+    """The section's mesh points on a closed section curve (m), in order around its centre (the
+    half model's half curve, x >= 0), and that centre. ``surface``: "lumen" (the section edges
+    between the lumen's triangles and the silicone's) or "outer" (the edges of one triangle only,
+    off the symmetry plane x = 0)."""
+    sec = problem.prism.section
+    owners: dict[tuple[int, int], list[int]] = {}
+    for t, tri in enumerate(sec.triangles):
+        for j in range(3):
+            a, b = int(tri[j]), int(tri[(j + 1) % 3])
+            owners.setdefault((min(a, b), max(a, b)), []).append(t)
+    on_plane = np.abs(sec.points[:, 0]) < 1e-12
+    if surface == "lumen":
+        centre = np.asarray(problem.design.lumen.center, dtype=float)
+        edges = [e for e, ts in owners.items() if len(ts) == 2
+                 and (sec.region[ts[0]] == "lumen") != (sec.region[ts[1]] == "lumen")]
+    elif surface == "outer":
+        centre = np.zeros(2)
+        edges = [e for e, ts in owners.items() if len(ts) == 1 and not (on_plane[e[0]] and on_plane[e[1]])]
+    else:
+        raise ValueError(f"surface: 'lumen' or 'outer', not {surface!r}")
+    pts = sec.points[np.unique(np.array(edges, dtype=int))]
+    return pts[np.argsort(np.arctan2(pts[:, 1] - centre[1], pts[:, 0] - centre[0]))], centre
+
+
+def _surface_levels(problem) -> np.ndarray:
+    """z (m) at which a surface is sampled: every mesh level above the base (which does not move)
+    and the middle of every layer (the P2 field is curved along z too)."""
+    z = problem.prism.z_levels
+    return np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))
+
+
 def lumen_wall_nodes(problem):
     """The section's mesh points on the lumen wall (m), in order around the lumen (the half model's
-    half wall), and the z levels (m) at which the wall is sampled: every mesh level above the base
-    (which does not move) and the middle of every layer (the P2 field is curved along z too)."""
-    lumen = problem.design.lumen
-    sec = problem.prism.section
-    c = np.asarray(lumen.center, dtype=float)
-    on = np.abs(np.hypot(sec.points[:, 0] - c[0], sec.points[:, 1] - c[1]) - lumen.radius) < 0.1 * lumen.radius
-    pts = sec.points[on]
-    pts = pts[np.argsort(np.arctan2(pts[:, 1] - c[1], pts[:, 0] - c[0]))]
-    z = problem.prism.z_levels
-    return pts, np.sort(np.concatenate([z[1:], 0.5 * (z[:-1] + z[1:])]))
+    half wall), and the z levels (m) at which the wall is sampled (``_surface_levels``)."""
+    return _curve_nodes(problem, "lumen")[0], _surface_levels(problem)
 
 
-def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
-    """The lumen wall's surface stretches at the current state, sampled at ``per_edge`` points per
-    wall edge of the section on every mesh level and mid-layer (a hair inside the silicone):
-    the hoop stretch |F t| (t the wall edge's reference direction in the section), the axial one |F e_z| and
-    the surface's principal stretches (of the 2x2 surface Cauchy-Green tensor on t, e_z). A
-    neo-Hookean surface under plane-strain compression creases at a surface stretch of about 0.65
+def surface_stretch(problem, surface: str, per_edge: int = 4, samples: bool = False) -> dict:
+    """A closed section curve's surface stretches along the body (``surface``: "lumen" wall or
+    "outer" surface, see ``_curve_nodes``) at the current state, sampled at ``per_edge`` points per
+    curve edge of the section on every mesh level and mid-layer, a hair inside the silicone: the
+    hoop stretch |F t| (t the curve edge's reference direction in the section), the axial one
+    |F e_z| and the surface's principal stretches (of the 2x2 surface Cauchy-Green tensor on t, e_z).
+    A neo-Hookean surface under plane-strain compression creases at a surface stretch of about 0.65
     (Hong, Zhao & Suo 2009), wrinkles (Biot) at 0.54. Returns the smallest hoop and principal
-    stretches with where (reference x, y, z in m), the wall's normal stretch there (det F over the
-    product of the principal ones) and the smallest det F at the wall."""
-    c = np.asarray(problem.design.lumen.center, dtype=float)
-    pts2, levels = lumen_wall_nodes(problem)
+    stretches with where (reference x, y, z in m), the surface's normal stretch there (det F over
+    the product of the principal ones) and the smallest det F on the surface; with ``samples`` also
+    every sample's reference point (m), hoop, axial and principal stretches and det F."""
+    pts2, c = _curve_nodes(problem, surface)
+    levels = _surface_levels(problem)
     nxt = pts2[1:] if problem.half else np.roll(pts2, -1, axis=0)
     start = pts2[:-1] if problem.half else pts2
-    t = (np.arange(per_edge) + 0.5) / per_edge   # inside each edge: the wall is a chord there
+    t = (np.arange(per_edge) + 0.5) / per_edge   # inside each edge: the surface is a chord there
     xy = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
     chord = np.repeat((nxt - start) / np.linalg.norm(nxt - start, axis=1)[:, None], per_edge, axis=0)
     tangent = np.column_stack([chord, np.zeros(len(chord))])
-    xy = c + (xy - c) * (1.0 + 1e-3)   # a hair inside the silicone (the lumen is not meshed)
+    inward = 1e-3 if surface == "lumen" else -1e-3   # the silicone: outside the lumen, inside the outer surface
+    xy = c + (xy - c) * (1.0 + inward)
     levels = np.clip(levels, 1e-9, problem.design.length - 1e-9)   # inside the mesh
     import ngsolve as ng
 
@@ -194,8 +221,22 @@ def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
     hoop = np.sqrt(c11)
     det = np.linalg.det(F)
     i, k = int(np.argmin(hoop)), int(np.argmin(lam_min))
-    return {"min_hoop_stretch": float(hoop[i]), "min_hoop_at_m": pts[i],
-            "axial_stretch_there": float(np.sqrt(c22[i])),
-            "min_principal_stretch": float(lam_min[k]), "other_principal_there": float(lam_max[k]),
-            "normal_stretch_there": float(det[k] / (lam_min[k] * lam_max[k])), "min_principal_at_m": pts[k],
-            "min_det_f": float(det.min()), "min_det_f_at_m": pts[int(np.argmin(det))]}
+    out = {"min_hoop_stretch": float(hoop[i]), "min_hoop_at_m": pts[i],
+           "axial_stretch_there": float(np.sqrt(c22[i])),
+           "min_principal_stretch": float(lam_min[k]), "other_principal_there": float(lam_max[k]),
+           "normal_stretch_there": float(det[k] / (lam_min[k] * lam_max[k])), "min_principal_at_m": pts[k],
+           "min_det_f": float(det.min()), "min_det_f_at_m": pts[int(np.argmin(det))]}
+    if samples:
+        out.update(points_m=pts, hoop_stretch=hoop, axial_stretch=np.sqrt(c22),
+                   principal_stretches=np.column_stack([lam_min, lam_max]), det_f=det)
+    return out
+
+
+def lumen_wall_stretch(problem, per_edge: int = 4) -> dict:
+    """The lumen wall's surface stretches (``surface_stretch``): the creasing diagnostic of the lumen."""
+    return surface_stretch(problem, "lumen", per_edge)
+
+
+def outer_surface_stretch(problem, per_edge: int = 4, samples: bool = False) -> dict:
+    """The outer surface's stretches (``surface_stretch``), under the hoop reinforcement."""
+    return surface_stretch(problem, "outer", per_edge, samples)

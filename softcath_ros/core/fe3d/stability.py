@@ -32,6 +32,9 @@ class Stability:
     at_m: np.ndarray             # that element's centre (reference, m)
     lumen_share: float           # the first mode's share of M within ``near`` of the lumen wall (nan: no lumen)
     load_share: float            # |f . v| / (|f|_M* |v|_M) of the first mode: ~1 a limit point, ~0 a bifurcation
+    extent: dict                 # the fewest elements holding ``share`` of the first mode's M: their count and
+                                 # the range of their centres' reference radius r_m, angle_deg (about the axis,
+                                 # from +x) and z_m, each (min, max)
 
     @property
     def smallest(self) -> float:
@@ -123,19 +126,20 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
             full.data += problem.a.harmonic_extension * full   # the condensed unknowns' response (q)
             modes[j] = full.FV().NumPy()
     mu = 2.0 * problem.design.material.c1
-    where, at, share, peak = _locate(problem, modes, near)
+    where, at, share, peak, extent = _locate(problem, modes, near)
     f = problem._load_vector().FV().NumPy()[idx]
     # the load's dual norm in M: sqrt(f . M^-1 f) (M's factorisation kept with M: it does not change)
     f_dual = math.sqrt(abs(f @ _reference_factor(problem, M).solve(f))) if f.any() else 0.0   # 0: no direction set
     load_share = abs(f @ vec[:, 0]) / f_dual if f_dual > 0 else 0.0
     return Stability(eigenvalues=lam / mu, modes=modes, max_displacement_m=peak, where=where, at_m=at,
-                     lumen_share=share, load_share=float(load_share))
+                     lumen_share=share, load_share=float(load_share), extent=extent)
 
 
-def _locate(problem, modes, near):
+def _locate(problem, modes, near, share: float = 0.9):
     """Where the first mode's |grad v|^2 (its density in M) is largest: that element's centre and
     nearest surface (as Fe3dProblem.worst_element names it); the share of the mode's M within ``near``
-    of the lumen wall (element centres); each mode's largest displacement at the mesh vertices."""
+    of the lumen wall (element centres); each mode's largest displacement at the mesh vertices; the
+    mode's extent (``Stability.extent``: the elements of largest M that together hold ``share`` of it)."""
     import ngsolve as ng
 
     mesh = problem.mesh
@@ -148,15 +152,24 @@ def _locate(problem, modes, near):
     volumes = np.array(ng.Integrate(ng.CF(1.0), mesh, element_wise=True))
     centres = np.array([np.mean([mesh[p].point for p in el.vertices], axis=0) for el in mesh.Elements(ng.VOL)])
     i = int(np.argmax(d))
+    w = d * volumes
     lumen = problem.design.lumen
     if lumen is not None:
         dist = np.abs(np.hypot(centres[:, 0] - lumen.center[0], centres[:, 1] - lumen.center[1]) - lumen.radius)
-        w = d * volumes
-        share = float(w[dist < near].sum() / w.sum())
+        lumen_share = float(w[dist < near].sum() / w.sum())
     else:
-        share = float("nan")
+        lumen_share = float("nan")
+    by_m = np.argsort(w)[::-1]
+    held = by_m[:int(np.searchsorted(np.cumsum(w[by_m]), share * w.sum())) + 1]
+    c = centres[held]
+
+    def span(v):
+        return (float(v.min()), float(v.max()))
+
+    extent = {"share": share, "elements": len(held), "of_elements": len(w), "r_m": span(np.hypot(c[:, 0], c[:, 1])),
+              "angle_deg": span(np.degrees(np.arctan2(c[:, 1], c[:, 0]))), "z_m": span(c[:, 2])}
     where = problem.describe_element(i, f"mode density {d[i] / max(np.mean(d), 1e-300):.3g} x its mean")
     # H1's vertex unknowns are the field's values there (NGSolve's basis is hierarchical)
     dofs = np.array([problem.fes.GetDofNrs(ng.NodeId(ng.VERTEX, j))[:3] for j in range(mesh.nv)])
     peak = np.array([float(np.max(np.linalg.norm(m[dofs], axis=1))) for m in modes])
-    return where, centres[i], share, peak
+    return where, centres[i], lumen_share, peak, extent
