@@ -505,3 +505,39 @@ def test_stability_matches_an_independent_eigensolve(implemented_design):
     other = np.sort(eigsh(K.tocsc(), k=3, M=M.tocsc(), sigma=0.0, which="LM", return_eigenvectors=False))
     mu = 2.0 * implemented_design.material.c1
     assert s.eigenvalues == pytest.approx(other / mu, rel=1e-7)
+
+
+@pytest.mark.parametrize("lam_before, lam_last, reason", [
+    (0.030, 0.0133, "physical limit point"),      # falling fast: zero 0.2 % of the load past the last state
+    (0.0140, 0.0133, "numerical failure"),        # falling slowly: zero 4.9 % past it
+    (0.0100, 0.0133, "numerical failure"),        # rising
+    (0.0050, 5e-4, "physical limit point"),       # below SINGULAR_BELOW
+    (0.0050, -2e-3, "unstable equilibrium"),      # a saddle
+])
+def test_a_failed_ramp_names_its_stop_by_the_smallest_eigenvalue(lam_before, lam_last, reason):
+    """_name_the_stop classifies the last two converged states' smallest eigenvalues (the fe3d
+    problem replaced by one whose stability() returns them, by state): a singular or falling-to-zero
+    tangent is a limit point, a negative one a saddle, else the numerical failure stays."""
+    from types import SimpleNamespace
+
+    from softcath_ros.core.continuation import RampResult
+    from softcath_ros.core.fe3d.ramp import _name_the_stop
+
+    class Problem:
+        contact = None
+        load = SimpleNamespace(Set=lambda v: None)
+
+        def set_state(self, s):
+            self.state = s
+
+        def stability(self, k=1):
+            lam = {1: lam_before, 2: lam_last}[int(self.state[0])]
+            return SimpleNamespace(smallest=lam, load_share=0.01, where="silicone element at x = 1.87")
+
+    result = RampResult(points=[], converged=False, message="", last_load=25190.0,
+                        last_state=np.array([2.0]), previous=(25125.0, np.array([1.0])))
+    s, why, text = _name_the_stop(Problem(), result, 1e-3)
+    assert why == reason
+    assert f"{lam_last:.3g} x 2 c1" in text and "x = 1.87" in text
+    if why == "physical limit point":   # the eigenvalues cannot tell a physical fold from a mesh's mode
+        assert "only a mesh study tells" in text

@@ -92,7 +92,8 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
             f": zero by {describe_pressure(zero)} on their line" if zero is not None else ": not falling")
     near = zero is not None and zero - result.last_load <= within * result.last_load
     reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold or near else NUMERICAL_FAILURE
-    kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation"}.get(reason, "not singular")
+    kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation of this mesh's equations; "
+                                          "only a mesh study tells a physical one from a discretisation mode"}.get(reason, "not singular")
     return s, reason, (f"; the condensed tangent's smallest eigenvalue at the last converged state is "
                        f"{lam:.3g} x 2 c1{trend} ({kind}; load share of its mode {s.load_share:.2g}), "
                        f"its mode largest at the {s.where}")
