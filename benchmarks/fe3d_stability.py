@@ -13,7 +13,15 @@ axial stretches and det F (core/fe3d/measure.py surface_stretch), the smallest g
 point, ~0 bifurcation), its extent (the elements holding 90 % of its M: count, reference r, angle
 and z ranges) and the outer surface's smallest principal stretch within that angular range.
 Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs pressure) and keeps the last two
-accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz.
+accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz. ``--k 0``: no eigenvalues (the
+wall's stretches along the ramp only). ``--census``: from ``--from`` bar also the contact pairs of a
+fresh search at every accepted step (LumenContact.pair_census: the wall area of the pairs in the
+barrier's range and of those whose partner lies more than 2 d_hat behind the primary, through the
+silicone, ignored by the energy; where they are and their mean gap), the diagnosis of the pairs'
+stall in docs/models/fe3d.md ("Where it fails"):
+
+    .venv/bin/python benchmarks/fe3d_stability.py --length 0.01 --mesh-size coarse --contact-distance 0.02 \
+        --order 0 --k 0 --census --from 0.20 --to 0.30 --name fe3d_contact_pairs_10mm
 
 ``--resume NAME``: continue NAME's ramp from its last converged state plus ``--amplitude`` x the
 lumen wall's thickness (0.6 mm) times its first mode scaled to a largest displacement of 1
@@ -23,6 +31,7 @@ Ctrl-C stops the ramp and writes what converged.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -56,12 +65,15 @@ def main(argv=None) -> int:
     ap.add_argument("--length", type=float, default=0.02, help="m")
     ap.add_argument("--order", type=int, default=1, help="element pressure's order (0: P2/P0, 1: P2/P1)")
     ap.add_argument("--mesh-size", default="1.0", help="scale of the default mesh, or 'coarse' (the tests')")
+    ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m, after --mesh-size "
+                    "(default: the mesh's wall_h)")
     ap.add_argument("--contact-distance", type=float, default=0.01, help="d_hat / lumen diameter")
     ap.add_argument("--from", dest="start", type=float, default=0.15, help="bar: eigenvalues from here on")
     ap.add_argument("--to", type=float, default=0.35, help="bar")
     ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
     ap.add_argument("--initial-step", type=float, default=None, help="bar (default: the ramp's, 0.01)")
-    ap.add_argument("--k", type=int, default=3, help="eigenvalues per state")
+    ap.add_argument("--k", type=int, default=3, help="eigenvalues per state (0: none)")
+    ap.add_argument("--census", action="store_true", help="the contact pairs' census from --from on (see above)")
     ap.add_argument("--resume", default=None, help="continue this run's last converged state (see above)")
     ap.add_argument("--amplitude", type=float, default=0.0, help="imperfection / wall thickness (with --resume)")
     ap.add_argument("--shifted", action="store_true", help="NewtonSettings(shifted_tangent=True)")
@@ -74,6 +86,8 @@ def main(argv=None) -> int:
 
     design = load_design(args.design).with_length(args.length)
     mesh = COARSE if args.mesh_size == "coarse" else MeshSettings().scaled(float(args.mesh_size))
+    if args.lumen_h is not None:
+        mesh = dataclasses.replace(mesh, lumen_h=args.lumen_h)
     pb = Fe3dProblem(design, mesh, NewtonSettings(threads=1, shifted_tangent=args.shifted), None,
                      contact_distance=args.contact_distance, pressure_order=args.order)
     if args.debug:
@@ -88,8 +102,8 @@ def main(argv=None) -> int:
             pb.contact.settle_force = args.settle_force
     start = None
     meta = {"design": args.design, "length_m": args.length, "pressure_order": args.order,
-            "mesh_size": args.mesh_size, "contact_distance": args.contact_distance, "ndof": pb.fes.ndof,
-            "threads": 1, "shifted_tangent": args.shifted, "k": args.k,
+            "mesh_size": args.mesh_size, "lumen_h_m": args.lumen_h, "contact_distance": args.contact_distance, "ndof": pb.fes.ndof,
+            "threads": 1, "shifted_tangent": args.shifted, "k": args.k, "census": args.census,
             "max_searches": pb.contact and pb.contact.max_searches, "settle_force": pb.contact and pb.contact.settle_force,
             "command": "benchmarks/fe3d_stability.py " + " ".join(sys.argv[1:] if argv is None else argv)}
     if args.resume:
@@ -117,6 +131,9 @@ def main(argv=None) -> int:
         row = {"pressure_bar": load / PA_PER_BAR, "R_C_mm": args.length / th * 1e3 if th > 0 else float("inf"),
                "lumen_min_gap_um": m.get("lumen_min_gap_m", float("nan")) * 1e6,
                "min_hoop_stretch": w["min_hoop_stretch"], "min_det_f_wall": w["min_det_f"],
+               "min_principal_stretch": w["min_principal_stretch"], "other_principal_there": w["other_principal_there"],
+               "normal_stretch_there": w["normal_stretch_there"],
+               **{f"min_principal_at_{k}_mm": float(v) * 1e3 for k, v in zip("xyz", w["min_principal_at_m"])},
                "outer_min_principal_stretch": o["min_principal_stretch"],
                "outer_other_principal_there": o["other_principal_there"],
                "outer_min_principal_at_x_mm": at[0], "outer_min_principal_at_y_mm": at[1],
@@ -125,7 +142,13 @@ def main(argv=None) -> int:
                "outer_min_hoop_stretch": o["min_hoop_stretch"], "outer_axial_stretch_there": o["axial_stretch_there"],
                "outer_min_axial_stretch": float(o["axial_stretch"].min()), "outer_min_det_f": o["min_det_f"]}
         state = pb.get_state()
-        if load >= args.start * PA_PER_BAR - 1e-6:
+        if args.census and pb.contact is not None and load >= args.start * PA_PER_BAR - 1e-6:
+            for kind, v in pb.contact.pair_census().items():
+                row[f"{kind}_area_mm2"] = v["area_m2"] * 1e6
+                for k in ("x", "y", "z", "gap"):   # absent when no pair of the kind
+                    if k in v:
+                        row[f"{kind}_{k}_{'um' if k == 'gap' else 'mm'}"] = v[k] * (1e6 if k == "gap" else 1e3)
+        if args.k > 0 and load >= args.start * PA_PER_BAR - 1e-6:
             ts = time.perf_counter()
             s = pb.stability(args.k)
             pb.set_state(state)
@@ -164,6 +187,7 @@ def main(argv=None) -> int:
     r = run_ramp(pb, [1.0], cps, control, progress=Progress(), start=start)
     meta.update(converged=r.converged, message=r.message, stop_reason=r.stop_reason, steps=r.steps,
                 cuts=r.cuts, newton_iterations=r.iterations, total_s=time.perf_counter() - t0,
+                min_gap_every_step_um=min(g for _, g in r.min_gap_m) * 1e6 if r.min_gap_m else None,
                 last_converged_bar=(shown[0] or (start[0] if start else 0.0)) / PA_PER_BAR)
     print(r.converged, r.message, f"{meta['total_s']:.0f} s", flush=True)
     if rows:
