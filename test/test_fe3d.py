@@ -507,6 +507,41 @@ def test_stability_matches_an_independent_eigensolve(implemented_design):
     assert s.eigenvalues == pytest.approx(other / mu, rel=1e-7)
 
 
+@pytest.mark.parametrize("diagonal, k", [
+    ([-0.5, 0.01, 0.02, 0.3, 0.7, 1.5], 1),    # a saddle whose eigenvalue is farther from 0 than one above 0
+    ([-0.5, 0.01, 0.02, 0.3, 0.7, 1.5], 3),
+    ([-0.004, 0.01, 0.02, 0.3, 0.7, 1.5], 2),  # the negative one is also the nearest zero
+    ([0.05, 0.08, 0.3, 0.7, 1.5, 2.0], 2),     # stable: the nearest zero only
+])
+def test_the_smallest_eigenvalue_is_found_beside_those_nearest_zero(diagonal, k):
+    """lowest_and_nearest_zero on K v = lam M v with a known spectrum (K and M sparse, 60 unknowns):
+    the first eigenvalue is the smallest algebraically even where the k nearest zero miss it, the
+    rest are the nearest zero, and each pair is an eigenpair."""
+    import scipy.sparse as sp
+    from scipy.linalg import eigh
+    from scipy.sparse.linalg import LinearOperator, eigsh, splu
+
+    from softcath_ros.core.fe3d.stability import lowest_and_nearest_zero
+
+    n = 60
+    d = np.concatenate([diagonal, np.linspace(3.0, 9.0, n - len(diagonal))])
+    M = sp.diags([np.full(n - 1, 0.2), np.full(n, 1.0), np.full(n - 1, 0.2)], [-1, 0, 1], format="csr")
+    L = np.linalg.cholesky(M.toarray())
+    K = sp.csr_matrix(L @ np.diag(d) @ L.T)   # K v = lam M v has the spectrum d
+    lu = splu(K.tocsc())
+    lam, vec = lowest_and_nearest_zero(K, M, k, LinearOperator((n, n), matvec=lu.solve, dtype=float), 1.0)
+    exact = eigh(K.toarray(), M.toarray(), eigvals_only=True)
+    nearest = exact[np.argsort(np.abs(exact))][:k]
+    expected = np.sort(nearest if exact[0] in nearest else np.concatenate([[exact[0]], nearest[:k - 1]]))
+    assert lam == pytest.approx(expected, rel=1e-8, abs=1e-10)
+    assert lam[0] == pytest.approx(min(diagonal), rel=1e-8)
+    for j in range(k):
+        assert np.linalg.norm(K @ vec[:, j] - lam[j] * (M @ vec[:, j])) < 1e-7 * np.linalg.norm(K @ vec[:, j])
+    if k == 1 and min(diagonal) == -0.5:   # what the nearest-zero solve alone reports there
+        only = eigsh(K, k=1, M=M, sigma=0.0, which="LM", return_eigenvectors=False)
+        assert only[0] == pytest.approx(0.01, rel=1e-8)
+
+
 @pytest.mark.parametrize("lam_before, lam_last, reason", [
     (0.030, 0.0133, "physical limit point"),      # falling fast: zero 0.2 % of the load past the last state
     (0.0140, 0.0133, "numerical failure"),        # falling slowly: zero 4.9 % past it

@@ -12,8 +12,12 @@ it is the shift at which NewtonSettings(shifted_tangent=True)'s shifted tangent 
 singular: sigma = -lam. lam -> 0 along a ramp at a limit point or a bifurcation; lam < 0 is a
 saddle. The eigenvalues nearest zero come from ARPACK in shift-invert mode on NGSolve's sparse
 Cholesky factorisation of K (its LDL^T also factorises an indefinite K), so they are the
-smallest in magnitude, which is the smallest algebraically while at most the eigenvalues found
-are negative. Opt-in: one factorisation and a few dozen solves, not part of the Newton loop.
+smallest in magnitude. A negative eigenvalue farther from zero than those is missed by them (a
+saddle would read as a stable state), so the smallest algebraically comes from a second
+shift-invert solve at -LOWEST_SHIFT x 2 c1, where K + LOWEST_SHIFT 2 c1 M is positive definite
+unless the state is far past a saddle (``lowest_and_nearest_zero``); the first eigenvalue
+reported is that one. Opt-in: two factorisations and a few dozen solves, not part of the Newton
+loop.
 """
 from __future__ import annotations
 
@@ -23,9 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 
+# the second solve's shift, in 2 c1 (module docstring): negative eigenvalues seen at stops are -0.003 to -0.13
+LOWEST_SHIFT = 1.0
+
+
 @dataclass
 class Stability:
-    eigenvalues: np.ndarray      # (k,) lam / (2 c1), ascending
+    eigenvalues: np.ndarray      # (k,) lam / (2 c1), ascending: the smallest algebraically, then the nearest zero
     modes: np.ndarray            # (k, ndof) eigenvectors in the state's layout (u and q), unit in M (J-free: m)
     max_displacement_m: np.ndarray   # (k,) the largest displacement of each unit mode at the mesh vertices
     where: str                   # the element where the first mode's |grad v|^2 is largest, and its nearest surface
@@ -89,10 +97,11 @@ def condensed_matrices(problem):
 
 
 def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> Stability:
-    """The ``k`` eigenvalues of K v = lam M v nearest zero at the current state (module docstring),
-    over 2 c1, their modes, and where the first mode lives."""
+    """``k`` eigenvalues of K v = lam M v at the current state, over 2 c1: the smallest algebraically
+    and those nearest zero (module docstring, ``lowest_and_nearest_zero``), their modes, and where
+    the first mode lives."""
     import ngsolve as ng
-    from scipy.sparse.linalg import LinearOperator, eigsh
+    from scipy.sparse.linalg import LinearOperator
 
     K, M, idx = condensed_matrices(problem)
     n = len(idx)
@@ -107,11 +116,9 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
         out.data = inv * rhs
         return np.array(out.FV().NumPy()[idx], copy=True)
 
-    op = LinearOperator((n, n), matvec=solve, dtype=float)
-    rng = np.random.default_rng(0)
-    lam, vec = eigsh(K, k=k, M=M, sigma=0.0, which="LM", OPinv=op, tol=tol, v0=rng.standard_normal(n))
-    order = np.argsort(lam)
-    lam, vec = lam[order], vec[:, order]
+    mu = 2.0 * problem.design.material.c1
+    lam, vec = lowest_and_nearest_zero(K, M, k, LinearOperator((n, n), matvec=solve, dtype=float),
+                                       LOWEST_SHIFT * mu, tol)
     for j in range(k):   # unit in M (ARPACK's are, to its tolerance), sign: largest entry positive
         vec[:, j] /= math.sqrt(vec[:, j] @ (M @ vec[:, j]))
         if vec[np.argmax(np.abs(vec[:, j])), j] < 0:
@@ -125,7 +132,6 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
             fv[idx] = vec[:, j]
             full.data += problem.a.harmonic_extension * full   # the condensed unknowns' response (q)
             modes[j] = full.FV().NumPy()
-    mu = 2.0 * problem.design.material.c1
     where, at, share, peak, extent = _locate(problem, modes, near)
     f = problem._load_vector().FV().NumPy()[idx]
     # the load's dual norm in M: sqrt(f . M^-1 f) (M's factorisation kept with M: it does not change)
@@ -133,6 +139,25 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
     load_share = abs(f @ vec[:, 0]) / f_dual if f_dual > 0 else 0.0
     return Stability(eigenvalues=lam / mu, modes=modes, max_displacement_m=peak, where=where, at_m=at,
                      lumen_share=share, load_share=float(load_share), extent=extent)
+
+
+def lowest_and_nearest_zero(K, M, k: int, inverse_k, shift: float, tol: float = 1e-10):
+    """(lam, vec) of K v = lam M v (scipy sparse K symmetric, M positive definite): the ``k``
+    eigenpairs nearest zero (shift-invert with ``inverse_k``, K's inverse as a LinearOperator),
+    ascending, with the smallest algebraically first where it is none of them (then the one of
+    them farthest from zero is dropped). The smallest comes from shift-invert at -``shift`` (same
+    units as lam), exact while lam_min > -shift and a negative eigenvalue in any case."""
+    from scipy.sparse.linalg import eigsh
+
+    n = K.shape[0]
+    v0 = np.random.default_rng(0).standard_normal(n)
+    lam, vec = eigsh(K, k=k, M=M, sigma=0.0, which="LM", OPinv=inverse_k, tol=tol, v0=v0)
+    low, low_vec = eigsh(K, k=1, M=M, sigma=-shift, which="LM", tol=tol, v0=v0)
+    if low[0] < lam.min() - 1e-6 * max(abs(low[0]), abs(lam.min()), 1e-300):
+        keep = np.argsort(np.abs(lam))[:k - 1]
+        lam, vec = np.concatenate([low, lam[keep]]), np.concatenate([low_vec, vec[:, keep]], axis=1)
+    order = np.argsort(lam)
+    return lam[order], vec[:, order]
 
 
 def _locate(problem, modes, near, share: float = 0.9):
