@@ -64,6 +64,8 @@ def main(argv=None) -> int:
     ap.add_argument("--design", default="implemented_5mm")
     ap.add_argument("--length", type=float, default=0.02, help="m")
     ap.add_argument("--order", type=int, default=1, help="element pressure's order (0: P2/P0, 1: P2/P1)")
+    ap.add_argument("--interior-order", type=int, default=None,
+                    help="order of the displacement's element-interior bubbles (condensed; default: none beyond P2)")
     ap.add_argument("--mesh-size", default="1.0", help="scale of the default mesh, or 'coarse' (the tests')")
     ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m, after --mesh-size "
                     "(default: the mesh's wall_h)")
@@ -83,13 +85,16 @@ def main(argv=None) -> int:
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--name", required=True)
     args = ap.parse_args(argv)
+    if args.interior_order is not None and args.interior_order < 3:
+        ap.error(f"--interior-order must be >= 3 (P2 has no interior bubbles below), not {args.interior_order}")
 
     design = load_design(args.design).with_length(args.length)
     mesh = COARSE if args.mesh_size == "coarse" else MeshSettings().scaled(float(args.mesh_size))
     if args.lumen_h is not None:
         mesh = dataclasses.replace(mesh, lumen_h=args.lumen_h)
     pb = Fe3dProblem(design, mesh, NewtonSettings(threads=1, shifted_tangent=args.shifted), None,
-                     contact_distance=args.contact_distance, pressure_order=args.order)
+                     contact_distance=args.contact_distance, pressure_order=args.order,
+                     interior_order=args.interior_order)
     if args.debug:
         import logging
 
@@ -102,6 +107,7 @@ def main(argv=None) -> int:
             pb.contact.settle_force = args.settle_force
     start = None
     meta = {"design": args.design, "length_m": args.length, "pressure_order": args.order,
+            "interior_order": args.interior_order,
             "mesh_size": args.mesh_size, "lumen_h_m": args.lumen_h, "contact_distance": args.contact_distance, "ndof": pb.fes.ndof,
             "threads": 1, "shifted_tangent": args.shifted, "k": args.k, "census": args.census,
             "max_searches": pb.contact and pb.contact.max_searches, "settle_force": pb.contact and pb.contact.settle_force,

@@ -85,13 +85,21 @@ class Fe3dProblem:
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
                  lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
-                 contact_distance: float | None = None, pressure_order: int = 0):
+                 contact_distance: float | None = None, pressure_order: int = 0, interior_order: int | None = None):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
         silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
         "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
         ``reinforcement``: "membrane" (homogenised hoop layer, stiffness E A / pitch on the whole
         outer surface) or "rings" (discrete rings: E A / thread width on the bands under the
-        threads only, the mesh resolving each band)."""
+        threads only, the mesh resolving each band). ``pressure_order``: the element pressure q's
+        order (0: P2/P0, 1: a discontinuous linear q). ``interior_order``: order (>= 3) of the
+        displacement's element-interior bubbles added to P2, condensed with q (order 3: two per
+        component and prism, the triangle's cubic bubble times the axial quadratic and cubic ones):
+        more divergence for a P1 q to act on, against the P2/P1 pair's spurious soft modes (the pair
+        is not inf-sup stable; on tetrahedra the full cure also needs face bubbles); None: plain P2."""
+        if interior_order is not None and (isinstance(interior_order, bool) or not isinstance(interior_order, int)
+                                           or interior_order < 3):
+            raise ValueError(f"interior_order must be an integer >= 3 or None, not {interior_order!r}")
         ng = _ng()
         ng.SetNumThreads(newton.threads)
         self.design = design
@@ -103,6 +111,9 @@ class Fe3dProblem:
         self.mirror = 2.0 if self.half else 1.0
         mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
         v = ng.VectorH1(mesh, order=2, dirichlet="base", dirichletx="sym" if self.half else "")
+        if interior_order is not None:
+            v.SetOrder(ng.PRISM, interior_order)
+            v.Update()
         q = ng.L2(mesh, order=pressure_order)
         self.fes = fes = v * q
         self.gf = ng.GridFunction(fes)

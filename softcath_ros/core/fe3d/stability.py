@@ -85,7 +85,9 @@ def _csr(mat, idx):
 
 def condensed_matrices(problem):
     """(K, M, idx): the condensed tangent at the current state and the reference form, as scipy CSR
-    matrices over the free coupling unknowns ``idx`` (the displacement's; q is condensed). Factorises K
+    matrices over the free coupling unknowns ``idx`` (the displacement's; q and any interior bubbles
+    are condensed, and M is the H1 form of the coupling unknowns alone: with bubbles the eigenvalues'
+    sign and zeros are exact, their scale is not the H1 one). Factorises K
     (problem.inverse then holds it; ``Fe3dProblem.tangent`` reuses it at a converged state)."""
     import ngsolve as ng
 
