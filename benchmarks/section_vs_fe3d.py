@@ -1,7 +1,7 @@
 """Section rung against fe3d in R_C = l / theta, from committed fe3d sweeps (no fe3d run here).
 
-Reads the fe3d rows of ``fe3d_sweep.py`` results (default: the 20 and 40 mm sweeps with lumen
-contact), evaluates the section rung of the same design and length at the same pressures, and
+Reads the fe3d rows of ``fe3d_sweep.py`` or ``fe3d_stability.py`` results (default: the 20 and 40
+mm sweeps with lumen contact), evaluates the section rung of the same design and length at the same pressures, and
 reports per pressure:
 - ``section_vs_fe3d``: the section rung as shipped (its arc over the channelled part, the tip cap
   straight beyond it; core/prediction.arc_and_cap);
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -35,10 +36,19 @@ DEFAULT = ("fe3d_sweep_20mm_contact", "fe3d_sweep_40mm_contact")
 TARGET = {0.02: 0.08, 0.04: 0.05}   # |section / fe3d - 1| in R_C over 0-0.35 bar (issue 12)
 
 
+def _fe3d_row(row: dict) -> dict | None:
+    """A converged fe3d row as {pressure_bar, radius_l_over_theta_mm}: fe3d_sweep.py's rows carry a
+    converged flag, fe3d_stability.py's (R_C_mm) hold accepted states only."""
+    rc = row.get("radius_l_over_theta_mm") if "converged" in row else row.get("R_C_mm")
+    if ("converged" in row and not row["converged"]) or not rc or not math.isfinite(rc) or row.get("pressure_bar", 0.0) <= 0.0:
+        return None
+    return {"pressure_bar": row["pressure_bar"], "radius_l_over_theta_mm": rc}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fe3d", nargs="+", default=list(DEFAULT), metavar="NAME",
-                    help="fe3d_sweep result names in benchmarks/results/ (without .json)")
+                    help="fe3d_sweep or fe3d_stability result names in benchmarks/results/ (without .json)")
     ap.add_argument("--name", default="section_vs_fe3d")
     args = ap.parse_args(argv)
     rows, sources = [], {}
@@ -50,11 +60,12 @@ def main(argv=None) -> int:
             length = float(meta["length_m"])
             design = load_design(meta.get("design", "implemented_5mm")).with_length(length)
         except (OSError, ValueError, KeyError) as exc:
-            print(f"section_vs_fe3d: {path}: not an fe3d_sweep result ({exc})", file=sys.stderr)
+            print(f"section_vs_fe3d: {path}: not an fe3d_sweep or fe3d_stability result ({exc})", file=sys.stderr)
             return 2
         sources[name] = {"git_commit": meta.get("git_commit"), "date": meta.get("date"), "length_m": length,
                          "stop": meta.get("message", "")[:200]}
-        fe = [r for r in doc["results"] if r.get("converged") and r.get("radius_l_over_theta_mm") and r["pressure_bar"] > 0]
+        fe = [_fe3d_row(r) for r in doc["results"]]
+        fe = [r for r in fe if r is not None]
         if not fe:
             continue
         p = np.array([r["pressure_bar"] for r in fe]) * PA_PER_BAR

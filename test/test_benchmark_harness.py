@@ -57,3 +57,26 @@ def test_every_benchmark_script_loads():
     out = subprocess.run([sys.executable, "-c", code, str(BENCHMARKS), *map(str, scripts)], capture_output=True,
                          text=True, timeout=110)
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+def test_section_vs_fe3d_reads_sweep_and_stability_results(harness, tmp_path, monkeypatch):
+    """Both fe3d result shapes: fe3d_sweep.py's rows (a converged flag, radius_l_over_theta_mm) and
+    fe3d_stability.py's (accepted states only, R_C_mm, inf when unbent); unconverged, unbent and
+    zero-pressure rows are left out, and the error is the section's R_C over the row's."""
+    import section_vs_fe3d
+
+    monkeypatch.setattr(section_vs_fe3d, "RESULTS", tmp_path)
+    meta = {"length_m": 0.02, "design": "implemented_5mm"}
+    sweep = [{"pressure_bar": 0.0, "converged": True, "radius_l_over_theta_mm": None},
+             {"pressure_bar": 0.1, "converged": True, "radius_l_over_theta_mm": 50.0},
+             {"pressure_bar": 0.2, "converged": False, "radius_l_over_theta_mm": 17.0}]
+    stability = [{"pressure_bar": 0.0, "R_C_mm": float("inf")}, {"pressure_bar": 0.15, "R_C_mm": 30.0}]
+    (tmp_path / "a.json").write_text(json.dumps({"meta": meta, "results": sweep}))
+    (tmp_path / "b.json").write_text(json.dumps({"meta": meta, "results": stability}))
+    assert section_vs_fe3d.main(["--fe3d", "a", "b", "--name", "pair"]) == 0
+    rows = json.loads((tmp_path / "pair.json").read_text())["results"]
+    assert [(r["pressure_bar"], r["fe3d_rc_mm"]) for r in rows] == [(0.1, 50.0), (0.15, 30.0)]
+    for r in rows:
+        assert r["section_vs_fe3d"] == pytest.approx(r["section_rc_mm"] / r["fe3d_rc_mm"] - 1.0)
+    (tmp_path / "c.json").write_text("{}")
+    assert section_vs_fe3d.main(["--fe3d", "c"]) == 2
