@@ -113,8 +113,14 @@ def main(argv=None) -> int:
             "max_searches": pb.contact and pb.contact.max_searches, "settle_force": pb.contact and pb.contact.settle_force,
             "command": "benchmarks/fe3d_stability.py " + " ".join(sys.argv[1:] if argv is None else argv)}
     if args.resume:
-        saved = np.load(_cache(args.resume))
-        mode = saved["mode"] / saved["mode_peak"]
+        try:
+            saved = np.load(_cache(args.resume))
+            mode = saved["mode"] / saved["mode_peak"]
+        except (OSError, KeyError, ValueError) as exc:
+            ap.error(f"--resume {args.resume}: no saved state in {_cache(args.resume)} ({exc})")
+        if saved["state"].shape != (pb.fes.ndof,):
+            ap.error(f"--resume {args.resume}: its state has {saved['state'].size} unknowns, this problem {pb.fes.ndof}: "
+                     "give the same --length, --order, --interior-order, --mesh-size and --lumen-h as that run")
         state = saved["state"] + args.amplitude * WALL_THICKNESS * mode
         start = (float(saved["load"]), state)
         meta.update(resumed_from=args.resume, resumed_load_bar=float(saved["load"]) / PA_PER_BAR,
