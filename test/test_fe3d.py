@@ -487,6 +487,32 @@ def test_stability_eigenpairs_of_the_condensed_tangent(short_design):
     assert s.max_displacement_m[0] > 0.0 and "element at" in s.where
 
 
+def test_an_interrupted_ramp_names_its_last_accepted_state(short_design):
+    """Ctrl-C (KeyboardInterrupt from the progress bar's update) between checkpoints: the ramp stops
+    cleanly, flagged interrupted, and names the last accepted load, not the last checkpoint."""
+    from softcath_ros.core.fe3d.ramp import run_ramp
+    from softcath_ros.core.units import PA_PER_BAR
+
+    class StopAtThird:
+        def __init__(self):
+            self.loads = [0.0]
+
+        def update(self, n):
+            self.loads.append(self.loads[-1] + n)
+            if len(self.loads) == 4:
+                raise KeyboardInterrupt
+
+        def set_postfix_str(self, _):
+            pass
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1).problem
+    bar = StopAtThird()
+    r = run_ramp(pb, [1.0], [0.0, 20000.0], progress=bar)
+    assert r.interrupted and not r.converged
+    assert 0.0 < bar.loads[-1] < 20000.0
+    assert r.message.startswith(f"interrupted after p = {bar.loads[-1] / PA_PER_BAR:.4f} bar (the last accepted state")
+
+
 def test_interior_bubbles_add_condensed_unknowns_and_soften_p2_p1_slightly(short_design):
     """interior_order=3 adds 2 condensed bubbles per component and prism (none coupled: the factorised system keeps
     its size) and, with a P1 pressure on the coarse 10 mm body at 0.1 bar, gives an R_C a little

@@ -163,8 +163,11 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
         except Exception:  # noqa: BLE001 - a singular tangent falls back to the secant
             return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
 
+    accepted = [t0]   # the last accepted load, for an interrupt's message
+
     def on_step(t, corr):
         # The problem holds the accepted state: measure it (the predictor needs its curvature).
+        accepted[0] = t
         problem.set_state(corr.state)
         m = measure(problem)
         if "lumen_min_gap_m" in m:
@@ -199,8 +202,8 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
         out.message = f"{result.message}{why} {stop_tag(out.stop_reason)}" if not result.converged else ""
         out.steps, out.cuts, out.iterations = result.steps, result.cuts, result.iterations
     except KeyboardInterrupt:
-        done = out.points[-1].load if out.points else 0.0
         out.converged, out.interrupted = False, True
-        out.message = f"interrupted after {describe_pressure(done)}"
+        last = f", checkpoint {describe_pressure(out.points[-1].load)}" if out.points else ""
+        out.message = f"interrupted after {describe_pressure(accepted[0])} (the last accepted state{last})"
     out.wall_time = time.perf_counter() - t_start
     return out
