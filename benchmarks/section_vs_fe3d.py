@@ -1,8 +1,8 @@
 """Section rung against fe3d in R_C = l / theta, from committed fe3d sweeps (no fe3d run here).
 
 Reads the fe3d rows of ``fe3d_sweep.py`` or ``fe3d_stability.py`` results (default: the 20 and 40
-mm sweeps with lumen contact), evaluates the section rung of the same design and length at the same pressures, and
-reports per pressure:
+mm sweeps with lumen contact), evaluates the section rung of the same design and length at the same
+pressures, and reports per pressure:
 - ``section_vs_fe3d``: the section rung as shipped (its arc over the channelled part, the tip cap
   straight beyond it; core/prediction.arc_and_cap);
 - ``no_cap_vs_fe3d``: the same curvature laid over the whole length (the cap bent like the body),

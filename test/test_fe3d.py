@@ -514,9 +514,9 @@ def test_an_interrupted_ramp_names_its_last_accepted_state(short_design):
 
 
 def test_interior_bubbles_add_condensed_unknowns_and_soften_p2_p1_slightly(short_design):
-    """interior_order=3 adds 2 condensed bubbles per component and prism (none coupled: the factorised system keeps
-    its size) and, with a P1 pressure on the coarse 10 mm body at 0.1 bar, gives an R_C a little
-    below plain P2's (the enriched element locks less), by well under the mesh's own error."""
+    """interior_order=3 adds 2 condensed bubbles per component and prism (none coupled: the factorised
+    system keeps its size) and, with a P1 pressure on the coarse 10 mm body at 0.1 bar, gives an R_C a
+    little below plain P2's (the enriched element locks less), by well under the mesh's own error."""
     from softcath_ros.core.fe3d.measure import measure
     from softcath_ros.core.fe3d.ramp import run_ramp
     from softcath_ros.core.fe3d.solver import Fe3dProblem
