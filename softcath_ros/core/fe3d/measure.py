@@ -61,6 +61,45 @@ def bending_from_tip(rot: np.ndarray, tip: np.ndarray) -> tuple[float, np.ndarra
     return phi, u
 
 
+def with_full_turns(theta_tip: float, theta_mid: float) -> float:
+    """The tip's angle theta_tip in [0, 2 pi) plus the full turns that the angle at mid-length
+    (also in [0, 2 pi)) implies: about half the tip's, so the tip angle is told while the first
+    half bends less than a full turn (to 4 pi for equal halves; the base's boundary layer and the
+    straight cap make the halves' shares differ by a few percent)."""
+    turns = max(0, round((2.0 * theta_mid - theta_tip) / (2.0 * math.pi)))
+    return theta_tip + 2.0 * math.pi * turns
+
+
+def _section_pose(problem, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation (rigid fit of the section's solid points at reference height z: the channels' too
+    within the tip cap, where silicone closes them) and position of the body axis there, in the
+    design's frame."""
+    sec = problem.prism.section
+    ref = np.column_stack([sec.points, np.full(len(sec.points), z)])
+    in_cap = z >= problem.design.length - problem.design.cap_thickness
+    solid = np.zeros(len(sec.points), dtype=bool)
+    for tri, reg in zip(sec.triangles, sec.region):
+        if reg in ("silicone", "fibre") or (in_cap and reg.startswith("channel")):
+            solid[tri] = True
+    ref = ref[solid]
+    cur = ref + _evaluate(problem, ref)
+    if problem.half:
+        off = np.abs(ref[:, 0]) > 1e-12
+        ref, cur = _mirror(ref, off), _mirror(cur, off)
+    rot = best_fit_rotation(ref, cur)
+    axis = np.array([0.0, 0.0, z])
+    if _axis_in_solid(problem):
+        point = axis + _evaluate(problem, axis[None, :])[0]
+    else:   # the axis runs through an empty lumen (e.g. a central one): carry it with the section's fit
+        point = cur.mean(axis=0) + rot @ (axis - ref.mean(axis=0))
+    turn = problem.rotation   # a half model about a mirror plane turned to x = 0
+    if turn:   # back to the design's frame
+        c, s = math.cos(-turn), math.sin(-turn)
+        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        point, rot = rz @ point, rz @ rot @ rz.T
+    return rot, point
+
+
 def _axis_in_solid(problem) -> bool:
     """Whether the body axis at the tip is in material (not in an empty lumen). Channels are
     closed by the cap there; a lumen with a device or a fill is solid."""
@@ -74,32 +113,10 @@ def measure(problem) -> dict:
     """Bending angle (rad), bending direction (unit (2,)), arc length (m), tip position (m),
     channel volumes (m^3) and mid-channel areas (m^2) of the current state."""
     design = problem.design
-    prism = problem.prism
-    sec = prism.section
     length = design.length
-    # --- tip rotation (section vertices at z = L)
-    tip_ref = np.column_stack([sec.points, np.full(len(sec.points), length)])
-    solid = np.zeros(len(sec.points), dtype=bool)
-    for tri, reg in zip(sec.triangles, sec.region):
-        if reg in ("silicone", "fibre") or reg.startswith("channel"):
-            solid[tri] = True
-    tip_ref = tip_ref[solid]
-    tip_cur = tip_ref + _evaluate(problem, tip_ref)
-    if problem.half:
-        off = np.abs(tip_ref[:, 0]) > 1e-12
-        tip_ref, tip_cur = _mirror(tip_ref, off), _mirror(tip_cur, off)
-    rot = best_fit_rotation(tip_ref, tip_cur)
-    axis_tip = np.array([0.0, 0.0, length])
-    if _axis_in_solid(problem):
-        tip = axis_tip + _evaluate(problem, axis_tip[None, :])[0]
-    else:   # the axis runs through an empty lumen (e.g. a central one): carry it with the tip face's fit
-        tip = tip_cur.mean(axis=0) + rot @ (axis_tip - tip_ref.mean(axis=0))
-    turn = problem.rotation   # a half model about a mirror plane turned to x = 0
-    if turn:   # back to the design's frame
-        c, s = math.cos(-turn), math.sin(-turn)
-        rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        tip, rot = rz @ tip, rz @ rot @ rz.T
+    rot, tip = _section_pose(problem, length)
     theta, direction = bending_from_tip(rot, tip)
+    theta = with_full_turns(theta, bending_from_tip(*_section_pose(problem, 0.5 * length))[0])
     # --- arc length through the deformed tip of the body axis
     if theta > 1e-9:
         g = np.array([direction[0] * (1 - math.cos(theta)) / theta,
