@@ -194,27 +194,28 @@ def test_bending_angle_beyond_half_circle_from_tip():
             np.testing.assert_allclose(got_u, u, atol=1e-9)
 
 
-def test_full_turns_are_counted_from_the_angle_at_mid_length():
-    """Past a full turn the tip's rotation repeats; the section at mid-length (about half the angle)
-    counts the turns, also when the two halves bend unequally by 20 % (base layer, straight cap)."""
+def test_bending_angle_past_a_full_turn_from_the_section_at_mid_length():
+    """Past a full turn the tip's rotation repeats, and near one the tip is back near the axis, where
+    its position cannot tell theta from 2 pi - theta; the section at mid-length decides (the tip's
+    position is not used), also when the two halves bend unequally (40 / 60 %)."""
     from scipy.spatial.transform import Rotation
 
-    from softcath_ros.core.fe3d.measure import bending_from_tip, with_full_turns
+    from softcath_ros.core.fe3d.measure import bending_with_mid
     from softcath_ros.core.kinematics import tip_pose
 
     length = 0.04
-    u = np.array([0.0, -1.0])
-    for deg in (0.0, 30.0, 200.0, 340.0, 370.0, 500.0, 580.0):
-        theta = math.radians(deg)
-        for first_half_share in (0.5, 0.4, 0.6):
-            theta_mid = first_half_share * theta
-            poses = []
-            for angle, z in ((theta_mid, 0.5 * length), (theta, length)):
-                # the mid pose of a bend with share s of the angle in the first half, the tip's of theta
-                pos, quat = tip_pose(angle / z * u, z)
-                poses.append(bending_from_tip(Rotation.from_quat(quat).as_matrix(), pos)[0])
-            assert with_full_turns(poses[1], poses[0]) == pytest.approx(theta, abs=1e-9), (deg, first_half_share)
-    assert with_full_turns(math.radians(10.0), math.radians(5.0)) == pytest.approx(math.radians(10.0))
+    for direction in (-90.0, 30.0):
+        u = np.array([math.cos(math.radians(direction)), math.sin(math.radians(direction))])
+        for deg in (0.0, 30.0, 170.0, 200.0, 340.0, 355.0, 359.0, 361.0, 370.0, 500.0, 580.0):
+            theta = math.radians(deg)
+            for first_half_share in (0.5, 0.4, 0.6):
+                mid, q_mid = tip_pose(first_half_share * theta / (0.5 * length) * u, 0.5 * length)
+                _, q_tip = tip_pose(theta / length * u, length)   # the tip's rotation: the total angle
+                got, got_u = bending_with_mid(Rotation.from_quat(q_tip).as_matrix(),
+                                              Rotation.from_quat(q_mid).as_matrix(), mid)
+                assert got == pytest.approx(theta, abs=1e-9), (direction, deg, first_half_share)
+                if 0 < deg % 360:
+                    np.testing.assert_allclose(got_u, u, atol=1e-9)
 
 
 def test_three_channel_design_with_a_central_lumen_bends_away_from_its_channel():

@@ -61,13 +61,28 @@ def bending_from_tip(rot: np.ndarray, tip: np.ndarray) -> tuple[float, np.ndarra
     return phi, u
 
 
-def with_full_turns(theta_tip: float, theta_mid: float) -> float:
-    """The tip's angle theta_tip in [0, 2 pi) plus the full turns that the angle at mid-length
-    (also in [0, 2 pi)) implies: about half the tip's, so the tip angle is told while the first
-    half bends less than a full turn (to 4 pi for equal halves; the base's boundary layer and the
-    straight cap make the halves' shares differ by a few percent)."""
-    turns = max(0, round((2.0 * theta_mid - theta_tip) / (2.0 * math.pi)))
-    return theta_tip + 2.0 * math.pi * turns
+def bending_with_mid(rot: np.ndarray, rot_mid: np.ndarray, mid: np.ndarray) -> tuple[float, np.ndarray]:
+    """Bending angle theta (beyond a full turn too) and direction u from the tip's rotation and the
+    section's at mid-length (its rotation ``rot_mid`` and axis point ``mid``). The mid-length angle,
+    about half the tip's and read by ``bending_from_tip`` (reliable below about 1.8 pi, where the
+    mid section stands well off the axis), gives the bending axis a and an estimate 2 theta_mid;
+    the tip's rotation angle signed by whether its axis is a or -a, psi in [-pi, pi], fixes
+    theta = psi + 2 pi k, k the turn nearest that estimate; u is the tip's. So theta is exact while the halves bend within pi of each other; near a full
+    turn, where the tip is back near the axis and its position cannot tell theta from
+    2 pi - theta, this still holds."""
+    from scipy.spatial.transform import Rotation
+
+    theta_mid, u_mid = bending_from_tip(rot_mid, mid)
+    rotvec = Rotation.from_matrix(rot).as_rotvec()
+    phi = float(np.linalg.norm(rotvec))           # in [0, pi]
+    if phi < 1e-12:
+        return 2.0 * math.pi * round(theta_mid / math.pi), u_mid
+    n = rotvec / phi
+    along = 1.0 if n @ np.array([-u_mid[1], u_mid[0], 0.0]) >= 0.0 else -1.0   # the tip's axis is a or -a
+    u = along * np.array([n[1], -n[0]])
+    psi = along * phi
+    theta = psi + 2.0 * math.pi * round((2.0 * theta_mid - psi) / (2.0 * math.pi))
+    return max(theta, 0.0), u / np.hypot(*u)
 
 
 def _section_pose(problem, z: float) -> tuple[np.ndarray, np.ndarray]:
@@ -115,8 +130,7 @@ def measure(problem) -> dict:
     design = problem.design
     length = design.length
     rot, tip = _section_pose(problem, length)
-    theta, direction = bending_from_tip(rot, tip)
-    theta = with_full_turns(theta, bending_from_tip(*_section_pose(problem, 0.5 * length))[0])
+    theta, direction = bending_with_mid(rot, *_section_pose(problem, 0.5 * length))
     # --- arc length through the deformed tip of the body axis
     if theta > 1e-9:
         g = np.array([direction[0] * (1 - math.cos(theta)) / theta,
