@@ -67,9 +67,9 @@ def bending_with_mid(rot: np.ndarray, rot_mid: np.ndarray, mid: np.ndarray) -> t
     about half the tip's and read by ``bending_from_tip`` (reliable below about 1.8 pi, where the
     mid section stands well off the axis), gives the bending axis a and an estimate 2 theta_mid;
     the tip's rotation angle signed by whether its axis is a or -a, psi in [-pi, pi], fixes
-    theta = psi + 2 pi k, k the turn nearest that estimate; u is the tip's. So theta is exact while the halves bend within pi of each other; near a full
-    turn, where the tip is back near the axis and its position cannot tell theta from
-    2 pi - theta, this still holds."""
+    theta = psi + 2 pi k, k the turn nearest that estimate; u is the tip's. So theta is exact while
+    the halves bend within pi of each other, also near a full turn, where the tip is back near the
+    axis and its position cannot tell theta from 2 pi - theta."""
     from scipy.spatial.transform import Rotation
 
     theta_mid, u_mid = bending_from_tip(rot_mid, mid)
