@@ -85,16 +85,17 @@ def main(argv=None) -> int:
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--name", required=True)
     args = ap.parse_args(argv)
-    if args.interior_order is not None and args.interior_order < 3:
-        ap.error(f"--interior-order must be >= 3 (P2 has no interior bubbles below), not {args.interior_order}")
 
     design = load_design(args.design).with_length(args.length)
     mesh = COARSE if args.mesh_size == "coarse" else MeshSettings().scaled(float(args.mesh_size))
     if args.lumen_h is not None:
         mesh = dataclasses.replace(mesh, lumen_h=args.lumen_h)
-    pb = Fe3dProblem(design, mesh, NewtonSettings(threads=1, shifted_tangent=args.shifted), None,
-                     contact_distance=args.contact_distance, pressure_order=args.order,
-                     interior_order=args.interior_order)
+    try:
+        pb = Fe3dProblem(design, mesh, NewtonSettings(threads=1, shifted_tangent=args.shifted), None,
+                         contact_distance=args.contact_distance, pressure_order=args.order,
+                         interior_order=args.interior_order)
+    except ValueError as exc:   # the problem's own check of its options, as one line
+        ap.error(str(exc))
     if args.debug:
         import logging
 

@@ -116,8 +116,8 @@ def _section_pose(problem, z: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _axis_in_solid(problem) -> bool:
-    """Whether the body axis at the tip is in material (not in an empty lumen). Channels are
-    closed by the cap there; a lumen with a device or a fill is solid."""
+    """Whether the body axis is in material (not in an empty lumen), at the tip and at mid-length.
+    A lumen with a device or a fill is solid; the designs' channels lie off the axis."""
     lumen = problem.design.lumen
     if lumen is None or problem.design.device is not None or getattr(problem, "has_fill", False):
         return True
