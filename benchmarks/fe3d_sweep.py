@@ -6,6 +6,8 @@
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.02 --name fe3d_contact_0.02
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --no-section --name fe3d_timing_20mm   # the timed case only
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --order 1 --interior-order 3 \
+        --contact-distance 0.02 --mesh-size 1.4 --no-section --name fe3d_timing_20mm_bubble3_mesh1.4   # trial element
 
 Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending angle,
 R_C = L/theta (and the section rung's at the same pressure with its relative difference:
@@ -33,6 +35,7 @@ from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
+from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
 from softcath_ros.core.prediction import angle_per_length  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
@@ -56,6 +59,10 @@ def main(argv=None) -> int:
     ap.add_argument("--energy-tol", type=float, default=None,
                     help="Newton's |du.r| tolerance relative to c1 x volume (default: the solver's, 1e-9)")
     ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m (default: wall_h)")
+    ap.add_argument("--order", type=int, default=0, help="element pressure's order (0: P2/P0, the default; 1: P2/P1)")
+    ap.add_argument("--interior-order", type=int, default=None,
+                    help="condensed interior bubbles of this order added to P2 (3: the trial element with --order 1)")
+    ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
     ap.add_argument("--name", default="fe3d_sweep")
     ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
@@ -73,8 +80,17 @@ def main(argv=None) -> int:
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
     mesh = dataclasses.replace(MeshSettings(), lumen_h=args.lumen_h).scaled(args.mesh_size)
     newton = NewtonSettings(threads=args.threads, **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
-    model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
-                      tangent_predictor=args.fixed_steps is None, threads=args.threads, **contact)
+    if args.debug:
+        import logging
+
+        logging.basicConfig(level=logging.WARNING, format="%(relativeCreated)9.0f ms %(message)s")
+        logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
+    try:
+        model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
+                          tangent_predictor=args.fixed_steps is None, threads=args.threads,
+                          pressure_order=args.order, interior_order=args.interior_order, **contact)
+    except ModelError as exc:   # a bad option, as one line
+        ap.error(str(exc))
     t0 = time.perf_counter()
     ndof = model.problem.fes.ndof
     t_setup = time.perf_counter() - t0
@@ -122,6 +138,7 @@ def main(argv=None) -> int:
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
             "contact_distance": model.contact_distance, "lumen_h": args.lumen_h,
+            "pressure_order": model.pressure_order, "interior_order": model.interior_order,
             "newton": dataclasses.asdict(model.newton_settings),
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,

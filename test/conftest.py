@@ -1,5 +1,6 @@
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -16,15 +17,40 @@ _SESSION_DOMAIN = lease_domain()
 os.environ["ROS_DOMAIN_ID"] = str(_SESSION_DOMAIN.domain)
 
 
+def _clean_dds_shared_memory() -> None:
+    """Remove Fast DDS shared-memory segments and ports whose owners are gone (Fast DDS's own
+    ``fastdds shm clean``: the pip wheels' tools/fastdds/fastdds.py, or ``fastdds`` on PATH in a ROS
+    install). With LOCALHOST discovery rmw_fastrtps always adds the shared-memory transport, and
+    a participant opening a port segment that a killed process left behind can spin forever (a CI
+    run hung so in rclpy.create_node); several tests kill nodes on purpose."""
+    tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
+    cmd = [sys.executable, str(tool)] if tool.exists() else ([shutil.which("fastdds")] if shutil.which("fastdds") else None)
+    if cmd is not None:
+        subprocess.run([*cmd, "shm", "clean"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60,
+                       check=False)
+
+
+_clean_dds_shared_memory()
+
+
+def _dds_shared_memory() -> set:
+    shm = Path("/dev/shm")
+    return {p.name for p in shm.glob("*fastdds*")} if shm.is_dir() else set()
+
+
 @pytest.fixture(autouse=True)
 def _release_private_domains():
-    """Leases a test took (domains.private_domain) end with the test."""
+    """Leases a test took (domains.private_domain) end with the test; a test that used DDS
+    leaves no dead process's shared memory behind for the next."""
     from domains import LEASES
 
     taken = len(LEASES)
+    shm_before = _dds_shared_memory()
     yield
     while len(LEASES) > taken:
         LEASES.pop().release()
+    if _dds_shared_memory() != shm_before:
+        _clean_dds_shared_memory()
 
 # Every run starts from an empty cache of its own (set here, at import, so the subprocesses the
 # tests start inherit it), so no test passes on results an earlier run left behind.

@@ -545,8 +545,14 @@ def test_interior_bubbles_add_condensed_unknowns_and_soften_p2_p1_slightly(short
     from softcath_ros.core.fe3d.ramp import run_ramp
     from softcath_ros.core.fe3d.solver import Fe3dProblem
 
-    plain, bubbled = (Fe3dProblem(short_design, COARSE, NewtonSettings(threads=1), None, contact_distance=0.02,
-                                  pressure_order=1, interior_order=order) for order in (None, 3))
+    plain = Fe3dProblem(short_design, COARSE, NewtonSettings(threads=1), None, contact_distance=0.02,
+                        pressure_order=1)
+    # the model builds the same problem from its options, and keys its cache on them
+    model = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02,
+                      pressure_order=1, interior_order=3)
+    bubbled = model.problem
+    assert model.cache_key != Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02,
+                                        pressure_order=1).cache_key
     assert bubbled.fes.ndof - plain.fes.ndof == 6 * plain.mesh.ne
     assert sum(bubbled.free) == sum(plain.free)
     rc = []
@@ -558,6 +564,11 @@ def test_interior_bubbles_add_condensed_unknowns_and_soften_p2_p1_slightly(short
     for bad in (2, 0, 3.0, True):
         with pytest.raises(ValueError, match="interior_order"):
             Fe3dProblem(short_design, COARSE, interior_order=bad)
+        with pytest.raises(ModelError, match=r"^fe3d: interior_order must be an integer >= 3 or None, not"):
+            Fe3dModel(short_design, mesh=COARSE, cache=False, interior_order=bad)
+    for bad in (2, -1, 0.5, False):
+        with pytest.raises(ModelError, match=r"^fe3d: pressure_order must be 0 \(P2/P0\) or 1"):
+            Fe3dModel(short_design, mesh=COARSE, cache=False, pressure_order=bad)
 
 
 def test_stability_matches_an_independent_eigensolve(implemented_design):

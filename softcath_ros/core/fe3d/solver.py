@@ -60,6 +60,16 @@ class NewtonSettings:
     shifted_steps: int = 12     # shifted steps per solve, on top of max_iterations
 
 
+def check_element(pressure_order, interior_order) -> None:
+    """Raise ValueError (one line) unless the element orders are ones Fe3dProblem builds:
+    ``pressure_order`` 0 or 1, ``interior_order`` None or an integer >= 3."""
+    if isinstance(pressure_order, bool) or pressure_order not in (0, 1):
+        raise ValueError(f"pressure_order must be 0 (P2/P0) or 1 (P2/P1), not {pressure_order!r}")
+    if interior_order is not None and (isinstance(interior_order, bool) or not isinstance(interior_order, int)
+                                       or interior_order < 3):
+        raise ValueError(f"interior_order must be an integer >= 3 or None, not {interior_order!r}")
+
+
 class NewtonFailure(Exception):
     """One Newton solve failed; ``reason`` says how (diverged, inverted, max iterations)."""
 
@@ -97,9 +107,7 @@ class Fe3dProblem:
         component and prism, the triangle's cubic bubble times the axial quadratic and cubic ones):
         more divergence for a P1 q to act on, against the P2/P1 pair's spurious soft modes (the pair
         is not inf-sup stable; on tetrahedra the full cure also needs face bubbles); None: plain P2."""
-        if interior_order is not None and (isinstance(interior_order, bool) or not isinstance(interior_order, int)
-                                           or interior_order < 3):
-            raise ValueError(f"interior_order must be an integer >= 3 or None, not {interior_order!r}")
+        check_element(pressure_order, interior_order)
         ng = _ng()
         ng.SetNumThreads(newton.threads)
         self.design = design

@@ -53,14 +53,17 @@ class Fe3dModel(BendModel):
                  Option("formulation", "str", "'mixed' (default) or 'displacement'"),
                  Option("reinforcement", "str", "'membrane' (default) or 'rings'"),
                  Option("contact_distance", "float", "lumen wall self-contact: barrier distance as a fraction of "
-                                                         "the lumen diameter (default 0.01; None: off)")))
+                                                         "the lumen diameter (default 0.01; None: off)"),
+                 Option("pressure_order", "int", "the element pressure's order: 0 (P2/P0, default) or 1 (P2/P1)"),
+                 Option("interior_order", "int", "add condensed element-interior displacement bubbles of this "
+                                                 "order (>= 3) to P2 (default none)")))
 
     def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache=True, progress: bool = False, threads: int = 2,
                  lumen_fill: float | None = None, formulation: str = "mixed",
                  reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
-                 mirror_mesh: bool = False):
+                 mirror_mesh: bool = False, pressure_order: int = 0, interior_order: int | None = None):
         """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
         ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
         load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
@@ -79,7 +82,10 @@ class Fe3dModel(BendModel):
         3-channel design: one channel, or two equal), the half body about that plane, the section
         turned so that it is x = 0 (core/fe3d/mesh.py ``mirror_plane``), the full body for the
         others; False: the full body. ``mirror_mesh``: the full body meshed as the half section and
-        its mirror image (so a full model shares the half model's discretisation: comparisons)."""
+        its mirror image (so a full model shares the half model's discretisation: comparisons).
+        ``pressure_order``, ``interior_order``: the element (Fe3dProblem): P2/P0 by default; P2 with
+        order-3 interior bubbles and a P1 pressure (``interior_order=3, pressure_order=1``) is the
+        element that reaches 0.35 bar at 20 mm on a coarse mesh (docs/models/fe3d.md)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -88,7 +94,7 @@ class Fe3dModel(BendModel):
                              f"(or pip install ngsolve) ({exc})") from None
         from ..fe3d.mesh import MeshSettings, can_use_half_model
         from ..fe3d.ramp import default_step_control
-        from ..fe3d.solver import NewtonSettings
+        from ..fe3d.solver import NewtonSettings, check_element
 
         self.mesh_settings = mesh if mesh is not None else MeshSettings().scaled(mesh_size)
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
@@ -104,6 +110,11 @@ class Fe3dModel(BendModel):
         self.reinforcement = reinforcement
         self.contact_distance = _contact_distance(contact_distance, design, self.lumen_fill)
         self.mirror_mesh = bool(mirror_mesh)
+        try:
+            check_element(pressure_order, interior_order)
+        except ValueError as exc:
+            raise ModelError(f"fe3d: {exc}") from None
+        self.pressure_order, self.interior_order = pressure_order, interior_order
         if self.mirror_mesh and self.half is True:
             raise ModelError("fe3d: mirror_mesh meshes the full body: it needs half = False")
         self.store = store_for(cache)
@@ -118,7 +129,9 @@ class Fe3dModel(BendModel):
                              *([] if formulation == "mixed" else [{"formulation": formulation}]),
                              *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]),
                              {"contact_distance": self.contact_distance},
-                             *([] if not self.mirror_mesh else [{"mirror_mesh": True}])]
+                             *([] if not self.mirror_mesh else [{"mirror_mesh": True}]),
+                             *([] if pressure_order == 0 else [{"pressure_order": pressure_order}]),
+                             *([] if interior_order is None else [{"interior_order": interior_order}])]
         self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
@@ -168,7 +181,8 @@ class Fe3dModel(BendModel):
             design = rotated_section(self.design, turn) if turn else self.design
             problem = Fe3dProblem(design, self.mesh_settings, self.newton_settings, half,
                                   lumen_fill=self.lumen_fill, formulation=self.formulation,
-                                  reinforcement=self.reinforcement, contact_distance=self.contact_distance)
+                                  reinforcement=self.reinforcement, contact_distance=self.contact_distance,
+                                  pressure_order=self.pressure_order, interior_order=self.interior_order)
             problem.rotation = turn   # measure() turns its results back into the design's frame
             self._problems[key] = problem
         return self._problems[key]
