@@ -58,11 +58,18 @@ def main(argv=None) -> int:
                          "(default: the rung's, 0.01); 'none' switches contact off")
     ap.add_argument("--energy-tol", type=float, default=None,
                     help="Newton's |du.r| tolerance relative to c1 x volume (default: the solver's, 1e-9)")
-    ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m (default: wall_h)")
+    ap.add_argument("--lumen-h", type=float, default=None,
+                    help="edge length on the lumen wall, m, after --mesh-size (default: wall_h)")
+    ap.add_argument("--layer-h", type=float, default=None,
+                    help="prism height along the body, m, after --mesh-size (default: the scaled mesh's)")
     ap.add_argument("--order", type=int, default=0, help="element pressure's order (0: P2/P0, the default; 1: P2/P1)")
     ap.add_argument("--interior-order", type=int, default=None,
                     help="condensed interior bubbles of this order added to P2 (3: the trial element with --order 1)")
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
+    ap.add_argument("--stall", type=int, default=None,
+                    help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
+    ap.add_argument("--no-retry", action="store_true",
+                    help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
     ap.add_argument("--name", default="fe3d_sweep")
     ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
@@ -76,10 +83,21 @@ def main(argv=None) -> int:
     control = None
     if args.fixed_steps is not None:
         control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
+    if args.no_retry:
+        control = dataclasses.replace(control or default_step_control(), retry_from_last=False)
+    if args.stall is not None and args.stall < 1:
+        ap.error(f"--stall {args.stall}: must be at least 1 iteration")
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
-    mesh = dataclasses.replace(MeshSettings(), lumen_h=args.lumen_h).scaled(args.mesh_size)
-    newton = NewtonSettings(threads=args.threads, **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
+    for flag, v in (("--lumen-h", args.lumen_h), ("--layer-h", args.layer_h), ("--mesh-size", args.mesh_size)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            ap.error(f"{flag} {v}: must be a positive length (m) or scale")
+    # the explicit edge lengths hold as given (m), after the scaling
+    mesh = MeshSettings().scaled(args.mesh_size)
+    mesh = dataclasses.replace(mesh, **{k: v for k, v in (("lumen_h", args.lumen_h), ("layer_h", args.layer_h))
+                                        if v is not None})
+    newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
+                            **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
     if args.debug:
         import logging
 
@@ -137,7 +155,7 @@ def main(argv=None) -> int:
             "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
-            "contact_distance": model.contact_distance, "lumen_h": args.lumen_h,
+            "contact_distance": model.contact_distance, "lumen_h": args.lumen_h, "layer_h": args.layer_h,
             "pressure_order": model.pressure_order, "interior_order": model.interior_order,
             "newton": dataclasses.asdict(model.newton_settings),
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),

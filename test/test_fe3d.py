@@ -13,6 +13,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("ngsolve", reason="fe3d needs the 'fe' extra (scripts/test.sh installs it)")
 
@@ -273,6 +275,42 @@ def test_contact_barrier_is_c2_and_zero_beyond_its_distance():
     assert beta(1.2) == 0.0
     for f in (lambda v: beta(v), lambda v: (beta(v + 1e-5) - beta(v - 1e-5)) / 2e-5):
         assert f(XI_MIN * (1 + 1e-7)) == pytest.approx(f(XI_MIN * (1 - 1e-7)), rel=1e-4)
+
+
+def _polygon_gap_all_pairs(P, skip):
+    """The lumen gap check's definition, every vertex against every segment: the reference for polygon_gap."""
+    from softcath_ros.core.section_fe.terms.contact import point_segment_distance, segments_cross
+
+    m = len(P)
+    si, sk = np.triu_indices(m, k=2)
+    far = (sk - si) <= m - 2
+    crossing = segments_cross(P, si[far], sk[far])
+    if np.any(crossing):
+        i, k = si[far][crossing], sk[far][crossing]
+        a, b, c, e = P[i], P[(i + 1) % m], P[k], P[(k + 1) % m]
+        depth = np.min(np.stack([point_segment_distance(a, c, e), point_segment_distance(b, c, e),
+                                 point_segment_distance(c, a, b), point_segment_distance(e, a, b)]), axis=0)
+        return -max(float(np.max(depth)), 1e-15)
+    vi, sj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    off = (sj - vi) % m
+    keep = (off >= skip) & (off <= m - skip - 1)
+    return float(np.min(point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m])))
+
+
+@given(seed=st.integers(0, 2**32 - 1), squeeze=st.floats(0.0, 1.08), m=st.integers(40, 400),
+       skip=st.integers(1, 8))
+@settings(max_examples=60, deadline=None)
+def test_polygon_gap_equals_the_all_pairs_check(seed, squeeze, m, skip):
+    """The lumen wall's gap check (a k-d tree on the segments) gives exactly the all-pairs answer on
+    wiggly rings squeezed towards a slit (squeeze 1) and past it, where the two walls cross."""
+    from softcath_ros.core.fe3d.contact import polygon_gap
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, 2 * np.pi, m))
+    r = 1.0 + 0.05 * rng.standard_normal(m)
+    noise = 0.001 + 0.02 * max(0.0, squeeze - 0.95)   # the squeezed walls cross where they wiggle
+    P = np.column_stack([r * np.cos(t), (1.0 - squeeze) * r * np.sin(t) + noise * rng.standard_normal(m)])
+    assert polygon_gap(P, skip) == _polygon_gap_all_pairs(P, skip)
 
 
 def test_lumen_wall_stretch_reads_a_homogeneous_deformation(short_design):
@@ -660,3 +698,45 @@ def test_a_failed_ramp_names_its_stop_by_the_smallest_eigenvalue(lam_before, lam
     assert f"{lam_last:.3g} x 2 c1" in text and "x = 1.87" in text
     if why == "physical limit point":   # the eigenvalues cannot tell a physical fold from a mesh's mode
         assert "only a mesh study tells" in text
+
+
+def test_a_failed_predicted_step_is_retried_from_the_last_state_unless_switched_off():
+    """continuation.ramp: a corrector failing on the predicted guess gets a second try from the last
+    converged state (it may rescue a step the predictor overshot); retry_from_last=False cuts at once."""
+    from softcath_ros.core.continuation import Correction, StepControl, ramp
+
+    for retry in (True, False):
+        calls = []
+
+        def corrector(guess, t, previous):
+            calls.append((t, bool(np.array_equal(guess, previous))))
+            ok = t <= 2.0 or (retry and np.array_equal(guess, previous))   # the guess beyond 2 always fails
+            return Correction(state=np.array([t]) if ok else previous, converged=ok, iterations=1)
+
+        control = StepControl(initial_step=1.0, max_step=1.0, min_step=0.5, adaptive=True, retry_from_last=retry)
+        r = ramp(corrector, np.array([0.0]), [3.0], control)
+        assert r.converged is retry
+        assert calls[2] == (3.0, False)                       # the predicted guess at t = 3
+        if retry:
+            assert calls[3] == (3.0, True) and r.cuts == 0    # retried from the state at t = 2, converged
+        else:
+            assert (3.0, True) not in calls and r.cuts > 0    # never retried: cut to the smallest step, stopped
+            assert r.last_load == 2.0
+
+
+def test_a_stalled_newton_solve_fails_early_and_says_so(short_design):
+    """NewtonSettings.stall_iterations: a solve whose |du.r| does not fall tenfold over that many
+    iterations fails then, named "stalled", instead of using its whole budget; without it the same
+    solve runs to its budget."""
+    from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonFailure
+
+    outcomes = {}
+    for stall in (None, 3):
+        pb = Fe3dProblem(short_design, COARSE, NewtonSettings(threads=1, max_iterations=12, stall_iterations=stall))
+        pb.set_direction(np.array([1.0]))
+        pb.load.Set(20000.0)   # from the straight state in one step: Newton wanders (0.1 bar converges in 5)
+        with pytest.raises(NewtonFailure) as exc:
+            pb.newton()
+        outcomes[stall] = exc.value
+    assert outcomes[3].reason.startswith("stalled: |du.r|") and outcomes[3].iterations < 12, outcomes[3].reason
+    assert outcomes[None].reason.startswith("no convergence in 12 Newton iterations"), outcomes[None].reason

@@ -62,6 +62,7 @@ class StepControl:
     adaptive: bool = True            # False: fixed steps of initial_step, no cutting (stability studies)
     domain_step: float | None = None  # stop cutting at this step when the failure is outside_domain
                                       # (a validity limit needs less precision than a hard turn)
+    retry_from_last: bool = True     # after a predicted guess fails, try once more from the last state
 
 
 @dataclass
@@ -133,7 +134,8 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
             else:
                 guess = state
             corr = corrector(guess, t_new, state)
-            if not corr.converged and not corr.outside_domain and prev is not None and extrapolate is not None:
+            if not corr.converged and not corr.outside_domain and prev is not None and extrapolate is not None \
+                    and control.retry_from_last:
                 # the secant can overshoot near a limit point: retry from the last state
                 result.iterations += corr.iterations
                 corr = corrector(state, t_new, state)

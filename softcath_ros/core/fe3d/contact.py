@@ -257,8 +257,6 @@ def _deformed_ring(problem, ring, zk):
 def min_wall_gap(problem, sampling) -> float:
     """See LumenContact.min_gap. Each deformed section ring is projected onto the plane normal
     to the deformed axis there; crossings are found with the section rung's polygon test."""
-    from ..section_fe.terms.contact import point_segment_distance, segments_cross
-
     ring, levels = sampling
     length = problem.design.length
     best = math.inf
@@ -275,26 +273,51 @@ def min_wall_gap(problem, sampling) -> float:
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(axis, e1)
         P = (cur - centre) @ np.column_stack([e1, e2])          # in-plane coordinates
-        m = len(P)
-        # every vertex against every segment at least 2 edges of the section mesh away along the wall
-        skip = 2 * SAMPLES
-        vi, sj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-        off = (sj - vi) % m
-        keep = (off >= skip) & (off <= m - skip - 1)
-        d = point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m])
-        si, sk = np.triu_indices(m, k=2)
-        far = (sk - si) <= m - 2
-        crossing = segments_cross(P, si[far], sk[far])
+        best = min(best, polygon_gap(P, 2 * SAMPLES))
+    return best
+
+
+def polygon_gap(P: np.ndarray, skip: int) -> float:
+    """A closed polygon's (P: (m, 2), segment k from vertex k to k + 1) smallest distance from a
+    vertex to a segment at least ``skip`` segments away along it, or, when two segments at least 2
+    apart properly cross, minus the largest crossing depth (per crossing pair the smallest distance
+    of an end point of one to the other). Exact, as the all-pairs test, but only pairs of segments
+    near each other are tested (a k-d tree on the segments' midpoints): a segment within r of a
+    point has its midpoint within r + half the longest segment."""
+    from scipy.spatial import cKDTree
+
+    from ..section_fe.terms.contact import point_segment_distance, segments_cross
+
+    m = len(P)
+    nxt = np.roll(P, -1, axis=0)
+    half = 0.5 * float(np.max(np.linalg.norm(nxt - P, axis=1)))
+    tree = cKDTree(0.5 * (P + nxt))
+    # crossings: segments whose midpoints lie within the two half lengths of each other
+    pairs = tree.query_pairs(2.0 * half * (1.0 + 1e-9) + 1e-300, output_type="ndarray")
+    if len(pairs):
+        i, k = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+        apart = (k - i >= 2) & (k - i <= m - 2)
+        i, k = i[apart], k[apart]
+        crossing = segments_cross(P, i, k)
         if np.any(crossing):
-            # crossed: minus the depth, for each crossing pair of segments the smaller of the
-            # distances of their end points to the other segment (a small crossing between
-            # the barrier's quadrature points has a depth of a fraction of d_hat)
-            i, k = si[far][crossing], sk[far][crossing]
+            i, k = i[crossing], k[crossing]
             a, b, c, e = P[i], P[(i + 1) % m], P[k], P[(k + 1) % m]
             depth = np.min(np.stack([point_segment_distance(a, c, e), point_segment_distance(b, c, e),
                                      point_segment_distance(c, a, b), point_segment_distance(e, a, b)]), axis=0)
-            best = min(best, -max(float(np.max(depth)), 1e-15))
-            continue
-        if len(d):
-            best = min(best, float(np.min(d)))
-    return best
+            return -max(float(np.max(depth)), 1e-15)
+    # distances: grow the radius r until some allowed pair lies within it (then none beyond can be nearer)
+    span = float(np.max(np.ptp(P, axis=0))) if m else 0.0
+    r = 4.0 * half
+    while True:
+        near = tree.query_ball_point(P, r + half)
+        counts = np.fromiter((len(n) for n in near), dtype=np.intp, count=m)
+        vi = np.repeat(np.arange(m), counts)
+        sj = np.fromiter((j for n in near for j in n), dtype=np.intp, count=int(counts.sum()))
+        off = (sj - vi) % m
+        keep = (off >= skip) & (off <= m - skip - 1)
+        d = point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m]) if keep.any() else np.empty(0)
+        if len(d) and float(np.min(d)) <= r:
+            return float(np.min(d))
+        if r > 2.0 * span + 4.0 * half:
+            return float(np.min(d)) if len(d) else math.inf
+        r *= 2.0

@@ -58,6 +58,10 @@ class NewtonSettings:
     # made that ramp 5x slower (docs/models/fe3d.md, "Where it fails")
     shifted_tangent: bool = False
     shifted_steps: int = 12     # shifted steps per solve, on top of max_iterations
+    # give up on a solve whose |du.r| has not fallen tenfold over this many iterations (None: never;
+    # with contact, solves that fail wander with |du.r| flat for their whole budget, those that
+    # converge fall from the start)
+    stall_iterations: int | None = None
 
 
 def check_element(pressure_order, interior_order) -> None:
@@ -420,8 +424,14 @@ class Fe3dProblem:
             self.sigma, self._shifted_in_solve = 0.0, 0
             tol = st.energy_tol * self.energy_scale
             work = math.inf
+            works: list[float] = []   # |du.r| per iteration since the last pairing search at convergence
             while it < budget:
                 it += 1
+                if st.stall_iterations is not None and len(works) > st.stall_iterations and \
+                        works[-1] > 0.1 * works[-1 - st.stall_iterations]:
+                    raise NewtonFailure(f"stalled: |du.r| {works[-1]:.2e} J, not a tenth of its "
+                                        f"{works[-1 - st.stall_iterations]:.2e} J {st.stall_iterations} "
+                                        "iterations before", it - 1)
                 t_it = time.perf_counter()
                 if self.contact is not None and it > 1 and searches == 0 and work >= self.contact.search_above * tol:
                     # far from convergence the pairs of an earlier iterate are stale (the walls slide):
@@ -487,6 +497,7 @@ class Fe3dProblem:
                     e0 = e
                 self.iterations_total += 1
                 self.last_work = work
+                works.append(work)
                 log.debug("load %.1f Pa it %d du.r %.3e alpha %g (%.2f s)", self.load.Get(), it, slope,
                           alpha, time.perf_counter() - t_it)
                 if alpha == 1.0 and work < tol:
@@ -496,6 +507,7 @@ class Fe3dProblem:
                         if searches > self.contact.max_searches:
                             raise NewtonFailure(f"the contact pairs did not settle in {searches} searches", it)
                         budget = it + st.max_iterations
+                        works = []
                         if st.line_search:
                             e0 = self.energy()   # the new pairs' energy
                         continue

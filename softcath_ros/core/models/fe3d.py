@@ -122,8 +122,10 @@ class Fe3dModel(BendModel):
         self.progress = progress
         self._problems = {}   # (half, rotation rad) -> Fe3dProblem
         self.last_ramps = []
-        self._cache_parts = [design.content_hash(), asdict(self.mesh_settings), asdict(self.newton_settings),
-                             asdict(self.step_control), tangent_predictor, self.half,
+        self._cache_parts = [design.content_hash(), asdict(self.mesh_settings),
+                             _without_later_defaults(self.newton_settings, stall_iterations=None),
+                             _without_later_defaults(self.step_control, retry_from_last=True),
+                             tangent_predictor, self.half,
                              # options added later enter the key only when set
                              *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
                              *([] if formulation == "mixed" else [{"formulation": formulation}]),
@@ -271,6 +273,12 @@ class Fe3dModel(BendModel):
             return state, (self.last_ramps[0] if self.last_ramps else None)
         finally:
             self.use_cache = saved
+
+
+def _without_later_defaults(settings, **later) -> dict:
+    """``settings`` as a dict for the cache key without the fields added later (``later``: their
+    defaults) while they hold their defaults, so earlier cache entries stay valid."""
+    return {k: v for k, v in asdict(settings).items() if not (k in later and v == later[k])}
 
 
 def _contact_distance(value, design: Design, lumen_fill) -> float | None:
