@@ -306,13 +306,12 @@ def polygon_gap(P: np.ndarray, skip: int) -> float:
                                      point_segment_distance(c, a, b), point_segment_distance(e, a, b)]), axis=0)
             return -max(float(np.max(depth)), 1e-15)
     # distances: grow the radius r until some allowed pair lies within it (then none beyond can be nearer)
+    vertices = cKDTree(P)
     span = float(np.max(np.ptp(P, axis=0))) if m else 0.0
-    r = 4.0 * half
+    r = max(4.0 * half, span / 16.0)
     while True:
-        near = tree.query_ball_point(P, r + half)
-        counts = np.fromiter((len(n) for n in near), dtype=np.intp, count=m)
-        vi = np.repeat(np.arange(m), counts)
-        sj = np.fromiter((j for n in near for j in n), dtype=np.intp, count=int(counts.sum()))
+        near = vertices.sparse_distance_matrix(tree, r + half, output_type="ndarray")
+        vi, sj = near["i"].astype(np.intp), near["j"].astype(np.intp)
         off = (sj - vi) % m
         keep = (off >= skip) & (off <= m - skip - 1)
         d = point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m]) if keep.any() else np.empty(0)
