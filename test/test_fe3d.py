@@ -740,3 +740,26 @@ def test_a_stalled_newton_solve_fails_early_and_says_so(short_design):
         outcomes[stall] = exc.value
     assert outcomes[3].reason.startswith("stalled: |du.r|") and outcomes[3].iterations < 12, outcomes[3].reason
     assert outcomes[None].reason.startswith("no convergence in 12 Newton iterations"), outcomes[None].reason
+
+
+def test_the_tangent_after_a_failed_solve_is_the_converged_states_own(short_design):
+    """A failed Newton solve leaves no factorisation of its last iterate behind: the tangent du/ds at
+    the converged state restored afterwards (a ramp's predictor after a cut) equals the one computed
+    there before the failure."""
+    from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonFailure
+
+    pb = Fe3dProblem(short_design, COARSE, NewtonSettings(threads=1, max_iterations=6), contact_distance=0.02)
+    pb.set_direction(np.array([1.0]))
+    pb.load.Set(10000.0)
+    pb.newton()
+    converged = pb.get_state()
+    before = pb.tangent()
+    pb.load.Set(30000.0)
+    with pytest.raises(NewtonFailure):
+        pb.newton()
+    assert pb.inverse is None
+    pb.set_state(converged)
+    pb.load.Set(10000.0)
+    after = pb.tangent()
+    # (before: the factorisation of Newton's last iterate but one, a hair from the converged state)
+    assert np.linalg.norm(after - before) < 1e-3 * np.linalg.norm(before)

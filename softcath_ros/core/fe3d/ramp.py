@@ -158,6 +158,7 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
             if guess is not None:
                 return guess
         problem.set_state(s1)
+        problem.load.Set(t1)   # the tangent of the state at its own load (a failed attempt left its own)
         try:
             return s1 + (t - t1) * problem.tangent()
         except Exception:  # noqa: BLE001 - a singular tangent falls back to the secant

@@ -394,8 +394,11 @@ class Fe3dProblem:
         return abs(self.load.Get()) * float(np.linalg.norm(self._load_vector().FV().NumPy()[self.free_mask]))
 
     def tangent(self) -> np.ndarray:
-        """du/ds at the current (converged) state: K du/ds = sum_i d_i dV_i/du."""
+        """du/ds at the current (converged) state and load: K du/ds = sum_i d_i dV_i/du (the last
+        Newton's factorisation, or, after a failed solve, a new one on freshly searched contact pairs)."""
         if self.inverse is None:
+            if self.contact is not None:
+                self.contact.update()
             self._factorize()
         rhs = self._load_vector()
         out = self.gf.vec.CreateVector()
@@ -407,6 +410,15 @@ class Fe3dProblem:
         Returns the iterations; raises NewtonFailure (the state is then undefined: the
         caller restores a converged one). A step that inverts an element (det F <= 0) or
         gives non-finite values is halved; below ``min_step`` the solve fails."""
+        try:
+            return self._newton()
+        except NewtonFailure:
+            # the factorisation is a failed iterate's: the tangent at the converged state the
+            # caller restores must not use it (a ramp's predictor after a cut did, and stepped off)
+            self.inverse = None
+            raise
+
+    def _newton(self) -> int:
         ng = _ng()
         st = self.newton_settings
         with ng.TaskManager():
