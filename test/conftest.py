@@ -33,27 +33,34 @@ def _clean_dds_shared_memory() -> None:
             pass   # a stuck cleaner must not stop the run; the hang it guards against is rare
 
 
-_clean_dds_shared_memory()
-
-
 def _dds_shared_memory() -> set:
     shm = Path("/dev/shm")
     return {p.name for p in shm.glob("*fastdds*")} if shm.is_dir() else set()
 
 
+_clean_dds_shared_memory()
+_SHM_AFTER_CLEAN = [_dds_shared_memory()]
+
+
+def _clean_if_changed() -> None:
+    if _dds_shared_memory() != _SHM_AFTER_CLEAN[0]:
+        _clean_dds_shared_memory()
+        _SHM_AFTER_CLEAN[0] = _dds_shared_memory()
+
+
 @pytest.fixture(autouse=True)
 def _release_private_domains():
-    """Leases a test took (domains.private_domain) end with the test; a test that used DDS
-    leaves no dead process's shared memory behind for the next."""
+    """Leases a test took (domains.private_domain) end with the test; no test starts on, or
+    leaves behind, a dead process's DDS shared memory (cleaned before and after each test when
+    /dev/shm changed: a process killed at a test's end may still hold its segments for a moment)."""
     from domains import LEASES
 
+    _clean_if_changed()
     taken = len(LEASES)
-    shm_before = _dds_shared_memory()
     yield
     while len(LEASES) > taken:
         LEASES.pop().release()
-    if _dds_shared_memory() != shm_before:
-        _clean_dds_shared_memory()
+    _clean_if_changed()
 
 # Every run starts from an empty cache of its own (set here, at import, so the subprocesses the
 # tests start inherit it), so no test passes on results an earlier run left behind.
