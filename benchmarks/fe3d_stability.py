@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import save_figure, write_results  # noqa: E402
+from harness import fe3d_solver_log, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure, outer_surface_stretch  # noqa: E402
@@ -97,10 +97,7 @@ def main(argv=None) -> int:
     except ValueError as exc:   # the problem's own check of its options, as one line
         ap.error(str(exc))
     if args.debug:
-        import logging
-
-        logging.basicConfig(level=logging.WARNING, format="%(message)s")
-        logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
+        fe3d_solver_log()
     if pb.contact is not None:
         if args.max_searches is not None:
             pb.contact.max_searches = args.max_searches

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import save_figure, write_results  # noqa: E402
+from harness import fe3d_solver_log, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
@@ -99,10 +99,7 @@ def main(argv=None) -> int:
     newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
                             **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
     if args.debug:
-        import logging
-
-        logging.basicConfig(level=logging.WARNING, format="%(relativeCreated)9.0f ms %(message)s")
-        logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
+        fe3d_solver_log()
     try:
         model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
                           tangent_predictor=args.fixed_steps is None, threads=args.threads,

@@ -80,3 +80,11 @@ def save_figure(fig, name: str, dpi: int = 100) -> str:
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
     return str(out)
+
+
+def fe3d_solver_log() -> None:
+    """The fe3d solver's per-iteration log on stderr, each line stamped with ms since start (--debug)."""
+    import logging
+
+    logging.basicConfig(level=logging.WARNING, format="%(relativeCreated)9.0f ms %(message)s")
+    logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
