@@ -763,3 +763,51 @@ def test_the_tangent_after_a_failed_solve_is_the_converged_states_own(short_desi
     after = pb.tangent()
     # (before: the factorisation of Newton's last iterate but one, a hair from the converged state)
     assert np.linalg.norm(after - before) < 1e-3 * np.linalg.norm(before)
+
+
+def test_the_deformed_backbone_of_an_imposed_arc_reaches_the_shaft_past_the_onset(implemented_design):
+    """The displacement of a pure bend (every section rigid, the axis an arc of radius rho towards
+    -y) set on a 30 mm body: deformed_backbone follows the arc, and body_contact finds the tip in the
+    shaft at 330 deg (onset 290 deg at rho = 5.2 mm) and nothing at 250 deg."""
+    import ngsolve as ng
+
+    from softcath_ros.core.body_contact import body_contact
+    from softcath_ros.core.fe3d.measure import deformed_backbone
+
+    design = implemented_design.with_length(0.030)
+    pb = Fe3dModel(design, mesh=COARSE, cache=False, threads=1).problem
+    radius = 0.5 * design.outer_diameter
+    for deg, reaches in ((250.0, False), (330.0, True)):
+        rho = design.length / math.radians(deg)
+        phi = ng.z / rho
+        pb.u.Set(ng.CF((0.0, -rho * (1 - ng.cos(phi)) + ng.y * ng.cos(phi) - ng.y,
+                        rho * ng.sin(phi) + ng.y * ng.sin(phi) - ng.z)))
+        axis = deformed_backbone(pb, 0.5 * radius)
+        z = np.linspace(0.0, design.length, len(axis))
+        expect = np.column_stack([0 * z, -rho * (1 - np.cos(z / rho)), rho * np.sin(z / rho)])
+        np.testing.assert_allclose(axis, expect, atol=0.02 * rho)
+        hit = body_contact(axis, radius)
+        assert (hit is not None and hit.what == "shaft") if reaches else hit is None, (deg, hit)
+
+
+def test_a_ramp_whose_body_reaches_its_shaft_stops_outside_the_model(short_design, monkeypatch):
+    """The ramp's check after every converged solve: from its third call on, the (stand-in) geometry
+    says the body reaches its shaft; the ramp cuts its step, keeps the states before, and stops
+    named outside the model's validity with what the body reached."""
+    from softcath_ros.core.body_contact import BodyContact
+    from softcath_ros.core.continuation import OUTSIDE_MODEL, tagged_stop
+    from softcath_ros.core.fe3d import ramp as ramp_module
+
+    calls = []
+
+    def reaches_from_the_third(points, radius):
+        calls.append(len(points))
+        return BodyContact("shaft", 0.01, 1e-4, True) if len(calls) >= 3 else None
+
+    monkeypatch.setattr(ramp_module, "body_contact", reaches_from_the_third)
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1).problem
+    r = ramp_module.run_ramp(pb, [1.0], [0.0, 1000.0, 2000.0, 10000.0])
+    assert not r.converged and r.stop_reason == OUTSIDE_MODEL and tagged_stop(r.message) == OUTSIDE_MODEL
+    assert "the tip" in r.message and "shaft" in r.message
+    assert [p.load for p in r.points] == [0.0, 1000.0, 2000.0] and r.cuts >= 3
+    assert calls[0] >= math.ceil(short_design.length / (0.25 * short_design.outer_diameter)) + 1

@@ -57,3 +57,20 @@ def test_default_model_node_runs_the_shipped_section_table_and_refuses_common_pr
         assert "shipped table" in err and "building" not in err
     finally:
         node.close()
+
+
+def test_model_node_publishes_no_pose_for_a_body_bent_through_its_shaft():
+    """The 40 mm design at 0.27 bar would turn about 350 deg, the tip through the shaft below the
+    base (core/body_contact.py): no pose, the reason on /diagnostics; a pose again at 0.15 bar."""
+    from softcath_ros.resources import find
+
+    node = Running("--params-file", str(find("params", "model_node")), "-p", "design:=implemented_5mm")
+    try:
+        assert node.client.send([27000.0], timeout_s=0.5) is None
+        diag = node.counters(model="surrogate", model_failed=1)
+        assert "shaft" in diag["last_reason"] and "27000" in diag["last_reason"]
+        assert node.client.send([15000.0]) is not None, "no pose for a valid command after a refused one"
+        code, err = node.stop(signal.SIGTERM)
+        assert code == 0 and "Traceback" not in err, err
+    finally:
+        node.close()

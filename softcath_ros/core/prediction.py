@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .body_contact import BodyContact, body_contact, may_reach
+from .continuation import OUTSIDE_MODEL, stop_tag
 from .kinematics import backbone_poses, planar_backbone_poses, tip_pose
 from .models.base import BendModel
 
@@ -74,6 +76,7 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     negative = None if state.diagnostics is None else state.diagnostics.negative_directions
     # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
     measured_rc = state.radius_l_over_theta if own_length else None
+    radius = 0.5 * model.design.outer_diameter
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]
@@ -83,6 +86,11 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
         finite = np.isfinite(np.concatenate([k, [state.axial_stretch[i], angle[i]], pos[i], quat[i]])).all()
         if converged and not finite:   # never report inf/nan as an answer
             converged, reason = False, "non-finite result: the pressure or length is beyond what the rung can represent"
+        if converged:   # a free body through itself or its shaft predicts nothing (core/body_contact.py)
+            solved = None if state.backbone is None else np.asarray(state.backbone)[i]
+            reached = body_reach(k, arc_length * float(state.axial_stretch[i]), cap, radius, solved)
+            if reached is not None:
+                converged, reason = False, f"{reached.describe()} {stop_tag(OUTSIDE_MODEL)}"
         out.append(Prediction(
             pressures_pa=[float(v) for v in p],
             curvature_per_m=[float(v) for v in k],
@@ -102,7 +110,26 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
 
 
 # bump when how a bend state becomes a tip pose, angle or R_C changes (part of cached predictions' keys)
-KINEMATICS_VERSION = "arc-cap-1"   # 1: the tip cap straight beyond the channelled part's arc
+KINEMATICS_VERSION = "arc-cap-2"   # 1: the tip cap straight beyond the channelled part's arc; 2: a body that
+                                   # reaches itself or its shaft is refused
+
+
+def body_reach(curvature, arc_length: float, cap: float, radius: float, backbone=None) -> BodyContact | None:
+    """Where a body of ``radius`` (m) reaches itself or its shaft (``body_contact``), or None: the
+    constant-curvature arc of ``curvature`` (2,) 1/m and deformed ``arc_length`` (m) with the straight
+    ``cap`` beyond, or the solved ``backbone`` (M, 3) m when given (the rod under loads). An arc within
+    half a turn is not sampled (``may_reach``), so a live node pays for the check only past it."""
+    k = np.asarray(curvature, dtype=float)
+    if backbone is None and not bool(may_reach(math.hypot(k[0], k[1]) * arc_length)):
+        return None
+    if backbone is None:
+        n = math.ceil((arc_length + cap) / (0.5 * radius)) + 1
+        points, _ = backbone_poses(k, arc_length, n, cap)
+    else:
+        solved = np.asarray(backbone, dtype=float)
+        total = float(np.linalg.norm(np.diff(solved, axis=0), axis=1).sum())
+        points, _ = planar_backbone_poses(solved, math.ceil(total / (0.5 * radius)) + 1)
+    return body_contact(points, radius)
 
 
 def arc_and_cap(model: BendModel, length: float) -> tuple[float, float]:

@@ -45,7 +45,7 @@ from ..core.answer_load import AnswerLoad
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
-from ..core.prediction import arc_and_cap, state_backbone
+from ..core.prediction import arc_and_cap, body_reach, state_backbone
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
@@ -110,6 +110,7 @@ class ModelNode(Node):
         self.n_channels = self.design.n_channels
         self.length = self.design.length
         self.arc_length, self.cap = arc_and_cap(self.model, self.length)   # the channelled part, the straight cap
+        self.body_radius = 0.5 * self.design.outer_diameter
         self.n_points = int(n_points)
         # The safety limit comes from the design only: an override is ignored (and said so).
         self.max_pressure = self.design.max_pressure
@@ -292,7 +293,7 @@ class ModelNode(Node):
                                    throttle_duration_sec=WARN_THROTTLE_S)
         if self._fast is not None:
             curvature, stretch = self._fast(check.pressures)
-            positions, quats = backbone_poses(curvature, self.arc_length * stretch, self.n_points, self.cap)
+            solved = None
         else:
             try:
                 state = self.model.evaluate(check.pressures)
@@ -300,6 +301,14 @@ class ModelNode(Node):
                 return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
             if not bool(state.converged):
                 return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
+            curvature, stretch, solved = state.curvature, float(state.axial_stretch), state.backbone
+        # a free body bent through itself or its shaft is no prediction (core/body_contact.py)
+        reached = body_reach(curvature, self.arc_length * stretch, self.cap, self.body_radius, solved)
+        if reached is not None:
+            return self._model_failed(f"no pose for {check.pressures.tolist()} Pa: {reached.describe()}")
+        if solved is None and self._fast is not None:
+            positions, quats = backbone_poses(curvature, self.arc_length * stretch, self.n_points, self.cap)
+        else:
             positions, quats = state_backbone(state, self.arc_length, self.cap, self.n_points)
         if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
             return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")

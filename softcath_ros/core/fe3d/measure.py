@@ -151,6 +151,14 @@ def measure(problem) -> dict:
     return out
 
 
+def deformed_backbone(problem, spacing: float) -> np.ndarray:
+    """The deformed body axis (M, 3), m, in the design's frame, at reference heights at most
+    ``spacing`` (m) apart from the base to the tip (each a section's rigid fit, as the tip's)."""
+    length = problem.design.length
+    heights = np.linspace(0.0, length, max(3, math.ceil(length / spacing) + 1))
+    return np.array([_section_pose(problem, float(z))[1] for z in heights])
+
+
 def channel_area(problem, i: int) -> float:
     """Area of channel i's deformed section at mid-length of its open part (Newell's formula).
     In the half model a channel the plane cuts is closed by its mirror image; one not meshed

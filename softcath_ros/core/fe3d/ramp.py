@@ -13,10 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, UNSTABLE, Correction, StepControl,
-                            ramp, stop_tag)
+from ..body_contact import body_contact
+from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, UNSTABLE, Correction,
+                            StepControl, ramp, stop_tag)
 from ..energy import yeoh_convexity_limit
-from .measure import measure
+from .measure import deformed_backbone, measure
 from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
 from ..units import PA_PER_BAR, describe_pressure
 
@@ -142,8 +143,14 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
                                   message=(f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit[0]:.3g} "
                                            f"(uniaxial stretch {limit[1]:.3g}) where its Yeoh energy (c3 < 0) "
                                            "stops being convex"))
+        reached = body_contact(deformed_backbone(problem, 0.5 * radius), radius)
+        if reached is not None:
+            problem.set_state(previous)
+            return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
+                              stop_reason=OUTSIDE_MODEL, message=reached.describe())
         return Correction(state=problem.get_state(), converged=True, iterations=its)
 
+    radius = 0.5 * problem.design.outer_diameter
     mat = problem.design.material
     limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)
 

@@ -32,7 +32,8 @@ DEFAULT_CONTACT_DISTANCE = 0.01   # of the lumen diameter: 15 um on the implemen
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-6"   # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-7"   # bump when a change alters results, so old cache entries are not reused
+                                # (7: a ramp stops where the body reaches itself or its shaft)
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
