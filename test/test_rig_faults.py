@@ -57,7 +57,8 @@ def test_rig_killed_at_a_random_step_stops_the_bench_and_keeps_every_completed_s
     assert took < STOP_WITHIN_S, f"bench stopped {took:.2f} s after the rig was killed (delay {delay:.2f} s)"
     s = _summary(out)
     assert s["complete"] is False and "stopped answering" in s["error"]
-    assert topics.pressure_measured_topic(0) in s["error"]
+    # every rig signal stops at once: the first the bench finds stale is named (which one is a race)
+    assert any(t in s["error"] for t in topics.rig_topics(1)), s["error"]
     path = tmp_path / "killed" / "killed_0.mcap"
     result = read_metadata(path)["softcath_result"]
     assert result["complete"] == "false" and int(result["completed_steps"]) == s["completed_steps"]
