@@ -423,3 +423,28 @@ def test_a_limit_beyond_the_rungs_reach_is_lowered_to_it_and_said(three):
         phi = math.radians(deg)
         res = allocator.allocate(1e3 * np.array([math.cos(phi), math.sin(phi)]))   # far beyond reach
         assert res.saturated and res.converged and max(res.pressures) <= reach_pa
+
+
+def test_a_bend_that_would_reach_the_shaft_saturates_where_the_body_clears_it(three):
+    """The 3-channel 40 mm body (shipped surrogate): a 200 deg bend is allocated as asked; a 340 deg
+    bend would take the tip into the shaft below the base (core/body_contact.py), so it saturates at
+    the largest bend that way which clears it: no contact there, contact a little further."""
+    from softcath_ros.core.prediction import arc_and_cap, body_reach
+
+    model = make_model("surrogate", three, build=False)
+    allocator = Allocator(model)
+    arc, cap = arc_and_cap(model, three.length)
+    radius = 0.5 * three.outer_diameter
+    direction = math.radians(90.0)
+    easy = allocator.allocate_bend(direction, math.radians(200.0))
+    assert easy.converged and not easy.saturated
+    assert easy.bending_angle == pytest.approx(math.radians(200.0), rel=1e-3)
+    far = allocator.allocate_bend(direction, math.radians(340.0))
+    assert far.saturated and "clears the body" in far.message and "shaft" in far.message
+    assert math.radians(270.0) < far.bending_angle < math.radians(340.0)
+    assert body_reach(far.achieved_curvature, arc * far.axial_stretch, cap, radius) is None
+    # the limit is where contact begins: 1 % more curvature is limited to the same bend
+    beyond = allocator.allocate(far.achieved_curvature * 1.01)
+    assert beyond.saturated and "clears the body" in beyond.message
+    assert math.hypot(*beyond.achieved_curvature) == pytest.approx(math.hypot(*far.achieved_curvature), rel=1e-5)
+    assert far.pressures.max() <= allocator.max_pressure

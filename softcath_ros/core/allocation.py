@@ -38,13 +38,18 @@ from scipy.optimize import brentq
 from .design import PLAUSIBLE_PRESSURE, pressure_guess
 from .errors import ModelError, SoftcathError
 from .kinematics import curvature_for_tip, tip_pose_single
-from .prediction import arc_and_cap
+from .prediction import arc_and_cap, body_reach
 from .models.base import BendModel
 
 TWO_PI = 2.0 * math.pi
 # A request counts as beyond reach only past this relative margin, so the boundary itself
 # (kappa == max curvature up to rounding) is reachable and not flagged saturated.
 _SATURATION_RTOL = 1e-9
+
+
+# bisections of a request's scale for the largest bend that keeps the body clear of itself and its
+# shaft (each one allocation; 2^-24 of the request)
+CLEAR_BISECTIONS = 24
 
 
 class AllocationError(SoftcathError):
@@ -222,8 +227,43 @@ class Allocator:
         self._current = None
         self._warm = None
 
-    def allocate(self, curvature) -> Allocation:
-        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m."""
+    def allocate(self, curvature, length: float | None = None) -> Allocation:
+        """Pressures for the curvature vector ``curvature`` = (kx, ky), 1/m. A bend that would take the
+        body of ``length`` (m, default the design's) through itself or its shaft is not reachable
+        (core/body_contact.py: no model predicts that state)."""
+        result = self._allocate(curvature)
+        arc, cap = arc_and_cap(self.model, self.design.length if length is None else float(length))
+
+        def reaches(r: Allocation):
+            if not (r.reachable and r.converged and r.active_channels):
+                return None
+            return body_reach(r.achieved_curvature, arc * r.axial_stretch, cap, 0.5 * self.design.outer_diameter)
+
+        reached = reaches(result)
+        if reached is None:
+            return result
+        # saturate where the body just clears: bisect the request's scale (the achieved bend grows with it)
+        requested = np.asarray(result.requested_curvature, dtype=float)
+        lo, hi = 0.0, min(1.0, math.hypot(*result.achieved_curvature) / math.hypot(*requested))
+        best = self._zero(tuple(requested), "")
+        for _ in range(CLEAR_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            trial = self._allocate(mid * requested)
+            if not (trial.reachable and trial.converged):
+                hi = mid
+            else:
+                hit = reaches(trial)
+                if hit is None:
+                    lo, best = mid, trial
+                else:
+                    hi, reached = mid, hit   # what the body reaches just beyond the limit
+        best.requested_curvature = requested
+        best.saturated = True
+        best.max_curvature = float(math.hypot(*best.achieved_curvature))
+        best.message = f"limited to the largest bend this way that clears the body: beyond it {reached.describe()}"
+        return best
+
+    def _allocate(self, curvature) -> Allocation:
         kx, ky = float(curvature[0]), float(curvature[1])
         if not (math.isfinite(kx) and math.isfinite(ky)):
             raise AllocationError(f"curvature ({kx}, {ky}) 1/m is not finite")
@@ -262,7 +302,7 @@ class Allocator:
         result = None
         for _ in range(8):
             kappa = angle / (arc * stretch)
-            result = self.allocate((kappa * ux, kappa * uy))
+            result = self.allocate((kappa * ux, kappa * uy), length)
             if abs(result.axial_stretch - stretch) <= 1e-10 * stretch:  # angle error <= 1e-10 relative
                 break
             stretch = result.axial_stretch
