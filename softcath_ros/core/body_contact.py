@@ -60,7 +60,7 @@ def may_reach(bending_angle_rad) -> np.ndarray:
 def _frames(points: np.ndarray):
     seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
-    tangent = np.gradient(points, s, axis=0, edge_order=2 if len(points) > 2 else 1)
+    tangent = np.gradient(points, s, axis=0, edge_order=2)
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     # a normal for each tangent: Gram-Schmidt against the axis least aligned with it
     helper = np.eye(3)[np.argmin(np.abs(tangent), axis=1)]
@@ -103,8 +103,7 @@ def body_contact(points, radius: float) -> BodyContact | None:
     if inside.any():
         i = int(np.flatnonzero(inside.any(axis=1))[0])
         found.append(BodyContact("shaft", float(s[i]), float(radius - off[i][inside[i]].min()), i == len(s) - 1))
-    # itself: a rim point of slice i inside slice j (half the spacing either side of point j)
-    # slice j: from half way back to point j - 1 to half way on to point j + 1 (the ends: to the face)
+    # itself: a rim point of slice i inside slice j, from half way back to point j - 1 to half way on to point j + 1 (the ends: to the face)
     back = 0.5 * np.concatenate([[0.0], seg])
     ahead = 0.5 * np.concatenate([seg, [0.0]])
     # (i, j) pairs to test: far apart along the backbone, near enough in space for a rim point of
