@@ -27,7 +27,8 @@ def _model_cell(values: dict, quantity: str, scale: float, digits: int) -> str:
 
 
 def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: list[Hysteresis],
-             plots: list[str], calibration: dict | None = None, tips: list | None = None) -> str:
+             plots: list[str], calibration: dict | None = None, tips: list | None = None,
+             tips_skipped: dict | None = None) -> str:
     labels = list(stats[0].model) if stats else []
     lines = [f"# {title}", ""]
     for k, v in info.items():
@@ -80,9 +81,9 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
         n_sig = sum(h.significant for h in hyst)
         lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
                   + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
-    if tips:
+    if tips or tips_skipped:
         from .tip_compare import markdown_section
-        lines += markdown_section(tips)
+        lines += markdown_section(tips, tips_skipped)
     if calibration:
         c = calibration.to_dict()
         lines += ["## Calibration", "",
@@ -223,9 +224,11 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
         info["incomplete"] = (f"{result.get('completed_steps', '?')} of {result.get('n_steps', '?')} steps completed "
                               f"(only those are analysed): {result.get('reason', '')}")
     from .tip_compare import tips_from_recording
-    tips = tips_from_recording(path)
+    tips_skipped: dict = {}
+    tips = tips_from_recording(path, design.length, tips_skipped)
     plots = plot(stats, out, "report")
-    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration, tips)
+    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration, tips, tips_skipped)
     md = out / "report.md"
     md.write_text(text)
-    return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows, "tips": tips}
+    return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows, "tips": tips,
+            "tips_skipped": tips_skipped}
