@@ -41,13 +41,13 @@ class BodyContact:
     def describe(self) -> str:
         where = ("the tip" if self.at_tip else f"the cross-section {self.at_m * 1e3:.1f} mm along the backbone")
         if self.what == "shaft":
-            return (f"the body reaches the shaft it sits on ({where} is {self.depth_m * 1e3:.2f} mm inside "
+            return (f"the body reaches the shaft it sits on ({where} is {self.depth_m * 1e3:.2g} mm inside "
                     "the straight continuation of the base): no rung models that contact")
         if self.what == "itself":
-            return (f"the body reaches itself ({where} is {self.depth_m * 1e3:.2f} mm inside another part "
+            return (f"the body reaches itself ({where} is {self.depth_m * 1e3:.2g} mm inside another part "
                     "of the body): no rung models the outer surface's self-contact")
         return (f"the bend folds the body's inner side ({where} has a radius of curvature "
-                f"{self.depth_m * 1e3:.2f} mm under the body's radius)")
+                f"{self.depth_m * 1e3:.2g} mm under the body's radius)")
 
 
 def may_reach(bending_angle_rad) -> np.ndarray:
