@@ -68,6 +68,8 @@ def main(argv=None) -> int:
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--stall", type=int, default=None,
                     help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
+    ap.add_argument("--max-step", type=float, default=None,
+                    help="StepControl.max_step, bar (the adaptive ramp's largest step; default 0.02 bar)")
     ap.add_argument("--no-retry", action="store_true",
                     help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
@@ -85,6 +87,10 @@ def main(argv=None) -> int:
         control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
     if args.no_retry:
         control = dataclasses.replace(control or default_step_control(), retry_from_last=False)
+    if args.max_step is not None:
+        if not 0 < args.max_step <= args.to:
+            ap.error(f"--max-step {args.max_step:g} bar: must be positive and at most --to ({args.to:g} bar)")
+        control = dataclasses.replace(control or default_step_control(), max_step=args.max_step * PA_PER_BAR)
     if args.stall is not None and args.stall < 1:
         ap.error(f"--stall {args.stall}: must be at least 1 iteration")
     contact = {} if args.contact_distance is None else {
