@@ -81,7 +81,7 @@ def run(args) -> int:
         for r in results:
             ps = ",".join(f"{v / PA_PER_BAR:.3f}" for v in r.pressures_pa)
             if not r.converged:
-                print(f"{ps:>18}  did not converge: {r.reason}")
+                print(f"{ps:>18}  no answer: {r.reason}")
                 continue
             tip = ",".join(f"{v * 1e3:.2f}" for v in r.tip_position_m)
             rc = format_mm(r.radius_of_curvature_m)

@@ -112,7 +112,7 @@ def run(args) -> int:
                 print(f"{r['pressure_bar']:8.4f} {r['bending_angle_deg']:12.2f} "
                       f"{'inf' if rc is None else f'{rc * 1e3:.2f}':>13}")
             else:
-                print(f"{r['pressure_bar']:8.4f}  did not converge: {r['reason']}")
+                print(f"{r['pressure_bar']:8.4f}  no answer: {r['reason']}")
         for path in written:
             print(f"wrote {path}")
     return 0 if all(r["converged"] for r in rows) else 1

@@ -37,6 +37,7 @@ class BodyContact:
     at_m: float          # arc length along the deformed backbone of the reaching cross-section, m
     depth_m: float       # how far that point is inside (fold: radius minus the radius of curvature), m
     at_tip: bool = False   # the reaching cross-section is the tip's
+    other_m: float | None = None   # itself: arc length of the earlier part it reaches, m
 
     def describe(self) -> str:
         where = ("the tip" if self.at_tip else f"the cross-section {self.at_m * 1e3:.1f} mm along the backbone")
@@ -44,8 +45,9 @@ class BodyContact:
             return (f"the body reaches the shaft it sits on ({where} is {self.depth_m * 1e3:.2g} mm inside "
                     "the straight continuation of the base): no rung models that contact")
         if self.what == "itself":
-            return (f"the body reaches itself ({where} is {self.depth_m * 1e3:.2g} mm inside another part "
-                    "of the body): no rung models the outer surface's self-contact")
+            return (f"the body reaches itself ({where} overlaps the cross-section {self.other_m * 1e3:.1f} mm "
+                    f"along the backbone by {self.depth_m * 1e3:.2g} mm): no rung models the outer "
+                    "surface's self-contact")
         return (f"the bend folds the body's inner side ({where} has a radius of curvature "
                 f"{self.depth_m * 1e3:.2g} mm under the body's radius)")
 
@@ -71,7 +73,7 @@ def _frames(points: np.ndarray):
 
 
 def body_contact(points, radius: float) -> BodyContact | None:
-    """The first contact (by arc length of the reaching cross-section) of a round body of
+    """The first contact (by arc length of the reaching cross-section, the later of a pair) of a round body of
     ``radius`` (m) around the backbone ``points`` (M, 3), m, base first, with itself or with its
     shaft; None when it reaches neither. The backbone needs points closer than ``radius`` apart
     (a slice is the length between two points)."""
@@ -117,8 +119,11 @@ def body_contact(points, radius: float) -> BodyContact | None:
         radial = np.linalg.norm(rel - a[..., None] * t[jj][:, None, :], axis=-1)
         hit = (a >= -back[jj][:, None]) & (a <= ahead[jj][:, None]) & (radial < radius * (1 - 1e-9))
         if hit.any():
+            # the pair whose later cross-section is nearest the base: the first part to come round
             p = np.flatnonzero(hit.any(axis=1))
-            first = p[np.argmin(s[ii[p]])]
-            found.append(BodyContact("itself", float(s[ii[first]]),
-                                     float(radius - radial[first][hit[first]].min()), ii[first] == len(s) - 1))
+            later = np.maximum(ii[p], jj[p])
+            first = p[np.argmin(later)]
+            a_i, b_j = int(max(ii[first], jj[first])), int(min(ii[first], jj[first]))
+            found.append(BodyContact("itself", float(s[a_i]), float(radius - radial[first][hit[first]].min()),
+                                     a_i == len(s) - 1, float(s[b_j])))
     return min(found, key=lambda c: c.at_m) if found else None
