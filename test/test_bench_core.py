@@ -288,6 +288,7 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
 
     model = make_model("surrogate", load_design("implemented_5mm"), build=False)
     rig = SimulatedRig(model, RigParams(gauge_noise=0.0, angle_noise=0.0))
+    rig.mount("angle", 0.017)   # a 17 mm sample: a 40 mm one this far bent would pass through its holder
     top = model.pressure_range[1]
     rig.advance(10.0, [0.9 * top])   # regulator settled
     inside = rig.read()
@@ -302,3 +303,20 @@ def test_default_truth_is_the_section_table_and_refuses_beyond_it():
     assert math.isfinite(rig.read().angle)
     rig.advance(10.0, [three.max_pressure, 0.0, 0.0])
     assert not math.isfinite(rig.read().angle)
+
+
+def test_a_truth_bent_through_its_holder_gives_no_reading_and_no_tip():
+    """The 40 mm sample on the angle bench with the section table as truth: at 0.2 bar (truth at
+    0.15 bar) a reading and a true tip; at 0.45 bar the free body would turn past 300 deg through the
+    holder below its base (core/body_contact.py): no angle reading and no tip to track, never a
+    made-up one; the force bench (tip on the scale) still reads."""
+    from softcath_ros.core.design import load_design
+
+    model = make_model("surrogate", load_design("implemented_5mm"), build=False)
+    rig = SimulatedRig(model, RigParams(gauge_noise=0.0, angle_noise=0.0))
+    rig.advance(10.0, [0.2e5])
+    assert math.isfinite(rig.read().angle) and rig.true_tip() is not None
+    rig.advance(10.0, [0.45e5])
+    assert not math.isfinite(rig.read().angle) and rig.true_tip() is None
+    rig.mount("force", 0.040)
+    assert math.isfinite(rig.read().force)

@@ -15,6 +15,8 @@
   gap between model and experiment (the model's curve lies on the experiment's when its
   input pressure is shifted by about 25%): the rig bends as the model does at
   (1 - pressure_shift) times the true pressure.
+- No reading where the truth has none: where it does not converge, and on the angle bench where
+  its free body would pass through itself or the holder below its base (``free_body_answers``).
 - Angle bench: bending angle theta = |k| lambda l of the mounted sample (its arc is stretched by
   the axial stretch lambda), read low by the known
   biases: friction on the paper (a fractional under-read) and out-of-plane bending
@@ -35,7 +37,7 @@ from dataclasses import replace, dataclass, fields
 import numpy as np
 
 from .blocking import BlockingForce
-from ..core.prediction import angle_per_length, arc_and_cap
+from ..core.prediction import angle_per_length, arc_and_cap, body_reach
 from ..core.kinematics import tip_pose_single
 from ..core.models import make_model
 from ..core.units import PA_PER_BAR
@@ -138,9 +140,22 @@ class SimulatedRig:
     def true_curvature(self) -> np.ndarray:
         return np.asarray(self.true_state().curvature, dtype=float)
 
+    def free_body_answers(self, state) -> bool:
+        """Whether the truth answered and its free body of the mounted length clears itself and the
+        holder below its base (core/body_contact.py): beyond that the truth would be a body passing
+        through itself, which no rig reads."""
+        if not bool(np.all(state.converged)):
+            return False
+        arc, cap = arc_and_cap(self.model, self.length)
+        return body_reach(np.asarray(state.curvature, dtype=float), arc * float(state.axial_stretch), cap,
+                          0.5 * self.model.design.outer_diameter) is None
+
     def true_tip(self):
-        """True tip position (m) and quaternion (x, y, z, w) in softcath_base, for the mounted length."""
+        """True tip position (m) and quaternion (x, y, z, w) in softcath_base, for the mounted length;
+        None where the free body has no answer (``free_body_answers``)."""
         state = self.true_state()
+        if not self.free_body_answers(state):
+            return None
         kx, ky = (float(v) for v in state.curvature)
         arc, cap = arc_and_cap(self.model, self.length)
         position, quat = tip_pose_single(kx, ky, arc * float(state.axial_stretch), cap)
@@ -152,7 +167,9 @@ class SimulatedRig:
         state = self.true_state()
         k = np.asarray(state.curvature, dtype=float)
         keep = (1.0 - p.friction_underread)
-        if not bool(np.all(state.converged)):   # the truth did not answer: no reading, never a made-up one
+        # the truth did not answer, or its free body on the angle bench would pass through itself or
+        # its holder: no reading, never a made-up one
+        if not bool(np.all(state.converged)) or (self.bench == "angle" and not self.free_body_answers(state)):
             k = np.full(2, np.nan)
             state = replace(state, curvature=k, axial_stretch=np.nan)
         if self.bench == "angle":

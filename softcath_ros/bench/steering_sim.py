@@ -128,9 +128,11 @@ def simulate(scenario: SteeringScenario, trajectory: str, duration: float, built
     for i in range(n):
         t = i * dt
         rig.advance(dt, command)
-        tip, _ = rig.true_tip()
+        true = rig.true_tip()   # None: the truth's free body has no answer (the tracker sees nothing)
+        tip = np.full(3, np.nan) if true is None else true[0]
         if t + 1e-12 >= next_sample:
-            tracker.capture(t, tip)
+            if true is not None:
+                tracker.capture(t, tip)
             next_sample += sample_dt
         target = path(t)
         t0 = clock()

@@ -114,6 +114,7 @@ class SimBenchNode(Node):
                           minimum=0.0, maximum=0.99 if name == "drop_fraction" else None)
                   for name, default in asdict(TrackerParams()).items()}
         self.tracker = TipTracker(TrackerParams(**values))
+        self._tip_quat = (0.0, 0.0, 0.0, 1.0)   # the last true tip orientation (tracked samples carry it)
         if values["rate_hz"] <= 0:   # no tracker
             return
         self._pose_type = PoseStamped
@@ -132,11 +133,13 @@ class SimBenchNode(Node):
 
     def tick_tracker(self):
         now = self.get_clock().now().nanoseconds
-        position, quat = self.rig.true_tip()
-        self.pub_tip_true.publish(self._pose(now, position, quat))
-        self.tracker.capture(now * 1e-9, position)
-        for stamp, pos in self.tracker.due(now * 1e-9):
-            self.pub_tip.publish(self._pose(round(stamp * 1e9), pos, quat))
+        true = self.rig.true_tip()
+        if true is not None:   # (None: the truth has no answer there, so there is nothing to track)
+            position, self._tip_quat = true
+            self.pub_tip_true.publish(self._pose(now, position, self._tip_quat))
+            self.tracker.capture(now * 1e-9, position)
+        for stamp, pos in self.tracker.due(now * 1e-9):   # (the tracker reads positions: the last true orientation)
+            self.pub_tip.publish(self._pose(round(stamp * 1e9), pos, self._tip_quat))
 
     def on_command(self, msg):
         p = np.asarray(msg.data, dtype=float)
