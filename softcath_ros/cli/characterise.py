@@ -39,7 +39,7 @@ from typing import Callable
 
 from ..bench.report import DEFAULT_OVERLAY
 from ..core.errors import SoftcathError
-from ..graph import NodeGraph, stop_process
+from ..graph import READY_MARK, NodeGraph, stop_process
 from .common import bounded_float, check_rung_names
 
 EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
@@ -48,6 +48,9 @@ EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
 # its lost_after, 1 s, then 0.3 s of venting), then is stopped. model_node is no part of the rig:
 # bench_node would never notice, so it is stopped at once.
 CHILD_GRACE_S = {"model_node": 0.0}
+# Every helper (rig, model_node, allocation_node) spins before bench_node starts, so the recording
+# has the model's predictions from the first step (a loaded machine can take many seconds to import).
+HELPER_READY_S = 120.0
 RIG_CHILD_GRACE_S = 1.5
 
 
@@ -175,6 +178,23 @@ class _Log:
                 self._fail(exc)
 
 
+def _wait_spinning(node: str, proc: subprocess.Popen, log: Path, timeout_s: float) -> None:
+    """Until ``node``'s log holds the runtime's ready mark; SoftcathError (one line) when it ends first
+    or ``timeout_s`` passes."""
+    end = time.monotonic() + timeout_s
+    while True:
+        try:
+            if READY_MARK in log.read_text(errors="replace"):
+                return
+        except OSError:
+            pass
+        if proc.poll() is not None:
+            raise SoftcathError(f"{node} ended (exit {proc.returncode}) before it was ready; its log: {log}")
+        if time.monotonic() > end:
+            raise SoftcathError(f"{node} was not ready within {timeout_s:g} s; its log: {log}")
+        time.sleep(0.05)
+
+
 def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
     """The ROS path shared by the rigs: helpers + bench_node on one domain, the bench's output
     followed, children watched; the report at the end (also on the completed steps of a failed run)."""
@@ -204,11 +224,16 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
         timed_out: list[bool] = []
         started = []
         try:
+            logged = []
             for node, params in helpers:
                 log = _Log(logs / f"{node}.log", say)
                 started.append((node, graph.start(node, params, stdout=log.f or subprocess.DEVNULL)))
+                if log.f is not None:
+                    logged.append(started[-1])
                 log.close()
                 say(f"[characterise] started {node} (log {logs / (node + '.log')})")
+            for node, proc in logged:   # (a helper without a log, on a full disk, is not waited for)
+                _wait_spinning(node, proc, logs / f"{node}.log", HELPER_READY_S)
             bench = graph.start("bench_node", {"protocol": args.protocol, "design": design_arg,
                                                "model": args.model[0], "output_dir": out_dir, "name": name,
                                                "wait_timeout": args.wait_timeout})
