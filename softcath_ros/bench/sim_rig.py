@@ -102,6 +102,7 @@ class SimulatedRig:
         self.actuated_pressures = np.zeros(n)  # after the actuator's lag
         self.bending_pressures = np.zeros(n)  # after the hysteresis play
         self._state_key, self._state = None, None
+        self._free_key, self._free = None, False   # free_body_answers' verdict and what it was for
         self.gauge_bias = self.rng.uniform(-self.params.gauge_error, self.params.gauge_error, n)
         self.force_model = BlockingForce(model)
         self.bench = "angle"
@@ -144,11 +145,16 @@ class SimulatedRig:
         """Whether the truth answered and its free body of the mounted length clears itself and the
         holder below its base (core/body_contact.py): beyond that the truth would be a body passing
         through itself, which no rig reads."""
-        if not bool(np.all(state.converged)):
-            return False
-        arc, cap = arc_and_cap(self.model, self.length)
-        return body_reach(np.asarray(state.curvature, dtype=float), arc * float(state.axial_stretch), cap,
-                          0.5 * self.model.design.outer_diameter) is None
+        # asked by every reading and tracker tick: once per truth state (its pressures) and mount
+        key = (self._state_key, self.length) if state is self._state else None
+        if key is None or self._free_key != key:
+            ok = bool(np.all(state.converged))
+            if ok:
+                arc, cap = arc_and_cap(self.model, self.length)
+                ok = body_reach(np.asarray(state.curvature, dtype=float), arc * float(state.axial_stretch), cap,
+                                self.model.design.outer_radius) is None
+            self._free_key, self._free = key, ok
+        return self._free
 
     def true_tip(self):
         """True tip position (m) and quaternion (x, y, z, w) in softcath_base, for the mounted length;

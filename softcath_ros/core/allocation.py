@@ -237,7 +237,7 @@ class Allocator:
         def reaches(r: Allocation):
             if not (r.reachable and r.converged and r.active_channels):
                 return None
-            return body_reach(r.achieved_curvature, arc * r.axial_stretch, cap, 0.5 * self.design.outer_diameter)
+            return body_reach(r.achieved_curvature, arc * r.axial_stretch, cap, self.design.outer_radius)
 
         reached = reaches(result)
         if reached is None:

@@ -76,7 +76,7 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
     negative = None if state.diagnostics is None else state.diagnostics.negative_directions
     # a rung that measures R_C itself (fe3d: l over its tip's angle) is reported as it measured it
     measured_rc = state.radius_l_over_theta if own_length else None
-    radius = 0.5 * model.design.outer_diameter
+    radius = model.design.outer_radius
     out = []
     for i, p in enumerate(np.atleast_2d(pressures)):
         k = state.curvature[i]

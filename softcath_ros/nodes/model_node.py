@@ -110,7 +110,7 @@ class ModelNode(Node):
         self.n_channels = self.design.n_channels
         self.length = self.design.length
         self.arc_length, self.cap = arc_and_cap(self.model, self.length)   # the channelled part, the straight cap
-        self.body_radius = 0.5 * self.design.outer_diameter
+        self.body_radius = self.design.outer_radius
         self.n_points = int(n_points)
         # The safety limit comes from the design only: an override is ignored (and said so).
         self.max_pressure = self.design.max_pressure

@@ -150,7 +150,7 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
                               stop_reason=OUTSIDE_MODEL, message=reached.describe())
         return Correction(state=problem.get_state(), converged=True, iterations=its)
 
-    radius = 0.5 * problem.design.outer_diameter
+    radius = problem.design.outer_radius
     mat = problem.design.material
     limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)
 
