@@ -25,7 +25,7 @@ from harness import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import best_fit_rotation  # noqa: E402
-from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.core.models.fe3d import DEFAULT_MESH_SIZE, Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 
@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--length", type=float, default=0.020, help="m")
     ap.add_argument("--to", type=float, default=0.35, help="bar")
-    ap.add_argument("--mesh-size", type=float, default=1.0)
+    ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE, help="scale of the base mesh in the section (the rung's default)")
     ap.add_argument("--lumen-fill", type=float, default=None)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--name", default="fe3d_failure_20mm")
@@ -82,7 +82,8 @@ def main(argv=None) -> int:
              "uy_mm": float(d[1] * 1e3), "uz_mm": float(d[2] * 1e3), "det_F": float(j)}
             for p, d, j in zip(sec.points, u, jac)]
     meta = {"length_m": args.length, "target_bar": args.to, "reached_bar": reached, "last_checkpoint_pa": last,
-            "lumen_fill": args.lumen_fill, "mesh_size": args.mesh_size, "section_z_m": z,
+            "lumen_fill": args.lumen_fill, "mesh_size": args.mesh_size, "layer_h": model.mesh_settings.layer_h,
+            "pressure_order": model.pressure_order, "interior_order": model.interior_order, "section_z_m": z,
             "message": ramp.message, "wall_s": elapsed, "ndof": problem.fes.ndof}
     write_results(args.name, meta, rows)
     print(ramp.message or f"reached {args.to} bar")

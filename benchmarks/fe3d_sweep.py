@@ -1,13 +1,16 @@
 """fe3d benchmark and validation runs: pressure sweeps through the 3D rung, timed, with peak memory.
 
-    .venv/bin/python benchmarks/fe3d_sweep.py                      # 0 -> 0.20 bar, 40 mm, default mesh
+    .venv/bin/python benchmarks/fe3d_sweep.py                      # 0 -> 0.20 bar, 40 mm, the rung's defaults
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_sweep_20mm
-    .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 0.7 --name fe3d_mesh_0.7
+    .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 1.2 --name fe3d_mesh_1.2   # finer in the section
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.02 --name fe3d_contact_0.02
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.03 --name fe3d_contact_0.03
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --no-section --name fe3d_timing_20mm   # the timed case only
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --order 1 --interior-order 3 \
-        --contact-distance 0.02 --mesh-size 1.4 --no-section --name fe3d_timing_20mm_bubble3_mesh1.4   # trial element
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --order 0 --interior-order none \
+        --contact-distance 0.01 --mesh-size 1.0 --layer-h scaled --name fe3d_p2p0   # the former default (fe3d-7)
+
+Flags left out take the rung's defaults (core/models/fe3d.py: mesh 1.4, 1.2 mm layers, P2 + bubbles / P1,
+barrier 0.02 D since 2026-12-04; result files before that date record their element and mesh in meta).
 
 Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending angle,
 R_C = L/theta (and the section rung's at the same pressure with its relative difference:
@@ -36,7 +39,8 @@ from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
-from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_INTERIOR_ORDER,  # noqa: E402
+                                            DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel)
 from softcath_ros.core.prediction import angle_per_length  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -49,22 +53,26 @@ def main(argv=None) -> int:
     ap.add_argument("--length", type=float, default=0.040, help="m")
     ap.add_argument("--to", type=float, default=0.20, help="bar")
     ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
-    ap.add_argument("--mesh-size", type=float, default=1.0, help="scale of the default mesh (smaller = finer)")
+    ap.add_argument("--mesh-size", type=float, default=None,
+                    help=f"scale of the base mesh in the section (smaller = finer; default {DEFAULT_MESH_SIZE})")
     ap.add_argument("--fixed-steps", type=float, default=None,
                     help="step control off: plain load steps of this size (bar), no cutting, no predictor")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--contact-distance", default=None,
                     help="lumen contact's barrier distance as a fraction of the lumen diameter "
-                         "(default: the rung's, 0.01); 'none' switches contact off")
+                         f"(default: the rung's, {DEFAULT_CONTACT_DISTANCE}); 'none' switches contact off")
     ap.add_argument("--energy-tol", type=float, default=None,
                     help="Newton's |du.r| tolerance relative to c1 x volume (default: the solver's, 1e-9)")
     ap.add_argument("--lumen-h", type=float, default=None,
                     help="edge length on the lumen wall, m, after --mesh-size (default: wall_h)")
-    ap.add_argument("--layer-h", type=float, default=None,
-                    help="prism height along the body, m, after --mesh-size (default: the scaled mesh's)")
-    ap.add_argument("--order", type=int, default=0, help="element pressure's order (0: P2/P0, the default; 1: P2/P1)")
-    ap.add_argument("--interior-order", type=int, default=None,
-                    help="condensed interior bubbles of this order added to P2 (3: the trial element with --order 1)")
+    ap.add_argument("--layer-h", default=None,
+                    help=f"prism height along the body, m (default {DEFAULT_LAYER_H}); 'scaled': the base mesh's "
+                         "scaled by --mesh-size")
+    ap.add_argument("--order", type=int, default=DEFAULT_PRESSURE_ORDER,
+                    help=f"element pressure's order (0: P2/P0; 1: P2/P1; default {DEFAULT_PRESSURE_ORDER})")
+    ap.add_argument("--interior-order", default=str(DEFAULT_INTERIOR_ORDER),
+                    help=f"condensed interior bubbles of this order added to P2 (default {DEFAULT_INTERIOR_ORDER}; "
+                         "'none': plain P2)")
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--stall", type=int, default=None,
                     help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
@@ -95,12 +103,20 @@ def main(argv=None) -> int:
         ap.error(f"--stall {args.stall}: must be at least 1 iteration")
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
-    for flag, v in (("--lumen-h", args.lumen_h), ("--layer-h", args.layer_h), ("--mesh-size", args.mesh_size)):
+    try:
+        layer_h = (DEFAULT_LAYER_H if args.layer_h is None else None if args.layer_h.lower() == "scaled"
+                   else float(args.layer_h))
+        interior = None if args.interior_order.lower() == "none" else int(args.interior_order)
+    except ValueError:
+        ap.error(f"--layer-h {args.layer_h} / --interior-order {args.interior_order}: a number, 'scaled' / 'none'")
+    if args.mesh_size is None:
+        args.mesh_size = DEFAULT_MESH_SIZE
+    for flag, v in (("--lumen-h", args.lumen_h), ("--layer-h", layer_h), ("--mesh-size", args.mesh_size)):
         if v is not None and not (math.isfinite(v) and v > 0):
             ap.error(f"{flag} {v}: must be a positive length (m) or scale")
     # the explicit edge lengths hold as given (m), after the scaling
     mesh = MeshSettings().scaled(args.mesh_size)
-    mesh = dataclasses.replace(mesh, **{k: v for k, v in (("lumen_h", args.lumen_h), ("layer_h", args.layer_h))
+    mesh = dataclasses.replace(mesh, **{k: v for k, v in (("lumen_h", args.lumen_h), ("layer_h", layer_h))
                                         if v is not None})
     newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
                             **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
@@ -109,7 +125,7 @@ def main(argv=None) -> int:
     try:
         model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
                           tangent_predictor=args.fixed_steps is None, threads=args.threads,
-                          pressure_order=args.order, interior_order=args.interior_order, **contact)
+                          pressure_order=args.order, interior_order=interior, **contact)
     except ModelError as exc:   # a bad option, as one line
         ap.error(str(exc))
     t0 = time.perf_counter()
@@ -158,7 +174,7 @@ def main(argv=None) -> int:
             "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
-            "contact_distance": model.contact_distance, "lumen_h": args.lumen_h, "layer_h": args.layer_h,
+            "contact_distance": model.contact_distance, "lumen_h": args.lumen_h, "layer_h": layer_h,
             "pressure_order": model.pressure_order, "interior_order": model.interior_order,
             "newton": dataclasses.asdict(model.newton_settings),
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),

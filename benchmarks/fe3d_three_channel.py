@@ -37,7 +37,7 @@ from harness import RESULTS, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
-from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.core.models.fe3d import DEFAULT_MESH_SIZE, Fe3dModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 DIRECTIONS = {"one": (1.0, 0.0, 0.0), "pair": (1.0, 1.0, 0.0), "pair21": (1.0, 0.5, 0.0)}
@@ -137,8 +137,9 @@ def run(args) -> int:
             "newton_iterations": int(state.diagnostics.newton_iterations[i]) if ok else None,
             "time_s": float(state.diagnostics.time_s[i]) if ok else None})
     meta = {"design": design.name, "length_m": args.length, "direction": list(direction),
-            "mesh_size": args.mesh_size, "ndof": problem.fes.ndof, "half_model": problem.half,
-            "mirror_mesh": model.mirror_mesh,
+            "mesh_size": args.mesh_size, "mesh": dataclasses.asdict(model.mesh_settings),
+            "pressure_order": model.pressure_order, "interior_order": model.interior_order,
+            "ndof": problem.fes.ndof, "half_model": problem.half, "mirror_mesh": model.mirror_mesh,
             "mirror_rotation_deg": math.degrees(getattr(problem, "rotation", 0.0)),
             "threads": args.threads, "contact_distance": model.contact_distance,
             "step_settings": dataclasses.asdict(model.step_control),
@@ -204,7 +205,7 @@ def main(argv=None) -> int:
     ap.add_argument("--length", type=float, default=0.040, help="m")
     ap.add_argument("--to", type=float, default=0.35, help="bar")
     ap.add_argument("--step", type=float, default=0.05, help="checkpoint spacing, bar")
-    ap.add_argument("--mesh-size", type=float, default=1.0)
+    ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE, help="scale of the base mesh in the section (the rung's default)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--max-step", type=float, default=None, help="largest load step, bar (default: the rung's)")
     ap.add_argument("--full", action="store_true", help="the full body (default: the half body when the "

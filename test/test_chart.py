@@ -9,8 +9,8 @@ from softcath_ros.core.errors import SoftcathError
 
 def _rows():
     rows = []
-    for case, family, length, ref in (("1ch 40mm", "length", 0.04, "fe3d mesh 1.0"),
-                                      ("1ch 17mm", "length", 0.017, "fe3d mesh 1.0"),
+    for case, family, length, ref in (("1ch 40mm", "length", 0.04, "fe3d mesh 1.4, 1.2 mm layers"),
+                                      ("1ch 17mm", "length", 0.017, "fe3d mesh 1.4, 1.2 mm layers"),
                                       ("3ch one channel", "direction", 0.04, "section D/40"),
                                       ("3ch pair 2:1", "direction", 0.04, "section D/40")):
         for setting, err, cost in (("closed_form", 2.0, 3e-6), ("surrogate (of section D/20)", 0.03, 2e-5),
@@ -70,5 +70,5 @@ def test_chart_marks_each_points_reference(tmp_path):
         w.writerows(rows)
     written = draw_all(load_rows(str(path)), tmp_path / "mixed.png")
     assert all(p.stat().st_size > 1000 for p in written if p.suffix == ".png")
-    assert _reference_legend(rows) == "filled circle: fe3d mesh 1.0, open diamond: section D/20"
+    assert _reference_legend(rows) == "filled circle: fe3d mesh 1.4, 1.2 mm layers, open diamond: section D/20"
     assert _reference_marker("") == "x"

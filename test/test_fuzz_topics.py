@@ -112,6 +112,16 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
                 t.header.frame_id = topics.FRAME_ID
                 t.point.x, t.point.y, t.point.z = _hostile(rng, 3)
                 pub_t.publish(t)
+        # After the flood the model node still answers a valid command and refuses a bad one. (Under
+        # load it answers only the newest command of a burst, which may have been one it refuses.)
+        good = Float64MultiArray(data=[0.1 * model.max_pressure] * model.n_channels)
+        bad = Float64MultiArray(data=[math.nan] * model.n_channels)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline and not (model.counters.accepted > 0 and model.counters.rejected > 0):
+            pub_p.publish(good)
+            time.sleep(0.1)
+            pub_p.publish(bad)
+            time.sleep(0.1)
         time.sleep(1.0)                      # the last answers and a diagnostics report or two
         took = time.monotonic() - t0
         assert not failures, failures

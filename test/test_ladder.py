@@ -31,7 +31,7 @@ def _result(rung, rcs, converged=(True,) * 4, boundary=40000.0, stop="", contact
 
 
 FAKE = {  # fe3d converges at the first two points only, as fe3d without contact stops at 0.252 bar
-    "fe3d mesh 1.0": _result("fe3d", [0.10, 0.05, 1, 1], (True, True, False, False), 20000.0, NUMERICAL_FAILURE),
+    "fe3d mesh 1.4, 1.2 mm layers": _result("fe3d", [0.10, 0.05, 1, 1], (True, True, False, False), 20000.0, NUMERICAL_FAILURE),
     "section D/20": _result("section", [0.11, 0.055, 0.03, 0.02]),
     "surrogate (of section D/20)": _result("surrogate", [0.11, 0.055, 0.0303, 0.0202]),
     "rod": _result("rod", [0.11, 0.055, 0.03, 0.02], boundary=30000.0, stop=ladder.stop_reason("x"),
@@ -45,7 +45,7 @@ def rows(monkeypatch):
     monkeypatch.setattr(ladder, "run_rung", lambda case, rung, options, solver, refresh=False:
                         next(r for r in FAKE.values() if r["rung"] == rung))
     rows, label = ladder.run_case(CASE, SETTINGS, say=lambda *a, **k: None)
-    assert label == "fe3d mesh 1.0 / section D/20"
+    assert label == "fe3d mesh 1.4, 1.2 mm layers / section D/20"
     return rows
 
 
@@ -55,12 +55,12 @@ def _of(rows, setting):
 
 def test_reference_per_point_and_errors_against_it(rows):
     section = _of(rows, "section D/20")
-    assert [r["reference"] for r in section] == ["fe3d mesh 1.0"] * 2 + ["section D/20"] * 2
+    assert [r["reference"] for r in section] == ["fe3d mesh 1.4, 1.2 mm layers"] * 2 + ["section D/20"] * 2
     assert section[0]["rc_rel_error"] == pytest.approx(0.10) and section[1]["rc_rel_error"] == pytest.approx(0.10)
     assert section[2]["rc_rel_error"] == 0.0        # its own reference there
     surrogate = _of(rows, "surrogate (of section D/20)")
     assert surrogate[2]["rc_rel_error"] == pytest.approx(0.01) and surrogate[3]["rc_rel_error"] == pytest.approx(0.01)
-    fe3d = _of(rows, "fe3d mesh 1.0")
+    fe3d = _of(rows, "fe3d mesh 1.4, 1.2 mm layers")
     assert [r["rc_rel_error"] for r in fe3d] == [0.0, 0.0, None, None]
 
 
@@ -70,7 +70,7 @@ def test_accuracy_boundary_per_tolerance(rows):
     assert sur["accurate_to_pa_10pct"] == 40000.0 and sur["accurate_to_pa_5pct"] == 0.0
     # the section rung is not measured where it is its own reference: its boundary ends at fe3d's last point
     assert _of(rows, "section D/20")[0]["accurate_to_pa_10pct"] == 20000.0
-    assert _of(rows, "fe3d mesh 1.0")[0]["accurate_to_pa_2pct"] == 20000.0
+    assert _of(rows, "fe3d mesh 1.4, 1.2 mm layers")[0]["accurate_to_pa_2pct"] == 20000.0
     assert ladder.accurate_to([0.01, None, 0.01], [1.0, 2.0, 3.0], 0.05) == 1.0
 
 
@@ -96,7 +96,7 @@ def test_envelope_from_the_rows_drives_selection(rows):
     doc = ladder.envelope_document(rows, "now")
     sur = doc["rungs"]["surrogate"]["designs"]["implemented_5mm"]
     assert sur["valid_pressure_pa"] == [0.0, 40000.0] and sur["accurate_to_pa"]["0.1"] == 40000.0
-    assert sur["reference_by_pressure_pa"][0] == [10000.0, "fe3d mesh 1.0"]
+    assert sur["reference_by_pressure_pa"][0] == [10000.0, "fe3d mesh 1.4, 1.2 mm layers"]
     assert sur["reference_by_pressure_pa"][-1] == [40000.0, "section D/20"]
     fe3d = doc["rungs"]["fe3d"]["designs"]["implemented_5mm"]
     assert fe3d["valid_pressure_pa"] == [0.0, 20000.0] and fe3d["stop_reasons"] == [NUMERICAL_FAILURE]

@@ -12,7 +12,7 @@ from softcath_ros.core.models import make_model
 from softcath_ros.core.scene import SceneError, load_scene, scene_from_dict
 from softcath_ros.resources import find, shipped_names
 
-ENV = {"reference": "fe3d mesh 1.0", "rungs": {
+ENV = {"reference": "fe3d mesh 1.4, 1.2 mm layers", "rungs": {
     "closed_form": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {
         "error_rc_rel_max": 0.60, "cost_s_per_eval": 5e-6, "valid_pressure_pa": [0, 50000]}}},
     "surrogate": {"capabilities": ["free_bending", "device_stiffness"], "designs": {"implemented_5mm": {

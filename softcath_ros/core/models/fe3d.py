@@ -17,7 +17,7 @@ time_s; channel volume and area NaN at zero pressure, which is not solved).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -27,17 +27,27 @@ from ..errors import ModelError
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
 
-DEFAULT_CONTACT_DISTANCE = 0.01   # of the lumen diameter: 15 um on the implemented design
+# The default element and mesh: the combination measured converged to 0.35 bar at 20 mm (docs/models/fe3d.md:
+# the in-plane mesh within 0.32 % of a finer one, the prism height within 0.34 % of its limit).
+DEFAULT_CONTACT_DISTANCE = 0.02   # of the lumen diameter: 30 um on the implemented design
+DEFAULT_MESH_SIZE = 1.4           # of the base MeshSettings, in the section
+DEFAULT_LAYER_H = 1.2e-3          # prism height along the body, m
+DEFAULT_PRESSURE_ORDER = 1        # P2 + interior bubbles / P1
+DEFAULT_INTERIOR_ORDER = 3
 
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-7"   # bump when a change alters results, so old cache entries are not reused
-                                # (7: a ramp stops where the body reaches itself or its shaft)
+    solver_version = "fe3d-8"   # bump when a change alters results, so old cache entries are not reused
+                                # (7: a ramp stops where the body reaches itself or its shaft;
+                                # 8: the default element, mesh and barrier distance)
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
-        options=(Option("mesh_size", "float", "scales the default mesh (0.5 = twice as fine)"),
+        options=(Option("mesh_size", "float", "scales the base mesh in the section (default 1.4; 0.5 = twice as "
+                                              "fine as the base)"),
+                 Option("layer_h", "float", "prism height along the body in metres (default 1.2e-3; None: the "
+                                            "base mesh's scaled by mesh_size)"),
                  Option("mesh", "object", "an explicit MeshSettings"),
                  Option("newton", "object", "NewtonSettings"),
                  Option("step_control", "object", "a continuation StepControl"),
@@ -54,19 +64,22 @@ class Fe3dModel(BendModel):
                  Option("formulation", "str", "'mixed' (default) or 'displacement'"),
                  Option("reinforcement", "str", "'membrane' (default) or 'rings'"),
                  Option("contact_distance", "float", "lumen wall self-contact: barrier distance as a fraction of "
-                                                         "the lumen diameter (default 0.01; None: off)"),
-                 Option("pressure_order", "int", "the element pressure's order: 0 (P2/P0, default) or 1 (P2/P1)"),
+                                                         "the lumen diameter (default 0.02; None: off)"),
+                 Option("pressure_order", "int", "the element pressure's order: 0 (P2/P0) or 1 (P2/P1, default)"),
                  Option("interior_order", "int", "add condensed element-interior displacement bubbles of this "
-                                                 "order (>= 3) to P2 (default none)")))
+                                                 "order (>= 3) to P2 (default 3; None: none)")))
 
-    def __init__(self, design: Design, mesh_size: float = 1.0, mesh=None, newton=None,
+    def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache=True, progress: bool = False, threads: int = 2,
                  lumen_fill: float | None = None, formulation: str = "mixed",
                  reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
-                 mirror_mesh: bool = False, pressure_order: int = 0, interior_order: int | None = None):
-        """``mesh_size`` scales the default mesh (0.5 = twice as fine); ``mesh`` is an explicit
-        ``MeshSettings``. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
+                 mirror_mesh: bool = False, pressure_order: int = DEFAULT_PRESSURE_ORDER,
+                 interior_order: int | None = DEFAULT_INTERIOR_ORDER, layer_h: float | None = DEFAULT_LAYER_H):
+        """``mesh_size`` scales the base mesh (``MeshSettings()``) in the section and, with ``layer_h``
+        None, along the body; ``layer_h`` (m) is the prism height along the body; ``mesh`` is an
+        explicit ``MeshSettings`` (then ``layer_h`` is its own). The defaults (mesh 1.4, 1.2 mm
+        layers, P2 + bubbles / P1, barrier 0.02 of the lumen diameter) are the converged set. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
         load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
         lumen with a soft solid of this fraction of the silicone's shear modulus (a self-contact
         proxy that lets short bodies pass the lumen's collapse; core/fe3d/solver.py).
@@ -84,9 +97,10 @@ class Fe3dModel(BendModel):
         turned so that it is x = 0 (core/fe3d/mesh.py ``mirror_plane``), the full body for the
         others; False: the full body. ``mirror_mesh``: the full body meshed as the half section and
         its mirror image (so a full model shares the half model's discretisation: comparisons).
-        ``pressure_order``, ``interior_order``: the element (Fe3dProblem): P2/P0 by default; P2 with
-        order-3 interior bubbles and a P1 pressure (``interior_order=3, pressure_order=1``) is the
-        element that reaches 0.35 bar at 20 mm on a coarse mesh (docs/models/fe3d.md)."""
+        ``pressure_order``, ``interior_order``: the element (Fe3dProblem): by default P2 with order-3
+        interior bubbles and a P1 pressure, the element that passes the lumen shoulders' fold to
+        0.35 bar at 20 mm; P2/P0 (``pressure_order=0, interior_order=None``), the former default,
+        stops near 0.23 bar there (docs/models/fe3d.md)."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -97,7 +111,16 @@ class Fe3dModel(BendModel):
         from ..fe3d.ramp import default_step_control
         from ..fe3d.solver import NewtonSettings, check_element
 
-        self.mesh_settings = mesh if mesh is not None else MeshSettings().scaled(mesh_size)
+        if mesh is None:
+            if isinstance(mesh_size, bool) or not 0.1 <= float(mesh_size) <= 10.0:
+                raise ModelError(f"fe3d: mesh_size = {mesh_size!r} must be a number in [0.1, 10]")
+            mesh = MeshSettings().scaled(float(mesh_size))
+            if layer_h is not None:
+                if isinstance(layer_h, bool) or not 2e-4 <= float(layer_h) <= 2e-2:
+                    raise ModelError(f"fe3d: layer_h = {layer_h!r} must be a prism height in metres in "
+                                     "[2e-4, 2e-2], or None")
+                mesh = replace(mesh, layer_h=float(layer_h))
+        self.mesh_settings = mesh
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
