@@ -183,3 +183,27 @@ def test_fe3d_runs_the_three_channel_cases_on_a_mirror_plane_on_the_half_body():
     assert by_name["3ch pair equal"] == {**FE3D[2], "half": True}
     assert by_name["3ch pair 2:1"] == FE3D[2]
     assert all(by_name[c.name] == FE3D[2] for c in CASES if c.family == "length")
+
+
+def test_a_rungs_boundary_ends_where_its_answers_end():
+    """A 40 mm body bends through its shaft from about 0.26 bar: the surrogate's own ramp reaches
+    max_pressure, but its answers (predict) end below 0.3 bar, named outside the model's validity;
+    that is the boundary run_rung records, and a result cached in format 2 (the rung's own ramp) is
+    upgraded to it once."""
+    from softcath_ros.core import cache
+    from softcath_ros.core.models import make_model
+
+    case = ladder.Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), (10000.0, 20000.0))
+    model = make_model("surrogate", case.sample)
+    own, own_beyond, _ = ladder.ramp_boundary(model, case.direction)
+    answered, beyond, message = ladder.ramp_boundary(model, case.direction, answers=True)
+    assert own == model.design.max_pressure and not own_beyond
+    assert 20000.0 < answered < 30000.0 and beyond and ladder.stop_reason(message) == OUTSIDE_MODEL
+    fresh = ladder.run_rung(case, "surrogate", {}, False, refresh=True)
+    assert fresh["boundary_pa"] == answered and fresh["stop_reason"] == OUTSIDE_MODEL and fresh["record"] == 3
+    key = ladder._key_parts(case, "surrogate", {})
+    cache.save_json("ladder", ladder.LADDER_VERSION, key,
+                    {**fresh, "record": 2, "boundary_pa": own, "fails_beyond": False, "stop_reason": "",
+                     "first_failure": ""}, "surrogate")
+    assert ladder.run_rung(case, "surrogate", {}, False) == fresh
+    assert cache.load_json("ladder", ladder.LADDER_VERSION, key, "surrogate") == fresh

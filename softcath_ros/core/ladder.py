@@ -97,8 +97,9 @@ SECTION_REFERENCE = "section D/20"   # the section rung with lumen contact at it
 TOLERANCES = (0.02, 0.05, 0.10)
 LADDER_VERSION = "ladder-3"   # bump when what a cached row records changes (3: R_C = l / theta, 0-0.5 bar)
 # The format of a cached rung result, kept in the value (a change of the key voids every cached result,
-# hours of fe3d): 2 adds contact_boundary_pa; a result without "record" is format 1.
-RECORD = 2
+# hours of fe3d): 2 adds contact_boundary_pa; 3: the boundary of a rung other than fe3d is where its
+# answers end (predict refuses a body through itself or its shaft); a result without "record" is format 1.
+RECORD = 3
 
 
 def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool = False) -> dict:
@@ -143,9 +144,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
         first_failure = next((p.reason for p in preds if not p.converged), "")
         stop = stop_reason(first_failure)
     else:
-        boundary, beyond, message = ramp_boundary(make_model(rung, design, **opts), case.direction)
-        first_failure = message.split("; ")[0] if beyond else ""
-        stop = stop_reason(message) if beyond else ""
+        boundary, beyond, first_failure, stop = _answer_boundary(make_model(rung, design, **opts), case)
     out = {"record": RECORD, "rung": rung, "options": options, "s_per_eval": per_eval, "boundary_pa": boundary,
            "stop_reason": stop,
            "capabilities": list(model.info.models),   # what the rung declares it models (scene features)
@@ -155,14 +154,30 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     return out
 
 
+def _answer_boundary(model, case: Case) -> tuple[float, bool, str, str]:
+    """The free-bending failure boundary of a rung other than fe3d: where its answers end on a ramp to
+    max_pressure (``ramp_boundary`` through ``predict``), whether it fails beyond, the first failure and
+    its named stop."""
+    boundary, beyond, message = ramp_boundary(model, case.direction, answers=True)
+    return boundary, beyond, (message.split("; ")[0] if beyond else ""), (stop_reason(message) if beyond else "")
+
+
 def _current_record(hit: dict, case: Case, rung: str, options: dict, key_parts: list) -> dict:
-    """A cached result in the current format (``RECORD``). One written in format 1 (before the range
-    with the tip on the scale was recorded) gains ``contact_boundary_pa`` and is saved again under the
-    same key, once; a current one is returned as it was cached (one written with the field before the
-    format was recorded counts as current)."""
-    if hit.get("record", 2 if "contact_boundary_pa" in hit else 1) >= RECORD:
+    """A cached result in the current format (``RECORD``), upgraded and saved again under the same key
+    once: format 1 (before the range with the tip on the scale was recorded) gains
+    ``contact_boundary_pa``; before format 3 a rung other than fe3d had its boundary from the rung's own
+    solves, now from its answers (fe3d's always were: its ramp checks the body). A current one is
+    returned as it was cached (one written with the field before the format was recorded counts as 2)."""
+    record = hit.get("record", 2 if "contact_boundary_pa" in hit else 1)
+    if record >= RECORD:
         return hit
-    hit = {**hit, "record": RECORD, "contact_boundary_pa": contact_boundary(case, rung, options)}
+    hit = {**hit, "record": RECORD}
+    if record < 2:
+        hit["contact_boundary_pa"] = contact_boundary(case, rung, options)
+    if rung != "fe3d":
+        opts = {**options, "cache": False} if rung == "section" else dict(options)
+        boundary, beyond, first, stop = _answer_boundary(make_model(rung, case.sample, **opts), case)
+        hit.update(boundary_pa=boundary, fails_beyond=beyond, first_failure=first[:300], stop_reason=stop)
     cache.save_json("ladder", LADDER_VERSION, key_parts, hit, rung)
     return hit
 
@@ -193,13 +208,20 @@ def contact_boundary(case: Case, rung: str, options: dict):
     return ramp_boundary(model, case.direction)[0]
 
 
-def ramp_boundary(model, direction) -> tuple[float, bool, str]:
+def ramp_boundary(model, direction, answers: bool = False) -> tuple[float, bool, str]:
     """A ramp of 41 commands along ``direction`` from 0 to the design's max_pressure: the last pressure
-    reached, whether it failed beyond it, and the rung's message."""
+    reached, whether it failed beyond it, and the rung's message. ``answers``: reached means answered
+    by ``predict``, which also refuses a free body bent through itself or its shaft."""
     mags = np.linspace(0.0, model.design.max_pressure, 41)
-    st = model.evaluate(np.outer(mags, direction))
-    n_ok = int(np.argmin(st.converged)) if not st.converged.all() else len(mags)
-    return float(mags[max(n_ok - 1, 0)]), n_ok < len(mags), st.message
+    if answers:
+        preds = predict(model, np.outer(mags, direction))
+        ok = np.array([p.converged for p in preds])
+        message = next((p.reason for p in preds if not p.converged), "")
+    else:
+        st = model.evaluate(np.outer(mags, direction))
+        ok, message = st.converged, st.message
+    n_ok = int(np.argmin(ok)) if not ok.all() else len(mags)
+    return float(mags[max(n_ok - 1, 0)]), n_ok < len(mags), message
 
 
 def stop_reason(message: str) -> str:
