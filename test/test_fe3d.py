@@ -815,3 +815,21 @@ def test_a_ramp_whose_body_reaches_its_shaft_stops_outside_the_model(short_desig
     assert "the tip" in r.message and "shaft" in r.message
     assert [p.load for p in r.points] == [0.0, 1000.0, 2000.0] and r.cuts >= 3
     assert calls[0] >= math.ceil(short_design.length / (0.25 * short_design.outer_diameter)) + 1
+
+
+def test_the_default_mesh_and_element_are_the_converged_set(short_design):
+    """Defaults (fe3d-8): P2 + order-3 bubbles / P1, barrier 0.02 D, the base mesh x 1.4 in the
+    section with 1.2 mm prisms; layer_h None scales the prisms with mesh_size; bad values are one
+    ModelError each, and the cache key follows the prism height."""
+    model = Fe3dModel(short_design, cache=False)
+    base = MeshSettings()
+    assert (model.pressure_order, model.interior_order, model.contact_distance) == (1, 3, 0.02)
+    assert model.mesh_settings.section_h == pytest.approx(1.4 * base.section_h)
+    assert model.mesh_settings.wall_h == pytest.approx(1.4 * base.wall_h)
+    assert model.mesh_settings.layer_h == 1.2e-3
+    scaled = Fe3dModel(short_design, cache=False, mesh_size=2.0, layer_h=None)
+    assert scaled.mesh_settings.layer_h == pytest.approx(2.0 * base.layer_h)
+    assert Fe3dModel(short_design, cache=False, layer_h=2e-3).cache_key != model.cache_key
+    for bad in ({"layer_h": 5.0}, {"layer_h": True}, {"mesh_size": 0.0}, {"mesh_size": 50.0}):
+        with pytest.raises(ModelError, match=next(iter(bad))):
+            Fe3dModel(short_design, cache=False, **bad)

@@ -183,12 +183,16 @@ def test_selection_judges_the_error_over_the_scenes_pressures():
 
 
 def test_a_scene_at_045_bar_picks_a_rung_whose_envelope_covers_it():
-    """The envelope is measured over 0-0.5 bar with lumen contact: a scene to 0.45 bar gets a rung whose
-    measured range and measured pressures reach 0.45 bar; every rung that stops below is refused for it."""
+    """The envelope is measured over 0-0.5 bar with lumen contact: a scene to 0.45 bar on the 3-channel
+    design (40 mm, bent by one channel it stays clear of itself) gets a rung whose measured range and
+    measured pressures reach 0.45 bar, and every rung that stops below is refused for it; the 40 mm
+    implemented_5mm body bends through its shaft from about 0.26 bar, so there every rung is refused
+    by its range."""
     from softcath_ros.core.model_selection import measured_envelope
 
     env = load_envelope()
-    high = scene(pressure_range=[0.0, 45000.0], required_accuracy=0.15, required_rate=100.0)
+    high = scene(design="three_channel_5mm", pressure_range=[0.0, 45000.0], required_accuracy=0.15,
+                 required_rate=100.0)
     sel = select_model(high, env)
     measured = measured_envelope(env["rungs"][sel.rung], high)
     assert measured["valid_pressure_pa"][1] >= 45000.0
@@ -196,8 +200,11 @@ def test_a_scene_at_045_bar_picks_a_rung_whose_envelope_covers_it():
     assert [p for p, e in measured["error_rc_rel_by_pressure_pa"] if p == 45000.0 and e is not None]
     short = [n for n, r in env["rungs"].items()
              if measured_envelope(r, high) and measured_envelope(r, high)["valid_pressure_pa"][1] < 45000.0]
-    assert "fe3d" in short      # without contact fe3d stops at 0.25 bar
+    assert "fe3d" in short      # its ramp stops near 0.36 bar on one channel of three
     assert all(re.search(r"valid over 0..\d+ Pa only", sel.rejected[n]) for n in short)
+    with pytest.raises(ModelError, match="no rung qualifies") as refused:
+        select_model(scene(pressure_range=[0.0, 45000.0], required_accuracy=0.15, required_rate=100.0), env)
+    assert len(re.findall(r"valid over 0..\d+ Pa only", str(refused.value))) >= 4
 
 
 @pytest.mark.slow

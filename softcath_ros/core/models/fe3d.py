@@ -79,10 +79,11 @@ class Fe3dModel(BendModel):
         """``mesh_size`` scales the base mesh (``MeshSettings()``) in the section and, with ``layer_h``
         None, along the body; ``layer_h`` (m) is the prism height along the body; ``mesh`` is an
         explicit ``MeshSettings`` (then ``layer_h`` is its own). The defaults (mesh 1.4, 1.2 mm
-        layers, P2 + bubbles / P1, barrier 0.02 of the lumen diameter) are the converged set. ``step_control``: a continuation ``StepControl`` (adaptive=False is plain
-        load stepping). ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty
-        lumen with a soft solid of this fraction of the silicone's shear modulus (a self-contact
-        proxy that lets short bodies pass the lumen's collapse; core/fe3d/solver.py).
+        layers, P2 + bubbles / P1, barrier 0.02 of the lumen diameter) are the converged set.
+        ``step_control``: a continuation ``StepControl`` (adaptive=False is plain load stepping).
+        ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty lumen with a soft solid
+        of this fraction of the silicone's shear modulus (a self-contact proxy that lets short bodies
+        pass the lumen's collapse; core/fe3d/solver.py).
         ``formulation``: "mixed" (P2 displacement + element-wise pressure, the default) or
         "displacement" (P2 displacement only, which locks for nearly incompressible silicone;
         kept to measure how much a standard element would stiffen the body).
