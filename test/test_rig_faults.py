@@ -302,3 +302,37 @@ def test_a_pressure_source_that_does_not_follow_is_refused_before_the_first_step
     s = _summary(out)
     assert "did not follow a test command within 3 s" in s["error"] and s["completed_steps"] == 0
     assert "starting protocol" not in out
+
+
+@pytest.mark.timeout(240)
+def test_a_bench_node_that_never_spins_is_started_once_more(tmp_path, monkeypatch, capsys):
+    """A bench_node hung before it spins (Fast DDS's start-up hang under load, stood in for by a
+    process that only sleeps) is stopped after BENCH_READY_S and started again; the run completes."""
+    import sys
+
+    from softcath_ros.cli import characterise
+    from softcath_ros.cli import main as softcath
+    from softcath_ros.graph import NodeGraph
+
+    starts = []
+    real_start = NodeGraph.start
+
+    def start(self, node, params=None, extra_ros_args=(), **popen):
+        if node == "bench_node":
+            starts.append(node)
+            if len(starts) == 1:   # the first: says nothing, never spins
+                proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], env=self.env,
+                                        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                self.processes.append((node, proc))
+                return proc
+        return real_start(self, node, params, extra_ros_args, **popen)
+
+    monkeypatch.setattr(NodeGraph, "start", start)
+    monkeypatch.setattr(characterise, "BENCH_READY_S", 3.0)
+    for key, value in private_env().items():
+        monkeypatch.setenv(key, value)
+    code = softcath(["characterise", "--protocol", "quick", "--output-dir", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert len(starts) == 2 and "not spinning after 3 s" in out and "started again" in out
+    assert len(list(tmp_path.glob("bench_quick_*/*.mcap"))) == 1

@@ -52,6 +52,7 @@ CHILD_GRACE_S = {"model_node": 0.0}
 # recording has the model's predictions from the first step (a loaded machine can take many seconds
 # to import); one not spinning by then is said, and the run goes on (bench_node checks the rig itself).
 HELPER_READY_S = 60.0
+BENCH_READY_S = 60.0   # bench_node not spinning by then: started once more
 RIG_CHILD_GRACE_S = 1.5
 
 
@@ -237,27 +238,45 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                 if not _wait_spinning(node, proc, logs / f"{node}.log", HELPER_READY_S):
                     say(f"[characterise] {node} is not spinning after {HELPER_READY_S:g} s (its log: "
                         f"{logs / (node + '.log')}); starting bench_node anyway: the recording may lack its output")
-            bench = graph.start("bench_node", {"protocol": args.protocol, "design": design_arg,
-                                               "model": args.model[0], "output_dir": out_dir, "name": name,
-                                               "wait_timeout": args.wait_timeout})
-            watchdog = threading.Timer(args.timeout, lambda: (timed_out.append(True), stop_process(bench, 15.0)))
-            watchdog.daemon = True
-            watchdog.start()
-            watcher = threading.Thread(target=_watch_children, args=(started, bench, died), daemon=True)
-            watcher.start()
-            say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
-                f"ROS_DOMAIN_ID={graph.domain}")
             blog = _Log(logs / "bench_node.log", say)
             try:
-                for line in bench.stdout:
-                    blog.write(line)
-                    lines.append(line.rstrip())
-                    if "[softcath_bench]" in line or line.startswith("recording:"):
-                        say("  " + line.rstrip().split("]: ")[-1])
+                for attempt in (1, 2):
+                    bench = graph.start("bench_node", {"protocol": args.protocol, "design": design_arg,
+                                                       "model": args.model[0], "output_dir": out_dir, "name": name,
+                                                       "wait_timeout": args.wait_timeout})
+                    watchdog = threading.Timer(args.timeout,
+                                               lambda b=bench: (timed_out.append(True), stop_process(b, 15.0)))
+                    watchdog.daemon = True
+                    watchdog.start()
+                    # A bench_node whose DDS participant hangs at start-up (seen under load) says nothing
+                    # and records nothing: stopped and started once more.
+                    spinning, stalled = threading.Event(), threading.Event()
+                    guard = threading.Timer(BENCH_READY_S, lambda b=bench: None if spinning.is_set() or b.poll()
+                                            is not None else (stalled.set(), stop_process(b, 5.0)))
+                    guard.daemon = True
+                    if attempt == 1:
+                        guard.start()
+                    watcher = threading.Thread(target=_watch_children, args=(started, bench, died), daemon=True)
+                    watcher.start()
+                    say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
+                        f"ROS_DOMAIN_ID={graph.domain}")
+                    for line in bench.stdout:
+                        blog.write(line)
+                        lines.append(line.rstrip())
+                        if READY_MARK in line:
+                            spinning.set()
+                        if "[softcath_bench]" in line or line.startswith("recording:"):
+                            say("  " + line.rstrip().split("]: ")[-1])
+                    bench.wait()
+                    guard.cancel()
+                    watchdog.cancel()
+                    if not (stalled.is_set() and not spinning.is_set() and not timed_out and not died):
+                        break
+                    say(f"[characterise] bench_node was not spinning after {BENCH_READY_S:g} s (a DDS start-up "
+                        "hang); stopped and started again")
+                    lines.clear()
             finally:
                 blog.close()
-            bench.wait()
-            watchdog.cancel()
         except (Stopped, KeyboardInterrupt) as exc:
             stopped.append(exc.signum if isinstance(exc, Stopped) else int(signal.SIGINT))
             if threading.current_thread() is threading.main_thread():
