@@ -249,10 +249,12 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                     watchdog.daemon = True
                     watchdog.start()
                     # A bench_node whose DDS participant hangs at start-up (seen under load) says nothing
-                    # and records nothing: stopped and started once more.
+                    # and has not made its recording's folder: stopped and started once more. (One that
+                    # made it is only slow, and is waited for.)
                     spinning, stalled = threading.Event(), threading.Event()
                     guard = threading.Timer(BENCH_READY_S, lambda b=bench: None if spinning.is_set() or b.poll()
-                                            is not None else (stalled.set(), stop_process(b, 5.0)))
+                                            is not None or (out_dir / name).exists()
+                                            else (stalled.set(), stop_process(b, 5.0)))
                     guard.daemon = True
                     if attempt == 1:
                         guard.start()
