@@ -425,7 +425,7 @@ def envelope_document(rows: list[dict], measured: str) -> dict:
             designs[design] = entry
         rungs[rung] = {"setting": label, "capabilities": list(rung_info(rung).models),
                        "designs": designs}
-    refs = sorted({r["reference"] for r in rows})
+    refs = sorted({r["reference"] for r in rows if r["reference"]})   # a point with no reference names none
     return {"reference": " / ".join(refs), "measured": measured,
            "loadavg": list(os.getloadavg()),
            "note": "written by `softcath envelope`; read by core/model_selection.py (model: auto). "
