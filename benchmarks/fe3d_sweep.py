@@ -34,13 +34,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import fe3d_solver_log, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
-from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_INTERIOR_ORDER,  # noqa: E402
-                                            DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel)
+                                            DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel,
+                                            mesh_settings)
 from softcath_ros.core.prediction import angle_per_length  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     ap.add_argument("--length", type=float, default=0.040, help="m")
     ap.add_argument("--to", type=float, default=0.20, help="bar")
     ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
-    ap.add_argument("--mesh-size", type=float, default=None,
+    ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE,
                     help=f"scale of the base mesh in the section (smaller = finer; default {DEFAULT_MESH_SIZE})")
     ap.add_argument("--fixed-steps", type=float, default=None,
                     help="step control off: plain load steps of this size (bar), no cutting, no predictor")
@@ -109,15 +109,14 @@ def main(argv=None) -> int:
         interior = None if args.interior_order.lower() == "none" else int(args.interior_order)
     except ValueError:
         ap.error(f"--layer-h {args.layer_h} / --interior-order {args.interior_order}: a number, 'scaled' / 'none'")
-    if args.mesh_size is None:
-        args.mesh_size = DEFAULT_MESH_SIZE
-    for flag, v in (("--lumen-h", args.lumen_h), ("--layer-h", layer_h), ("--mesh-size", args.mesh_size)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            ap.error(f"{flag} {v}: must be a positive length (m) or scale")
-    # the explicit edge lengths hold as given (m), after the scaling
-    mesh = MeshSettings().scaled(args.mesh_size)
-    mesh = dataclasses.replace(mesh, **{k: v for k, v in (("lumen_h", args.lumen_h), ("layer_h", layer_h))
-                                        if v is not None})
+    if args.lumen_h is not None and not (math.isfinite(args.lumen_h) and args.lumen_h > 0):
+        ap.error(f"--lumen-h {args.lumen_h}: must be a positive length (m)")
+    try:   # the rung's own mesh; an explicit lumen edge holds as given (m), after the scaling
+        mesh = mesh_settings(args.mesh_size, layer_h)
+    except ModelError as exc:
+        ap.error(str(exc))
+    if args.lumen_h is not None:
+        mesh = dataclasses.replace(mesh, lumen_h=args.lumen_h)
     newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
                             **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
     if args.debug:

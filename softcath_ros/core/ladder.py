@@ -110,9 +110,7 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     hit = None if refresh else cache.load_json("ladder", LADDER_VERSION, key_parts, rung)
     if hit is not None:
         return _current_record(hit, case, rung, options, key_parts)
-    opts = dict(options)
-    if rung == "section":
-        opts["cache"] = False   # cold: the time is the solver's
+    opts = _solver_options(rung, options)
     load0 = os.getloadavg()[0]
     model = make_model(rung, design, **opts)
     t0 = time.perf_counter()
@@ -154,6 +152,11 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
     return out
 
 
+def _solver_options(rung: str, options: dict) -> dict:
+    """The options a rung is measured with: the section rung cold (its time is the solver's)."""
+    return {**options, "cache": False} if rung == "section" else dict(options)
+
+
 def _answer_boundary(model, case: Case) -> tuple[float, bool, str, str]:
     """The free-bending failure boundary of a rung other than fe3d: where its answers end on a ramp to
     max_pressure (``ramp_boundary`` through ``predict``), whether it fails beyond, the first failure and
@@ -175,8 +178,8 @@ def _current_record(hit: dict, case: Case, rung: str, options: dict, key_parts: 
     if record < 2:
         hit["contact_boundary_pa"] = contact_boundary(case, rung, options)
     if rung != "fe3d":
-        opts = {**options, "cache": False} if rung == "section" else dict(options)
-        boundary, beyond, first, stop = _answer_boundary(make_model(rung, case.sample, **opts), case)
+        boundary, beyond, first, stop = _answer_boundary(make_model(rung, case.sample,
+                                                                    **_solver_options(rung, options)), case)
         hit.update(boundary_pa=boundary, fails_beyond=beyond, first_failure=first[:300], stop_reason=stop)
     cache.save_json("ladder", LADDER_VERSION, key_parts, hit, rung)
     return hit

@@ -36,6 +36,21 @@ DEFAULT_PRESSURE_ORDER = 1        # P2 + interior bubbles / P1
 DEFAULT_INTERIOR_ORDER = 3
 
 
+def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = DEFAULT_LAYER_H):
+    """The rung's mesh: the base ``MeshSettings()`` scaled by ``mesh_size``, its prisms ``layer_h`` high
+    (m; None: scaled too). ModelError (one line) for a value out of range."""
+    from ..fe3d.mesh import MeshSettings
+
+    if isinstance(mesh_size, bool) or not 0.1 <= float(mesh_size) <= 10.0:
+        raise ModelError(f"fe3d: mesh_size = {mesh_size!r} must be a number in [0.1, 10]")
+    mesh = MeshSettings().scaled(float(mesh_size))
+    if layer_h is None:
+        return mesh
+    if isinstance(layer_h, bool) or not 2e-4 <= float(layer_h) <= 2e-2:
+        raise ModelError(f"fe3d: layer_h = {layer_h!r} must be a prism height in metres in [2e-4, 2e-2], or None")
+    return replace(mesh, layer_h=float(layer_h))
+
+
 class Fe3dModel(BendModel):
     name = "fe3d"
     solver_version = "fe3d-8"   # bump when a change alters results, so old cache entries are not reused
@@ -108,20 +123,11 @@ class Fe3dModel(BendModel):
         except ImportError as exc:
             raise ModelError("model 'fe3d' needs NGSolve: pip install 'softcath_ros[fe]' "
                              f"(or pip install ngsolve) ({exc})") from None
-        from ..fe3d.mesh import MeshSettings, can_use_half_model
+        from ..fe3d.mesh import can_use_half_model
         from ..fe3d.ramp import default_step_control
         from ..fe3d.solver import NewtonSettings, check_element
 
-        if mesh is None:
-            if isinstance(mesh_size, bool) or not 0.1 <= float(mesh_size) <= 10.0:
-                raise ModelError(f"fe3d: mesh_size = {mesh_size!r} must be a number in [0.1, 10]")
-            mesh = MeshSettings().scaled(float(mesh_size))
-            if layer_h is not None:
-                if isinstance(layer_h, bool) or not 2e-4 <= float(layer_h) <= 2e-2:
-                    raise ModelError(f"fe3d: layer_h = {layer_h!r} must be a prism height in metres in "
-                                     "[2e-4, 2e-2], or None")
-                mesh = replace(mesh, layer_h=float(layer_h))
-        self.mesh_settings = mesh
+        self.mesh_settings = mesh if mesh is not None else mesh_settings(mesh_size, layer_h)
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
