@@ -77,7 +77,7 @@ def main(argv=None) -> int:
     ap.add_argument("--stall", type=int, default=None,
                     help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
     ap.add_argument("--max-step", type=float, default=None,
-                    help="StepControl.max_step, bar (the adaptive ramp's largest step; default 0.02 bar)")
+                    help="StepControl.max_step, bar (the adaptive ramp's largest step; default 0.025 bar)")
     ap.add_argument("--no-retry", action="store_true",
                     help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")

@@ -56,7 +56,7 @@ class StepControl:
     initial_step: float
     max_step: float
     min_step: float
-    grow: float = 1.5                # after an easy step (fewer than target_iterations)
+    grow: float = 1.5                # after an easy step (an effort below target_iterations)
     shrink: float = 0.5              # after a failed attempt
     target_iterations: int = 4
     adaptive: bool = True            # False: fixed steps of initial_step, no cutting (stability studies)
@@ -77,6 +77,8 @@ class Correction:
     outside_domain: bool = False     # the solve converged but the state is outside the model's
                                      # validity (e.g. self-contact): another predictor will not help
     stop_reason: str = ""            # one of the reasons above when the corrector knows it
+    effort: float | None = None      # how hard the solve was, in full iterations, for the step size
+                                     # (None: ``iterations``; e.g. cheaper iterations weighted less)
 
 
 @dataclass
@@ -150,7 +152,8 @@ def ramp(corrector: Callable[[Any, float, Any], Correction], state0, checkpoints
                 result.last_load, result.last_state = t, state
                 if on_step is not None:
                     on_step(t, corr)
-                if control.adaptive and corr.iterations < control.target_iterations:
+                effort = corr.iterations if corr.effort is None else corr.effort
+                if control.adaptive and effort < control.target_iterations:
                     step = min(control.max_step, step * control.grow)
                 continue
             result.cuts += 1

@@ -51,6 +51,10 @@ BEHIND_LOW, BEHIND_HIGH = -2.0, -1.0
 NEAR_LOW, NEAR_HIGH = 0.25, 0.5
 # a converged state may cross by at most TOLERANCE d_hat between the barrier's quadrature points
 TOLERANCE = 0.5
+# the pair search is skipped while every section's wall keeps at least FAR d_hat between points two
+# edges apart along it (min_gap): a pair weighs in only with its partner within d_hat along the normal
+# and OFF_HIGH d_hat beside it, so no search there can find a pair the energy counts
+FAR = 6.0
 # wall points per mesh edge of the lumen wall in the geometric gap check: its chords cut the
 # curved wall, most at a shoulder folded tight; at the 20 mm default mesh's 0.2397 bar state
 # 4 per edge read a crossing of 6.5 um, 8 / 16 / 32 read 5.2 / 0.85 / 0.82 um (0.1 s per check at 16)
@@ -161,6 +165,11 @@ class LumenContact:
         self.force_boundary.AddEnergy(energy)
         self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
+        self.far = FAR * self.d_hat
+        # True while the pairs held count nothing: none searched yet, or the last search was made
+        # with the walls far apart (then skipping a search changes no energy, gradient or tangent)
+        self.pairs_idle = True
+        self.searches = self.skipped = 0
         self._wall, self._gap, self._ref, self._paired = wall, gap, ref, paired
         self._census = None   # pair_census's forms, built on its first call (diagnosis only)
 
@@ -183,11 +192,23 @@ class LumenContact:
                     self._census.append((kind, what, cb, ng.BilinearForm(self.problem.fes)))
         return self._census
 
-    def update(self) -> None:
-        """Search the contact pairs for the current displacement (before each Newton iteration)."""
+    def update(self, gap: float | None = None) -> bool:
+        """Search the contact pairs for the current displacement (before each Newton iteration),
+        unless the walls are far apart (``min_gap``, or ``gap`` when the caller has it for this
+        state, above ``far``) and the pairs held count nothing, where a search cannot change the
+        problem (it costs as much as a factorisation). Returns whether it searched."""
+        if gap is None:
+            gap = self.min_gap()
+        far = gap > self.far
+        if far and self.pairs_idle:
+            self.skipped += 1
+            return False
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         if self.backtrack_on_overlap:
             self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+        self.pairs_idle = far
+        self.searches += 1
+        return True
 
     def force_norm(self, free) -> float:
         """Euclidean norm over the ``free`` unknowns of the contact's nodal forces (N) on the pairs of
@@ -208,6 +229,7 @@ class LumenContact:
         primary, ignored by the energy) the model's wall area (m^2), its centroid (m) and mean
         gap (m)."""
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
+        self.pairs_idle = False   # (not known: the next update searches)
         raw: dict = {}
         for kind, what, cb, form in self._census_forms():
             cb.Update(self.problem.u, form, self.intorder, self.maxdist, other=self.boundary)
