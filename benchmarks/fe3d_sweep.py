@@ -179,6 +179,9 @@ def main(argv=None) -> int:
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,
             "newton_iterations_total": ramp.iterations if ramp else 0,
+            "factorisations": model.problem.factorizations,
+            "pair_searches": model.problem.contact.searches if model.problem.contact else None,
+            "pair_searches_skipped": model.problem.contact.skipped if model.problem.contact else None,
             "note": "wall clock on a 2-core machine shared with other jobs (load average in meta)"}
     path = write_results(args.name, meta, rows)
     print(f"{args.name}: {total:.1f} s, peak {peak_mb:.0f} MB, {ndof} DOF, converged={meta['converged']} "

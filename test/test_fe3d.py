@@ -826,10 +826,16 @@ def test_a_ramp_whose_body_reaches_its_shaft_stops_outside_the_model(short_desig
 
 
 def test_the_default_mesh_and_element_are_the_converged_set(short_design):
-    """Defaults (fe3d-8): P2 + order-3 bubbles / P1, barrier 0.02 D, the base mesh x 1.4 in the
-    section with 1.2 mm prisms; layer_h None scales the prisms with mesh_size; bad values are one
-    ModelError each, and the cache key follows the prism height."""
+    """Defaults (fe3d-8, the element and mesh kept by fe3d-9): P2 + order-3 bubbles / P1, barrier
+    0.02 D, the base mesh x 1.4 in the section with 1.2 mm prisms; layer_h None scales the prisms
+    with mesh_size; bad values are one ModelError each, and the cache key follows the prism height.
+    fe3d-9's ramp: reused factorisations, the stall and cut rules, steps up to 0.025 bar, no retry
+    from the last state, body-reach stops located to 250 Pa."""
     model = Fe3dModel(short_design, cache=False)
+    assert model.newton_settings.reuse_ratio == 0.25 and model.newton_settings.stall_iterations == 4
+    assert model.newton_settings.cut_iterations == 3
+    steps = model.step_control
+    assert (steps.max_step, steps.domain_step, steps.retry_from_last) == (2500.0, 250.0, False)
     base = MeshSettings()
     assert (model.pressure_order, model.interior_order, model.contact_distance) == (1, 3, 0.02)
     assert model.mesh_settings.section_h == pytest.approx(1.4 * base.section_h)

@@ -53,9 +53,11 @@ def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = 
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-8"   # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-9"   # bump when a change alters results, so old cache entries are not reused
                                 # (7: a ramp stops where the body reaches itself or its shaft;
-                                # 8: the default element, mesh and barrier distance)
+                                # 8: the default element, mesh and barrier distance; 9: Newton reuses
+                                # factorisations, the ramp's steps and stops: the same states to
+                                # Newton's tolerance, its stops located differently)
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
