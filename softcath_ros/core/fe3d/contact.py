@@ -192,14 +192,12 @@ class LumenContact:
                     self._census.append((kind, what, cb, ng.BilinearForm(self.problem.fes)))
         return self._census
 
-    def update(self, gap: float | None = None) -> bool:
+    def update(self) -> bool:
         """Search the contact pairs for the current displacement (before each Newton iteration),
-        unless the walls are far apart (``min_gap``, or ``gap`` when the caller has it for this
-        state, above ``far``) and the pairs held count nothing, where a search cannot change the
-        problem (it costs as much as a factorisation). Returns whether it searched."""
-        if gap is None:
-            gap = self.min_gap()
-        far = gap > self.far
+        unless the walls are far apart (``min_gap`` above ``far``) and the pairs held count
+        nothing, where a search cannot change the problem (it costs about as much as a
+        factorisation). Returns whether it searched."""
+        far = self.min_gap() > self.far
         if far and self.pairs_idle:
             self.skipped += 1
             return False

@@ -27,7 +27,7 @@ def default_step_control(adaptive: bool = True, step: float = 1000.0) -> StepCon
     largest step is the benchmarks' checkpoint spacing (0.025 bar), so easy stretches take one
     step per checkpoint; a stop outside the model's validity (the body reaching itself or its
     shaft) is located to DOMAIN_STEP. A failed step is cut at once, not tried again from the last
-    state: on the 20 mm default ramp those second tries all failed too and took 60 % of its time."""
+    state: on the 20 mm default ramp every such second try failed as well."""
     return StepControl(initial_step=step, max_step=2500.0, min_step=20.0, grow=1.6, shrink=0.5,
                        target_iterations=5, adaptive=adaptive, domain_step=DOMAIN_STEP, retry_from_last=False)
 

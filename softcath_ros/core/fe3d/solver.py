@@ -69,11 +69,12 @@ class NewtonSettings:
     cut_iterations: int | None = 3
     # reuse a solve's factorisation while Newton contracts with it: after its first iteration
     # (always factorised), an iteration solves with the tangent of an earlier iterate of the same
-    # solve (at most reuse_age iterations old); the step is kept when the residual norm falls to
-    # at most reuse_ratio of its value at the step's start, else the solve goes back there and
-    # takes Newton's own step (a fresh factorisation), as it does at once when the reused step is
-    # no descent or not admissible (an inverted element, crossing walls). Convergence is tested
-    # as before. None: a factorisation at every iteration.
+    # solve (at most reuse_age iterations old) and keeps that increment while its |du.r| is at
+    # most reuse_ratio of the last step's; else it takes Newton's own step (a fresh factorisation),
+    # from the start of the last step when that step was the reused one, and at once when the
+    # reused step is no descent or not admissible (an inverted element, crossing walls). A solve
+    # ends on a reused factorisation only at REUSED_TOLERANCE of the tolerance. None: a
+    # factorisation at every iteration.
     reuse_ratio: float | None = 0.25
     reuse_age: int = 8
 
