@@ -38,8 +38,8 @@ from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
-from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_INTERIOR_ORDER,  # noqa: E402
-                                            DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel,
+from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_CONTACT_INTORDER,  # noqa: E402
+                                            DEFAULT_INTERIOR_ORDER, DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel,
                                             mesh_settings)
 from softcath_ros.core.prediction import angle_per_length  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
@@ -70,6 +70,8 @@ def main(argv=None) -> int:
                          "scaled by --mesh-size")
     ap.add_argument("--order", type=int, default=DEFAULT_PRESSURE_ORDER,
                     help=f"element pressure's order (0: P2/P0; 1: P2/P1; default {DEFAULT_PRESSURE_ORDER})")
+    ap.add_argument("--contact-intorder", type=int, default=DEFAULT_CONTACT_INTORDER,
+                    help=f"quadrature order of the lumen contact on the wall (default {DEFAULT_CONTACT_INTORDER})")
     ap.add_argument("--interior-order", default=str(DEFAULT_INTERIOR_ORDER),
                     help=f"condensed interior bubbles of this order added to P2 (default {DEFAULT_INTERIOR_ORDER}; "
                          "'none': plain P2)")
@@ -124,7 +126,8 @@ def main(argv=None) -> int:
     try:
         model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
                           tangent_predictor=args.fixed_steps is None, threads=args.threads,
-                          pressure_order=args.order, interior_order=interior, **contact)
+                          pressure_order=args.order, interior_order=interior,
+                          contact_intorder=args.contact_intorder, **contact)
     except ModelError as exc:   # a bad option, as one line
         ap.error(str(exc))
     t0 = time.perf_counter()
@@ -175,6 +178,7 @@ def main(argv=None) -> int:
             "stop_reason": ramp.stop_reason if ramp else "",
             "contact_distance": model.contact_distance, "lumen_h": args.lumen_h, "layer_h": layer_h,
             "pressure_order": model.pressure_order, "interior_order": model.interior_order,
+            "contact_intorder": model.contact_intorder,
             "newton": dataclasses.asdict(model.newton_settings),
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,

@@ -317,6 +317,33 @@ def test_polygon_gap_equals_the_all_pairs_check(seed, squeeze, m, skip):
     assert polygon_gap(P, skip) == _polygon_gap_all_pairs(P, skip)
 
 
+def test_lumen_gap_check_reads_each_state_once_and_as_located_point_by_point(short_design):
+    """The gap check's wall points, located in the mesh once, deform as the displacement evaluated
+    ring by ring at freshly located points; min_gap answers for the state it is asked at (the
+    memo of the last state is dropped when the state changes: bending narrows the lumen)."""
+    from softcath_ros.core.fe3d.contact import min_wall_gap
+    from softcath_ros.core.fe3d.measure import _evaluate
+
+    from softcath_ros.core.fe3d.ramp import run_ramp
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1).problem
+    lc = pb.contact
+    gap0 = lc.min_gap()
+    ramp = run_ramp(pb, [1.0], [20000.0])   # bent: the lumen narrows
+    assert ramp.converged, ramp.message
+    sampling = lc._sampling
+    batch = sampling.deformed(pb)
+    ring = sampling.ring
+    for k, zk in enumerate(sampling.levels):
+        ref = np.column_stack([ring, np.full(len(ring), zk)])
+        np.testing.assert_allclose(batch[k, 0], ref + _evaluate(pb, ref), rtol=0, atol=1e-15)
+    gap1 = lc.min_gap()
+    assert gap1 == min_wall_gap(pb, sampling)
+    assert 0.0 < gap1 < gap0
+    pb.set_state(np.zeros(pb.fes.ndof))
+    assert lc.min_gap() == gap0
+
+
 def test_lumen_wall_stretch_reads_a_homogeneous_deformation(short_design):
     """lumen_wall_stretch (the creasing diagnostic): under u = ((s - 1) x, (s - 1)(y - y_c), (a - 1) z)
     the lumen wall's hoop stretch is s and its axial stretch a everywhere; the smaller is the
@@ -398,6 +425,12 @@ def test_contact_option_checked(short_design):
     a = Fe3dModel(short_design, mesh=COARSE)
     b = Fe3dModel(short_design, mesh=COARSE, contact_distance=0.03)
     assert a.cache_key != b.cache_key
+    for bad in (1, 13, 6.0, True):
+        with pytest.raises(ModelError, match="contact_intorder"):
+            Fe3dModel(short_design, mesh=COARSE, contact_intorder=bad)
+    c = Fe3dModel(short_design, mesh=COARSE, contact_intorder=6)
+    assert c.problem.contact.intorder == 6 and a.problem.contact.intorder == 8
+    assert c.cache_key != a.cache_key
 
 
 @pytest.mark.slow

@@ -165,6 +165,7 @@ class LumenContact:
         self.force_boundary.AddEnergy(energy)
         self.force_form = ng.BilinearForm(problem.fes)
         self._sampling = wall_sampling(problem)
+        self._gap_of = None   # (state, min_gap there): the last state asked about
         self.far = FAR * self.d_hat
         # True while the pairs held count nothing: none searched yet, or the last search was made
         # with the walls far apart (then skipping a search changes no energy, gradient or tangent)
@@ -242,13 +243,39 @@ class LumenContact:
         """The smallest distance (m) between two wall points of one section that are not
         neighbours along the wall, over every section of the mesh; negative (minus the
         depth of the deepest crossing point) when a section's wall crosses itself."""
-        return min_wall_gap(self.problem, self._sampling)
+        state = self.problem.gf.vec.FV().NumPy()
+        if self._gap_of is None or not np.array_equal(state, self._gap_of[0]):
+            # (a Newton step's admissibility check and the next iteration's search ask at one state)
+            self._gap_of = (state.copy(), min_wall_gap(self.problem, self._sampling))
+        return self._gap_of[1]
 
 
-def wall_sampling(problem):
-    """Reference points of the lumen wall, per mesh level: SAMPLES points per wall edge of the
-    section, in order around the lumen (the half model's half wall mirrored later), and the
-    reference arc length of each, for excluding neighbours along the wall."""
+class WallSampling:
+    """Reference points of the lumen wall for the geometric gap check: ``ring`` (n, 2), SAMPLES
+    points per wall edge of the section in order around the lumen (the half model's half wall,
+    mirrored later), ``levels`` the mesh levels' z (m), and per level three rings stacked in
+    ``ref`` (m): at the level and a quarter layer above and below it (the deformed axis there). The
+    points are located in the mesh once (``located``): locating them cost ten times evaluating
+    the displacement there."""
+
+    def __init__(self, ring: np.ndarray, levels: np.ndarray, length: float):
+        self.ring, self.levels = ring, np.asarray(levels, dtype=float)
+        dz = 0.25 * (self.levels[1] - self.levels[0]) if len(self.levels) > 1 else 1e-4
+        zs = np.column_stack([self.levels, np.minimum(self.levels + dz, length), np.maximum(self.levels - dz, 0.0)])
+        n = len(ring)
+        self.ref = np.column_stack([np.tile(ring, (zs.size, 1)), np.repeat(zs.ravel(), n)])
+        self.located = None
+
+    def deformed(self, problem) -> np.ndarray:
+        """(levels, 3, n, 3): the deformed points (m) of the rings at, above and below each level."""
+        if self.located is None:
+            self.located = problem.mesh(self.ref[:, 0], self.ref[:, 1], self.ref[:, 2])
+        cur = self.ref + np.asarray(problem.u(self.located)).reshape(len(self.ref), 3)
+        return cur.reshape(len(self.levels), 3, len(self.ring), 3)
+
+
+def wall_sampling(problem) -> WallSampling:
+    """The lumen wall's WallSampling for ``problem``."""
     from .measure import lumen_wall_nodes
 
     pts, levels = lumen_wall_nodes(problem)
@@ -259,35 +286,28 @@ def wall_sampling(problem):
     ring = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
     if not closed:
         ring = np.vstack([ring, pts[-1:]])
-    return ring, levels
+    return WallSampling(ring, levels, problem.design.length)
 
 
-def _deformed_ring(problem, ring, zk):
-    from .measure import _evaluate
-
-    ref = np.column_stack([ring, np.full(len(ring), zk)])
-    cur = ref + _evaluate(problem, ref)
-    if problem.half:   # the mirrored half closes the wall
+def _closed_ring(problem, cur: np.ndarray) -> np.ndarray:
+    """A deformed ring (n, 3) closed by its mirror image on the half model."""
+    if problem.half:
         back = cur[::-1].copy()
         back[:, 0] *= -1.0
         cur = np.vstack([cur, back[1:-1]])
     return cur
 
 
-def min_wall_gap(problem, sampling) -> float:
+def min_wall_gap(problem, sampling: WallSampling) -> float:
     """See LumenContact.min_gap. Each deformed section ring is projected onto the plane normal
     to the deformed axis there; crossings are found with the section rung's polygon test."""
-    ring, levels = sampling
-    length = problem.design.length
     best = math.inf
-    for zk in levels:
-        cur = _deformed_ring(problem, ring, zk)
+    for rings in sampling.deformed(problem):
+        cur, above, below = (_closed_ring(problem, r) for r in rings)
         centre = cur.mean(axis=0)
         # the deformed section's plane: normal to the body's deformed axis there (a best-fit
         # plane would tilt out of a closed slit, whose points are nearly on one curve)
-        dz = 0.25 * (levels[1] - levels[0]) if len(levels) > 1 else 1e-4
-        lo, hi = max(zk - dz, 0.0), min(zk + dz, length)
-        axis = (_deformed_ring(problem, ring, hi) - _deformed_ring(problem, ring, lo)).mean(axis=0)
+        axis = (above - below).mean(axis=0)
         axis /= np.linalg.norm(axis)
         e1 = np.array([1.0, 0.0, 0.0]) - axis[0] * axis
         e1 /= np.linalg.norm(e1)

@@ -34,6 +34,7 @@ DEFAULT_MESH_SIZE = 1.4           # of the base MeshSettings, in the section
 DEFAULT_LAYER_H = 1.2e-3          # prism height along the body, m
 DEFAULT_PRESSURE_ORDER = 1        # P2 + interior bubbles / P1
 DEFAULT_INTERIOR_ORDER = 3
+DEFAULT_CONTACT_INTORDER = 8      # quadrature order of the lumen contact on the wall (its pair search's points)
 
 
 def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = DEFAULT_LAYER_H):
@@ -84,7 +85,9 @@ class Fe3dModel(BendModel):
                                                          "the lumen diameter (default 0.02; None: off)"),
                  Option("pressure_order", "int", "the element pressure's order: 0 (P2/P0) or 1 (P2/P1, default)"),
                  Option("interior_order", "int", "add condensed element-interior displacement bubbles of this "
-                                                 "order (>= 3) to P2 (default 3; None: none)")))
+                                                 "order (>= 3) to P2 (default 3; None: none)"),
+                 Option("contact_intorder", "int", "quadrature order of the lumen contact on the wall: its "
+                                                   "pairs are searched at those points (default 8, 2-12)")))
 
     def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
@@ -92,7 +95,8 @@ class Fe3dModel(BendModel):
                  lumen_fill: float | None = None, formulation: str = "mixed",
                  reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
                  mirror_mesh: bool = False, pressure_order: int = DEFAULT_PRESSURE_ORDER,
-                 interior_order: int | None = DEFAULT_INTERIOR_ORDER, layer_h: float | None = DEFAULT_LAYER_H):
+                 interior_order: int | None = DEFAULT_INTERIOR_ORDER, layer_h: float | None = DEFAULT_LAYER_H,
+                 contact_intorder: int = DEFAULT_CONTACT_INTORDER):
         """``mesh_size`` scales the base mesh (``MeshSettings()``) in the section and, with ``layer_h``
         None, along the body; ``layer_h`` (m) is the prism height along the body; ``mesh`` is an
         explicit ``MeshSettings`` (then ``layer_h`` is its own). The defaults (mesh 1.4, 1.2 mm
@@ -118,7 +122,9 @@ class Fe3dModel(BendModel):
         ``pressure_order``, ``interior_order``: the element (Fe3dProblem): by default P2 with order-3
         interior bubbles and a P1 pressure, the element that passes the lumen shoulders' fold to
         0.35 bar at 20 mm; P2/P0 (``pressure_order=0, interior_order=None``), the former default,
-        stops near 0.23 bar there (docs/models/fe3d.md)."""
+        stops near 0.23 bar there (docs/models/fe3d.md). ``contact_intorder``: the contact's
+        quadrature order on the lumen wall; the pair search, at every such point, is a large part
+        of a Newton iteration in contact (docs/models/fe3d.md, "Newton and the ramp")."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -148,6 +154,9 @@ class Fe3dModel(BendModel):
         except ValueError as exc:
             raise ModelError(f"fe3d: {exc}") from None
         self.pressure_order, self.interior_order = pressure_order, interior_order
+        if isinstance(contact_intorder, bool) or not isinstance(contact_intorder, int) or not 2 <= contact_intorder <= 12:
+            raise ModelError(f"fe3d: contact_intorder = {contact_intorder!r} must be an integer in 2..12")
+        self.contact_intorder = contact_intorder
         if self.mirror_mesh and self.half is True:
             raise ModelError("fe3d: mirror_mesh meshes the full body: it needs half = False")
         self.store = store_for(cache)
@@ -166,7 +175,9 @@ class Fe3dModel(BendModel):
                              {"contact_distance": self.contact_distance},
                              *([] if not self.mirror_mesh else [{"mirror_mesh": True}]),
                              *([] if pressure_order == 0 else [{"pressure_order": pressure_order}]),
-                             *([] if interior_order is None else [{"interior_order": interior_order}])]
+                             *([] if interior_order is None else [{"interior_order": interior_order}]),
+                             *([] if contact_intorder == DEFAULT_CONTACT_INTORDER else
+                               [{"contact_intorder": contact_intorder}])]
         self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
@@ -217,7 +228,8 @@ class Fe3dModel(BendModel):
             problem = Fe3dProblem(design, self.mesh_settings, self.newton_settings, half,
                                   lumen_fill=self.lumen_fill, formulation=self.formulation,
                                   reinforcement=self.reinforcement, contact_distance=self.contact_distance,
-                                  pressure_order=self.pressure_order, interior_order=self.interior_order)
+                                  pressure_order=self.pressure_order, interior_order=self.interior_order,
+                                  contact_intorder=self.contact_intorder)
             problem.rotation = turn   # measure() turns its results back into the design's frame
             self._problems[key] = problem
         return self._problems[key]
