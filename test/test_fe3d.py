@@ -428,8 +428,8 @@ def test_contact_option_checked(short_design):
     for bad in (1, 13, 6.0, True):
         with pytest.raises(ModelError, match="contact_intorder"):
             Fe3dModel(short_design, mesh=COARSE, contact_intorder=bad)
-    c = Fe3dModel(short_design, mesh=COARSE, contact_intorder=6)
-    assert c.problem.contact.intorder == 6 and a.problem.contact.intorder == 8
+    c = Fe3dModel(short_design, mesh=COARSE, contact_intorder=4)
+    assert c.problem.contact.intorder == 4 and a.problem.contact.intorder == 6
     assert c.cache_key != a.cache_key
 
 

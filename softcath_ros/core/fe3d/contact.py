@@ -55,6 +55,10 @@ TOLERANCE = 0.5
 # edges apart along it (min_gap): a pair weighs in only with its partner within d_hat along the normal
 # and OFF_HIGH d_hat beside it, so no search there can find a pair the energy counts
 FAR = 6.0
+# the contact's quadrature order on the lumen wall: the barrier is integrated, and the pairs searched,
+# at these points. 6 since fe3d-10 (8 before): on the 20 mm ramp R_C within 0.06 % of order 8 at every
+# checkpoint to 0.325 bar, the pair search 40 % cheaper (docs/models/fe3d.md, "Newton and the ramp")
+INTORDER = 6
 # wall points per mesh edge of the lumen wall in the geometric gap check: its chords cut the
 # curved wall, most at a shoulder folded tight; at the 20 mm default mesh's 0.2397 bar state
 # 4 per edge read a crossing of 6.5 um, 8 / 16 / 32 read 5.2 / 0.85 / 0.82 um (0.1 s per check at 16)
@@ -93,7 +97,7 @@ def smooth_step_cf(t):
 class LumenContact:
     """The lumen wall's self-contact term added to a problem's BilinearForm."""
 
-    def __init__(self, problem, distance: float, intorder: int = 8):
+    def __init__(self, problem, distance: float, intorder: int = INTORDER):
         """``distance``: the barrier distance d_hat, m."""
         import ngsolve as ng
 

@@ -24,6 +24,7 @@ import numpy as np
 from ..cache import CacheStore, store_for
 from ..design import Design
 from ..errors import ModelError
+from ..fe3d.contact import INTORDER
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
 
@@ -34,7 +35,7 @@ DEFAULT_MESH_SIZE = 1.4           # of the base MeshSettings, in the section
 DEFAULT_LAYER_H = 1.2e-3          # prism height along the body, m
 DEFAULT_PRESSURE_ORDER = 1        # P2 + interior bubbles / P1
 DEFAULT_INTERIOR_ORDER = 3
-DEFAULT_CONTACT_INTORDER = 8      # quadrature order of the lumen contact on the wall (its pair search's points)
+DEFAULT_CONTACT_INTORDER = INTORDER   # quadrature order of the lumen contact on the wall (its pair search's points)
 
 
 def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = DEFAULT_LAYER_H):
@@ -54,11 +55,12 @@ def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = 
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-9"   # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-10"  # bump when a change alters results, so old cache entries are not reused
                                 # (7: a ramp stops where the body reaches itself or its shaft;
                                 # 8: the default element, mesh and barrier distance; 9: Newton reuses
                                 # factorisations, the ramp's steps and stops: the same states to
-                                # Newton's tolerance, its stops located differently)
+                                # Newton's tolerance, its stops located differently; 10: the contact's
+                                # quadrature order 8 -> 6)
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
@@ -87,7 +89,7 @@ class Fe3dModel(BendModel):
                  Option("interior_order", "int", "add condensed element-interior displacement bubbles of this "
                                                  "order (>= 3) to P2 (default 3; None: none)"),
                  Option("contact_intorder", "int", "quadrature order of the lumen contact on the wall: its "
-                                                   "pairs are searched at those points (default 8, 2-12)")))
+                                                   "pairs are searched at those points (default 6, 2-12)")))
 
     def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
