@@ -56,8 +56,8 @@ TOLERANCE = 0.5
 # and OFF_HIGH d_hat beside it, so no search there can find a pair the energy counts
 FAR = 6.0
 # the contact's quadrature order on the lumen wall: the barrier is integrated, and the pairs searched,
-# at these points. 6 since fe3d-10 (8 before): on the 20 mm ramp R_C within 0.06 % of order 8 at every
-# checkpoint to 0.325 bar, the pair search 40 % cheaper (docs/models/fe3d.md, "Newton and the ramp")
+# at these points. 6 since fe3d-10 (8 before): the same R_C to a small fraction of a percent for a
+# cheaper pair search (the measurements: docs/models/fe3d.md, "Newton and the ramp")
 INTORDER = 6
 # wall points per mesh edge of the lumen wall in the geometric gap check: its chords cut the
 # curved wall, most at a shoulder folded tight; at the 20 mm default mesh's 0.2397 bar state

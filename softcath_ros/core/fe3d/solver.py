@@ -36,6 +36,7 @@ import numpy as np
 
 from ..design import Design
 from ..energy import isochoric_i1, neo_hookean, yeoh
+from .contact import INTORDER, LumenContact
 from .mesh import MeshSettings, PrismMesh, build_mesh
 
 log = logging.getLogger(__name__)
@@ -124,7 +125,7 @@ class Fe3dProblem:
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
                  lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
                  contact_distance: float | None = None, pressure_order: int = 0, interior_order: int | None = None,
-                 contact_intorder: int | None = None):
+                 contact_intorder: int = INTORDER):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
         silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
         "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
@@ -136,8 +137,7 @@ class Fe3dProblem:
         component and prism, the triangle's cubic bubble times the axial quadratic and cubic ones):
         more divergence for a P1 q to act on, against the P2/P1 pair's spurious soft modes (the pair
         is not inf-sup stable; on tetrahedra the full cure also needs face bubbles); None: plain P2.
-        ``contact_intorder``: the lumen contact's quadrature order on the wall (None: LumenContact's
-        default, contact.INTORDER)."""
+        ``contact_intorder``: the lumen contact's quadrature order on the wall (LumenContact)."""
         check_element(pressure_order, interior_order)
         ng = _ng()
         ng.SetNumThreads(newton.threads)
@@ -200,10 +200,8 @@ class Fe3dProblem:
 
         self.contact = None
         if contact_distance is not None and "lumen" in mesh.GetBoundaries():
-            from .contact import LumenContact
-
             self.contact = LumenContact(self, float(contact_distance) * 2.0 * design.lumen.radius,
-                                        **({} if contact_intorder is None else {"intorder": contact_intorder}))
+                                        intorder=contact_intorder)
         self.J = ng.Det(ng.Id(3) + ng.Grad(self.u))
         self.bulk_cf = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=0.0)
         self.reference_volume = ng.Integrate(ng.CF(1.0), mesh) * self.mirror
