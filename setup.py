@@ -3,26 +3,34 @@
 The ROS 2 client libraries are an extra (`[ros]`) so that a sourced ROS
 workspace, which already provides rclpy, does not get a second copy.
 """
-from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = "softcath_ros"
+
+
+def config_data_files():
+    """Every file under config/ to share/softcath_ros/config/<same folder> (what ROS packages install
+    and softcath_ros.resources finds by name)."""
+    folders = {}
+    for f in sorted(Path("config").rglob("*")):
+        if f.is_file():
+            folders.setdefault(str(Path("share", package_name) / f.parent), []).append(str(f))
+    return sorted(folders.items())
+
 
 setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks"]),
     # Shipped data (designs, scenes, protocols, node parameters, the ladder envelope, surrogate
-    # tables) live in the package and are found by softcath_ros.resources from any install; the
-    # node parameter files are also copied to share/ for `--params-file` in a ROS workspace.
-    package_data={package_name: ["config/*.yaml", "config/*/*.yaml", "config/surrogate_tables/*.npz",
-                                 "config/foxglove/*.json"]},
+    # tables, the Foxglove layout) live in the top-level config/ and install to
+    # share/softcath_ros/config, where softcath_ros.resources finds them by name from any route.
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config",
-         sorted(set(glob(package_name + "/config/*.yaml")) - {package_name + "/config/ladder_envelope.yaml"})),
+        *config_data_files(),
     ],
     python_requires=">=3.10",
     install_requires=[

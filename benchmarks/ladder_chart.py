@@ -2,7 +2,7 @@
 settings and references are described in softcath_ros/core/ladder.py).
 
 Writes benchmarks/results/ladder_chart.{csv,json} and, when every case is run, the shipped
-softcath_ros/config/ladder_envelope.yaml that model selection reads; a subset of the cases writes
+config/ladder_envelope.yaml that model selection reads; a subset of the cases writes
 benchmarks/results/ladder_chart_partial.* and leaves the envelope as it was; then draws the charts
 (`softcath chart`: ladder_chart.png, _lengths.png, _directions.png beside the CSV).
 

@@ -1,19 +1,23 @@
 """The one finder for data shipped with the package: designs, scenes, protocols, node parameter
 files, the ladder envelope and surrogate tables.
 
-The data live inside the Python package (``softcath_ros/config/``), so the same lookup works from
-a source checkout, a pip install and a colcon install (which also copies the node parameter files
-to ``share/softcath_ros/config`` for ``--params-file``). No ROS import.
+The data live in the repository's top-level ``config/`` folder, as a ROS package keeps them, and are
+installed to ``<prefix>/share/softcath_ros/config`` (setup.py ``data_files``: pip wheel, pip
+``--target``/``--user``, colcon). The finder looks in the source checkout first, then in the
+``share`` folder of the prefix the package is installed under, then in every ``AMENT_PREFIX_PATH``
+entry (a sourced ROS workspace). No ROS import.
 """
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 
 from .core.errors import SoftcathError
 
 ENVELOPE_NAME = "ladder_envelope"
-# kind -> (folder under softcath_ros/config, "" = the folder itself; file suffix)
+PACKAGE = "softcath_ros"
+# kind -> (folder under config/, "" = the folder itself; file suffix)
 KINDS = {
     "design": ("designs", ".yaml"),
     "scene": ("scenes", ".yaml"),
@@ -32,9 +36,29 @@ class ResourceNotFound(SoftcathError):
         super().__init__(f"{kind} '{name}': no such file or shipped {kind}; shipped: {', '.join(known) or 'none'}")
 
 
+def _package_dir() -> Path:
+    return Path(str(resources.files(PACKAGE))).resolve()
+
+
+def config_candidates() -> list[Path]:
+    """Where the shipped data may be, in the order they are searched."""
+    package = _package_dir()
+    found = [package.parent / "config"] if (package.parent / "package.xml").is_file() else []  # checkout
+    # an install prefix: <prefix>/lib/python3.X/site-packages/softcath_ros, or pip --target's <dir>/softcath_ros
+    found += [a / "share" / PACKAGE / "config" for a in list(package.parents)[:4]]
+    found += [Path(p) / "share" / PACKAGE / "config" for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
+              if p]
+    return found
+
+
 def config_dir() -> Path:
-    """The package's data folder (a real directory: the package is installed unzipped)."""
-    return Path(str(resources.files("softcath_ros") / "config"))
+    """The shipped data folder: the first of ``config_candidates()`` that holds the designs."""
+    candidates = config_candidates()
+    for folder in candidates:
+        if (folder / "designs").is_dir():
+            return folder
+    raise SoftcathError(f"{PACKAGE}: shipped data not found (looked in {', '.join(map(str, candidates))}); "
+                        "reinstall the package")
 
 
 def shipped_dir(kind: str) -> Path:
@@ -71,7 +95,7 @@ def find(kind: str, name_or_path: str | Path) -> Path:
 def checkout_root() -> Path | None:
     """The repository folder when the package runs from a source checkout (the benchmark results
     live there, not in the package), else None."""
-    root = Path(str(resources.files("softcath_ros"))).resolve().parent
+    root = _package_dir().parent
     return root if (root / "setup.py").is_file() and (root / "benchmarks").is_dir() else None
 
 

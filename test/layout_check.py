@@ -1,13 +1,13 @@
-"""The Foxglove layout (softcath_ros/config/foxglove/softcath.json) against a recording."""
+"""The Foxglove layout (config/foxglove/softcath.json) against a recording."""
 import json
 from pathlib import Path
 
 from mcap.reader import make_reader
 
-import softcath_ros
 from softcath_ros import topics
+from softcath_ros.resources import config_dir
 
-LAYOUT = Path(softcath_ros.__file__).parent / "config" / "foxglove" / "softcath.json"
+LAYOUT = config_dir() / "foxglove" / "softcath.json"
 # Named by the layout but published only by a rig with a tip tracker (or the simulated rig that
 # plays one): not in every recording.
 ONLY_WITH_A_TRACKER = {topics.TIP_MEASURED}

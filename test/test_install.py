@@ -32,7 +32,7 @@ print(json.dumps({
     "default_rung_origin": __import__("softcath_ros.core.models", fromlist=["make_model"]).make_model(
         "surrogate", load_design("three_channel_5mm"), build=False, cache=False).origin,
     "checkout": str(checkout_root()),
-    "foxglove_layout": __import__("pathlib").Path(softcath_ros.__file__).with_name("config").joinpath(
+    "foxglove_layout": __import__("softcath_ros.resources", fromlist=["config_dir"]).config_dir().joinpath(
         "foxglove", "softcath.json").is_file(),
 }))
 """
@@ -60,9 +60,11 @@ def _clean_copy(src: Path) -> Path:
     return src
 
 
-def _check(found: dict, root: Path) -> None:
+def _check(found: dict, root: Path, data_root: Path | None = None) -> None:
+    """``root``: where the package must come from; ``data_root``: where its shipped data must (the
+    checkout, or the install prefix whose share/softcath_ros/config holds them)."""
     assert Path(found["package"]).resolve().is_relative_to(root.resolve()), found["package"]
-    assert Path(found["envelope"]).resolve().is_relative_to(root.resolve())
+    assert Path(found["envelope"]).resolve().is_relative_to((data_root or root).resolve()), found["envelope"]
     assert found["design"] == "implemented_5mm" and found["protocol"] == "quick" and found["envelope_exists"]
     assert {"implemented_5mm", "three_channel_5mm"} <= set(found["designs"])
     assert "free_bending_live" in found["scenes"]
@@ -110,7 +112,8 @@ def test_colcon_style_install(tmp_path):
     share = prefix / "share" / "softcath_ros"
     assert (share / "package.xml").is_file()
     params = {"model_node", "allocation_node", "bench_node", "sim_bench_node", "steer_node"}
-    assert {p.stem for p in (share / "config").glob("*.yaml")} == params  # for `--params-file`
+    assert {p.stem for p in (share / "config").glob("*.yaml")} == params | {"ladder_envelope"}  # `--params-file`
+    assert (share / "config" / "designs" / "implemented_5mm.yaml").is_file()
     assert (prefix / "share/ament_index/resource_index/packages/softcath_ros").is_file()
     assert (prefix / "lib" / "softcath_ros" / "model_node").is_file()  # `ros2 run softcath_ros model_node`
-    _check(_probe(site, tmp_path), site)
+    _check(_probe(site, tmp_path), site, data_root=share)

@@ -41,3 +41,22 @@ def test_not_found_is_one_line_listing_the_shipped_names(tmp_path):
     with pytest.raises(DesignError, match="implemented_5mm") as exc:
         load_design("implemented_6mm")
     assert "\n" not in str(exc.value)
+
+
+def test_ros_package_layout():
+    """The layout a ROS package has: package.xml, setup.py, the Python package, config/, test/ and
+    README.md at the top; the finder reads config/ from a checkout; the params files' usage lines
+    name paths that exist from the repository root."""
+    import re
+    from pathlib import Path
+
+    from softcath_ros.resources import config_dir
+
+    root = Path(__file__).resolve().parents[1]
+    for name in ("package.xml", "setup.py", "softcath_ros", "config", "test", "README.md"):
+        assert (root / name).exists(), name
+    assert not (root / "softcath_ros" / "config").exists()
+    assert config_dir() == root / "config"
+    for params in (root / "config").glob("*.yaml"):
+        for path in re.findall(r"--params-file (\S+)", params.read_text()):
+            assert (root / path).is_file(), (params.name, path)

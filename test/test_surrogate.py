@@ -225,7 +225,7 @@ def test_surrogate_cli_build_and_check(tmp_path, capsys):
     assert "current: implemented_5mm: shipped table" in capsys.readouterr().out
     # a user's design: no table until built; a table file for another design is refused
     mine = tmp_path / "mine.yaml"
-    text = (Path(__file__).resolve().parents[1] / "softcath_ros/config/designs/implemented_5mm.yaml").read_text()
+    text = (Path(__file__).resolve().parents[1] / "config/designs/implemented_5mm.yaml").read_text()
     mine.write_text(text.replace("length: 0.040", "length: 0.030").replace("name: implemented_5mm", "name: mine"))
     assert main(["surrogate", "check", str(mine), "--option", "source=closed_form"]) == 1
     assert "none shipped, none in the cache" in capsys.readouterr().out

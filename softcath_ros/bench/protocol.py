@@ -1,4 +1,4 @@
-"""Test protocols (shipped in softcath_ros/config/protocols/) and the engine that steps through them.
+"""Test protocols (shipped in config/protocols/) and the engine that steps through them.
 
 A protocol is a pressure staircase (0 -> max -> 0 by default), repeated over trials,
 on one or more benches (angle, blocking force), each with its mounted samples

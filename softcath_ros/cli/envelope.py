@@ -19,7 +19,7 @@ def register(sub) -> None:
     p = sub.add_parser("envelope", help="measure the model ladder and write the envelope model selection reads")
     p.add_argument("--out", default="ladder_envelope.yaml",
                    help="envelope YAML to write (default: ./ladder_envelope.yaml; the shipped one is "
-                        "softcath_ros/config/ladder_envelope.yaml)")
+                        "config/ladder_envelope.yaml)")
     p.add_argument("--results", default=None, metavar="STEM",
                    help="also write the rows as STEM.csv (what `softcath chart` draws) and STEM.json (with metadata)")
     p.add_argument("--no-fe3d", action="store_true", help="no fe3d runs: the reference is section D/20 (the section rung with lumen contact)")
