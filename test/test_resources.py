@@ -58,5 +58,5 @@ def test_ros_package_layout():
     assert not (root / "softcath_ros" / "config").exists()
     assert config_dir() == root / "config"
     for params in (root / "config").glob("*.yaml"):
-        for path in re.findall(r"--params-file (\S+)", params.read_text()):
+        for path in re.findall(r"--params-file ([\w./-]+\w)", params.read_text()):
             assert (root / path).is_file(), (params.name, path)
