@@ -13,7 +13,7 @@ import os
 from importlib import resources
 from pathlib import Path
 
-from .core.errors import SoftcathError
+from .errors import SoftcathError
 
 ENVELOPE_NAME = "ladder_envelope"
 PACKAGE = "softcath_ros"

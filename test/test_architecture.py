@@ -89,11 +89,31 @@ def test_pure_layers_never_import_ros(layer):
 
 
 def test_the_ladder_does_not_import_model_selection():
-    """'auto' lives above the ladder: core/model_selection registers it with core/models."""
+    """'auto' lives above the ladder: core/models names its module as a string, imported on first use."""
     graph = _graph()
     assert "softcath_ros.core.models" in graph["softcath_ros.core.model_selection"]
     assert not [m for m, imports in graph.items()
                 if m.startswith("softcath_ros.core.models") and "softcath_ros.core.model_selection" in imports]
+
+
+def test_arrows_point_down():
+    """The bottom modules (the error base, the resource finder) import nothing of the package above
+    them, and importing core registers nothing by side effect (its __init__ imports nothing)."""
+    graph = _graph()
+    for bottom in ("softcath_ros.errors", "softcath_ros.resources"):
+        assert not {m for m in graph[bottom] if m.startswith("softcath_ros.") and m != "softcath_ros.errors"}, bottom
+    assert not {m for m in graph["softcath_ros.core"] if m.startswith("softcath_ros")}
+
+
+def test_model_auto_works_in_a_fresh_interpreter():
+    """make_model("auto") needs no earlier import of core/model_selection."""
+    import subprocess
+    import sys
+
+    code = ("from softcath_ros.core.models import make_model; from softcath_ros.core.scene import load_scene; "
+            "s = load_scene('free_bending_live'); print(make_model('auto', s.design, scene=s).selection.rung)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip(), out.stderr[-1000:]
 
 
 def test_rung_capabilities_need_no_rung_and_no_ngsolve():

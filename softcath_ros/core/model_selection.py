@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import ModelError
-from .models import make_model, register_chooser
+from .models import make_model
 from .scene import Scene
 from .yaml_io import load_yaml_file
 
@@ -136,4 +136,3 @@ def make_auto_model(design, scene: Scene | None = None, envelope: dict | None = 
     return model
 
 
-register_chooser("auto", make_auto_model)

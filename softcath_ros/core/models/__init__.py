@@ -2,8 +2,9 @@
 
 Each rung class declares what it can do (``RungInfo``: scene features, linear gain, solved
 backbone, options); ``rung_info`` reads that without building a rung or loading a heavy engine.
-Names that choose a rung instead of naming one ("auto") are registered from above by the module
-that chooses (core/model_selection.py registers "auto"), so this registry imports no selection.
+Names that choose a rung instead of naming one ("auto") are looked up the same lazy way: the
+chooser's module (core/model_selection.py) is imported when the name is first used, so this
+registry imports no selection and no module registers anything by import side effect.
 """
 from __future__ import annotations
 
@@ -23,15 +24,15 @@ RUNGS: dict[str, str] = {
     "rod": "softcath_ros.core.models.rod:RodModel",
 }
 
-# name -> make(design, **options): names that pick a rung (registered by the module that picks).
-CHOOSERS: dict[str, Callable[..., BendModel]] = {}
+# name -> "module:function" make(design, **options): names that pick a rung instead of naming one.
+CHOOSERS: dict[str, str] = {
+    "auto": "softcath_ros.core.model_selection:make_auto_model",
+}
 
 
-def register_chooser(name: str, make: Callable[..., BendModel]) -> None:
-    """Let ``make_model(name, ...)`` call ``make``; for rung choosers such as "auto"."""
-    if name in RUNGS:
-        raise ValueError(f"'{name}' is a rung; a chooser needs another name")
-    CHOOSERS[name] = make
+def _chooser(name: str) -> Callable[..., BendModel]:
+    module_name, func_name = CHOOSERS[name].split(":")
+    return getattr(importlib.import_module(module_name), func_name)
 
 
 def available_models() -> list[str]:
@@ -66,14 +67,14 @@ def run_options(name: str, *, progress: bool | None = None, cache: bool | None =
 
 def make_model(name: str, design: Design, **options) -> BendModel:
     """Instantiate the rung ``name`` for ``design``; unknown names list the known ones.
-    ``"auto"`` picks a rung for ``scene=`` (registered by core/model_selection.py)."""
+    ``"auto"`` picks a rung for ``scene=`` (core/model_selection.py)."""
     if name in CHOOSERS:
-        return CHOOSERS[name](design, **options)
+        return _chooser(name)(design, **options)
     model = rung_class(name)(design, **options)
     model.made_with = dict(options)
     return model
 
 
 __all__ = ["BendModel", "BendState", "CHOOSERS", "RUNGS", "RungInfo", "SolverDiagnostics",
-           "TipPose", "available_models", "make_model", "register_chooser", "rung_class", "rung_info",
+           "TipPose", "available_models", "make_model", "rung_class", "rung_info",
            "run_options"]
