@@ -228,6 +228,24 @@ def test_background_writer_keeps_order_flushes_after_the_queue_and_counts_refusa
     assert w.write_failures == 1 and "closed" in w.error
 
 
+def test_idle_background_writer_sleeps_until_a_message_or_a_flush_is_due(tmp_path, monkeypatch):
+    """The writer thread waits on its queue: idle, it wakes only when the open chunk's flush is due
+    (never polls), and a message wakes it at once."""
+    import time
+
+    wakes = []
+    monkeypatch.setattr(BagWriter, "flush_if_due", lambda self: wakes.append(time.monotonic()))
+    w = BagWriter(tmp_path / "idle", flush_period_s=60.0, fsync=False, background=True)
+    w.add_topic("/x", F64)
+    time.sleep(0.3)
+    assert wakes == []          # a 2 ms poll would have woken ~150 times
+    w.write("/x", cdr_float64(1.0), 1)
+    w.flush()
+    assert w.message_count == 1 and wakes == []
+    w.close()
+    assert not w._thread.is_alive()
+
+
 # --------------------------------------------------------------------------- recovery
 
 def test_recover_complete_file_keeps_everything(tmp_path):

@@ -325,13 +325,6 @@ def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, alloc
     return steps
 
 
-def estimated_duration(protocol: Protocol, n_steps: int, regulator_time_constant: float = 0.1) -> float:
-    """Lower bound of a run's duration, s (settling assumed after ~4 time constants)."""
-    per_step = max(protocol.dwell, 4 * regulator_time_constant + protocol.settle_hold) + \
-        protocol.samples_per_step * protocol.sample_period
-    return n_steps * per_step
-
-
 # --------------------------------------------------------------------------- engine
 
 class ProtocolRunner:

@@ -14,6 +14,8 @@ from .msg_definitions import full_definition
 
 @functools.lru_cache(maxsize=None)
 def _encoder(type_name: str):
+    # mcap_ros2 (0.6) offers CDR encoding only inside its Writer (write_message into an MCAP stream);
+    # serialize_dynamic is the function that Writer itself calls, and there is no public equivalent.
     from mcap_ros2._dynamic import serialize_dynamic
 
     return serialize_dynamic(type_name, full_definition(type_name))[type_name]

@@ -15,7 +15,7 @@ up later fails the write (or flush, or close) with a RecordingError that says "d
 ``abandon()`` then lets go of the file as it is: everything flushed before is recoverable.
 
 ``background=True`` moves the writing to a writer thread: ``write`` only appends to a
-queue (a deque append, well under a microsecond), so the DDS callbacks that call it
+queue (a SimpleQueue put, about a microsecond), so the DDS callbacks that call it
 never wait for chunk compression or fsync; ``flush`` and ``close`` first drain the
 queue, so order and the flush guarantees are the same as in the synchronous mode. A
 write that fails in the thread is counted in ``write_failures`` (``error`` says why);
@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import errno
 import os
+import queue
 import shutil
 import threading
 import time
-from collections import deque
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
@@ -38,6 +38,8 @@ from . import bag_metadata as bm
 from .bag_metadata import TopicInfo
 from .msg_definitions import full_definition, type_description_hash
 from .qos import OfferedQos, qos_profiles_yaml
+
+_STOP = object()   # queued by close/abandon: the writer thread ends there
 
 LIBRARY = "softcath_ros recorder (python mcap)"
 
@@ -86,11 +88,10 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self.write_failures = 0
         self.error: str | None = None
-        self._queue: deque | None = None
+        self._queue: queue.SimpleQueue | None = None
         if background:
-            self._queue = deque()
+            self._queue = queue.SimpleQueue()
             self._max_queued = int(max_queued)
-            self._stop = False
             self._thread = threading.Thread(target=self._drain_loop, name="bag-writer", daemon=True)
             self._thread.start()
 
@@ -138,14 +139,14 @@ class BagWriter:
         In background mode the message is queued and errors surface in ``write_failures``/``error``."""
         q = self._queue
         if q is not None:
-            if len(q) >= self._max_queued or self._closed:
+            if q.qsize() >= self._max_queued or self._closed:
                 self.write_failures += 1
                 self.error = self.error or (f"recording {self.path} is closed" if self._closed else
                                             f"writer queue full ({self._max_queued} messages waiting)")
                 return
             if topic not in self._channel_ids:
                 raise RecordingError(f"topic {topic} was not added to the recording")
-            q.append((topic, data, log_time_ns, publish_time_ns))
+            q.put((topic, data, log_time_ns, publish_time_ns))
             return
         self._write_now(topic, data, log_time_ns, publish_time_ns)
 
@@ -171,18 +172,21 @@ class BagWriter:
 
     # ------------------------------------------------------------------ writer thread
     def _drain_loop(self) -> None:
+        """Writes queued messages; sleeps on the queue until a message comes or the open chunk's
+        flush is due (no polling); ends at the stop marker that ``close``/``abandon`` queue."""
         q = self._queue
         while True:
-            if not q:
-                if self._stop:
-                    return
+            due = self.flush_period_s - (time.monotonic() - self._last_flush)
+            try:
+                item = q.get(timeout=max(due, 0.001))
+            except queue.Empty:
                 try:
                     self.flush_if_due()
                 except RecordingError as exc:
                     self.error = str(exc)
-                time.sleep(0.002)  # idle poll: cheaper than waking on every message
                 continue
-            item = q.popleft()
+            if item is _STOP:
+                return
             if item[0] is None:  # a flush/close barrier: everything before it is written
                 item[1].set()
                 continue
@@ -197,13 +201,13 @@ class BagWriter:
         if self._queue is None or not self._thread.is_alive():
             return
         done = threading.Event()
-        self._queue.append((None, done))
+        self._queue.put((None, done))
         done.wait()
 
     @property
     def queued(self) -> int:
         """Messages waiting for the writer thread (0 in synchronous mode)."""
-        return 0 if self._queue is None else len(self._queue)
+        return 0 if self._queue is None else self._queue.qsize()
 
     def flush_if_due(self) -> None:
         """Call periodically (timer): closes the open chunk once it is older than the flush period."""
@@ -259,10 +263,12 @@ class BagWriter:
         full") if that cannot be written: call ``abandon()`` then."""
         if self._queue is not None and not self._closed:
             self._drain()
-            self._stop = True
+            self._queue.put(_STOP)
             self._thread.join()
-            while self._queue:  # a write that raced the stop
-                item = self._queue.popleft()
+            while not self._queue.empty():  # a write that raced the stop
+                item = self._queue.get_nowait()
+                if item is _STOP:
+                    continue
                 if item[0] is None:
                     item[1].set()
                 else:
@@ -285,8 +291,8 @@ class BagWriter:
         """After a failed close: stop the writer thread and let go of the file as it is (torn at
         the end; `softcath recover` rebuilds what was flushed). Never raises."""
         self._closed = True
-        self._stop = True
         if self._queue is not None and self._thread.is_alive():
+            self._queue.put(_STOP)
             self._thread.join(timeout=5.0)
         try:
             self._file.close()
