@@ -45,6 +45,11 @@ setup(
         "zstandard>=0.22",
         # Sparse LDL^T for the section rung's Newton steps (it falls back to SuperLU without it).
         "qdldl>=0.1.7",
+        # The cross-section's outlines (core/geometry): validation, walls, polygons for meshers.
+        "shapely>=2.1",
+        # Hole outlines drawn in CAD (`shape: file`): DXF layers and SVG elements.
+        "ezdxf>=1.1",
+        "svgelements>=1.9",
     ],
     extras_require={
         "ros": [

@@ -9,14 +9,18 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
+
 
 
 from .yaml_io import load_yaml_file
 
 from .errors import DesignError
 from .materials import YeohMaterial, material_from_spec
-from .checks import NAME_RULE, finite_number, is_file_name
+from .checks import NAME_RULE, is_file_name
+from . import geometry
+from .geometry.shapes import nonnegative_field as _nonnegative, number_field as _number, required_field as _req
 
 # Thinnest silicone wall we accept unless the design states its own minimum (m).
 # 0.2 mm is about what moulding of Ecoflex reliably gives; the implemented design has 0.6 mm.
@@ -29,6 +33,7 @@ class Hole:
 
     diameter: float
     center: tuple[float, float]
+    kind = "circle"
 
     @property
     def radius(self) -> float:
@@ -37,6 +42,61 @@ class Hole:
     @property
     def area(self) -> float:
         return math.pi * self.radius**2
+
+    @property
+    def shape(self) -> geometry.Circle:
+        return geometry.Circle(self.center, self.radius)
+
+    @property
+    def outline(self) -> geometry.Outline:
+        return geometry.Outline.circle(self.center, self.radius)
+
+    def spec(self) -> dict:
+        return {"diameter": self.diameter, "center": list(self.center)}
+
+
+@dataclass(frozen=True)
+class ShapedHole:
+    """A hole of another shape (sector, polygon, CAD outline): ``center`` is its area centroid,
+    where the pressure on its end cap acts. Code that still reads only circles asks for
+    ``diameter``/``radius`` and is refused in one line."""
+
+    shape: object                     # geometry.Sector | PolygonShape | FileShape
+    center: tuple[float, float]
+    field_name: str = field(default="", compare=False)
+
+    def __post_init__(self):
+        c = self.outline.centroid
+        if math.dist(c, self.center) > 1e-12 + 1e-9 * math.hypot(*c):
+            raise DesignError(self.field_name or self.kind, list(self.center),
+                              f"a {self.kind} moves with its outline, not by its centre alone")
+
+    @property
+    def kind(self) -> str:
+        return self.shape.kind
+
+    @cached_property
+    def outline(self) -> geometry.Outline:
+        return geometry.shape_outline(self.shape, self.field_name or self.kind)
+
+    @property
+    def area(self) -> float:
+        return self.outline.area
+
+    def _circles_only(self):
+        raise DesignError(self.field_name or "hole", self.kind,
+                          "this part of softcath reads circular holes only; give it a design of circles")
+
+    @property
+    def diameter(self) -> float:
+        self._circles_only()
+
+    @property
+    def radius(self) -> float:
+        self._circles_only()
+
+    def spec(self) -> dict:
+        return self.shape.spec()
 
 
 @dataclass(frozen=True)
@@ -87,8 +147,8 @@ class Design:
     name: str
     length: float
     outer_diameter: float
-    channels: tuple[Hole, ...]
-    lumen: Hole | None
+    channels: tuple[Hole | ShapedHole, ...]
+    lumen: Hole | ShapedHole | None
     limiting_fibre: LimitingFibre | None
     reinforcement: Reinforcement | None
     cap_thickness: float
@@ -106,6 +166,22 @@ class Design:
     def outer_radius(self) -> float:
         return 0.5 * self.outer_diameter
 
+    @cached_property
+    def section(self) -> geometry.Section:
+        """The cross-section as outlines (core/geometry): what every rung reads."""
+        holes = [geometry.SectionHole(f"channels[{i}]", "channel", c.outline, c.shape)
+                 for i, c in enumerate(self.channels)]
+        if self.lumen is not None:
+            holes.append(geometry.SectionHole("lumen", "lumen", self.lumen.outline, self.lumen.shape))
+        f = self.limiting_fibre
+        fibre = None if f is None else geometry.Circle(f.center, 0.5 * f.diameter)
+        return geometry.Section(self.outer_radius, tuple(holes), fibre)
+
+    @property
+    def all_circles(self) -> bool:
+        """Every hole a circle (what rungs not yet reading outlines need)."""
+        return all(isinstance(h, Hole) for h in self.channels + ((self.lumen,) if self.lumen else ()))
+
     def with_length(self, length: float) -> "Design":
         return replace(self, length=plausible_length(_positive(length, "length")))
 
@@ -115,9 +191,8 @@ class Design:
             "name": self.name,
             "length": self.length,
             "outer_diameter": self.outer_diameter,
-            "channels": [{"diameter": c.diameter, "center": list(c.center)} for c in self.channels],
-            "lumen": None if self.lumen is None else {"diameter": self.lumen.diameter,
-                                                      "center": list(self.lumen.center)},
+            "channels": [c.spec() for c in self.channels],
+            "lumen": None if self.lumen is None else self.lumen.spec(),
             "limiting_fibre": None if self.limiting_fibre is None else {
                 "diameter": self.limiting_fibre.diameter,
                 "center": list(self.limiting_fibre.center),
@@ -200,6 +275,9 @@ def check_plausible(design: "Design") -> None:
     holes += [("lumen", design.lumen)] if design.lumen is not None else []
     holes += [("limiting_fibre", design.limiting_fibre)] if design.limiting_fibre is not None else []
     for name, h in holes:
+        if isinstance(h, ShapedHole):
+            sizes += _shape_sizes(name, h.shape)
+            continue
         sizes += [(f"{name}.diameter", h.diameter), (f"{name}.center[0]", h.center[0]),
                   (f"{name}.center[1]", h.center[1])]
     if design.reinforcement is not None:
@@ -262,9 +340,10 @@ def design_from_dict(data, source: str | None = None) -> Design:
 
     raw_channels = data["channels"]
     if not isinstance(raw_channels, list) or not raw_channels:
-        raise DesignError("channels", raw_channels, "must be a non-empty list of {diameter, center}")
-    channels = tuple(_hole(c, f"channels[{i}]") for i, c in enumerate(raw_channels))
-    lumen = None if get("lumen") is None else _hole(get("lumen"), "lumen")
+        raise DesignError("channels", raw_channels, "must be a non-empty list of holes ({diameter, center} or {shape: ...})")
+    base_dir = None if source is None else Path(source).parent   # CAD outlines are found beside the file
+    channels = tuple(_hole(c, f"channels[{i}]", base_dir) for i, c in enumerate(raw_channels))
+    lumen = None if get("lumen") is None else _hole(get("lumen"), "lumen", base_dir)
 
     material = material_from_spec(data["material"], "material")
 
@@ -304,7 +383,7 @@ def design_from_dict(data, source: str | None = None) -> Design:
                                                        "device.bending_stiffness"))
         if lumen is None:
             raise DesignError("device", get("device"), "a device needs a lumen, and lumen is null")
-        if device.diameter > lumen.diameter:
+        if isinstance(lumen, Hole) and device.diameter > lumen.diameter:
             raise DesignError("device.diameter", device.diameter,
                               f"larger than the lumen diameter {lumen.diameter}")
 
@@ -322,41 +401,28 @@ def design_from_dict(data, source: str | None = None) -> Design:
     if cap >= length:
         raise DesignError("cap_thickness", cap, f"not shorter than the length {length}")
     check_geometry(design)
+    if device is not None and isinstance(lumen, ShapedHole):
+        room = design.section.largest_inscribed_diameter(design.section.lumen)
+        if device.diameter > room:
+            raise DesignError("device.diameter", device.diameter,
+                              f"larger than the largest circle the {lumen.kind} lumen holds ({room:.6g} m)")
     return design
 
 
+def _shape_sizes(name: str, shape) -> list[tuple[str, float]]:
+    """The sizes of a non-circular hole the plausibility check reads (m)."""
+    if shape.kind == "sector":
+        return [(f"{name}.inner_radius", shape.inner_radius), (f"{name}.outer_radius", shape.outer_radius),
+                (f"{name}.fillet", shape.fillet)]
+    field_name = f"{name}.points" if shape.kind == "polygon" else f"{name}.path"
+    largest = max(abs(c) for p in shape.points for c in p[:2])
+    return [(field_name, largest)] + ([(f"{name}.fillet", shape.fillet)] if shape.kind == "polygon" else [])
+
+
 def check_geometry(design: Design) -> None:
-    """Holes inside the body with walls >= the minimum, holes apart, fibre inside silicone."""
-    big_r = design.outer_radius
-    wmin = design.min_wall_thickness
-    holes = [(f"channels[{i}]", c) for i, c in enumerate(design.channels)]
-    if design.lumen is not None:
-        holes.append(("lumen", design.lumen))
-    for name, h in holes:
-        outer_wall = big_r - (math.hypot(*h.center) + h.radius)
-        if outer_wall < 0:
-            raise DesignError(f"{name}.center", list(h.center),
-                              f"hole of diameter {h.diameter} reaches outside the body (outer diameter {design.outer_diameter})")
-        if outer_wall < wmin - 1e-12:
-            raise DesignError(f"{name}.center", list(h.center),
-                              f"outer wall {outer_wall * 1e3:.3f} mm is thinner than the minimum {wmin * 1e3:.3f} mm")
-    for i, (na, a) in enumerate(holes):
-        for nb, b in holes[i + 1:]:
-            gap = math.dist(a.center, b.center) - a.radius - b.radius
-            if gap < 0:
-                raise DesignError(f"{nb}.center", list(b.center), f"overlaps {na}")
-            if gap < wmin - 1e-12:
-                raise DesignError(f"{nb}.center", list(b.center),
-                                  f"wall to {na} is {gap * 1e3:.3f} mm, thinner than the minimum {wmin * 1e3:.3f} mm")
-    f = design.limiting_fibre
-    if f is not None:
-        r = 0.5 * f.diameter
-        if math.hypot(*f.center) + r > big_r:
-            raise DesignError("limiting_fibre.center", list(f.center), "fibre is not inside the silicone body")
-        for name, h in holes:
-            if math.dist(f.center, h.center) < r + h.radius:
-                raise DesignError("limiting_fibre.center", list(f.center),
-                                  f"fibre is not inside silicone: it cuts {name}")
+    """Outlines simple, holes inside the body with walls >= the minimum (true minimum distance),
+    holes apart, fibre inside silicone (core/geometry ``check_section``)."""
+    geometry.check_section(design.section, design.min_wall_thickness)
 
 
 def _mapping(value, field_name, allowed):
@@ -368,14 +434,14 @@ def _mapping(value, field_name, allowed):
     return value
 
 
-def _req(mapping, key, parent):
-    if key not in mapping:
-        raise DesignError(f"{parent}.{key}", None, "missing required field")
-    return mapping[key]
-
-
-def _hole(value, field_name) -> Hole:
-    m = _mapping(value, field_name, {"diameter", "center"})
+def _hole(value, field_name, base_dir: Path | None = None) -> Hole | ShapedHole:
+    """A hole mapping: a circle {diameter, center} (``shape: circle`` optional) or {shape: ...}."""
+    kind = geometry.shape_kind(value, field_name)
+    if kind != "circle":
+        shape = geometry.parse_shape(value, field_name, base_dir)
+        outline = geometry.shape_outline(shape, field_name)
+        return ShapedHole(shape, tuple(float(c) for c in outline.centroid), field_name)
+    m = {k: v for k, v in value.items() if k != "shape"}
     return Hole(diameter=_positive(_req(m, "diameter", field_name), f"{field_name}.diameter"),
                 center=_point(_req(m, "center", field_name), f"{field_name}.center"))
 
@@ -386,22 +452,8 @@ def _point(value, field_name) -> tuple[float, float]:
     return (_number(value[0], f"{field_name}[0]"), _number(value[1], f"{field_name}[1]"))
 
 
-def _number(value, field_name) -> float:
-    v = finite_number(value)
-    if v is None:
-        raise DesignError(field_name, value, "must be a finite number")
-    return v
-
-
 def _positive(value, field_name) -> float:
     v = _number(value, field_name)
     if v <= 0:
         raise DesignError(field_name, v, "must be positive")
-    return v
-
-
-def _nonnegative(value, field_name) -> float:
-    v = _number(value, field_name)
-    if v < 0:
-        raise DesignError(field_name, v, "must not be negative")
     return v

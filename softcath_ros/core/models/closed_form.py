@@ -1,6 +1,6 @@
 """Closed-form rung: Euler-Bernoulli beam over the transformed section.
 
-Each channel's pressure acts on its end cap (area A_i, centre r_i): an axial force
+Each channel's pressure acts on its end cap (area A_i, centroid r_i, any hole shape): an axial force
 p_i A_i at an offset r_i - r_na from the neutral axis, so a moment that is constant
 along the length. Equilibrium of the linear-elastic section gives
     J k = -sum_i p_i A_i (r_i - r_na)     (J: bending stiffness tensor, N m^2)
@@ -27,8 +27,9 @@ class ClosedFormModel(BendModel):
     def __init__(self, design: Design):
         super().__init__(design)
         self.section = transformed_section(design)
-        areas = np.array([c.area for c in design.channels])
-        offsets = np.array([c.center for c in design.channels]) - self.section.neutral_axis  # (C, 2)
+        # any hole shape: each channel's end-cap area and its centroid's offset from the neutral axis
+        areas = self.section.pressure_areas
+        offsets = self.section.pressure_offsets                                            # (C, 2)
         moment_per_pa = (areas[:, None] * offsets).T                                       # (2, C) m^3
         self.curvature_per_pa = -np.linalg.solve(self.section.bending_stiffness, moment_per_pa)  # (2, C)
         self.stretch_per_pa = areas / self.section.axial_stiffness                          # (C,)

@@ -1,0 +1,219 @@
+"""The cross-section as outlines: the body circle, holes with roles, the limiting fibre; its
+validation and its walls.
+
+``Section`` is what every rung reads: ``outer`` (the body's ``Outline``), ``holes`` (each a
+``SectionHole``: design field name, role ``channel`` | ``lumen``, exact ``outline``, shapely
+``polygon``, the ``shape`` as written), ``fibre`` (a ``Circle`` or None). Walls are true minimum
+distances: exact where one side is a circle (the body, a circular hole, the fibre), otherwise
+between polygonal approximations within ``WALL_CHORD_TOLERANCE`` of the arcs.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..errors import DesignError
+from .outline import Outline
+
+# Chord tolerance (m) of the approximations walls between two non-circular outlines are measured on;
+# such a wall is then within 2x this of the true minimum distance.
+WALL_CHORD_TOLERANCE = 1.0e-8
+# A wall this much (m) under the minimum still passes: a wall drawn at the minimum is accepted.
+WALL_TOLERANCE = 1.0e-9
+
+
+@dataclass(frozen=True)
+class Circle:
+    center: tuple[float, float]
+    radius: float
+    kind = "circle"
+
+    def spec(self) -> dict:
+        return {"diameter": 2.0 * self.radius, "center": list(self.center)}
+
+
+@dataclass(frozen=True, eq=False)
+class SectionHole:
+    """A hole in the section: ``name`` is its design field (``channels[0]``, ``lumen``)."""
+
+    name: str
+    role: str            # "channel" | "lumen"
+    outline: Outline
+    shape: object       # Circle | Sector | PolygonShape | FileShape: the exact primitive as written
+
+    @property
+    def polygon(self):
+        """Shapely polygon of the outline (chords within ``outline.CHORD_TOLERANCE``)."""
+        return self.outline.shapely
+
+    @property
+    def area(self) -> float:
+        return self.outline.area
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return self.outline.centroid
+
+    @property
+    def is_circle(self) -> bool:
+        return isinstance(self.shape, Circle)
+
+    def position_field(self, towards_axis: bool = False) -> tuple[str, object]:
+        """The field (and its value) a refusal about where this hole lies names."""
+        s = self.shape
+        if isinstance(s, Circle):
+            return f"{self.name}.center", list(s.center)
+        if s.kind == "sector":
+            return (f"{self.name}.inner_radius", s.inner_radius) if towards_axis else \
+                (f"{self.name}.outer_radius", s.outer_radius)
+        if s.kind == "polygon":
+            return f"{self.name}.points", [list(p) for p in s.points]
+        return f"{self.name}.path", s.path
+
+
+@dataclass(frozen=True)
+class Wall:
+    """Silicone between two boundaries: ``between`` names them (a hole's field or ``outer``)."""
+
+    thickness: float                      # m
+    between: tuple[str, str]
+    points: tuple[tuple[float, float], tuple[float, float]]   # the nearest points, m
+
+
+@dataclass(frozen=True, eq=False)
+class Section:
+    outer_radius: float
+    holes: tuple[SectionHole, ...]
+    fibre: Circle | None = None
+
+    @cached_property
+    def outer(self) -> Outline:
+        return Outline.circle((0.0, 0.0), self.outer_radius)
+
+    @property
+    def channels(self) -> tuple[SectionHole, ...]:
+        return tuple(h for h in self.holes if h.role == "channel")
+
+    @property
+    def lumen(self) -> SectionHole | None:
+        return next((h for h in self.holes if h.role == "lumen"), None)
+
+    @property
+    def body_area(self) -> float:
+        return math.pi * self.outer_radius**2
+
+    @property
+    def silicone_area(self) -> float:
+        return self.body_area - sum(h.area for h in self.holes)
+
+    @property
+    def area_ratio(self) -> float:
+        """Total channel area over the body's cross-section area."""
+        return sum(h.area for h in self.channels) / self.body_area
+
+    def silicone(self, tolerance: float | None = None):
+        """Shapely polygon of the silicone: the body with the holes cut out."""
+        from shapely.geometry import Polygon
+
+        if tolerance is None:
+            return Polygon(self.outer.shapely.exterior, [h.polygon.exterior for h in self.holes])
+        return Polygon(self.outer.polygon(tolerance).exterior, [h.outline.polygon(tolerance).exterior for h in self.holes])
+
+    # ------------------------------------------------------------------ walls
+    def outer_wall(self, hole: SectionHole) -> Wall:
+        far = hole.outline.farthest_from_origin()
+        pts = hole.outline.polygon_points()
+        p = pts[int(np.argmax(np.hypot(pts[:, 0], pts[:, 1])))]
+        rim = p * self.outer_radius / max(float(np.hypot(*p)), 1e-300)
+        return Wall(self.outer_radius - far, (hole.name, "outer"), (tuple(p), tuple(rim)))
+
+    def wall_between(self, a: SectionHole, b: SectionHole) -> Wall:
+        """The wall between two holes; negative thickness (-1) when they overlap."""
+        from shapely import shortest_line
+
+        line = shortest_line(a.polygon, b.polygon)
+        pts = tuple(tuple(c) for c in line.coords) if line is not None and not line.is_empty else ((0, 0), (0, 0))
+        if a.polygon.intersects(b.polygon):
+            if not (a.is_circle and b.is_circle):
+                return Wall(-1.0, (a.name, b.name), pts)
+        if a.is_circle and b.is_circle:
+            gap = math.dist(a.shape.center, b.shape.center) - a.shape.radius - b.shape.radius
+        elif a.is_circle or b.is_circle:
+            c, other = (a, b) if a.is_circle else (b, a)
+            gap = other.outline.distance_to_point(c.shape.center) - c.shape.radius
+        else:
+            gap = a.outline.polygon(WALL_CHORD_TOLERANCE).distance(b.outline.polygon(WALL_CHORD_TOLERANCE))
+        return Wall(gap, (a.name, b.name), pts)
+
+    def walls(self) -> list[Wall]:
+        out = [self.outer_wall(h) for h in self.holes]
+        for i, a in enumerate(self.holes):
+            out += [self.wall_between(a, b) for b in self.holes[i + 1:]]
+        return out
+
+    def thinnest_wall(self) -> Wall:
+        return min(self.walls(), key=lambda w: w.thickness)
+
+    def largest_inscribed_diameter(self, hole: SectionHole) -> float:
+        """Diameter of the largest circle inside a hole (what a device in the lumen can be)."""
+        if hole.is_circle:
+            return 2.0 * hole.shape.radius
+        from shapely import maximum_inscribed_circle
+
+        line = maximum_inscribed_circle(hole.polygon, tolerance=WALL_CHORD_TOLERANCE * 10)
+        return 2.0 * line.length
+
+
+def check_section(section: Section, min_wall: float) -> None:
+    """Outlines simple, holes inside the body and apart, every wall >= ``min_wall`` (true minimum
+    distance, ``WALL_TOLERANCE`` allowed), the fibre inside silicone. Refusals name the field."""
+    for h in section.holes:
+        if not h.is_circle:
+            check_outline(h)
+    for h in section.holes:
+        wall = section.outer_wall(h)
+        field, value = h.position_field()
+        if wall.thickness < 0:
+            what = f"hole of diameter {2 * h.shape.radius:g}" if h.is_circle else f"the {h.shape.kind}"
+            raise DesignError(field, value, f"{what} reaches outside the body (outer diameter {2 * section.outer_radius:g})")
+        if wall.thickness < min_wall - WALL_TOLERANCE:
+            raise DesignError(field, value, f"outer wall {wall.thickness * 1e3:.3f} mm is thinner than the minimum "
+                                            f"{min_wall * 1e3:.3f} mm")
+    for i, a in enumerate(section.holes):
+        for b in section.holes[i + 1:]:
+            wall = section.wall_between(a, b)
+            # name the later hole, or the shaped one of a circle and a shape (its fields place the wall)
+            named, other = (a, b) if b.is_circle and not a.is_circle else (b, a)
+            towards_axis = float(np.hypot(*other.centroid)) < float(np.hypot(*named.centroid))
+            field, value = named.position_field(towards_axis)
+            if wall.thickness < 0:
+                raise DesignError(field, value, f"overlaps {other.name}")
+            if wall.thickness < min_wall - WALL_TOLERANCE:
+                raise DesignError(field, value, f"wall to {other.name} is {wall.thickness * 1e3:.3f} mm, thinner than "
+                                                f"the minimum {min_wall * 1e3:.3f} mm")
+    f = section.fibre
+    if f is not None:
+        if math.hypot(*f.center) + f.radius > section.outer_radius:
+            raise DesignError("limiting_fibre.center", list(f.center), "fibre is not inside the silicone body")
+        for h in section.holes:
+            if h.is_circle:
+                cuts = math.dist(f.center, h.shape.center) < f.radius + h.shape.radius
+            else:
+                cuts = h.outline.contains(f.center) or h.outline.distance_to_point(f.center) < f.radius
+            if cuts:
+                raise DesignError("limiting_fibre.center", list(f.center), f"fibre is not inside silicone: it cuts {h.name}")
+
+
+def check_outline(hole: SectionHole) -> None:
+    """A non-circular outline must be one simple closed loop with area."""
+    import shapely
+
+    field, value = hole.position_field()
+    poly = hole.polygon
+    if not poly.is_valid:
+        raise DesignError(field, value, f"the outline is not simple ({shapely.is_valid_reason(poly)})")
+    if hole.area <= 0 or poly.area <= 0:
+        raise DesignError(field, value, "the outline encloses no area")

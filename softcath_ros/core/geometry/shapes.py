@@ -1,0 +1,296 @@
+"""Hole shapes as written in a design file, each turned into an exact ``Outline``.
+
+``circle`` {diameter, center}; ``sector`` {inner_radius, outer_radius, direction, span, fillet}
+(an annular sector about the body axis, angles in degrees, direction counter-clockwise from +x);
+``polygon`` {points, fillet} (points [x, y] or [x, y, bulge] in m); ``file`` {path, units,
+layer | id} (a closed outline from a DXF layer or an SVG element, read by ``cad``). Fillets are
+exact tangent arcs (not a buffered approximation), so they stay arcs for a mesher. Every refusal
+is a ``DesignError`` naming the field and the value.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..checks import finite_number
+from ..errors import DesignError
+from .outline import Outline
+
+SHAPES = ("circle", "sector", "polygon", "file")
+_KEYS = {"circle": {"shape", "diameter", "center"},
+         "sector": {"shape", "inner_radius", "outer_radius", "direction", "span", "fillet"},
+         "polygon": {"shape", "points", "fillet"},
+         "file": {"shape", "path", "units", "layer", "id"}}
+MAX_POINTS = 10_000
+
+
+@dataclass(frozen=True)
+class Sector:
+    inner_radius: float
+    outer_radius: float
+    direction: float    # deg
+    span: float         # deg
+    fillet: float = 0.0
+    kind = "sector"
+
+    def spec(self) -> dict:
+        return {"shape": "sector", "inner_radius": self.inner_radius, "outer_radius": self.outer_radius,
+                "direction": self.direction, "span": self.span, "fillet": self.fillet}
+
+
+@dataclass(frozen=True)
+class PolygonShape:
+    points: tuple[tuple[float, ...], ...]
+    fillet: float = 0.0
+    kind = "polygon"
+
+    def spec(self) -> dict:
+        return {"shape": "polygon", "points": [list(p) for p in self.points], "fillet": self.fillet}
+
+
+@dataclass(frozen=True)
+class FileShape:
+    """An outline read from CAD; ``spec()`` gives it back as the polygon read (self-contained,
+    e.g. inside a recording), so the content hash follows the geometry, not the file name."""
+
+    path: str
+    units: str
+    layer: str | None
+    element_id: str | None
+    points: tuple[tuple[float, float, float], ...]   # the outline as read: [x, y, bulge] in m
+    kind = "file"
+
+    def spec(self) -> dict:
+        return {"shape": "polygon", "points": [list(p) for p in self.points], "fillet": 0.0}
+
+
+def number_field(value, field_name) -> float:
+    """A design field's finite number, else refused naming the field."""
+    v = finite_number(value)
+    if v is None:
+        raise DesignError(field_name, value, "must be a finite number")
+    return v
+
+
+def nonnegative_field(value, field_name) -> float:
+    v = number_field(value, field_name)
+    if v < 0:
+        raise DesignError(field_name, v, "must not be negative")
+    return v
+
+
+def shape_kind(spec, field_name: str) -> str:
+    """The ``shape`` a hole mapping names (``circle`` when it names none)."""
+    if not isinstance(spec, dict):
+        raise DesignError(field_name, spec, "must be a mapping (a circle {diameter, center} or {shape: ...})")
+    kind = spec.get("shape", "circle")
+    if kind not in SHAPES:
+        raise DesignError(f"{field_name}.shape", kind, f"unknown shape; known: {list(SHAPES)}")
+    for key in spec:
+        if key not in _KEYS[kind]:
+            raise DesignError(f"{field_name}.{key}", spec[key], f"unknown key for a {kind}; allowed: {sorted(_KEYS[kind])}")
+    return kind
+
+
+def required_field(spec, key, field_name):
+    """``spec[key]``, else refused as ``field_name.key`` missing."""
+    if key not in spec:
+        raise DesignError(f"{field_name}.{key}", None, "missing required field")
+    return spec[key]
+
+
+def parse_sector(spec: dict, field_name: str) -> Sector:
+    ri = nonnegative_field(required_field(spec, "inner_radius", field_name), f"{field_name}.inner_radius")
+    ro = number_field(required_field(spec, "outer_radius", field_name), f"{field_name}.outer_radius")
+    if ro <= ri:
+        raise DesignError(f"{field_name}.outer_radius", ro, f"must be larger than inner_radius {ri:g}")
+    direction = number_field(required_field(spec, "direction", field_name), f"{field_name}.direction")
+    span = number_field(required_field(spec, "span", field_name), f"{field_name}.span")
+    if not 0 < span < 360:
+        raise DesignError(f"{field_name}.span", span, "must lie in (0, 360) degrees")
+    fillet = nonnegative_field(spec.get("fillet", 0.0), f"{field_name}.fillet")
+    return Sector(ri, ro, direction, span, fillet)
+
+
+def parse_points(value, field_name: str) -> tuple[tuple[float, ...], ...]:
+    if not isinstance(value, list) or not 3 <= len(value) <= MAX_POINTS:
+        raise DesignError(field_name, value, f"must be a list of 3 to {MAX_POINTS} points [x, y] (m)")
+    out = []
+    for i, p in enumerate(value):
+        if not isinstance(p, (list, tuple)) or len(p) not in (2, 3):
+            raise DesignError(f"{field_name}[{i}]", p, "must be [x, y] (m) or [x, y, bulge]")
+        out.append(tuple(number_field(c, f"{field_name}[{i}][{k}]") for k, c in enumerate(p)))
+    return tuple(out)
+
+
+def parse_polygon(spec: dict, field_name: str) -> PolygonShape:
+    points = parse_points(required_field(spec, "points", field_name), f"{field_name}.points")
+    fillet = nonnegative_field(spec.get("fillet", 0.0), f"{field_name}.fillet")
+    return PolygonShape(points, fillet)
+
+
+def parse_file(spec: dict, field_name: str, base_dir: Path | None) -> FileShape:
+    from .cad import read_outline
+
+    raw = required_field(spec, "path", field_name)
+    if not isinstance(raw, str) or not raw:
+        raise DesignError(f"{field_name}.path", raw, "must be a file path (DXF or SVG)")
+    path = Path(raw)
+    if not path.is_absolute():
+        path = (base_dir or Path.cwd()) / path
+    units = spec.get("units", "mm")
+    if units not in ("mm", "m"):
+        raise DesignError(f"{field_name}.units", units, "must be 'mm' or 'm'")
+    layer, element_id = spec.get("layer"), spec.get("id")
+    points = read_outline(path, units, layer, element_id, field_name)
+    return FileShape(str(path), units, layer, element_id, points)
+
+
+def parse_shape(spec: dict, field_name: str, base_dir: Path | None = None):
+    """The shape of a non-circular hole mapping (``shape_kind`` already checked the keys)."""
+    kind = spec["shape"]
+    if kind == "sector":
+        return parse_sector(spec, field_name)
+    if kind == "polygon":
+        return parse_polygon(spec, field_name)
+    return parse_file(spec, field_name, base_dir)
+
+
+# ------------------------------------------------------------------------------ outlines
+
+def _unit(angle: float) -> np.ndarray:
+    return np.array([math.cos(angle), math.sin(angle)])
+
+
+def _arc_bulge(start, end, centre, ccw: bool) -> float:
+    """Bulge of the arc about ``centre`` from ``start`` to ``end`` turning as told."""
+    a0 = math.atan2(start[1] - centre[1], start[0] - centre[0])
+    a1 = math.atan2(end[1] - centre[1], end[0] - centre[0])
+    sweep = (a1 - a0) % (2 * math.pi) if ccw else -((a0 - a1) % (2 * math.pi))
+    return math.tan(sweep / 4.0)
+
+
+def sector_outline(s: Sector, field_name: str = "sector") -> Outline:
+    ri, ro, f = s.inner_radius, s.outer_radius, s.fillet
+    a0 = math.radians(s.direction - 0.5 * s.span)
+    a1 = math.radians(s.direction + 0.5 * s.span)
+    span = a1 - a0
+    if ri == 0.0:   # a pie slice: its tip on the axis is a polygon corner
+        pts = [(0.0, 0.0, 0.0), (*(ro * _unit(a0)), math.tan(span / 4)), (*(ro * _unit(a1)), 0.0)]
+        if f == 0:
+            return Outline([p[:2] for p in pts], [p[2] for p in pts])
+        # fillet the two outer corners exactly, then the tip as a polygon corner
+    if f == 0:
+        v = [ri * _unit(a0), ro * _unit(a0), ro * _unit(a1), ri * _unit(a1)]
+        return Outline(v, [0.0, math.tan(span / 4), 0.0, -math.tan(span / 4)])
+    if f >= 0.5 * (ro - ri):
+        raise DesignError(f"{field_name}.fillet", f, f"must be less than half the radial depth {ro - ri:g} m")
+    beta_o = math.asin(f / (ro - f))
+    if span - 2 * beta_o <= 0:
+        raise DesignError(f"{field_name}.fillet", f, "too large for the sector's span at its outer arc")
+    verts, bulges = [], []
+    # outer corner at a0: fillet from the radial line to the outer arc
+    c = (ro - f) * _unit(a0 + beta_o)
+    t_line, t_arc = (ro - f) * math.cos(beta_o) * _unit(a0), ro * _unit(a0 + beta_o)
+    verts += [t_line, t_arc]
+    bulges += [_arc_bulge(t_line, t_arc, c, True), math.tan((span - 2 * beta_o) / 4)]
+    c = (ro - f) * _unit(a1 - beta_o)
+    t_arc, t_line = ro * _unit(a1 - beta_o), (ro - f) * math.cos(beta_o) * _unit(a1)
+    verts += [t_arc, t_line]
+    bulges += [_arc_bulge(t_arc, t_line, c, True), 0.0]
+    if ri == 0.0:
+        inner = _fillet_corners([(0.0, 0.0)], f, field_name, neighbours=(verts[-1], verts[0]))
+        verts += [p for p, _ in inner]
+        bulges += [b for _, b in inner]
+    else:
+        beta_i = math.asin(f / (ri + f))
+        if span - 2 * beta_i <= 0:
+            raise DesignError(f"{field_name}.fillet", f, "too large for the sector's span at its inner arc")
+        if (ro - f) * math.cos(beta_o) <= (ri + f) * math.cos(beta_i):
+            raise DesignError(f"{field_name}.fillet", f, "too large for the sector's radial edges")
+        c = (ri + f) * _unit(a1 - beta_i)
+        t_line, t_arc = (ri + f) * math.cos(beta_i) * _unit(a1), ri * _unit(a1 - beta_i)
+        verts += [t_line, t_arc]
+        bulges += [_arc_bulge(t_line, t_arc, c, True), -math.tan((span - 2 * beta_i) / 4)]
+        c = (ri + f) * _unit(a0 + beta_i)
+        t_arc, t_line = ri * _unit(a0 + beta_i), (ri + f) * math.cos(beta_i) * _unit(a0)
+        verts += [t_arc, t_line]
+        bulges += [_arc_bulge(t_arc, t_line, c, True), 0.0]
+    return Outline(verts, bulges)
+
+
+def _fillet_corners(points, f, field_name, neighbours=None):
+    """Exact tangent-arc fillets of radius ``f`` at polygon corners (straight edges on both sides).
+
+    ``points``: the corner vertices, counter-clockwise; returns [(vertex, bulge of the edge
+    leaving it)] with each corner replaced by its two tangent points and the arc between them.
+    ``neighbours`` (prev, next) gives the far ends of the two edges for a single corner."""
+    pts = [np.asarray(p[:2], float) for p in points]
+    n = len(pts)
+    out, tangents = [], []
+    for i in range(n):
+        v = pts[i]
+        prev = np.asarray(neighbours[0], float) if neighbours else pts[i - 1]
+        nxt = np.asarray(neighbours[1], float) if neighbours else pts[(i + 1) % n]
+        d1, d2 = prev - v, nxt - v
+        l1, l2 = float(np.hypot(*d1)), float(np.hypot(*d2))
+        d1, d2 = d1 / l1, d2 / l2
+        theta = math.acos(max(-1.0, min(1.0, float(d1 @ d2))))   # interior angle between the edges
+        a_, b_ = v - prev, nxt - v
+        turn = float(a_[0] * b_[1] - a_[1] * b_[0])
+        if abs(math.pi - theta) < 1e-9 or f == 0:
+            tangents.append((0.0, l1, l2))
+            out.append([(v, 0.0)])
+            continue
+        t = f / math.tan(0.5 * theta)
+        tangents.append((t, l1, l2))
+        sweep = math.pi - theta
+        bulge = math.tan(sweep / 4) * (1.0 if turn > 0 else -1.0)
+        out.append([(v + t * d1, bulge), (v + t * d2, 0.0)])
+    if neighbours is None:
+        for i in range(n):   # the two fillets on one edge must fit on it
+            t_here, _, l_next = tangents[i]
+            t_next = tangents[(i + 1) % n][0]
+            if t_here + t_next > l_next * (1 + 1e-12):
+                raise DesignError(f"{field_name}.fillet", f, f"too large for the edge after point {i}")
+    else:
+        t, l1, l2 = tangents[0]
+        if t > min(l1, l2):
+            raise DesignError(f"{field_name}.fillet", f, "too large for the sector's tip")
+    return [p for corner in out for p in corner]
+
+
+def polygon_outline(s: PolygonShape, field_name: str = "polygon") -> Outline:
+    pts = np.array([p[:2] for p in s.points], float)
+    bulges = np.array([p[2] if len(p) == 3 else 0.0 for p in s.points], float)
+    if np.any(np.abs(bulges) >= 1e6):
+        raise DesignError(f"{field_name}.points", "bulge", "a bulge must be finite and below 1e6")
+    steps = np.hypot(*(np.roll(pts, -1, axis=0) - pts).T)
+    if np.any(steps == 0):
+        i = int(np.flatnonzero(steps == 0)[0])
+        raise DesignError(f"{field_name}.points[{i}]", list(s.points[i]), "repeats the next point (an outline is closed by itself)")
+    if s.fillet == 0:
+        return _checked(lambda: Outline(pts, bulges), field_name)
+    if np.any(bulges != 0):
+        raise DesignError(f"{field_name}.fillet", s.fillet, "fillets apply to straight-edged polygons only")
+    ccw = Outline(pts)   # oriented counter-clockwise
+    filleted = _fillet_corners(ccw.vertices, s.fillet, field_name)
+    return _checked(lambda: Outline([p for p, _ in filleted], [b for _, b in filleted]), field_name)
+
+
+def _checked(build, field_name):
+    try:
+        return build()
+    except (ValueError, ZeroDivisionError) as exc:
+        raise DesignError(f"{field_name}.points", "outline", str(exc)) from None
+
+
+def shape_outline(shape, field_name: str) -> Outline:
+    if isinstance(shape, Sector):
+        return sector_outline(shape, field_name)
+    if isinstance(shape, PolygonShape):
+        return polygon_outline(shape, field_name)
+    return polygon_outline(PolygonShape(shape.points), f"{field_name}.path")

@@ -1,0 +1,127 @@
+"""core/geometry: exact outlines, section properties, walls, symmetry; shaped holes in designs."""
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from softcath_ros.core.design import ShapedHole, design_from_dict
+from softcath_ros.core.errors import DesignError
+from softcath_ros.core.geometry import Outline, PolygonShape, Sector, symmetry
+from softcath_ros.core.geometry.shapes import polygon_outline, sector_outline
+from softcath_ros.core.models import make_model
+
+
+def sector_design(design_dict, span=95.0, fillet=0.1e-3, n=3, ri=1.25e-3, ro=2.0e-3, first=90.0):
+    d = copy.deepcopy(design_dict)
+    d.update(limiting_fibre=None, min_wall_thickness=0.5e-3,
+             lumen={"diameter": 1.5e-3, "center": [0.0, 0.0]},
+             channels=[{"shape": "sector", "inner_radius": ri, "outer_radius": ro,
+                        "direction": first + 360.0 * i / n, "span": span, "fillet": fillet} for i in range(n)])
+    return d
+
+
+def fine_polygon_integrals(outline, tol):
+    """The same integrals over a fine polygon: converges linearly in ``tol`` to the exact ones."""
+    return Outline(outline.polygon_points(tol)).integrals
+
+
+@pytest.mark.parametrize("outline", [
+    Outline.circle((0.3e-3, 1.05e-3), 0.85e-3),
+    sector_outline(Sector(1.25e-3, 2.0e-3, 90.0, 100.0, 0.1e-3)),
+    sector_outline(Sector(0.0, 2.0e-3, 30.0, 200.0, 0.1e-3)).mirrored(0.3),
+    polygon_outline(PolygonShape(((0, 0), (1e-3, 0), (1e-3, 1e-3), (0.5e-3, 0.4e-3), (0, 1e-3)), 0.1e-3)),
+])
+def test_exact_integrals_are_the_limit_of_fine_polygons(outline):
+    exact = outline.integrals
+    errors = []
+    for tol in (1e-10, 1e-12):
+        fine = fine_polygon_integrals(outline, tol)
+        j = exact.centroidal_second
+        errors.append((abs(fine.area - exact.area) / exact.area,
+                       np.abs(fine.centroidal_second - j).max() / np.abs(j).max()))
+        np.testing.assert_allclose(fine.centroid, exact.centroid, atol=1e-6 * math.sqrt(exact.area))
+    # the polygon's error falls 100x with its chord tolerance: the exact value is its limit
+    assert errors[1][0] < errors[0][0] / 50 and errors[1][1] < errors[0][1] / 50 + 1e-12
+    assert errors[1][0] < 1e-8 and errors[1][1] < 1e-8
+
+
+def test_circle_properties_are_the_circle_formulas():
+    r = 0.85e-3
+    i = Outline.circle((0.2e-3, -0.4e-3), r).integrals
+    assert i.area == pytest.approx(math.pi * r * r, rel=1e-14)
+    np.testing.assert_allclose(i.centroid, [0.2e-3, -0.4e-3], rtol=1e-13)
+    np.testing.assert_allclose(i.centroidal_second, math.pi * r**4 / 4 * np.eye(2), atol=1e-12 * r**4)
+
+
+def test_sector_design_loads_with_exact_areas_and_walls(design_dict):
+    d = design_from_dict(sector_design(design_dict, fillet=0.0))
+    assert all(isinstance(c, ShapedHole) for c in d.channels)
+    area = math.radians(95.0) / 2 * (2.0e-3**2 - 1.25e-3**2)
+    assert d.channels[0].area == pytest.approx(area, rel=1e-12)
+    # centroid of an annular sector: 2/3 (ro^3 - ri^3)/(ro^2 - ri^2) sin(a)/a on its mid-line
+    a = math.radians(47.5)
+    y = 2 / 3 * (2.0e-3**3 - 1.25e-3**3) / (2.0e-3**2 - 1.25e-3**2) * math.sin(a) / a
+    np.testing.assert_allclose(d.channels[0].center, [0.0, y], atol=1e-15)
+    wall = d.section.thinnest_wall()
+    assert wall.thickness == pytest.approx(0.5e-3, abs=1e-12)    # lumen wall 1.25 - 0.75 mm, outer 2.5 - 2.0 mm
+
+
+def test_wall_exactly_at_the_minimum_is_accepted_and_below_refused(design_dict):
+    design_from_dict(sector_design(design_dict, ri=0.75e-3 + 0.5e-3))
+    with pytest.raises(DesignError) as info:
+        design_from_dict(sector_design(design_dict, ri=0.75e-3 + 0.49e-3))
+    assert info.value.field == "channels[0].inner_radius" and "0.490 mm" in str(info.value)
+    with pytest.raises(DesignError) as info:
+        design_from_dict(sector_design(design_dict, ro=2.01e-3))
+    assert info.value.field == "channels[0].outer_radius" and "outer wall 0.490 mm" in str(info.value)
+    with pytest.raises(DesignError) as info:       # neighbours too close: walls between the radial edges
+        design_from_dict(sector_design(design_dict, span=118.0))
+    assert "wall to channels[0]" in str(info.value) or "overlaps" in str(info.value)
+
+
+def test_closed_form_takes_sectors_and_bends_away_from_each(design_dict):
+    d = design_from_dict(sector_design(design_dict))
+    model = make_model("closed_form", d)
+    for i, a in enumerate(np.radians([90, 210, 330])):
+        p = np.zeros(3)
+        p[i] = 2e4
+        k = model.evaluate(p).curvature
+        assert math.cos(math.atan2(k[1], k[0]) - (a + math.pi)) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(model.evaluate(np.full(3, 2e4)).curvature, 0.0, atol=1e-9)
+    areas = model.section.pressure_areas
+    np.testing.assert_allclose(areas, d.channels[0].area, rtol=1e-12)
+
+
+def test_three_fold_and_mirror_symmetry_found_from_the_outlines(design_dict):
+    d = design_from_dict(sector_design(design_dict))
+    sym = symmetry(d.section)
+    assert sym.rotation_order == 3 and sym.rotation_permutation == (1, 2, 0, 3)
+    assert len(sym.mirrors) == 3 and sym.has_mirror(math.pi / 2) is not None
+    assert sym.has_mirror(math.pi / 2).permutation == (0, 2, 1, 3)
+    # one sector a little wider: no rotation, one mirror left (through the wider one's mid-line)
+    dd = sector_design(design_dict)
+    dd["channels"][0]["span"] = 90.0
+    sym = symmetry(design_from_dict(dd).section)
+    assert sym.rotation_order == 1 and [round(math.degrees(m.angle), 9) for m in sym.mirrors] == [90.0]
+    # the shipped circles: three-fold, three mirrors
+    from softcath_ros.core.design import load_design
+    sym = symmetry(load_design("three_channel_5mm").section)
+    assert sym.rotation_order == 3 and len(sym.mirrors) == 3
+    sym = symmetry(load_design("implemented_5mm").section)
+    assert sym.rotation_order == 1 and [m.angle for m in sym.mirrors] == [pytest.approx(math.pi / 2)]
+
+
+def test_round_trip_of_shaped_holes(design_dict):
+    d = design_from_dict(sector_design(design_dict))
+    again = design_from_dict(d.to_dict())
+    assert again == d and again.content_hash() == d.content_hash()
+    dd = sector_design(design_dict)
+    dd["channels"][1]["span"] = 94.0
+    assert design_from_dict(dd).content_hash() != d.content_hash()
+
+
+def test_circle_only_code_refuses_shaped_holes_in_one_line(design_dict):
+    d = design_from_dict(sector_design(design_dict))
+    with pytest.raises(DesignError, match="reads circular holes only"):
+        d.channels[0].radius
