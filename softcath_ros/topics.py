@@ -62,13 +62,24 @@ def message_type(topic: str) -> str | None:
     return MESSAGE_TYPES.get(topic)
 
 
-def rig_topics(n_channels: int) -> list[str]:
-    """What a rig publishes under the contract: one pressure topic per channel, angle, scale."""
-    return [pressure_measured_topic(c) for c in range(n_channels)] + [BENCH_BEND_ANGLE, BENCH_WRENCH]
+# The reading each bench kind (bench.protocol.BENCHES) adds to the contract, stamped and deprecated.
+BENCH_READINGS = {"angle": BENCH_BEND_ANGLE, "force": BENCH_WRENCH}
+DEPRECATED_BENCH_READINGS = {"angle": BENCH_ANGLE, "force": BENCH_FORCE}
+
+
+def rig_topics(n_channels: int, benches=tuple(BENCH_READINGS)) -> list[str]:
+    """What a rig publishes under the contract: one pressure topic per channel and the reading of
+    each bench in ``benches`` (default both: angle, scale)."""
+    return [pressure_measured_topic(c) for c in range(n_channels)] + [BENCH_READINGS[b] for b in benches]
+
+
+def deprecated_rig_topics(benches=tuple(BENCH_READINGS)) -> list[str]:
+    """The deprecated unstamped rig topics a run on ``benches`` needs."""
+    return [PRESSURE_MEASURED] + [DEPRECATED_BENCH_READINGS[b] for b in benches]
 
 
 # Published for one release beside the stamped topics, then removed (docs/rig.md "Deprecated").
-DEPRECATED_RIG_TOPICS = [PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE]
+DEPRECATED_RIG_TOPICS = deprecated_rig_topics()
 
 # What bench_node records by default: every signal of a bench run (plus rig_topics(n) of the design).
 RECORDED = [PRESSURE_CMD, BEND_CMD, PRESSURE_MEASURED, BENCH_ANGLE, BENCH_FORCE, BENCH_BEND_ANGLE, BENCH_WRENCH,

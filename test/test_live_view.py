@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from softcath_ros import topics
-from softcath_ros.core.body_mesh import HIGH_RGBA, LOW_RGBA, SILICONE_RGBA, BodyMesh, radius_l_over_theta
+from softcath_ros.core.body_mesh import HIGH_RGBA, LOW_RGBA, SILICONE_RGBA, BodyMesh
 from softcath_ros.core.design import load_design
-from softcath_ros.core.kinematics import backbone_poses
+from softcath_ros.core.kinematics import backbone_bend_angle, backbone_poses, radius_l_over_theta
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
 
@@ -48,11 +48,18 @@ def test_body_mesh_is_a_tube_of_the_outer_diameter_coloured_by_channel_pressure(
     np.testing.assert_allclose(over[mesh._vertex_owner == 0][0], HIGH_RGBA)
 
 
-def test_radius_l_over_theta_from_the_tip_orientation():
-    k = np.array([25.0, 0.0])
-    _, quat = backbone_poses(k, 0.02, 2)
-    assert radius_l_over_theta(0.02, quat[-1]) == pytest.approx(1 / 25.0, rel=1e-9)  # constant curvature
-    assert radius_l_over_theta(0.02, [0.0, 0.0, 0.0, 1.0]) == math.inf
+@pytest.mark.parametrize("degrees", [30.0, 179.0, 283.0, 340.0])
+def test_the_bending_angle_of_a_backbone_counts_past_180_degrees(degrees):
+    """The tangent's turning integrated along the backbone, not the tip orientation's rotation angle
+    (2 acos |w|, which reads 283 degrees as 77); with a straight cap beyond the arc and in any direction."""
+    theta, arc = math.radians(degrees), 0.039
+    k = theta / arc * np.array([math.cos(0.7), math.sin(0.7)])
+    _, quat = backbone_poses(k, arc, 20, cap=0.001)
+    assert backbone_bend_angle(quat) == pytest.approx(theta, rel=1e-12)
+    assert radius_l_over_theta(0.04, backbone_bend_angle(quat)) == pytest.approx(0.04 / theta, rel=1e-12)
+    assert radius_l_over_theta(0.04, -theta) == pytest.approx(0.04 / theta, rel=1e-12)
+    assert radius_l_over_theta(0.02, 0.0) == math.inf
+    assert backbone_bend_angle(backbone_poses(np.zeros(2), arc, 5)[1]) == 0.0
 
 
 def test_templates_deserialise_to_the_messages_they_stand_for():
@@ -127,12 +134,45 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     path = got["path"][-1]
     np.testing.assert_allclose([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in path.poses],
                                last.backbone_m, atol=1e-15)
-    want = radius_l_over_theta(load_design("implemented_5mm").length, last.tip_orientation_xyzw)
+    want = radius_l_over_theta(load_design("implemented_5mm").length, backbone_bend_angle(last.backbone_orientation_xyzw))
     node.client.spin_until(lambda: got["radius"] and abs(got["radius"][-1].data - want) < 1e-9 * want, 2.0)
     assert got["radius"][-1].data == pytest.approx(want, rel=1e-9)
     code, err = node.stop(signal.SIGTERM)
     assert code == 0 and "Traceback" not in err
     assert "tf2_ros is not importable" in err
+
+
+def test_r_c_past_180_degrees_is_the_rungs_own_on_the_topic_and_in_the_sweep_tool(start_node):
+    """At 0.25 bar the 40 mm body bends through about 283 degrees on the default rung: the R_C topic and
+    the sweep tool's table say what `softcath sweep` (core.prediction) says, not l over the tip
+    orientation's folded-back angle (29.84 mm / 76.8 degrees before the fix)."""
+    import io
+
+    from std_msgs.msg import Float64
+
+    from softcath_ros.core.models import make_model
+    from softcath_ros.core.prediction import predict
+    from softcath_ros.nodes.qos import stream_qos
+    from softcath_ros.tools.pressure_sweep import print_table
+
+    design = load_design("implemented_5mm")
+    want = predict(make_model("surrogate", design), np.array([[25000.0]]))[0]
+    assert want.converged and want.bending_angle_rad > math.pi
+    node = start_node("-p", "model:=surrogate", "-p", "display_rate:=20.0")
+    radius = []
+    node.client.node.create_subscription(Float64, topics.RADIUS_L_OVER_THETA, radius.append, stream_qos(100))
+    node.client.spin_until(lambda: False, 1.0)   # discovery of the new subscription
+    point = node.client.send([25000.0])
+    assert point is not None
+    assert node.client.spin_until(lambda: bool(radius), 5.0)
+    assert radius[-1].data == pytest.approx(want.radius_of_curvature_m, rel=1e-9)
+    centreline, angle = point.radius_and_angle(design.cap_thickness)
+    assert angle == pytest.approx(want.bending_angle_rad, rel=1e-9)
+    out = io.StringIO()
+    print_table([point], [[25000.0]], design.length, design.cap_thickness, file=out)
+    cells = out.getvalue().splitlines()[1].split()
+    assert float(cells[1]) == pytest.approx(want.radius_of_curvature_m * 1e3, abs=0.006)
+    assert float(cells[3]) == pytest.approx(math.degrees(want.bending_angle_rad), abs=0.006)
 
 
 def test_a_repeated_command_is_drawn_once_a_second(start_node):

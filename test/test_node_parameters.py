@@ -89,10 +89,56 @@ PARAMS_FILES = {
 }
 
 
-def _start(node: str, *ros_args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+def _start(node: str, *ros_args: str, timeout: float = 60.0, cwd=None) -> subprocess.CompletedProcess:
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     return subprocess.run([sys.executable, "-m", f"softcath_ros.nodes.{node}", "--ros-args", *ros_args],
-                          env=env, capture_output=True, text=True, timeout=timeout)
+                          env=env, capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
+EVERY_NODE = ["allocation_node", "bench_node", "model_node", "sim_bench_node", "steer_driver", "steer_node"]
+
+
+@pytest.mark.parametrize("node", EVERY_NODE)
+def test_a_misspelt_parameter_is_refused_in_one_line(tmp_path, node):
+    """rcl keeps a parameter a node does not declare and the node would start on the default: refused
+    (exit 2, one line, the near name suggested) before the node opens a recording or builds a rung."""
+    proc = _start(node, "-p", "desgin:=three_channel_5mm", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "'desgin' (did you mean 'design'?)" in lines[0], proc.stderr
+    assert list(tmp_path.iterdir()) == []         # no recording folder, nothing written
+
+
+@pytest.mark.parametrize("content, words", [
+    ("softcath_model:\n  ros__parameters:\n    desgin: three_channel_5mm\n", "'desgin' (did you mean 'design'?)"),
+    ("/**:\n  ros__parameters:\n    publish_rate: 100.0\n", "'publish_rate'"),
+    ("softcath_modle:\n  ros__parameters:\n    design: three_channel_5mm\n",
+     "no section for node /softcath_model (it has /softcath_modle)"),
+    ("/lab:\n  softcath_model:\n    ros__parameters:\n      design: three_channel_5mm\n",
+     "no section for node /softcath_model (it has /lab/softcath_model)"),
+])
+def test_a_params_file_the_node_would_ignore_is_refused_in_one_line(tmp_path, content, words):
+    path = tmp_path / "params.yaml"
+    path.write_text(content)
+    proc = _start("model_node", "--params-file", str(path))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], proc.stderr
+
+
+def test_params_file_sections_match_as_rcl_matches_them(tmp_path):
+    from softcath_ros.nodes.parameters import params_file_sections, section_matches
+
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters: {a: 1}\nlab:\n  softcath_model:\n    ros__parameters: {a: 1}\n"
+                    "/lab/*:\n  ros__parameters: {a: 1}\n")
+    assert params_file_sections(str(path)) == ["/**", "/lab/softcath_model", "/lab/*"]
+    node = "/softcath_model"
+    assert section_matches("/**", node) and section_matches("softcath_model", node)
+    assert section_matches("/**/softcath_model", node) and section_matches("/*", node)
+    assert section_matches("/lab/*", "/lab/softcath_model") and section_matches("/**", "/lab/softcath_model")
+    assert not section_matches("/lab/softcath_model", node) and not section_matches("/softcath_modle", node)
+    assert not section_matches("/*", "/lab/softcath_model")
 
 
 @pytest.mark.parametrize("case", sorted(PARAMS_FILES))
@@ -182,3 +228,13 @@ def test_shipped_params_files_set_only_parameters_their_node_declares(tmp_path, 
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def test_no_shipped_params_file_puts_a_node_on_a_real_time_class():
+    """SCHED_FIFO (as root on a lab PC) can starve everything else: opt in with -p, never by default."""
+    from softcath_ros.core.yaml_io import load_yaml_file
+    from softcath_ros.resources import find, shipped_names
+
+    for name in shipped_names("params"):
+        for section, body in load_yaml_file(find("params", name)).items():
+            assert body["ros__parameters"].get("realtime_priority", 0) == 0, (name, section)

@@ -181,6 +181,26 @@ def _short_protocol(tmp_path, levels=(0.0, 10000.0, 20000.0), trials=1) -> Path:
     return path
 
 
+@pytest.mark.timeout(180)
+def test_a_protocol_on_the_angle_bench_alone_needs_no_scale(tmp_path, procs):
+    """A rig without a scale (its wrench topic remapped away, no deprecated topics) runs a protocol
+    on the angle bench only; a protocol on both benches still names the missing scale."""
+    env = private_env()
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false",
+                   "-r", f"{topics.BENCH_WRENCH}:=/hidden{topics.BENCH_WRENCH}"], env)
+    angle_only = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}",
+                                "-p", f"output_dir:={tmp_path}", "-p", "name:=angle_only"], env)
+    out = angle_only.communicate(timeout=120)[0]
+    assert angle_only.returncode == 0, out
+    assert _summary(out)["complete"] is True
+    both = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                          "-p", "wait_timeout:=2.0", "-p", "name:=both"], env)
+    out = both.communicate(timeout=60)[0]
+    assert both.returncode == 3, out
+    err = _summary(out)["error"]
+    assert f"{topics.BENCH_WRENCH}: no publisher" in err and topics.BENCH_BEND_ANGLE not in err, err
+
+
 @pytest.mark.timeout(240)
 def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs):
     from softcath_ros.bench.analysis import rows_from_recording

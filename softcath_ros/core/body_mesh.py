@@ -78,9 +78,3 @@ class BodyMesh:
         colours = np.take(palette, self._vertex_owner, axis=0, out=out_colours)
         return points, colours
 
-
-def radius_l_over_theta(length: float, tip_quat) -> float:
-    """R_C = l / theta from the tip orientation (theta = its rotation angle), m; inf when straight."""
-    w = min(1.0, abs(float(tip_quat[3])))
-    theta = 2.0 * math.acos(w)
-    return math.inf if theta < 1e-9 else length / theta

@@ -101,6 +101,25 @@ def bending_angle(curvature, length):
     return np.hypot(k[..., 0], k[..., 1]) * np.asarray(length, dtype=float)
 
 
+def radius_l_over_theta(length: float, angle: float) -> float:
+    """R_C = l / theta (m) of a sample of ``length`` (m) bent through ``angle`` (rad); inf when straight.
+    The one place R_C is formed: predictions, model_node's R_C topic and the sweep tool call it."""
+    theta = abs(float(angle))
+    return math.inf if theta < 1e-12 or not math.isfinite(theta) else float(length) / theta
+
+
+def backbone_bend_angle(quats) -> float:
+    """The bending angle (rad) of a backbone given as poses from base to tip (``quats`` (n, 4), xyzw, z
+    the tangent): the tangent's turning integrated along it (the angles between neighbouring poses'
+    tangents, summed). It keeps counting past 180 degrees, where the tip orientation's rotation angle
+    (2 acos |w|) folds back; each step between neighbouring poses must stay under 180 degrees."""
+    q = np.asarray(quats, dtype=float)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    t = np.column_stack([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])  # R(q) e_z
+    a, b = t[:-1], t[1:]
+    return float(np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b)).sum())
+
+
 @dataclass(frozen=True)
 class TipInverse:
     curvature: np.ndarray   # (..., 2) 1/m: the arc through the target, tangent to z at the base

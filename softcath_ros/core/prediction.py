@@ -9,7 +9,7 @@ import numpy as np
 
 from .body_contact import BodyContact, body_contact, may_reach
 from .continuation import OUTSIDE_MODEL, stop_tag
-from .kinematics import backbone_poses, planar_backbone_poses, tip_pose
+from .kinematics import backbone_poses, planar_backbone_poses, radius_l_over_theta, tip_pose
 from .models.base import BendModel
 
 
@@ -96,7 +96,7 @@ def predict(model: BendModel, pressures: np.ndarray, length: float | None = None
             curvature_per_m=[float(v) for v in k],
             axial_stretch=float(state.axial_stretch[i]),
             radius_of_curvature_m=(float(measured_rc[i]) if measured_rc is not None and np.isfinite(measured_rc[i])
-                                   else length / abs(theta) if theta != 0 else None),
+                                   else _finite_or_none(radius_l_over_theta(length, theta))),
             centreline_radius_m=(1.0 / kappa) if kappa > 0 else None,
             bending_angle_rad=float(angle[i]),
             tip_position_m=[float(v) for v in pos[i]],
@@ -162,6 +162,10 @@ def state_backbone(state, arc_length: float, cap: float, n_points: int, index: i
     k = np.asarray(state.curvature).reshape(-1, 2)[index]
     stretch = float(np.asarray(state.axial_stretch).reshape(-1)[index])
     return backbone_poses(k, arc_length * stretch, n_points, cap)
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
 
 
 def format_mm(value_m: float | None) -> str:

@@ -33,7 +33,7 @@ from ..core.design import load_design
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
 from .runtime import EXECUTORS, run_node
 
@@ -68,6 +68,7 @@ class AllocationNode(Node):
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
         self.realtime_priority = p("realtime_priority", 0, "SCHED_FIFO priority 1-99 for the node's threads, "
                                                            "0 = normal scheduling", minimum=0, maximum=99)
+        refuse_unknown_parameters(self, later=("max_pressure", "max_tip_distance"))   # before the rung is built
 
         design = load_design(design_name)
         requested_max = p("max_pressure", design.max_pressure, "safety limit on every published pressure, Pa")

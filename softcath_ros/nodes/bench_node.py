@@ -12,8 +12,9 @@ stops with an error, exit code 4). A protocol by bending direction publishes the
 curvature on /softcath/bend_cmd and allocation_node, then the only publisher allowed,
 turns it into /softcath/pressure_cmd.
 
-The rig contract (docs/rig.md): it waits (up to ``wait_timeout`` s) until every rig topic
-(/softcath/pressure_measured/ch<i>, /softcath/bench/bend_angle, /softcath/bench/wrench) is alive
+The rig contract (docs/rig.md): it waits (up to ``wait_timeout`` s) until every rig topic the
+protocol uses (/softcath/pressure_measured/ch<i>; /softcath/bench/bend_angle for an angle bench,
+/softcath/bench/wrench for a force bench) is alive
 with fresh stamps and something listens to /softcath/pressure_cmd (by direction also
 allocation_node, whose /softcath/pressure_cmd must keep coming); a timeout names each missing
 topic (exit 3). A rig on the deprecated unstamped topics is accepted with a warning. Then the
@@ -54,7 +55,7 @@ from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..recording import BagWriter, RecordingError
 from .diagnostics import diagnostic_status, publish_statuses
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .recorder import TopicRecorder
 from .runtime import EXECUTORS, run_node
 
@@ -101,6 +102,7 @@ class BenchNode(Node):
         self.follow_timeout = p("follow_timeout", 3.0, "s the pressure source gets to follow the test command",
                                 minimum=0.1, maximum=120.0)
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
+        refuse_unknown_parameters(self)    # before a recording is opened on a typo's default
         self.protocol = load_protocol(protocol_name)
         design_name = design_name or self.protocol.design
         if not design_name:
@@ -132,8 +134,10 @@ class BenchNode(Node):
         # The rig's topics (docs/rig.md), and the deprecated unstamped ones for one release.
         n = self.design.n_channels
         extra = [topics.PRESSURE_CMD] if self.by_direction else []  # allocation_node keeps publishing
-        self.contract = RigMonitor(topics.rig_topics(n) + extra, stale_after)
-        self.legacy = RigMonitor(topics.DEPRECATED_RIG_TOPICS + extra, stale_after)
+        # only the readings of the benches this protocol uses are required (all are recorded)
+        benches = tuple(dict.fromkeys(b.kind for b in self.protocol.benches))
+        self.contract = RigMonitor(topics.rig_topics(n, benches) + extra, stale_after)
+        self.legacy = RigMonitor(topics.deprecated_rig_topics(benches) + extra, stale_after)
         self.monitor: RigMonitor | None = None   # the one chosen when the rig is found
         self.channel_pressures = np.full(n, np.nan)
         self.legacy_pressures: np.ndarray | None = None

@@ -5,8 +5,8 @@ is published, if there is a new one (a repeat of the shown command only once a s
 bench dwelling on a step does not fill its recording with identical 55 kB markers): ``/softcath/body_marker`` (visualization_msgs/Marker,
 TRIANGLE_LIST: a tube of the outer diameter along the backbone, channel surfaces coloured by
 pressure, core.body_mesh), ``/softcath/backbone_path`` (nav_msgs/Path) and
-``/softcath/radius_l_over_theta`` (std_msgs/Float64, R_C = l / theta of the design length, m;
-not published while straight), all in ``softcath_base`` and stamped with the prediction's
+``/softcath/radius_l_over_theta`` (std_msgs/Float64, R_C = l / theta of the design length and the
+rung's own bending angle, m, also past 180 degrees; not published while straight), all in ``softcath_base`` and stamped with the prediction's
 stamp. The pose callback only stores a reference to its result (no copy, no work).
 
 The Marker (about 1400 vertices) and the Path are preallocated CDR templates
@@ -30,7 +30,8 @@ from std_msgs.msg import ColorRGBA, Float64
 from visualization_msgs.msg import Marker
 
 from .. import topics
-from ..core.body_mesh import BodyMesh, radius_l_over_theta
+from ..core.body_mesh import BodyMesh
+from ..core.kinematics import radius_l_over_theta
 from .cdr import MessageTemplate
 
 _S_FIRST, _S_LAST = 1.2345678901234567e-200, 7.654321098765432e-201   # sentinels (f8)
@@ -96,7 +97,7 @@ class LiveView:
         self.pub_marker = node.create_publisher(Marker, topics.BODY_MARKER, qos)
         self.pub_path = node.create_publisher(Path, topics.BACKBONE_PATH, qos)
         self.pub_radius = node.create_publisher(Float64, topics.RADIUS_L_OVER_THETA, qos)
-        self.latest = None        # (stamp ns, positions (n, 3), quats (n, 4), pressures (C,))
+        self.latest = None        # (stamp ns, positions (n, 3), quats (n, 4), pressures (C,), bending angle rad)
         self._shown = None
         self._shown_pressures = None
         self._t_published = 0.0
@@ -120,7 +121,7 @@ class LiveView:
         if latest is None or latest is self._shown:
             return
         self._shown = latest
-        stamp_ns, positions, quats, pressures = latest
+        stamp_ns, positions, quats, pressures, angle = latest
         # The same command again (a bench dwelling on a step): nothing new to draw; once a second
         # anyway, so a viewer that joins late gets the body.
         now = time.monotonic()
@@ -140,7 +141,7 @@ class LiveView:
             stamp[:] = sec_nsec
         self._path.set_stamp(stamp_ns)
         self.pub_path.publish(self._path.to_bytes())
-        r = radius_l_over_theta(self.length, quats[-1])
+        r = radius_l_over_theta(self.length, angle)
         if np.isfinite(r):
             self.pub_radius.publish(Float64(data=r))
         if self.tf is not None:

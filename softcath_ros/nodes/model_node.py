@@ -29,6 +29,7 @@ runs the callbacks; benchmarks/node_latency.py measures these and the alternativ
 """
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -50,7 +51,7 @@ from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
 from .runtime import EXECUTORS, run_node
 
@@ -95,6 +96,7 @@ class ModelNode(Node):
                          "0 = off", minimum=0.0, maximum=1000.0)
         body_sides = p("body_sides", 12, "vertices around the body tube of the 3D view", minimum=3, maximum=64)
         tip_frame = p("tip_frame", "softcath_tip", "TF frame of the tip (broadcast where tf2_ros exists)")
+        refuse_unknown_parameters(self, later=("max_pressure",))   # before a rung is built on a typo's default
 
         self.design = load_design(design_name)
         self.calibration = load_calibration(calibration_file) if calibration_file else None
@@ -314,7 +316,10 @@ class ModelNode(Node):
             return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
         c.accepted += 1
         if self.view is not None:   # the display timer picks it up (a reference, no copy)
-            self.view.latest = (stamp_ns, positions, quats, check.pressures)
+            # the rung's own bending angle (its solved tip's, else |k| x the deformed arc): R_C past 180 deg
+            angle = float(state.tip.angle) if solved is not None and state.tip is not None else \
+                math.hypot(curvature[0], curvature[1]) * self.arc_length * stretch
+            self.view.latest = (stamp_ns, positions, quats, check.pressures, angle)
         if self.preparation == "serialized":
             self._publish_serialized(stamp_ns, positions, quats)
         else:

@@ -57,3 +57,58 @@ def _describe_range(desc: ParameterDescriptor, numeric: bool, minimum, maximum) 
     else:
         desc.integer_range = [IntegerRange(from_value=int(-2**63 if minimum is None else minimum),
                                            to_value=int(2**63 - 1 if maximum is None else maximum), step=0)]
+
+
+def refuse_unknown_parameters(node, params_files: list[str] | None = None, later: tuple = ()) -> None:
+    """Refuse, in one line, what rcl would silently ignore: a parameter set for ``node`` (by ``-p`` or
+    a params file) that it does not declare (a misspelt ``desgin``), and a params file none of whose
+    sections names this node (``/**`` and ``*`` wildcards count). Called once a node has declared
+    every parameter, before it acts on any; ``params_files`` default to the ones the process was
+    started with (runtime.run_node); ``later``: names the node declares after this check."""
+    import difflib
+
+    from .runtime import started_params_files
+
+    declared = set(node._parameters) | set(later)
+    unknown = sorted(set(node._parameter_overrides) - declared)
+    name = node.get_fully_qualified_name()
+    if unknown:
+        hints = [f"'{u}'" + (f" (did you mean '{close[0]}'?)" if (close := difflib.get_close_matches(u, declared, 1))
+                             else "") for u in unknown]
+        raise SoftcathError(f"{name} has no parameter {', '.join(hints)}; it declares: {', '.join(sorted(declared))}")
+    for path in started_params_files() if params_files is None else params_files:
+        sections = params_file_sections(path)
+        if not any(section_matches(s, name) for s in sections):
+            raise SoftcathError(f"params file {path}: no section for node {name} (it has {', '.join(sections)}); "
+                                f"the form is {name.lstrip('/')}: {{ros__parameters: {{...}}}}, or /** for every node")
+
+
+def params_file_sections(path: str) -> list[str]:
+    """The node paths of a (checked, runtime.check_params_file) params file: '/ns/node', '/**', ..."""
+    from ..core.yaml_io import load_yaml_file
+
+    out = []
+
+    def walk(value, where: str) -> None:
+        if isinstance(value, dict) and "ros__parameters" not in value:
+            for key, inner in value.items():
+                walk(inner, f"{where}/{str(key).strip('/')}")
+        else:
+            out.append(where)
+
+    for key, value in load_yaml_file(path, f"params file {path}").items():
+        walk(value, "/" + str(key).strip("/"))
+    return out
+
+
+def section_matches(section: str, node_name: str) -> bool:
+    """Whether the params-file section ``section`` applies to the node ``node_name`` (fully
+    qualified), as rcl matches them: ``*`` stands for one name part, ``**`` for any number."""
+    def match(pattern: list[str], name: list[str]) -> bool:
+        if not pattern:
+            return not name
+        if pattern[0] == "**":
+            return any(match(pattern[1:], name[i:]) for i in range(len(name) + 1))
+        return bool(name) and pattern[0] in ("*", name[0]) and match(pattern[1:], name[1:])
+
+    return match([t for t in section.split("/") if t], [t for t in node_name.split("/") if t])

@@ -3,7 +3,8 @@
 ``run_node`` builds the node, spins it on the executor it names and ends with exit
 code 0 on SIGINT/SIGTERM (rclpy's signal handlers shut the context down; we catch
 the resulting exceptions so no traceback is printed). A node that cannot start
-(bad design file, unknown model, bad parameter) logs one line and exits with 2.
+(bad design file, unknown model, bad parameter, a parameter it does not declare, a params file
+with no section for it) logs one line and exits with 2.
 
 Executors (``benchmarks/node_latency.py`` compares them):
 - ``events``: rclpy.experimental.EventsExecutor, C++ event queue, lowest overhead.
@@ -24,6 +25,7 @@ from typing import Callable
 from ..core.errors import SoftcathError, shown
 
 EXECUTORS = ("events", "single", "multi")
+_started_argv: list[str] = []     # the command line run_node started this process's node with
 
 
 def make_executor(name: str):
@@ -92,6 +94,11 @@ def params_files(argv: list[str]) -> list[str]:
     """The ``--params-file PATH`` arguments among the ROS arguments of ``argv``."""
     ros = ros_arguments(argv)
     return [ros[i + 1] if i + 1 < len(ros) else "" for i, a in enumerate(ros) if a == "--params-file"]
+
+
+def started_params_files() -> list[str]:
+    """The ``--params-file`` paths of the command line ``run_node`` started with ([] in-process)."""
+    return params_files(_started_argv)
 
 
 def check_parameter_rules(argv: list[str]) -> None:
@@ -190,6 +197,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
     from ..graph import READY_MARK, default_to_localhost_discovery
+    from .parameters import refuse_unknown_parameters
 
     # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
     # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
@@ -200,6 +208,7 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     default_to_localhost_discovery()
     try:
         argv = sys.argv if args is None else list(args)
+        _started_argv[:] = argv
         check_parameter_rules(argv)
         for path in params_files(argv):
             check_params_file(path)
@@ -218,6 +227,13 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
             node = factory()
         except startup_errors as exc:
             print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+            return 2
+        try:    # each node refuses these itself before acting on its parameters; this covers every node
+            refuse_unknown_parameters(node)
+        except SoftcathError as exc:
+            print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+            node.destroy_node()
+            node = None
             return 2
         name = getattr(node, "executor_name", "events")
         executor = make_executor(name)

@@ -34,7 +34,7 @@ from ..bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, 
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .diagnostics import diagnostic_status, publish_statuses
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .runtime import run_node
 
 # Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
@@ -66,6 +66,7 @@ class SimBenchNode(Node):
             values[name] = p(name, default, f"simulated rig: {name} (bench/sim_rig.py RigParams)",
                              minimum=lo, maximum=hi)
         params = RigParams(**values)
+        refuse_unknown_parameters(self, later=tuple(f"tracker_{n}" for n in asdict(TrackerParams())))
         design = load_design(design_name)
         model = truth_model(model_name, design, params)
         self.rig = SimulatedRig(model, params)

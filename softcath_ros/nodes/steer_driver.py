@@ -36,7 +36,7 @@ from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.steering import STEERING_MAX_PRESSURE, rung_options, steering_design
 from ..recording import BagWriter
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
 from .recorder import TopicRecorder
 from .runtime import run_node
@@ -61,6 +61,7 @@ class SteerDriver(Node):
         rate = p("target_rate", 100.0, "tip_target rate, Hz", minimum=1.0, maximum=1000.0)
         self.wait_timeout = p("wait_timeout", 60.0, "seconds to wait for the rig and the controller", minimum=0.1)
         out = p("output", "runs/steer", "recording directory (MCAP bag)")
+        refuse_unknown_parameters(self)    # before a recording is opened on a typo's default
         design = steering_design(design, max_pressure)
         rig = RigParams(pressure_shift=shift, material_scale=scale)
         self.path = targets_for(self.kind, self.duration, truth_model(truth, design, rig, **rung_options(truth)),

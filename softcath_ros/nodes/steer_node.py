@@ -39,7 +39,7 @@ from ..core.pressure_command import check_pressure_command
 from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
                              make_steering_model, steering_design)
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
-from .parameters import declare
+from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
 from .runtime import EXECUTORS, run_node
 
@@ -78,6 +78,7 @@ class SteerNode(Node):
         publish_rate = p("publish_rate", 200.0, "pressure_cmd publishing rate, Hz", minimum=1.0, maximum=5000.0)
         diag_period = p("diagnostics_period", 1.0, "period of /diagnostics, s", minimum=1e-3, maximum=3600.0)
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
+        refuse_unknown_parameters(self, later=("max_pressure", "max_tip_distance"))   # before the rung is built
         design = load_design(design_name)
         requested_max = p("max_pressure", min(STEERING_MAX_PRESSURE, design.max_pressure),
                           "safety limit on every published pressure, Pa (never above the design's)", minimum=1.0)

@@ -4,9 +4,11 @@
 
 Sends one command at a time on /softcath/pressure_cmd and waits for the node's
 /softcath/tip_pose and /softcath/backbone answer before the next one (lock-step, so
-every pose belongs to a known command). The bending angle is read from the received tip
-orientation and 1/|k| from the tip position (core.kinematics.curvature_for_tip, with the
-design's straight tip cap), so the table shows what the topics say, not a second computation. Reusable: ``SweepClient.run(pressures)``.
+every pose belongs to a known command). The bending angle is the received backbone's tangent
+turning integrated from base to tip (core.kinematics.backbone_bend_angle: right past 180 degrees,
+where the tip orientation alone folds back) and 1/|k| comes from the tip position
+(core.kinematics.curvature_for_tip, with the design's straight tip cap), so the table shows what
+the topics say, not a second computation. Reusable: ``SweepClient.run(pressures)``.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import argparse
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +24,7 @@ import numpy as np
 from .. import topics
 from ..cli.common import bounded_int, finite_float, positive_float
 from ..core import json_output
+from ..core.kinematics import radius_l_over_theta
 from ..core.units import PA_PER_BAR
 from ..graph import default_to_localhost_discovery
 
@@ -33,17 +36,20 @@ class SweepPoint:
     tip_orientation_xyzw: list[float]
     backbone_m: list[list[float]]       # (points, 3) positions, base to tip
     stamp_ns: int
+    backbone_orientation_xyzw: list[list[float]] = field(default_factory=list)   # (points, 4), base to tip
 
     def radius_and_angle(self, cap: float = 0.0) -> tuple[float, float]:
         """(1/|k| in m of the arc that ends ``cap`` (m, the straight tip cap) before the tip, inf when
-        straight; bending angle theta in rad, the tip orientation's rotation). R_C = l / theta needs the
-        sample's unstretched length l (``print_table``)."""
-        from ..core.kinematics import curvature_for_tip
+        straight; bending angle theta in rad, the backbone's integrated tangent turning, or without a
+        backbone the tip orientation's rotation, which folds back past 180 degrees). R_C = l / theta
+        needs the sample's unstretched length l (``print_table``)."""
+        from ..core.kinematics import backbone_bend_angle, curvature_for_tip
 
         inv = curvature_for_tip(np.array(self.tip_position_m), 1.0, cap=cap)
         kappa = float(np.hypot(*inv.curvature))
-        qx, qy, qz, qw = self.tip_orientation_xyzw
-        return (1.0 / kappa if kappa > 0 else math.inf), 2.0 * math.atan2(math.sqrt(qx * qx + qy * qy + qz * qz), abs(qw))
+        quats = self.backbone_orientation_xyzw if len(self.backbone_orientation_xyzw) >= 2 else \
+            [[0.0, 0.0, 0.0, 1.0], self.tip_orientation_xyzw]
+        return (1.0 / kappa if kappa > 0 else math.inf), backbone_bend_angle(quats)
 
 
 class SweepClient:
@@ -102,6 +108,8 @@ class SweepClient:
         return SweepPoint(pressures_pa=[float(v) for v in pressures_pa], tip_position_m=[p.x, p.y, p.z],
                           tip_orientation_xyzw=[q.x, q.y, q.z, q.w],
                           backbone_m=[[b.position.x, b.position.y, b.position.z] for b in bb.poses],
+                          backbone_orientation_xyzw=[[b.orientation.x, b.orientation.y, b.orientation.z,
+                                                      b.orientation.w] for b in bb.poses],
                           stamp_ns=tip.header.stamp.sec * 1_000_000_000 + tip.header.stamp.nanosec)
 
     def run(self, commands) -> list[SweepPoint | None]:
@@ -131,7 +139,8 @@ def print_table(points: list[SweepPoint | None], commands, length: float, cap: f
             continue
         centreline, angle = pt.radius_and_angle(cap)
         tip = ", ".join(f"{v * 1e3:7.2f}" for v in pt.tip_position_m)
-        rc_s = "inf" if angle == 0 else f"{length / abs(angle) * 1e3:.2f}"
+        rc = radius_l_over_theta(length, angle)
+        rc_s = "inf" if math.isinf(rc) else f"{rc * 1e3:.2f}"
         k_s = "inf" if math.isinf(centreline) else f"{centreline * 1e3:.2f}"
         print(f"{ps:>16} {rc_s:>17} {k_s:>11} {math.degrees(angle):12.2f} {tip:>28}", file=file)
 
