@@ -310,6 +310,47 @@ def test_two_processes_bend_cmd_to_pose_through_model_node(allocator):
         stop(model)
 
 
+def test_the_shipped_two_dof_pair_works_together():
+    """README: model_node and allocation_node both started with config/two_dof_pair.yaml (from the
+    checkout): allocation_node's three-channel commands reach model_node, which answers them (none
+    rejected as the wrong number of channels), the tip bending the commanded way."""
+    from geometry_msgs.msg import PoseStamped
+
+    domain = private_domain()
+    repo = Path(__file__).resolve().parents[1]
+    procs = [subprocess.Popen([str(EXE.parent / exe), "--ros-args", "--params-file", "config/two_dof_pair.yaml"],
+                              cwd=repo, env=graph_env(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              text=True) for exe in ("model_node", "allocation_node")]
+    op = Operator(domain)
+    tips, model_counters = [], {}
+    op.node.create_subscription(PoseStamped, topics.TIP_POSE, lambda m: tips.append(m.pose.position), 50)
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            if status.name.startswith(topics.MODEL_NODE):
+                model_counters.update({kv.key: kv.value for kv in status.values})
+
+    op.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, 50)
+    try:
+        for proc in procs:
+            wait_ready(proc, timeout_s=120)
+        assert op.spin(60.0, until=lambda: len(tips) > 3 and op.bend.get_subscription_count() > 0), \
+            "no tip_pose from model_node, or allocation_node does not hear bend_cmd"
+        mark = len(op.pressures)
+        op.stream_bend((6.0, 0.0), 0.5)
+        assert op.spin(15.0, until=lambda: tips and tips[-1].x > 1e-3), "the tip did not bend towards +x"
+        limit = load_design("three_channel_5mm").max_pressure
+        assert all(len(p) == 3 and max(p) <= limit for _, p in op.pressures[mark:])
+        assert max(max(p) for _, p in op.pressures[mark:]) > 0.0
+        assert abs(tips[-1].y) < 0.01 * tips[-1].x
+        assert op.spin(10.0, until=lambda: int(model_counters.get("accepted", "0")) > 10), model_counters
+        assert model_counters["rejected"] == "0" and model_counters["design"] == "three_channel_5mm", model_counters
+    finally:
+        op.close()
+        for proc in procs:
+            stop(proc)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_exit_on_signal(sig):
     proc = start_node(EXE, private_domain())
