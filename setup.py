@@ -62,12 +62,18 @@ setup(
             "ros-visualization-msgs>=5.5",
             "ros-nav-msgs>=5.5",
             "ros-rmw-fastrtps-cpp>=9.3",
+            # managed (lifecycle) hardware nodes: tracker_node (rclpy.lifecycle needs its messages)
+            "ros-lifecycle-msgs>=2.0",
         ],
         "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",
                  "hypothesis>=6.80",
                  # test_install.py builds a wheel offline (no build isolation): bdist_wheel
-                 "wheel>=0.40"],
+                 "wheel>=0.40",
+                 # the camera tracker's tests (the `vision` extra)
+                 "opencv-python-headless>=4.8"],
         "bench": ["psutil>=5.9"],
+        # `softcath track` and tracker_node: the camera measurement (OpenCV with ArUco, imported lazily).
+        "vision": ["opencv-python-headless>=4.8"],
         # 3D finite-element rung (fe3d): NGSolve with the netgen mesher, imported lazily.
         "fe": ["ngsolve>=6.2.2404"],
         # `softcath study --scheduler ADDR`: run study cases on an existing Dask cluster (imported lazily).
@@ -87,6 +93,7 @@ setup(
             "allocation_node = softcath_ros.nodes.allocation_node:main",
             "steer_node = softcath_ros.nodes.steer_node:main",
             "steer_driver = softcath_ros.nodes.steer_driver:main",
+            "tracker_node = softcath_ros.nodes.tracker_node:main",
         ],
     },
 )

@@ -27,6 +27,7 @@ SUBCOMMANDS = [
     "study",
     "surrogate",
     "steer_sim",
+    "track",
 ]
 
 

@@ -1,0 +1,510 @@
+"""Camera measurement of a bending sample: backbone, bend angle, tip and R_C = l / theta per frame.
+
+The scene (docs/tracker.md): the camera looks perpendicular onto the bending plane; the body is
+darker than its background (plain or graph paper, lit unevenly) or lies in an HSV colour range.
+The scale (mm per pixel), the base (the body's centre where it leaves the clamp) and the unbent
+direction are fixed for a run (``Scene``), given or taken once from ArUco markers (``scene_from_markers``).
+
+Per frame ``Tracker.measure`` walks the body from the base: each cross-section perpendicular to the
+predicted tangent gives the body's two edges (sub-pixel, at half the body's contrast) and their
+midpoint on the centreline; the walk ends where the body does, and the tip is the body's end along
+the last tangent. The tangent angle along the backbone is unwrapped (angles beyond 180 deg stay
+what they are); the bend angle is its value at the tip from a local fit. A frame it cannot measure
+gets ``ok = False`` and the reason, never a guess.
+
+Pure: numpy and OpenCV (the ``vision`` extra, imported here only), no ROS.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.errors import SoftcathError
+
+ARUCO_DICTIONARY = "DICT_4X4_50"   # the marker family we print (docs/tracker.md)
+BACKBONE_POINTS = 21               # the backbone is resampled to this many points, base to tip
+MIN_QUALITY = 0.6                  # fewer clean cross-sections than this share: no measurement
+MIN_SECTIONS = 4
+LENGTH_TOLERANCE = 0.25            # measured backbone length vs --length: relative deviation allowed
+DOWNSCALE = 8                      # background brightness is estimated on a frame this much smaller
+SECTION_STEP = 0.25                # cross-sections this many body widths apart
+MAX_UNCLEAN_RUN = 4                # this many unclean cross-sections in a row: the body is lost
+MAX_TURN = 0.35                    # rad between chords (a body bends < 0.13 rad per step)
+
+
+def cv2_module():
+    """OpenCV, or the one-line install hint (it is the ``vision`` extra)."""
+    try:
+        import cv2
+    except ImportError:
+        raise SoftcathError("the camera tracker needs OpenCV: pip install 'softcath_ros[vision]' "
+                            "(opencv-python-headless)") from None
+    return cv2
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What is fixed for a run. Image coordinates: x right, y down, pixels."""
+    mm_per_px: float
+    base_px: tuple[float, float]
+    toward_px: tuple[float, float]       # any point on the unbent axis beyond the base
+    length_m: float | None = None        # the sample's length (R_C = l / theta); None: the measured one
+    mirror: bool = False                 # positive bending to the left of the unbent axis (as seen)
+    hsv_range: tuple | None = None       # ((h, s, v) low, (h, s, v) high): the body's colour
+    diameter_mm: float | None = None     # the body's width; None: measured on the first frame
+    cap_mm: float | None = None          # the straight tip beyond the bending part (the design's cap)
+
+    def __post_init__(self):
+        if not (math.isfinite(self.mm_per_px) and self.mm_per_px > 0):
+            raise SoftcathError(f"scale {self.mm_per_px!r} mm/px: must be a positive number")
+        d = np.subtract(self.toward_px, self.base_px)
+        if not np.all(np.isfinite(d)) or np.hypot(*d) < 1.0:
+            raise SoftcathError("--toward-px must be a point at least 1 px away from --base-px")
+        if self.length_m is not None and not (math.isfinite(self.length_m) and 0 < self.length_m < 10):
+            raise SoftcathError(f"--length {self.length_m!r}: a sample length in m, e.g. 0.04")
+        if self.diameter_mm is not None and not (math.isfinite(self.diameter_mm) and self.diameter_mm > 0):
+            raise SoftcathError(f"--diameter-mm {self.diameter_mm!r}: must be a positive number")
+
+    @property
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Unit vectors (image) along the unbent axis and across it (positive bending side)."""
+        d = np.subtract(self.toward_px, self.base_px).astype(float)
+        d /= np.hypot(*d)
+        n = np.array([-d[1], d[0]])      # the right of the axis as seen, looking from base to tip
+        return d, (-n if self.mirror else n)
+
+
+@dataclass
+class Measurement:
+    """One frame's result; the numbers are None when ``ok`` is False (``reason`` says why)."""
+    frame: int
+    ok: bool
+    reason: str = ""
+    time_s: float | None = None
+    bend_angle_deg: float | None = None
+    tip_mm: list | None = None                 # [across, along] the unbent axis from the base
+    radius_of_curvature_mm: float | None = None  # l / theta
+    quality: float | None = None               # share of clean cross-sections (1 = all)
+    width_mm: float | None = None              # median body width seen
+    length_measured_mm: float | None = None    # backbone length base to tip as seen
+    backbone_mm: list | None = None            # [[across, along], ...] base to tip
+    backbone_px: np.ndarray | None = field(default=None, repr=False)   # for the overlay
+
+    def as_dict(self) -> dict:
+        out = {k: getattr(self, k) for k in ("frame", "ok", "reason", "time_s", "bend_angle_deg", "tip_mm",
+                                             "radius_of_curvature_mm", "quality", "width_mm",
+                                             "length_measured_mm", "backbone_mm")}
+        if self.ok:
+            del out["reason"]
+        return out
+
+
+def parse_point(text: str, what: str) -> tuple[float, float]:
+    """``X,Y`` pixels, or the one-line error naming ``what``."""
+    parts = str(text).split(",")
+    try:
+        x, y = (float(p) for p in parts)
+    except ValueError:
+        raise SoftcathError(f"{what} {text!r}: expected X,Y in pixels, e.g. 640,700") from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise SoftcathError(f"{what} {text!r}: must be finite")
+    return x, y
+
+
+def parse_hsv_range(text: str) -> tuple:
+    """``H,S,V:H,S,V`` (OpenCV ranges: H 0-179, S and V 0-255) -> (low, high)."""
+    try:
+        lo, hi = (tuple(int(v) for v in part.split(",")) for part in str(text).split(":"))
+        if len(lo) != 3 or len(hi) != 3:
+            raise ValueError
+    except ValueError:
+        raise SoftcathError(f"--color {text!r}: expected H,S,V:H,S,V, e.g. 35,80,40:85,255,255") from None
+    tops = (179, 255, 255)
+    if any(not 0 <= v <= t for part in (lo, hi) for v, t in zip(part, tops)) or any(a > b for a, b in zip(lo, hi)):
+        raise SoftcathError(f"--color {text!r}: H in 0-179, S and V in 0-255, low <= high")
+    return lo, hi
+
+
+def find_markers(frame) -> list[tuple[int, np.ndarray]]:
+    """ArUco markers (``ARUCO_DICTIONARY``) in ``frame``: (id, corners (4, 2) px) each; corners in the
+    marker's own order: top-left, top-right, bottom-right, bottom-left."""
+    cv2 = cv2_module()
+    gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, ARUCO_DICTIONARY))
+    detector = cv2.aruco.ArucoDetector(dictionary, cv2.aruco.DetectorParameters())
+    corners, ids, _ = detector.detectMarkers(gray)
+    if ids is None:
+        return []
+    out = []
+    for c, i in zip(corners, ids.ravel()):
+        c = np.asarray(c, dtype=float).reshape(4, 2)
+        out.append((int(i), _refine_corners(gray, c, cv2)))
+    return out
+
+
+def _refine_corners(gray, corners: np.ndarray, cv2) -> np.ndarray:
+    """Marker corners from its four outer edges, each a line fitted through sub-pixel edge points
+    (half-way between the white margin and the black border) along the side's middle: the scale is
+    only as good as the side measured, and the detector's corners are a pixel short."""
+    image = gray.astype(np.float32)
+    side = float(np.mean([np.hypot(*(corners[(k + 1) % 4] - corners[k])) for k in range(4)]))
+    reach = 0.45 * side / 6                          # within one module (the border is one module wide)
+    offsets = np.arange(-reach, reach + 0.125, 0.25)
+    lines = []
+    for k in range(4):
+        a, b = corners[k], corners[(k + 1) % 4]
+        e = (b - a) / np.hypot(*(b - a))
+        outward = np.array([e[1], -e[0]])            # corners run clockwise as seen
+        points = []
+        for t in np.linspace(0.2, 0.8, 15):
+            q = a + t * (b - a)
+            prof = _sample(image, q[0] + offsets * outward[0], q[1] + offsets * outward[1], cv2)
+            if np.isnan(prof).any():
+                continue
+            cut = _crossings(prof, 0.5 * (prof.min() + prof.max()))
+            if cut.size == 1:
+                points.append(q + (offsets[0] + 0.25 * cut[0]) * outward)
+        if len(points) < 5:
+            return corners                            # too close to the frame's edge: as detected
+        pts = np.asarray(points)
+        centre = pts.mean(axis=0)
+        direction = np.linalg.svd(pts - centre)[2][0]
+        lines.append((centre, direction))
+    refined = []
+    for k in range(4):   # corner k is where side k-1 meets side k
+        (p1, d1), (p2, d2) = lines[k - 1], lines[k]
+        t = np.linalg.solve(np.column_stack([d1, -d2]), p2 - p1)
+        refined.append(p1 + t[0] * d1)
+    return np.asarray(refined)
+
+
+def scene_from_markers(frame, aruco_mm: float | None, clamp_marker: int | None, clamp_gap_mm: float = 0.0,
+                       **scene) -> Scene:
+    """The ``Scene`` with the scale and/or the base taken from ArUco markers in ``frame``.
+
+    ``aruco_mm``: the printed side of the markers (mm): mm/px from the clamp marker, else from the
+    mean side of every marker found. ``clamp_marker``: the id of the marker on the clamp, upright
+    along the unbent axis with its top edge ``clamp_gap_mm`` below the clamp's exit (centred on the
+    body): the base lies that far above the edge's midpoint, the unbent direction is the marker's up. Other ``scene`` fields as ``Scene``'s."""
+    markers = find_markers(frame)
+    if not markers:
+        raise SoftcathError(f"no ArUco marker ({ARUCO_DICTIONARY}) found in the first frame")
+    chosen = markers
+    if clamp_marker is not None:
+        chosen = [m for m in markers if m[0] == clamp_marker]
+        if not chosen:
+            raise SoftcathError(f"--clamp-marker {clamp_marker}: no such marker in the first frame "
+                                f"(found ids {sorted(m[0] for m in markers)})")
+        c = chosen[0][1]
+        up = 0.5 * (c[0] + c[1]) - 0.5 * (c[2] + c[3])
+        side_px = float(np.mean([np.hypot(*(c[(k + 1) % 4] - c[k])) for k in range(4)]))
+        mm_per_px = aruco_mm / side_px if aruco_mm is not None else scene["mm_per_px"]
+        top = 0.5 * (c[0] + c[1]) + up / np.hypot(*up) * clamp_gap_mm / mm_per_px
+        scene["base_px"] = (float(top[0]), float(top[1]))
+        scene["toward_px"] = (float(top[0] + up[0]), float(top[1] + up[1]))
+    if aruco_mm is not None:
+        sides = [np.hypot(*(c[(k + 1) % 4] - c[k])) for _, c in chosen for k in range(4)]
+        scene["mm_per_px"] = aruco_mm / float(np.mean(sides))
+    return Scene(**scene)
+
+
+def _sample(image: np.ndarray, xs: np.ndarray, ys: np.ndarray, cv2) -> np.ndarray:
+    """Bilinear samples of ``image`` at (xs, ys) (same shape); outside the image: nan."""
+    mx = np.ascontiguousarray(xs, dtype=np.float32).reshape(1, -1)
+    my = np.ascontiguousarray(ys, dtype=np.float32).reshape(1, -1)
+    out = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+    return out.reshape(np.shape(xs))
+
+
+def _crossings(values: np.ndarray, threshold: float) -> np.ndarray:
+    """Sub-pixel positions (fractional sample index) where ``values`` crosses ``threshold``."""
+    above = values > threshold
+    i = np.flatnonzero(above[1:] != above[:-1])
+    a, b = values[i], values[i + 1]
+    return i + (threshold - a) / (b - a)
+
+
+def _rotate(v: np.ndarray, angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+class Tracker:
+    """Measures frames of one scene; keeps the body's width and contrast found on the first frame."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.cv2 = cv2_module()
+        self.width_px = None if scene.diameter_mm is None else scene.diameter_mm / scene.mm_per_px
+        self.contrast = None      # the body's score (0 background, ~1 black) where it is surely body
+
+    # -- the body score: 0 on the background, larger on the body -------------------------------
+    def _score_images(self, frame):
+        """(image to sample, background to sample or None, its downscale): score = 1 - image / background,
+        or the colour mask itself (0..1) with ``--color``."""
+        cv2 = self.cv2
+        if self.scene.hsv_range is not None:
+            if frame.ndim != 3:
+                raise SoftcathError("--color needs colour frames; this input is grey")
+            lo, hi = self.scene.hsv_range
+            mask = cv2.inRange(cv2.cvtColor(frame, cv2.COLOR_BGR2HSV), lo, hi)
+            return cv2.GaussianBlur(mask, (5, 5), 0).astype(np.float32) * (1 / 255.0), None
+        gray = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        small = cv2.resize(gray, (max(1, gray.shape[1] // DOWNSCALE), max(1, gray.shape[0] // DOWNSCALE)),
+                           interpolation=cv2.INTER_AREA)
+        # the local background: the brightest around, over more than the body's width (the body
+        # and graph-paper lines vanish), smoothed: uneven light divides out
+        wide = self.width_px if self.width_px is not None else min(gray.shape) / 6
+        k = 2 * int(math.ceil(1.2 * wide / DOWNSCALE)) + 1
+        bg = cv2.dilate(small, cv2.getStructuringElement(cv2.MORPH_RECT, (k, k)))
+        bg = cv2.blur(bg, (k, k)).astype(np.float32)
+        return gray, np.maximum(bg, 1.0)
+
+    def _score(self, images, xs, ys):
+        image, bg = images
+        cv2 = self.cv2
+        if bg is None:
+            return _sample(image, xs, ys, cv2)
+        g = _sample(image, xs, ys, cv2)
+        half = 0.5 * (DOWNSCALE - 1)
+        b = _sample(bg, (xs - half) / DOWNSCALE, (ys - half) / DOWNSCALE, cv2)
+        return 1.0 - g / b
+
+    # -- one cross-section ----------------------------------------------------------------------
+    def _section(self, images, point, normal, half_width, threshold):
+        """(left, right) edge offsets (px along ``normal``) of the body run nearest ``point``, whether
+        both edges were found, or None when no body is there. (Plain Python over the few edges: this
+        runs some 40 times a frame.)"""
+        u = self._offsets(half_width)
+        s = self._score(images, point[0] + u * normal[0], point[1] + u * normal[1])
+        outside = np.isnan(s)
+        out_any = bool(outside.any())
+        if out_any:
+            s[outside] = -1.0   # beyond the frame: no body, unless the body reaches there
+        first, last = float(u[0]), float(u[-1])
+        cuts = (first + 0.5 * _crossings(s, threshold)).tolist()
+        edges = ([-math.inf] if s[0] > threshold else []) + cuts + ([math.inf] if s[-1] > threshold else [])
+        if len(edges) < 2:
+            return None
+        best, nearest = None, math.inf
+        for lo, hi in zip(edges[::2], edges[1::2]):
+            mid = abs(max(lo, first) + min(hi, last))
+            if mid < nearest:
+                best, nearest = (lo, hi), mid
+        lo, hi = best
+        clean = math.isfinite(lo) and math.isfinite(hi)
+        lo, hi = max(lo, first), min(hi, last)
+        if out_any and outside[(u >= lo - 2) & (u <= hi + 2)].any():
+            raise _LeavesImage
+        return lo, hi, clean
+
+    def _offsets(self, half_width):
+        key = round(half_width, 3)
+        if getattr(self, "_offsets_key", None) != key:
+            self._offsets_key, self._offsets_u = key, np.arange(-half_width, half_width + 0.25, 0.5)
+        return self._offsets_u
+
+    def _calibrate(self, images) -> str:
+        """Width and contrast of the body at the base (first frame); '' or why not."""
+        along, across = self.scene.axes
+        h = images[0].shape
+        point = np.asarray(self.scene.base_px, float)
+        half = 0.5 * min(h[0], h[1]) / 4 if self.width_px is None else 1.5 * self.width_px
+        u = np.arange(-half, half + 0.25, 0.5)
+        best = None
+        for step in (0.5, 1.0, 1.5):   # a little way out from the clamp
+            p = point + along * step * (self.width_px or 20.0)
+            s = self._score(images, p[0] + u * across[0], p[1] + u * across[1])
+            if np.isnan(s).any():
+                return "the base point lies too close to the frame's edge"
+            level = float(np.percentile(s, 95))
+            if level < 0.15:
+                continue
+            inside = s > 0.5 * level
+            mid = len(u) // 2
+            if not inside[mid]:
+                continue
+            lo, hi = mid, mid
+            while lo > 0 and inside[lo - 1]:
+                lo -= 1
+            while hi < len(u) - 1 and inside[hi + 1]:
+                hi += 1
+            if lo == 0 or hi == len(u) - 1:
+                continue
+            best = (u[hi] - u[lo] + 0.5, float(np.median(s[lo:hi + 1])))
+            break
+        if best is None:
+            return "no body at the base point (darker than the background, or in --color)"
+        if self.width_px is None:
+            self.width_px = best[0]
+        self.contrast = best[1]
+        return ""
+
+    # -- a frame ----------------------------------------------------------------------------------
+    def measure(self, frame, index: int = 0, time_s: float | None = None) -> Measurement:
+        def fail(reason: str) -> Measurement:
+            return Measurement(frame=index, ok=False, reason=reason, time_s=time_s)
+
+        if frame is None or getattr(frame, "ndim", 0) not in (2, 3) or frame.size == 0:
+            return fail("unreadable frame")
+        images = self._score_images(frame)
+        if self.contrast is None:
+            why = self._calibrate(images)
+            if why:
+                return fail(why)
+            images = self._score_images(frame)   # again with the width now known
+        try:
+            return self._walk(images, index, time_s, frame.shape)
+        except _LeavesImage:
+            return fail("the body leaves the image")
+
+    @staticmethod
+    def _tip_angle(s_mid, phi, s_at):
+        return _tip_angle_fit(s_mid, phi, s_at)
+
+    def _walk(self, images, index, time_s, shape) -> Measurement:
+        sc = self.scene
+        along, across = sc.axes
+        w = self.width_px
+        threshold = 0.5 * self.contrast
+        step = max(2.0, SECTION_STEP * w)
+        half = 0.9 * w
+        base = np.asarray(sc.base_px, float)
+        expected = (sc.length_m * 1e3 / sc.mm_per_px) if sc.length_m else math.hypot(*shape[:2])
+        max_steps = int(2.0 * expected / step) + 8
+        centres, widths, clean = [base], [], []
+        chord_dir, turn = along.copy(), 0.0
+        ended = lost = False
+        unclean_run = 0
+        for _ in range(max_steps):
+            predicted = _rotate(chord_dir, turn)
+            p = centres[-1] + step * predicted
+            tangent = _rotate(chord_dir, 1.5 * turn)   # the tangent at p on a circle through the last chords
+            normal = np.array([-tangent[1], tangent[0]])
+            cut = self._section(images, p, normal, half, threshold)
+            if cut is None or cut[1] - cut[0] < 0.5 * w:
+                ended = True
+                break
+            lo, hi, ok = cut
+            good = ok and abs(hi - lo - w) < 0.25 * w
+            clean.append(good)
+            if good:
+                offset, unclean_run = 0.5 * (lo + hi), 0
+                widths.append(hi - lo)
+            else:   # something touches the body: trust the edge that lies where an edge should, else the prediction
+                unclean_run += 1
+                if unclean_run > MAX_UNCLEAN_RUN:
+                    lost = True
+                    break
+                sides = ([lo + 0.5 * w] if lo > -half + 0.5 else []) + ([hi - 0.5 * w] if hi < half - 0.5 else [])
+                offset = min(sides, key=abs) if sides else 0.0
+                offset = offset if abs(offset) < 0.25 * w else 0.0
+            c = p + normal * offset
+            chord = c - centres[-1]
+            new_dir = chord / np.hypot(*chord)
+            new_turn = math.atan2(chord_dir[0] * new_dir[1] - chord_dir[1] * new_dir[0], float(chord_dir @ new_dir))
+            if len(centres) > 1:
+                if abs(new_turn) > MAX_TURN:
+                    lost = True
+                    break
+                turn = new_turn
+            chord_dir = new_dir
+            centres.append(c)
+        if lost:
+            walked = (len(centres) - 1) * step * sc.mm_per_px
+            return Measurement(frame=index, ok=False, time_s=time_s,
+                               reason=f"lost the body {walked:.0f} mm from the base: something crosses or touches it")
+        if not ended:
+            return Measurement(frame=index, ok=False, time_s=time_s,
+                               reason=f"the body does not end within {max_steps * step * sc.mm_per_px:.0f} mm of the base")
+        if len(centres) - 1 < MIN_SECTIONS:
+            return Measurement(frame=index, ok=False, time_s=time_s, reason="too little body beyond the base")
+        pts = np.asarray(centres)
+        chords = np.diff(pts, axis=0)
+        seg = np.hypot(chords[:, 0], chords[:, 1])
+        # tangent angle from the unbent axis, positive towards the bending side, unwrapped
+        phi = np.unwrap(np.arctan2(chords @ across, chords @ along))
+        s_mid = np.cumsum(seg) - 0.5 * seg
+        s_end = float(seg.sum())
+        theta = self._tip_angle(s_mid, phi, s_end)
+        # the tip: the body's end along the last tangent
+        t_img = along * math.cos(theta) + across * math.sin(theta)
+        v = np.arange(0.0, step + w, 0.5)
+        sv = self._score(images, pts[-1][0] + v * t_img[0], pts[-1][1] + v * t_img[1])
+        falls = _crossings(np.nan_to_num(sv, nan=-1.0), threshold)
+        if falls.size and np.isnan(sv[:int(falls[0]) + 4]).any():
+            raise _LeavesImage
+        if sv[0] <= threshold or falls.size == 0:
+            return Measurement(frame=index, ok=False, time_s=time_s, reason="the tip's end is not clear")
+        cap = (sc.cap_mm or 0.0) / sc.mm_per_px
+        if cap > 0:   # the bending part ends a cap before the tip: its tangent there, not extrapolated
+            theta = self._tip_angle(s_mid, phi, s_end + 0.5 * falls[0] - cap)
+            t_img = along * math.cos(theta) + across * math.sin(theta)
+        tip = pts[-1] + 0.5 * falls[0] * t_img
+        backbone = np.vstack([pts, tip])
+        seg = np.hypot(*np.diff(backbone, axis=0).T)
+        s = np.concatenate(([0.0], np.cumsum(seg)))
+        quality = float(np.mean(clean))
+        widths_mm = float(np.median(widths)) * sc.mm_per_px if widths else math.nan
+        length_mm = float(s[-1]) * sc.mm_per_px
+        result = Measurement(frame=index, ok=False, time_s=time_s, quality=quality, width_mm=widths_mm,
+                             length_measured_mm=length_mm)
+        if quality < MIN_QUALITY:
+            result.reason = (f"only {quality:.0%} of the body's cross-sections are clean (need "
+                             f"{MIN_QUALITY:.0%}): something crosses or touches the body")
+            return result
+        if sc.length_m and abs(length_mm / (sc.length_m * 1e3) - 1) > LENGTH_TOLERANCE:
+            result.reason = (f"the backbone seen is {length_mm:.1f} mm long, --length says "
+                             f"{sc.length_m * 1e3:g} mm: the body is hidden, cut or leaves the view")
+            return result
+        # resampled backbone (px and mm [across, along] from the base)
+        si = np.linspace(0.0, s[-1], BACKBONE_POINTS)
+        resampled = np.column_stack([np.interp(si, s, backbone[:, 0]), np.interp(si, s, backbone[:, 1])])
+        rel = (resampled - base) * sc.mm_per_px
+        mm = np.column_stack([rel @ across, rel @ along])
+        tip_rel = (tip - base) * sc.mm_per_px
+        length = sc.length_m * 1e3 if sc.length_m else length_mm
+        result.ok = True
+        result.bend_angle_deg = math.degrees(theta)
+        result.tip_mm = [float(tip_rel @ across), float(tip_rel @ along)]
+        result.radius_of_curvature_mm = length / abs(theta) if theta != 0 else math.inf
+        result.backbone_mm = mm.round(4).tolist()
+        result.backbone_px = resampled
+        return result
+
+
+def _tip_angle_fit(s_mid, phi, s_at):
+    """The tangent angle at arc length ``s_at``: a quadratic in arc length through the chords' angles
+    before it (exact for constant curvature, follows a curvature that changes along the body, and
+    averages the noise of every cross-section)."""
+    keep = s_mid <= s_at
+    return float(np.polyval(np.polyfit(s_mid[keep], phi[keep], 2), s_at))
+
+
+class _LeavesImage(Exception):
+    """A cross-section reached beyond the frame."""
+
+
+def draw_overlay(frame, m: Measurement, scene: Scene):
+    """``frame`` (colour copy) with the fitted backbone, base, axis and the result drawn on it."""
+    cv2 = cv2_module()
+    img = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR) if frame.ndim == 2 else frame.copy()
+    along, _ = scene.axes
+    base = np.asarray(scene.base_px)
+    axis_end = base + along * 0.25 * min(img.shape[:2])
+    cv2.line(img, tuple(int(round(v)) for v in base), tuple(int(round(v)) for v in axis_end), (255, 160, 0), 1,
+             cv2.LINE_AA)
+    if m.ok:
+        pts = np.round(m.backbone_px * 16).astype(np.int32).reshape(-1, 1, 2)
+        cv2.polylines(img, [pts], False, (0, 0, 255), 2, cv2.LINE_AA, shift=4)
+        tip = tuple(int(round(v)) for v in m.backbone_px[-1])
+        cv2.circle(img, tip, 5, (0, 255, 0), 2, cv2.LINE_AA)
+        text = (f"theta {m.bend_angle_deg:.1f} deg  tip [{m.tip_mm[0]:.1f}, {m.tip_mm[1]:.1f}] mm  "
+                f"R_C {m.radius_of_curvature_mm:.1f} mm  q {m.quality:.2f}")
+        colour = (0, 128, 0)
+    else:
+        text, colour = f"not measured: {m.reason}", (0, 0, 255)
+    cv2.putText(img, f"frame {m.frame}: {text}", (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6, colour, 2, cv2.LINE_AA)
+    return img
