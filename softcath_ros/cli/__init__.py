@@ -28,6 +28,7 @@ SUBCOMMANDS = [
     "surrogate",
     "steer_sim",
     "track",
+    "design",
 ]
 
 

@@ -3,7 +3,8 @@
 Returns [(x, y, bulge)] in metres. DXF lines, arcs, circles and (LW)polylines stay exact (a
 polyline's bulges are kept); SVG lines and circular arcs stay exact, Bezier curves and
 elliptical arcs become chords within ``CHORD_TOLERANCE``. SVG's y axis points down: it is
-flipped so the section reads as drawn. Every refusal is one ``DesignError`` line.
+flipped so the section reads as drawn. SVG coordinates are user units (the viewBox's, whatever
+the page size), each a mm or a m as the design's ``units`` says. Every refusal is one ``DesignError`` line.
 """
 from __future__ import annotations
 
@@ -124,6 +125,8 @@ def _svg_loop(path: Path, element_id: str, field_name: str, scale: float):
     if element is None or not isinstance(element, se.Shape):
         raise DesignError(f"{field_name}.id", element_id, "no shape with this id in the SVG file")
     path_ = se.Path(element)
+    if svg.viewbox is not None:   # back to user units (the viewBox's): ``units`` says what one is
+        path_ *= ~se.Matrix(svg.viewbox_transform)
     path_.reify()
     tol = CHORD_TOLERANCE / scale   # in the file's units
     loops, loop = [], []

@@ -110,8 +110,8 @@ class Outline:
         b = np.zeros(len(v)) if bulges is None else np.asarray(bulges, dtype=float).reshape(-1)
         if len(b) != len(v):
             raise ValueError("one bulge per vertex")
-        if len(v) < 2 or (len(v) == 2 and not np.all(b != 0)):
-            raise ValueError("an outline needs at least three vertices, or two joined by arcs")
+        if len(v) < 2 or (len(v) == 2 and not np.any(b != 0)):
+            raise ValueError("an outline needs at least three vertices, or two with an arc between them")
         if self._signed_area(v, b) < 0:        # keep every outline counter-clockwise
             v, b = v[::-1].copy(), -np.roll(b[::-1], -1)
         self.vertices, self.bulges = v, b

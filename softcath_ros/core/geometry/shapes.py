@@ -116,8 +116,8 @@ def parse_sector(spec: dict, field_name: str) -> Sector:
 
 
 def parse_points(value, field_name: str) -> tuple[tuple[float, ...], ...]:
-    if not isinstance(value, list) or not 3 <= len(value) <= MAX_POINTS:
-        raise DesignError(field_name, value, f"must be a list of 3 to {MAX_POINTS} points [x, y] (m)")
+    if not isinstance(value, list) or not 2 <= len(value) <= MAX_POINTS:
+        raise DesignError(field_name, value, f"must be a list of 2 to {MAX_POINTS} points [x, y] (m)")
     out = []
     for i, p in enumerate(value):
         if not isinstance(p, (list, tuple)) or len(p) not in (2, 3):
@@ -263,34 +263,48 @@ def _fillet_corners(points, f, field_name, neighbours=None):
     return [p for corner in out for p in corner]
 
 
-def polygon_outline(s: PolygonShape, field_name: str = "polygon") -> Outline:
+def polygon_outline(s: PolygonShape, field_name: str = "polygon", points_field: str | None = None) -> Outline:
+    """The outline of a polygon (its points' bulges kept, its corners filleted); refusals name
+    ``points_field`` (default ``field_name.points``)."""
+    points_field = points_field or f"{field_name}.points"
     pts = np.array([p[:2] for p in s.points], float)
     bulges = np.array([p[2] if len(p) == 3 else 0.0 for p in s.points], float)
     if np.any(np.abs(bulges) >= 1e6):
-        raise DesignError(f"{field_name}.points", "bulge", "a bulge must be finite and below 1e6")
+        raise DesignError(points_field, "bulge", "a bulge must be below 1e6 in size")
     steps = np.hypot(*(np.roll(pts, -1, axis=0) - pts).T)
     if np.any(steps == 0):
         i = int(np.flatnonzero(steps == 0)[0])
-        raise DesignError(f"{field_name}.points[{i}]", list(s.points[i]), "repeats the next point (an outline is closed by itself)")
+        raise DesignError(f"{points_field}[{i}]", list(s.points[i]), "repeats the next point (an outline is closed by itself)")
     if s.fillet == 0:
-        return _checked(lambda: Outline(pts, bulges), field_name)
+        return _checked(lambda: Outline(pts, bulges), points_field)
     if np.any(bulges != 0):
         raise DesignError(f"{field_name}.fillet", s.fillet, "fillets apply to straight-edged polygons only")
     ccw = Outline(pts)   # oriented counter-clockwise
     filleted = _fillet_corners(ccw.vertices, s.fillet, field_name)
-    return _checked(lambda: Outline([p for p, _ in filleted], [b for _, b in filleted]), field_name)
+    return _checked(lambda: Outline([p for p, _ in filleted], [b for _, b in filleted]), points_field)
 
 
-def _checked(build, field_name):
+def _checked(build, points_field):
     try:
         return build()
     except (ValueError, ZeroDivisionError) as exc:
-        raise DesignError(f"{field_name}.points", "outline", str(exc)) from None
+        raise DesignError(points_field, "outline", str(exc)) from None
 
 
 def shape_outline(shape, field_name: str) -> Outline:
+    """The exact outline of a non-circular hole, refused unless one simple loop with area."""
     if isinstance(shape, Sector):
-        return sector_outline(shape, field_name)
-    if isinstance(shape, PolygonShape):
-        return polygon_outline(shape, field_name)
-    return polygon_outline(PolygonShape(shape.points), f"{field_name}.path")
+        outline, field, value = sector_outline(shape, field_name), f"{field_name}.outer_radius", shape.outer_radius
+    elif isinstance(shape, PolygonShape):
+        outline, field, value = polygon_outline(shape, field_name), f"{field_name}.points", [list(p) for p in shape.points]
+    else:
+        outline = polygon_outline(PolygonShape(shape.points), field_name, f"{field_name}.path")
+        field, value = f"{field_name}.path", shape.path
+    import shapely
+
+    poly = outline.shapely
+    if not poly.is_valid:
+        raise DesignError(field, value, f"the outline is not simple ({shapely.is_valid_reason(poly)})")
+    if not outline.area > 0 or not poly.area > 0:
+        raise DesignError(field, value, "the outline encloses no area")
+    return outline

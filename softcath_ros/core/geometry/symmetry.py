@@ -44,20 +44,29 @@ class Symmetry:
         return None
 
 
+def _same_moments(a: Outline, b: Outline, tol: float) -> bool:
+    """Cheap exact test first: equal area, centroid and centroidal second moments."""
+    ia, ib = a.integrals, b.integrals
+    if np.hypot(*(ia.centroid - ib.centroid)) > tol:
+        return False
+    scale = max(ia.area, ib.area)
+    if abs(ia.area - ib.area) > 1e-6 * scale:
+        return False
+    ja, jb = ia.centroidal_second, ib.centroidal_second
+    return bool(np.abs(ja - jb).max() <= 1e-6 * max(np.abs(ja).max(), np.abs(jb).max()))
+
+
 def _matches(section: Section, transform, tol: float):
     """The hole permutation under ``transform`` (Outline -> Outline), or None if it fails."""
-    chord = tol / 10.0
     perm = []
     for hole in section.holes:
         moved = transform(hole.outline)
-        c = moved.centroid
         found = None
         for j, other in enumerate(section.holes):
-            if other.role != hole.role or j in perm:
+            if other.role != hole.role or j in perm or not _same_moments(moved, other.outline, tol):
                 continue
-            if np.hypot(*(other.centroid - c)) > tol or abs(other.area - moved.area) > tol * math.sqrt(abs(other.area)) * 4:
-                continue
-            if moved.polygon(chord).hausdorff_distance(other.outline.polygon(chord)) <= tol:
+            # the outlines themselves, coarsely (chords within 10 tol): the moments could agree by chance
+            if moved.polygon(10 * tol).hausdorff_distance(other.outline.polygon(10 * tol)) <= 21 * tol:
                 found = j
                 break
         if found is None:
