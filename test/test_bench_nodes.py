@@ -1,10 +1,12 @@
 """bench_node + sim_bench_node as separate processes: a short protocol end to end, SIGINT, bad paths."""
 import json
+import shlex
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from mcap.reader import make_reader
@@ -162,6 +164,42 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     from layout_check import ONLY_WITH_A_TRACKER, check_recording
     assert check_recording(result["recording"]) <= ONLY_WITH_A_TRACKER
     assert counts[topics.BODY_MARKER] > 10 and counts[topics.BACKBONE_PATH] == counts[topics.BODY_MARKER]
+
+
+def readme_command(prefix: str) -> list[str]:
+    """The README line that starts with ``prefix``, as argv (its shell comment dropped)."""
+    readme = Path(__file__).resolve().parents[1] / "README.md"
+    for line in readme.read_text().splitlines():
+        if line.startswith(prefix):
+            return shlex.split(line, comments=True)
+    raise AssertionError(f"README.md has no line starting {prefix!r}")
+
+
+@pytest.mark.timeout(300)   # 54 steps: about 45 s on a quiet machine
+def test_readme_direction_protocol_runs_through_the_cli_as_written(tmp_path, procs):
+    """README Quick start: `softcath characterise --protocol three_channel_directions`, as written
+    (in a fresh folder: runs/ lands there). The graph bends the 2-DOF design by direction through
+    allocation_node, and each direction's curvature grows with its fraction of the reach."""
+    from softcath_ros.bench.analysis import rows_from_recording
+
+    argv = readme_command("softcath characterise --protocol three_channel_directions")
+    assert argv == ["softcath", "characterise", "--protocol", "three_channel_directions"]
+    run = _start(procs, argv, _env(), cwd=tmp_path)
+    out, _ = run.communicate(timeout=RUN_TIMEOUT_S + 60)
+    assert run.returncode == 0, out
+    assert "allocation_node" in out
+    recording = Path([x for x in out.splitlines() if x.startswith("recording: ")][-1].split(": ", 1)[1])
+    assert recording.is_relative_to(tmp_path / "runs") and (recording.parent / "report.md").is_file()
+    with open(recording, "rb") as f:
+        summary = make_reader(f).get_summary()
+    counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+    assert counts[topics.BEND_CMD] > 50 and counts[topics.PRESSURE_CMD] > 50
+    rows = rows_from_recording(recording)
+    assert {r.drive for r in rows} == {"direction 0 deg", "direction 60 deg", "direction 210 deg"}
+    for drive in {r.drive for r in rows}:
+        bend = {lv: np.mean([r.angle / r.length for r in rows if r.drive == drive and r.level == lv
+                             and r.phase == "loading"]) for lv in (0.0, 0.5, 1.0)}
+        assert abs(bend[0.0]) < 2.0 < bend[0.5] < bend[1.0], (drive, bend)
 
 
 def test_a_domain_another_graph_uses_is_not_leased(procs):

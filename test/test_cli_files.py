@@ -80,7 +80,7 @@ def test_unwritable_outputs_are_one_line(tmp_path, recording):
     assert_one_line_exit_2(cli("calibrate", recording, "--output", a_file / "sub" / "d.yaml"))
     assert_one_line_exit_2(cli("recover", recording, "--output", tmp_path / "missing" / "r.mcap"), "does not exist")
     assert_one_line_exit_2(cli("calibrate", recording, "--model", "closed_form", "--output", tmp_path), "a folder")
-    assert_one_line_exit_2(cli("sweep", "--design", "implemented_5mm", "--to", "1000", "--no-plot",
+    assert_one_line_exit_2(cli("sweep", "--design", "implemented_5mm", "--to", "1000Pa", "--no-plot",
                                "--out", a_file / "sub" / "s"))
 
 

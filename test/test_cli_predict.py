@@ -36,7 +36,7 @@ def test_predict_json_matches_model():
 
 
 def test_predict_length_override_and_table():
-    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "20000", "--length", "0.02")
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "20000Pa", "--length", "0.02")
     assert r.returncode == 0, r.stderr
     # 1/|k| does not depend on the length; R_C = l / theta does, through the straight 1 mm cap
     state = make_model("closed_form", load_design("implemented_5mm")).evaluate([2e4])
@@ -46,12 +46,12 @@ def test_predict_length_override_and_table():
 
 
 @pytest.mark.parametrize("args,fragment", [
-    (["--design", "nope", "--pressure", "1"], "no such file or shipped design"),
-    (["--design", "implemented_5mm", "--pressure", "1,2"], "2 value(s) for a design with 1 channel"),
-    (["--design", "implemented_5mm", "--pressure", "abc"], "not a number"),
-    (["--design", "implemented_5mm", "--pressure", "-1"], "must not be negative"),
-    (["--design", "implemented_5mm", "--pressure", "1", "--model", "bogus"], "unknown model 'bogus'"),
-    (["--design", "implemented_5mm", "--pressure", "1", "--length", "-2"], "must be positive"),
+    (["--design", "nope", "--pressure", "1Pa"], "no such file or shipped design"),
+    (["--design", "implemented_5mm", "--pressure", "1,2", "--unit", "Pa"], "2 value(s) for a design with 1 channel"),
+    (["--design", "implemented_5mm", "--pressure", "abc"], "not a pressure"),
+    (["--design", "implemented_5mm", "--pressure", "-1", "--unit", "kPa"], "must not be negative"),
+    (["--design", "implemented_5mm", "--pressure", "1Pa", "--model", "bogus"], "unknown model 'bogus'"),
+    (["--design", "implemented_5mm", "--pressure", "1Pa", "--length", "-2"], "must be positive"),
 ])
 def test_bad_input_is_one_line_error(args, fragment):
     r = softcath("predict", *args)
@@ -116,7 +116,7 @@ def test_rung_options_are_checked_against_the_declaration():
         parse_model_options("section", ["mesh_size=fine"])
     with pytest.raises(SoftcathError, match="cannot give"):
         parse_model_options("fe3d", ["mesh=x"])
-    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "10000", "--option",
+    r = softcath("predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "10000Pa", "--option",
                  "tol=1")
     assert r.returncode == 2 and "model 'closed_form' has no such option" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
@@ -128,7 +128,7 @@ def test_commands_default_to_the_accurate_rung():
     from softcath_ros.cli import build_parser
 
     parser = build_parser()
-    for argv in (["predict", "--design", "d", "--pressure", "1"], ["sweep", "--design", "d", "--to", "1"],
+    for argv in (["predict", "--design", "d", "--pressure", "1Pa"], ["sweep", "--design", "d", "--to", "1Pa"],
                  ["allocate", "--design", "d", "--curvature", "1,0"], ["calibrate"]):
         assert parser.parse_args(argv).model == "surrogate", argv
     r = softcath("predict", "--design", "implemented_5mm", "--pressure", "0.2", "--unit", "bar", "--json")

@@ -197,7 +197,8 @@ def _cli(argv):
 
 
 NUMBER_TEXT = st.one_of(st.sampled_from(["nan", "inf", "-inf", "1e400", "0", "-1", "1e8", "100000000", "2e-3",
-                                         "0.04", "abc", "", "1,2", "0x10"]),
+                                         "0.04", "abc", "", "1,2", "0x10", "0.1bar", "15kPa", "1e3Pa", "2barr",
+                                         "bar", "-0.1bar", "nanbar", "1e400kPa"]),
                         st.floats(allow_nan=False, allow_infinity=False).map(repr))
 
 
@@ -207,11 +208,11 @@ NUMBER_TEXT = st.one_of(st.sampled_from(["nan", "inf", "-inf", "1e400", "0", "-1
 def test_cli_numbers_give_valid_output_or_one_line_exit_2(tmp_path_factory, command, numbers):
     a, b, c = numbers
     if command == "predict":
-        argv = ["predict", "--design", "implemented_5mm", "--pressure", a, "--length", b, "--json"]
+        argv = ["predict", "--design", "implemented_5mm", "--pressure", a, "--length", b, "--json", "--unit", "Pa"]
     elif command == "sweep":
         out = tmp_path_factory.mktemp("sweep") / "s"
         argv = ["sweep", "--design", "implemented_5mm", "--from", a, "--to", b, "--steps", c, "--no-plot",
-                "--out", str(out), "--json"]
+                "--out", str(out), "--json", "--unit", "Pa"]
     else:
         argv = ["allocate", "--design", "three_channel_5mm", "--curvature", f"{a},{b}", "--reachable-set", c,
                 "--json"]

@@ -42,7 +42,7 @@ def test_channel_diameter_in_millimetres_is_refused_as_a_slip(design_dict):
 @pytest.mark.parametrize("command", [
     ["predict", "--design", "implemented_5mm", "--pressure", "0.2", "0.6", "--unit", "bar"],
     ["sweep", "--design", "implemented_5mm", "--to", "0.6", "--unit", "bar", "--no-plot"],
-    ["predict", "--design", "implemented_5mm", "--pressure", "60000"],
+    ["predict", "--design", "implemented_5mm", "--pressure", "60kPa"],
 ])
 def test_pressures_above_max_pressure_are_refused_by_predict_and_sweep(command, capsys, tmp_path):
     if command[0] == "sweep":
@@ -114,7 +114,7 @@ def test_no_cache_reaches_the_rung(monkeypatch, capsys):
         return real("closed_form", design)
 
     monkeypatch.setattr(cf, "make_model", spy)
-    assert main(["predict", "--design", "implemented_5mm", "--model", "section", "--pressure", "1000",
+    assert main(["predict", "--design", "implemented_5mm", "--model", "section", "--pressure", "1000Pa",
                  "--no-cache"]) == 0
     assert seen == {"cache": False}
 
@@ -202,23 +202,26 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
     above, in_bar = tmp_path / "above.yaml", tmp_path / "in_bar.yaml"
     above.write_text(yaml.safe_dump({**quick, "staircase": {"max": 60000.0, "step": 10000.0}}))
     in_bar.write_text(yaml.safe_dump({**quick, "staircase": {"levels": [0.0, 0.1, 0.2, 0.3]}}))
-    predict = ["predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "1000"]
+    predict = ["predict", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "1000Pa"]
     out = tmp_path / "out"
     cases = [
         (predict + ["--length", "40"], "--length 40: 40 m length is implausible"),
         (predict + ["--length", "1e-12"], "below 1 mm"),
         (["predict", "--design", "implemented_5mm", "--model", "auto", "--scene", "blocking_force_bench",
-          "--pressure", "1000", "--length", "0.03"], "scene 'blocking_force_bench' sets the length (0.017 m)"),
-        (["sweep", "--design", "implemented_5mm", "--model", "closed_form", "--to", "1000", "--length", "40",
+          "--pressure", "1000Pa", "--length", "0.03"], "scene 'blocking_force_bench' sets the length (0.017 m)"),
+        (["sweep", "--design", "implemented_5mm", "--model", "closed_form", "--to", "1000Pa", "--length", "40",
           "--no-plot", "--out", str(out / "s")], "--length 40"),
         (["predict", "--design", "implemented_5mm", "--model", "rod", "--option", "source=closed_form",
-          "--option", "n_segments=100000000", "--pressure", "1000"], "n_segments 100000000 must lie in [4, 1000]"),
+          "--option", "n_segments=100000000", "--pressure", "1000Pa"], "n_segments 100000000 must lie in [4, 1000]"),
         (predict + ["--calibration", str(tmp_path)], "a folder, not a calibration file"),
         (predict + ["--calibration", str(bad_rung)], "field 'rung' = 'no_such_rung': not a rung"),
         (["allocate", "--design", "three_channel_5mm", "--model", "closed_form", "--curvature", "3,0",
-          "--max-pressure", "0.3"], "0.3 Pa is implausible (below 1000 Pa): it is in pascals; 30000 (0.3 bar)?"),
-        (["steer-sim", "--max-pressure", "1e9", "--output-dir", str(out)], "at most design 'three_channel_5mm''s"),
-        (["steer-sim", "--max-pressure", "0.3", "--output-dir", str(out)], "in pascals"),
+          "--max-pressure", "0.3Pa"], "0.3 Pa is implausible (below 1000 Pa): it is in pascals; 30000 (0.3 bar)?"),
+        (["allocate", "--design", "three_channel_5mm", "--model", "closed_form", "--curvature", "3,0",
+          "--max-pressure", "0.3"], "--max-pressure 0.3: which unit? write 0.3bar, 0.3kPa or 0.3Pa"),
+        (["steer-sim", "--max-pressure", "1e9Pa", "--output-dir", str(out)], "at most design 'three_channel_5mm''s"),
+        (["steer-sim", "--max-pressure", "0.3", "--unit", "Pa", "--output-dir", str(out)], "in pascals"),
+        (["steer-sim", "--max-pressure", "0.3", "--output-dir", str(out)], "--max-pressure 0.3: which unit?"),
         (["steer-sim", "--duration", "1e9", "--output-dir", str(out)], "at most 3600 s"),
         (["steer-sim", "--model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
         (["characterise", "--model", "bogus", "--output-dir", str(out)], "unknown model 'bogus'"),
@@ -246,3 +249,25 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err and words in err, (argv, err)
     assert not out.exists()   # refused before anything was written
+
+
+@pytest.mark.parametrize("rig", ["sim", "ros"])
+def test_a_direction_protocol_passes_characterise_checks_to_the_graph(rig, monkeypatch):
+    """README: `softcath characterise --protocol three_channel_directions` (and `--rig ros`) was refused
+    before any node started ("needs the allocator"). Its steps are allocated as bench_node allocates
+    them, and the graph gets the protocol's 2-DOF design (the graph itself: test_bench_nodes.py)."""
+    from softcath_ros.cli import characterise
+
+    handed = []
+    monkeypatch.setitem(characterise.RIGS, rig, characterise.RigChoice(
+        "stand-in", lambda args, protocol, design: handed.append((protocol.drive, design.name)) or 0))
+    args = ["characterise", "--protocol", "three_channel_directions"] + (["--rig", rig] if rig != "sim" else [])
+    assert main(args) == 0
+    assert handed == [("direction", "three_channel_5mm")]
+
+
+def test_a_direction_protocol_beyond_the_design_is_refused_in_one_line(capsys):
+    """A 1-channel design cannot bend in the protocol's directions: one line, exit 2, before any node."""
+    code = main(["characterise", "--protocol", "three_channel_directions", "--design", "implemented_5mm"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "directions_deg" in err, err

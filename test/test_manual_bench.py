@@ -63,12 +63,13 @@ def test_entries_are_parsed_and_bad_ones_refused():
     assert parse_entry("12.5", "angle", mp).values == (12.5,)
     e = parse_entry(" 7 @ 0.2 ", "force", mp)
     assert (e.kind, e.values, e.gauge_bar) == ("reading", (7.0,), 0.2)
+    assert parse_entry("7 @ 20kPa", "force", mp).gauge_bar == pytest.approx(0.2)   # the one pressure rule
     assert parse_entry("12 12.5, 13 @0.1", "angle", mp).values == (12.0, 12.5, 13.0)
     assert [parse_entry(x, "angle", mp).kind for x in ("u", "s", "q", "?")] == ["undo", "skip", "quit", "help"]
     for text, bench, words in (("abc", "angle", "not a number"), ("361", "angle", "outside 0-360"),
                                ("-0.1", "angle", "outside 0-360"), ("-2", "force", "negative"),
                                ("nan", "force", "not a number"), ("", "angle", "empty"),
-                               ("5 @ 0.5", "angle", "max_pressure"), ("5 @ x", "force", "not a number of bar"),
+                               ("5 @ 0.5", "angle", "max_pressure"), ("5 @ x", "force", "not a pressure"),
                                ("12 400", "angle", "outside 0-360"), ("3 -1", "force", "negative"),
                                ("@ 0.1", "angle", "no reading")):
         msg = parse_entry(text, bench, mp)

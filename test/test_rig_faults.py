@@ -201,14 +201,31 @@ def test_a_protocol_on_the_angle_bench_alone_needs_no_scale(tmp_path, procs):
     assert f"{topics.BENCH_WRENCH}: no publisher" in err and topics.BENCH_BEND_ANGLE not in err, err
 
 
+def _short_direction_protocol(tmp_path) -> Path:
+    """The shipped three_channel_directions, cut to one direction and one trial."""
+    from softcath_ros.core.yaml_io import load_yaml_file
+    from softcath_ros.resources import find
+
+    data = load_yaml_file(find("protocol", "three_channel_directions"))
+    data.update(name="short_directions", directions_deg=[60.0], trials=1,
+                staircase={"levels": [0.0, 0.5, 1.0], "down": True})
+    path = tmp_path / "short_directions.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 @pytest.mark.timeout(240)
-def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs):
+@pytest.mark.parametrize("drive", ["channels", "direction"])
+def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs, drive):
+    """Per channel, and by direction (the 2-DOF design: characterise starts allocation_node)."""
     from softcath_ros.bench.analysis import rows_from_recording
     from softcath_ros.recording.reader import read_metadata
 
     env = private_env()
-    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false"], env)
-    run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(_short_protocol(tmp_path)),
+    design = "implemented_5mm" if drive == "channels" else "three_channel_5mm"
+    protocol = _short_protocol(tmp_path) if drive == "channels" else _short_direction_protocol(tmp_path)
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false", "-p", f"design:={design}"], env)
+    run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(protocol),
                          "--output-dir", str(tmp_path), "--json"], env)
     out = run.communicate(timeout=200)[0]
     assert run.returncode == 0, out
@@ -217,7 +234,10 @@ def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs
     assert meta["softcath"]["simulated"] == "true" and meta["softcath"]["rig_topics"] == "stamped"
     assert meta["softcath_result"]["complete"] == "true"
     rows = rows_from_recording(result["recording"])
-    assert len(rows) == 5 * 2 and np.all(np.isfinite([r.angle for r in rows]))
+    assert len(rows) == 5 * (2 if drive == "channels" else 3) and np.all(np.isfinite([r.angle for r in rows]))
+    if drive == "direction":
+        top = np.mean([r.angle for r in rows if r.level == 1.0])
+        assert top > np.mean([r.angle for r in rows if r.level == 0.5]) > 0.1
 
 
 @pytest.mark.timeout(180)

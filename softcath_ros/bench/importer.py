@@ -26,11 +26,12 @@ import math
 from pathlib import Path
 
 from ..core.errors import SoftcathError
+from ..core import units
 from ..core.units import PA_PER_BAR
 from .protocol import BenchSample, Step, protocol_from_dict
 from .session import BenchSession, grams_to_newton
 
-PRESSURE_UNITS = {"bar": PA_PER_BAR, "kpa": 1e3, "pa": 1.0}
+PRESSURE_UNITS = {u.lower(): pa for u, pa in units.PRESSURE_UNITS.items()}   # column suffixes: pressure_bar, _kpa, _pa
 ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
 FORCE_UNITS = {"g": None, "mn": 1e-3, "n": 1.0}   # g: a mass on the scale, times standard gravity
 

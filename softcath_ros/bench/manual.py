@@ -3,7 +3,7 @@
 Readings as the published bench took them: the bending angle in degrees off the graph
 paper (angle bench) and the scale in grams (force bench; the analysis subtracts the reading
 at 0 bar of the same trial, the tare, so type what the scale shows). A reading may carry the
-gauge pressure it was taken at, ``READING @ BAR`` (default: the commanded pressure, and the
+gauge pressure it was taken at, ``READING @ BAR`` (or with its unit, ``@ 15kPa``; default: the commanded pressure, and the
 marker says so). Several readings of the step on one line, separated by spaces, are its
 samples. Each entry is written and fsynced as it is made (bench.session), so Ctrl-C,
 a closed terminal or a crash loses nothing entered.
@@ -20,7 +20,8 @@ import sys
 from dataclasses import dataclass
 from typing import Callable
 
-from ..core.units import PA_PER_BAR
+from ..core.errors import SoftcathError
+from ..core.units import PA_PER_BAR, parse_pressure
 from .protocol import Step
 from .session import BenchSession, grams_to_newton
 
@@ -67,9 +68,10 @@ def parse_entry(text: str, bench: str, max_pressure: float) -> Entry | str:
         return "no reading before '@': type the reading, then '@ BAR'"
     gauge_bar = None
     if gauge.strip():
-        gauge_bar = _number(gauge)
-        if gauge_bar is None:
-            return f"gauge pressure '{gauge.strip()}' is not a number of bar"
+        try:   # bar unless it carries its unit (core/units.py: one rule for every pressure typed)
+            gauge_bar = parse_pressure(gauge.strip(), "gauge pressure", unit="bar") / PA_PER_BAR
+        except SoftcathError as exc:
+            return f"{exc} (a number of bar)"
         if gauge_bar < 0 or gauge_bar * PA_PER_BAR > max_pressure * (1 + 1e-9):
             return (f"gauge pressure {gauge_bar:g} bar is outside [0, max_pressure "
                     f"{max_pressure / PA_PER_BAR:g} bar]: vent and set the step's pressure")

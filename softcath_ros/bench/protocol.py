@@ -271,6 +271,18 @@ def protocol_from_dict(data) -> Protocol:
 
 # --------------------------------------------------------------------------- expansion
 
+def design_steps(protocol: Protocol, design, model_name: str = "surrogate") -> list[Step]:
+    """Every step of ``protocol`` on ``design``; a protocol by direction is allocated on rung
+    ``model_name``, as allocation_node allocates it (bench_node and `softcath characterise`)."""
+    allocator = None
+    if protocol.drive == "direction":
+        from ..core.allocation import Allocator
+        from ..core.models import make_model
+
+        allocator = Allocator(make_model(model_name, design))
+    return expand_steps(protocol, design.n_channels, design.max_pressure, allocator)
+
+
 def expand_steps(protocol: Protocol, n_channels: int, max_pressure: float, allocator=None) -> list[Step]:
     """Every step in execution order. ``allocator`` (core.allocation.Allocator) is needed for
     drive 'direction'; pressures beyond ``max_pressure`` are refused, never clipped silently."""

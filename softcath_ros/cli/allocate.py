@@ -13,7 +13,7 @@ from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.prediction import arc_and_cap
-from .common import PA_PER_BAR, add_model_argument, bounded_int, finite_float, positive_float
+from .common import PA_PER_BAR, add_model_argument, add_unit_argument, bounded_int, finite_float, parse_pressure
 
 MAX_DIRECTIONS = 3600   # 0.1 deg apart; each direction is one bisection on the model
 
@@ -28,8 +28,9 @@ def register(sub) -> None:
                         help="bending direction, degrees from +x towards +y (use with --angle)")
     target.add_argument("--tip", metavar="X,Y,Z", help="desired tip position in softcath_base, m")
     p.add_argument("--angle", type=finite_float, metavar="DEG", help="bending angle, degrees (with --direction)")
-    p.add_argument("--max-pressure", type=positive_float, default=None, metavar="PA",
-                   help="lower the design's max_pressure (Pa), e.g. to stay where a rung converges")
+    p.add_argument("--max-pressure", default=None, metavar="P",
+                   help="lower the design's max_pressure, e.g. 0.2bar, to stay where a rung converges")
+    add_unit_argument(p, "--max-pressure")
     p.add_argument("--reachable-set", type=bounded_int(0, MAX_DIRECTIONS), default=0, metavar="N",
                    help=f"also report the maximum curvature on N equally spaced directions (N <= {MAX_DIRECTIONS})")
     p.add_argument("--calibration", default=None, help="calibration file from `softcath calibrate` to apply")
@@ -58,7 +59,8 @@ def run(args) -> int:
     design = load_design(args.design)
     calibration = load_calibration(args.calibration) if args.calibration else None
     model = build_model(args.model, design, calibration, **run_options(args.model, cache=not args.no_cache))
-    allocator = Allocator(model, max_pressure=args.max_pressure)
+    max_pressure = None if args.max_pressure is None else parse_pressure(args.max_pressure, "--max-pressure", args.unit)
+    allocator = Allocator(model, max_pressure=max_pressure)
     if args.curvature is not None:
         k = _floats(args.curvature, 2, "--curvature")
         result = allocator.allocate(k)

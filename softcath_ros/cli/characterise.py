@@ -92,7 +92,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..bench.protocol import expand_steps, load_protocol
+    from ..bench.protocol import design_steps, load_protocol
     from ..core.design import load_design
 
     check_rung_names([*args.model, *([args.sim_model] if args.rig == "sim" else [])])
@@ -100,7 +100,7 @@ def run(args) -> int:
         return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
-    expand_steps(protocol, design.n_channels, design.max_pressure)   # a step beyond the design: refused now
+    design_steps(protocol, design, args.model[0])   # a step beyond the design (or its reach): refused now
     main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
     previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:

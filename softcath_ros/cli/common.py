@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from ..core.errors import SoftcathError
-from ..core.units import PA_PER_BAR
+from ..core.units import PA_PER_BAR, PRESSURE_UNITS, parse_pressure, parse_pressure_list, pressure_unit
 
 
 def finite_float(text: str) -> float:
@@ -77,21 +77,30 @@ def checked_length(design, length: float | None) -> float:
         raise SoftcathError(f"--length {length:g}: {exc.reason}") from None
 
 
-def parse_pressures(values: list[str], n_channels: int, unit: str) -> np.ndarray:
-    """Each value is one command: a number, or a comma list with one value per channel."""
-    scale = PA_PER_BAR if unit == "bar" else 1.0
+def parse_pressures(values: list[str], n_channels: int, unit: str | None) -> np.ndarray:
+    """Each value is one command: a pressure, or a comma list with one per channel (core/units.py rule)."""
     rows = []
     for v in values:
-        try:
-            row = [float(x) for x in v.split(",")]
-        except ValueError:
-            raise SoftcathError(f"--pressure {v!r}: not a number or comma list of numbers") from None
+        row = parse_pressure_list(v, "--pressure", unit)
         if len(row) != n_channels:
             raise SoftcathError(f"--pressure {v!r}: {len(row)} value(s) for a design with {n_channels} channel(s)")
-        if not all(math.isfinite(x) for x in row):
-            raise SoftcathError(f"--pressure {v!r}: values must be finite")
         rows.append(row)
-    return np.asarray(rows) * scale
+    return np.asarray(rows, dtype=float)
+
+
+def unit_name(text: str) -> str:
+    """argparse type of ``--unit``: Pa, kPa or bar in any case, as its canonical name."""
+    try:
+        return pressure_unit(text)
+    except SoftcathError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_unit_argument(parser, options: str) -> None:
+    """``--unit``: the unit of the bare numbers in ``options``; without it each carries its own."""
+    parser.add_argument("--unit", type=unit_name, default=None, metavar="|".join(PRESSURE_UNITS),
+                        help=f"unit of bare numbers in {options}; without it each pressure carries its unit "
+                             "(0.15bar, 15kPa, 15000Pa); a bare number is refused")
 
 
 DEFAULT_RUNG = "surrogate"   # the section rung's shipped table: accurate and fast (the nodes' default too)

@@ -14,8 +14,8 @@ import numpy as np
 from ..core import json_output
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from .common import (PA_PER_BAR, add_model_argument, add_option_argument, check_pressure_limits, checked_length,
-                     parse_model_options, parse_pressures, positive_float)
+from .common import (PA_PER_BAR, add_model_argument, add_option_argument, add_unit_argument, check_pressure_limits,
+                     checked_length, parse_model_options, parse_pressures, positive_float)
 
 
 def register(sub) -> None:
@@ -23,8 +23,9 @@ def register(sub) -> None:
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
     add_model_argument(p, "model rung")
     p.add_argument("--pressure", required=True, nargs="+",
-                   help="one command per value; comma list per channel for multi-channel designs")
-    p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
+                   help="one pressure per command (0.15bar, 15kPa, 15000Pa, or a bare number with --unit); "
+                        "a comma list per channel for multi-channel designs")
+    add_unit_argument(p, "--pressure")
     p.add_argument("--length", type=positive_float, default=None,
                    help="actuated length in m (default: the design's); rungs that solve the whole body (rod, fe3d) "
                         "solve one of this length")

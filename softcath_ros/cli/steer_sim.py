@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..core.allocation import lowered_max_pressure
 from ..core.errors import SoftcathError
-from .common import check_rung_names
+from .common import add_unit_argument, check_rung_names, parse_pressure
 
 MAX_DURATION_S = 3600.0   # of targets: the run, its recording and its plot are held to this
 
@@ -32,7 +32,9 @@ def register(sub) -> None:
     p.add_argument("--open-loop", action="store_true", help="run the controller open loop (feed-forward only)")
     p.add_argument("--mode", choices=("integral", "adaptive"), default="adaptive", help="feedback (closed loop)")
     p.add_argument("--model", default="closed_form", help="rung of the controller and of the rig's truth")
-    p.add_argument("--max-pressure", type=float, default=None, help="pressure limit, Pa (default 30000)")
+    p.add_argument("--max-pressure", default=None, metavar="P",
+                   help="pressure limit, e.g. 0.25bar (default 0.3 bar, lowered to the design's)")
+    add_unit_argument(p, "--max-pressure")
     p.add_argument("--latency", type=float, default=0.05, help="tracker latency, s")
     p.add_argument("--drop", type=float, default=0.2, help="fraction of tracker samples lost")
     p.add_argument("--output-dir", default="runs", help="where the recording goes (default runs/)")
@@ -96,7 +98,7 @@ def run(args) -> int:
     design = load_design(args.design)   # a wrong name or file is one line here, not a node that fails to start
     check_rung_names([args.model])
     max_pressure = (min(STEERING_MAX_PRESSURE, design.max_pressure) if args.max_pressure is None
-                    else lowered_max_pressure(args.max_pressure, design))
+                    else lowered_max_pressure(parse_pressure(args.max_pressure, "--max-pressure", args.unit), design))
     rig = steering_rig_params()
     mode = "open_loop" if args.open_loop else args.mode
     name = f"steer_{args.trajectory}_{mode}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"

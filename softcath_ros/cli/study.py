@@ -9,7 +9,7 @@ from pathlib import Path
 from ..core import json_output
 from ..core.errors import SoftcathError
 from ..core.units import PA_PER_BAR
-from .common import bounded_int, positive_float
+from .common import add_unit_argument, bounded_int, parse_pressure, positive_float
 
 
 def register(sub) -> None:
@@ -20,9 +20,9 @@ def register(sub) -> None:
     p.add_argument("name", choices=list(STUDIES), help="which study")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
     p.add_argument("--model", default="section", help="model rung (default section)")
-    p.add_argument("--pressure", type=positive_float, default=None,
-                   help="pressure on channel 0 at which R_C is compared (default 0.15 bar)")
-    p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --pressure (default Pa)")
+    p.add_argument("--pressure", default=None,
+                   help="pressure on channel 0 at which R_C is compared, e.g. 0.15bar (default 0.15 bar)")
+    add_unit_argument(p, "--pressure")
     p.add_argument("--mesh-size", type=positive_float, default=None,
                    help="section rung element size in m (default: the rung's, outer diameter / 20)")
     p.add_argument("--min-wall", type=positive_float, default=None,
@@ -53,9 +53,9 @@ def run(args) -> int:
     design = load_design(args.design)
     if args.model not in RUNGS:
         make_model(args.model, design)   # raises the 'unknown model' error listing the rungs
-    pressure = DEFAULT_PRESSURE if args.pressure is None else args.pressure * (PA_PER_BAR if args.unit == "bar" else 1.0)
+    pressure = DEFAULT_PRESSURE if args.pressure is None else parse_pressure(args.pressure, "--pressure", args.unit)
     if not 0 < pressure <= design.max_pressure:
-        raise SoftcathError(f"--pressure {args.pressure} {args.unit}: must be positive and at most the design's "
+        raise SoftcathError(f"--pressure {pressure / PA_PER_BAR:g} bar: must be positive and at most the design's "
                             f"limit {design.max_pressure / PA_PER_BAR:g} bar")
     options = {}
     if args.mesh_size is not None:

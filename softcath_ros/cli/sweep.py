@@ -18,8 +18,8 @@ import numpy as np
 
 from ..core import json_output
 from ..core.errors import SoftcathError
-from .common import (PA_PER_BAR, add_model_argument, add_option_argument, bounded_int, check_pressure_limits,
-                     checked_length, finite_float, parse_model_options, positive_float)
+from .common import (PA_PER_BAR, add_model_argument, add_option_argument, add_unit_argument, bounded_int,
+                     check_pressure_limits, checked_length, parse_model_options, parse_pressure, positive_float)
 
 MAX_STEPS = 10_000   # a sweep's rows are held in memory and plotted
 
@@ -28,11 +28,11 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="pressure sweep through a model: CSV, JSON and a plot")
     p.add_argument("--design", required=True, help="design YAML file, or the name of a shipped design")
     add_model_argument(p, "model rung")
-    p.add_argument("--from", dest="p_from", type=finite_float, default=0.0, help="first pressure (default 0)")
-    p.add_argument("--to", dest="p_to", type=finite_float, required=True, help="last pressure")
+    p.add_argument("--from", dest="p_from", default="0", help="first pressure, e.g. 0.05bar (default 0)")
+    p.add_argument("--to", dest="p_to", required=True, help="last pressure, e.g. 0.25bar or 25kPa")
     p.add_argument("--steps", type=bounded_int(2, MAX_STEPS), default=11,
                    help=f"number of pressures, ends included, 2-{MAX_STEPS} (default 11)")
-    p.add_argument("--unit", choices=("bar", "Pa"), default="Pa", help="unit of --from/--to (default Pa)")
+    add_unit_argument(p, "--from/--to")
     p.add_argument("--channel", type=bounded_int(0, 63), default=0, help="which channel ramps (0-based; default 0)")
     p.add_argument("--length", type=positive_float, default=None,
                    help="actuated length in m (default: the design's); rungs that solve the whole body (rod, fe3d) "
@@ -59,9 +59,8 @@ def run(args) -> int:
         raise SoftcathError(f"--steps {args.steps}: need at least 2")
     if not 0 <= args.channel < design.n_channels:
         raise SoftcathError(f"--channel {args.channel}: design '{design.name}' has channels 0..{design.n_channels - 1}")
-    scale = PA_PER_BAR if args.unit == "bar" else 1.0
-    lo, hi = args.p_from * scale, args.p_to * scale
-    if not (math.isfinite(lo) and math.isfinite(hi)) or lo < 0 or hi <= lo:
+    lo, hi = parse_pressure(args.p_from, "--from", args.unit), parse_pressure(args.p_to, "--to", args.unit)
+    if lo < 0 or hi <= lo:
         raise SoftcathError(f"--from {args.p_from} --to {args.p_to}: need 0 <= from < to")
     if args.model not in RUNGS:
         make_model(args.model, design)  # raises the 'unknown model' error listing the rungs

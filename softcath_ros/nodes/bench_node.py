@@ -48,7 +48,7 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
-from ..bench.protocol import ProtocolRunner, expand_steps, load_protocol
+from ..bench.protocol import ProtocolRunner, design_steps, load_protocol
 from ..bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
 from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
@@ -108,12 +108,7 @@ class BenchNode(Node):
         if not design_name:
             raise SoftcathError("no design: set the 'design' parameter or 'design' in the protocol")
         self.design = load_design(design_name)
-        allocator = None
-        if self.protocol.drive == "direction":
-            from ..core.allocation import Allocator
-            from ..core.models import make_model
-            allocator = Allocator(make_model(model_name, self.design))
-        self.steps = expand_steps(self.protocol, self.design.n_channels, self.design.max_pressure, allocator)
+        self.steps = design_steps(self.protocol, self.design, model_name)
         stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
         if run_name and not is_file_name(run_name):   # it names the recording folder under output_dir
             raise SoftcathError(f"parameter name = {run_name!r}: {NAME_RULE}")

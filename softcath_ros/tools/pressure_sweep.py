@@ -1,6 +1,6 @@
 """Feed a running model_node a pressure sweep and collect its predicted poses.
 
-    python -m softcath_ros.tools.pressure_sweep --from 0 --to 0.35 --steps 8 --unit bar --plot runs/x.png
+    python -m softcath_ros.tools.pressure_sweep --from 0 --to 0.35bar --steps 8 --plot runs/x.png
 
 Sends one command at a time on /softcath/pressure_cmd and waits for the node's
 /softcath/tip_pose and /softcath/backbone answer before the next one (lock-step, so
@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import topics
-from ..cli.common import bounded_int, finite_float, positive_float
+from ..cli.common import add_unit_argument, bounded_int, finite_float, parse_pressure, positive_float
 from ..core import json_output
+from ..core.errors import SoftcathError
 from ..core.kinematics import radius_l_over_theta
 from ..core.units import PA_PER_BAR
 from ..graph import default_to_localhost_discovery
@@ -173,12 +174,15 @@ def plot_backbones(points: list[SweepPoint | None], path: Path, title: str = "")
     return path
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description="send a pressure sweep to a running model_node and show its poses")
-    ap.add_argument("--from", dest="start", type=finite_float, default=0.0)
-    ap.add_argument("--to", dest="stop", type=finite_float, default=0.35)
+def build_parser() -> argparse.ArgumentParser:
+    from ..cli import OneLineParser
+
+    ap = OneLineParser(prog="pressure_sweep", description="send a pressure sweep to a running model_node and show "
+                       "its poses")
+    ap.add_argument("--from", dest="start", default="0", help="first pressure, e.g. 0.05bar (default 0)")
+    ap.add_argument("--to", dest="stop", default="0.35bar", help="last pressure, e.g. 0.25bar (default 0.35bar)")
     ap.add_argument("--steps", type=bounded_int(1, 10_000), default=8)
-    ap.add_argument("--unit", choices=("bar", "Pa"), default="bar")
+    add_unit_argument(ap, "--from/--to")
     ap.add_argument("--channels", type=bounded_int(1, 64), default=1, help="channels of the node's design")
     ap.add_argument("--length", type=positive_float, default=0.040,
                     help="the node's design length in m, for R_C = l / theta (default 0.040: implemented_5mm)")
@@ -188,13 +192,29 @@ def main(argv=None) -> int:
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
     ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
     ap.add_argument("--timeout", type=positive_float, default=5.0, help="s to wait for each answer")
+    return ap
+
+
+def sweep_range(args) -> tuple[float, float]:
+    """(--from, --to) in Pa by the one pressure rule (core/units.py); SoftcathError otherwise."""
+    start, stop = parse_pressure(args.start, "--from", args.unit), parse_pressure(args.stop, "--to", args.unit)
+    if start < 0 or stop < 0:
+        raise SoftcathError("--from/--to are gauge pressures and must not be negative")
+    return start, stop
+
+
+def main(argv=None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
     if args.steps < 1 or not 0 <= args.channel < args.channels:
         ap.error("need --steps >= 1 and 0 <= --channel < --channels")
     if not 0.0 <= args.cap < args.length:
         ap.error(f"--cap {args.cap} m must be in [0, --length {args.length} m)")
-    scale = PA_PER_BAR if args.unit == "bar" else 1.0
-    commands = sweep_commands(args.start * scale, args.stop * scale, args.steps, args.channels, args.channel)
+    try:
+        start, stop = sweep_range(args)
+    except SoftcathError as exc:
+        ap.error(str(exc))
+    commands = sweep_commands(start, stop, args.steps, args.channels, args.channel)
 
     import rclpy
 
