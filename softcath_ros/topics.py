@@ -93,6 +93,7 @@ BENCH_NODE = "softcath_bench"
 SIM_BENCH_NODE = "softcath_sim_bench"
 STEER_NODE = "softcath_steer"
 STEER_DRIVER = "softcath_steer_driver"
+TRACKER_NODE = "softcath_tracker"
 # What steer-sim records.
 STEERING_RECORDED = [TIP_TARGET, TIP_MEASURED, TIP_TRUE, PRESSURE_CMD, PRESSURE_MEASURED, DIAGNOSTICS]
 

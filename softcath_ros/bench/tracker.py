@@ -29,6 +29,7 @@ MIN_QUALITY = 0.6                  # fewer clean cross-sections than this share:
 MIN_SECTIONS = 4
 LENGTH_TOLERANCE = 0.25            # measured backbone length vs --length: relative deviation allowed
 DOWNSCALE = 8                      # background brightness is estimated on a frame this much smaller
+NO_BODY = "no body at the base point (darker than the background, or in the colour range)"
 SECTION_STEP = 0.25                # cross-sections this many body widths apart
 MAX_UNCLEAN_RUN = 4                # this many unclean cross-sections in a row: the body is lost
 MAX_TURN = 0.35                    # rad between chords (a body bends < 0.13 rad per step)
@@ -113,17 +114,17 @@ def parse_point(text: str, what: str) -> tuple[float, float]:
     return x, y
 
 
-def parse_hsv_range(text: str) -> tuple:
+def parse_hsv_range(text: str, what: str = "--color") -> tuple:
     """``H,S,V:H,S,V`` (OpenCV ranges: H 0-179, S and V 0-255) -> (low, high)."""
     try:
         lo, hi = (tuple(int(v) for v in part.split(",")) for part in str(text).split(":"))
         if len(lo) != 3 or len(hi) != 3:
             raise ValueError
     except ValueError:
-        raise SoftcathError(f"--color {text!r}: expected H,S,V:H,S,V, e.g. 35,80,40:85,255,255") from None
+        raise SoftcathError(f"{what} {text!r}: expected H,S,V:H,S,V, e.g. 35,80,40:85,255,255") from None
     tops = (179, 255, 255)
     if any(not 0 <= v <= t for part in (lo, hi) for v, t in zip(part, tops)) or any(a > b for a, b in zip(lo, hi)):
-        raise SoftcathError(f"--color {text!r}: H in 0-179, S and V in 0-255, low <= high")
+        raise SoftcathError(f"{what} {text!r}: H in 0-179, S and V in 0-255, low <= high")
     return lo, hi
 
 
@@ -208,6 +209,42 @@ def scene_from_markers(frame, aruco_mm: float | None, clamp_marker: int | None, 
         sides = [np.hypot(*(c[(k + 1) % 4] - c[k])) for _, c in chosen for k in range(4)]
         scene["mm_per_px"] = aruco_mm / float(np.mean(sides))
     return Scene(**scene)
+
+
+def scene_from_settings(first_frame, *, mm_per_px=None, aruco_mm=None, base_px=None, toward_px=None,
+                        clamp_marker=None, clamp_gap_mm=0.0, length_m=None, cap_mm=0.0, diameter_mm=None,
+                        color=None, mirror=False, flag="--") -> Scene:
+    """The Scene from the user's settings (``softcath track``'s options, tracker_node's parameters;
+    ``flag`` prefixes their names in errors) and, for markers, the first frame; one-line errors."""
+    def name(option: str) -> str:
+        return flag + (option.replace("-", "_") if flag != "--" else option)
+
+    if (mm_per_px is None) == (aruco_mm is None):
+        raise SoftcathError(f"give the scale: {name('mm-per-px')} or {name('aruco-mm')} (one of them)")
+    if clamp_marker is None and (not base_px or not toward_px):
+        raise SoftcathError(f"give {name('base-px')} X,Y and {name('toward-px')} X,Y, or {name('clamp-marker')} ID")
+    if clamp_marker is not None and (base_px or toward_px):
+        raise SoftcathError(f"{name('clamp-marker')} sets the base and axis: leave out {name('base-px')}/"
+                            f"{name('toward-px')}")
+    if clamp_marker is not None and aruco_mm is None:
+        raise SoftcathError(f"{name('clamp-marker')} needs {name('aruco-mm')} (the marker's printed side)")
+    if not 0 <= cap_mm < 100 or not 0 <= clamp_gap_mm < 1000:
+        raise SoftcathError(f"{name('cap-mm')} and {name('clamp-gap-mm')} are lengths in mm, at least 0")
+    fields = dict(length_m=length_m, mirror=mirror, diameter_mm=diameter_mm, cap_mm=cap_mm,
+                  hsv_range=parse_hsv_range(color, name("color")) if color else None)
+    if clamp_marker is None:
+        fields["base_px"] = parse_point(base_px, name("base-px"))
+        fields["toward_px"] = parse_point(toward_px, name("toward-px"))
+        height, width = first_frame.shape[:2]
+        x, y = fields["base_px"]
+        if not (0 <= x < width and 0 <= y < height):
+            raise SoftcathError(f"{name('base-px')} {base_px}: outside the {width}x{height} frame")
+    if aruco_mm is None:
+        return Scene(mm_per_px=mm_per_px, **fields)
+    fields.setdefault("base_px", (0.0, 0.0))
+    fields.setdefault("toward_px", (0.0, -1.0))
+    return scene_from_markers(first_frame, aruco_mm, clamp_marker, clamp_gap_mm=clamp_gap_mm, mm_per_px=1.0,
+                              **fields)
 
 
 def _sample(image: np.ndarray, xs: np.ndarray, ys: np.ndarray, cv2) -> np.ndarray:
@@ -336,7 +373,7 @@ class Tracker:
             best = (u[hi] - u[lo] + 0.5, float(np.median(s[lo:hi + 1])))
             break
         if best is None:
-            return "no body at the base point (darker than the background, or in --color)"
+            return NO_BODY
         if self.width_px is None:
             self.width_px = best[0]
         self.contrast = best[1]
@@ -420,7 +457,8 @@ class Tracker:
             return Measurement(frame=index, ok=False, time_s=time_s,
                                reason=f"the body does not end within {max_steps * step * sc.mm_per_px:.0f} mm of the base")
         if len(centres) - 1 < MIN_SECTIONS:
-            return Measurement(frame=index, ok=False, time_s=time_s, reason="too little body beyond the base")
+            return Measurement(frame=index, ok=False, time_s=time_s, reason=(
+                "too little body beyond the base" if len(centres) > 1 else NO_BODY))
         pts = np.asarray(centres)
         chords = np.diff(pts, axis=0)
         seg = np.hypot(chords[:, 0], chords[:, 1])

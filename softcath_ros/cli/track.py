@@ -49,32 +49,12 @@ def register(sub) -> None:
 
 def build_scene(args, first_frame):
     """The Scene from the arguments and (for markers) the first frame; one-line errors."""
-    from ..bench.tracker import Scene, parse_hsv_range, parse_point, scene_from_markers
+    from ..bench.tracker import scene_from_settings
 
-    if args.clamp_marker is None and (args.base_px is None or args.toward_px is None):
-        raise SoftcathError("give --base-px X,Y and --toward-px X,Y, or --clamp-marker ID")
-    if args.clamp_marker is not None and (args.base_px or args.toward_px):
-        raise SoftcathError("--clamp-marker sets the base and axis: leave out --base-px/--toward-px")
-    if args.clamp_marker is not None and args.aruco_mm is None:
-        raise SoftcathError("--clamp-marker needs --aruco-mm (the marker's printed side)")
-    if not 0 <= args.cap_mm < 100 or not 0 <= args.clamp_gap_mm < 1000:
-        raise SoftcathError("--cap-mm and --clamp-gap-mm are lengths in mm, at least 0")
-    fields = dict(length_m=args.length, mirror=args.mirror, diameter_mm=args.diameter_mm, cap_mm=args.cap_mm,
-                  hsv_range=parse_hsv_range(args.color) if args.color else None)
-    if args.clamp_marker is None:
-        fields["base_px"] = parse_point(args.base_px, "--base-px")
-        fields["toward_px"] = parse_point(args.toward_px, "--toward-px")
-        height, width = first_frame.shape[:2]
-        x, y = fields["base_px"]
-        if not (0 <= x < width and 0 <= y < height):
-            raise SoftcathError(f"--base-px {args.base_px}: outside the {width}x{height} frame")
-    if args.aruco_mm is None:
-        return Scene(mm_per_px=args.mm_per_px, **fields)
-    fields.setdefault("base_px", (0.0, 0.0))
-    fields.setdefault("toward_px", (0.0, -1.0))
-    fields["mm_per_px"] = 1.0
-    return scene_from_markers(first_frame, args.aruco_mm, args.clamp_marker, clamp_gap_mm=args.clamp_gap_mm,
-                              **fields)
+    return scene_from_settings(first_frame, mm_per_px=args.mm_per_px, aruco_mm=args.aruco_mm, base_px=args.base_px,
+                               toward_px=args.toward_px, clamp_marker=args.clamp_marker,
+                               clamp_gap_mm=args.clamp_gap_mm, length_m=args.length, cap_mm=args.cap_mm,
+                               diameter_mm=args.diameter_mm, color=args.color, mirror=args.mirror)
 
 
 def run(args) -> int:

@@ -1,0 +1,199 @@
+"""tracker_node (node ``softcath_tracker``): the camera half of the rig contract (docs/rig.md,
+docs/tracker.md). A managed (lifecycle) node around ``softcath_ros.bench.tracker``:
+
+- configure: opens the input (camera device, video file or folder of images), reads the first
+  frame and sets the scene on it (scale, base and axis: given, or from ArUco markers); any fault
+  is one line and the transition fails;
+- activate: reads frames at ``rate_hz`` (a camera at its own pace) and, for each frame it can
+  measure, publishes /softcath/bench/bend_angle (geometry_msgs/Vector3Stamped, vector.x = theta in
+  rad, signed) and /softcath/tip_measured (geometry_msgs/PoseStamped in softcath_base: x across, z
+  along the unbent axis, m; orientation the tip's rotation about y by theta), both stamped with the
+  time the frame was read; a frame it cannot measure publishes nothing and is counted, with its
+  reason, on /diagnostics;
+- deactivate stops reading; cleanup closes the input.
+
+``autostart`` (default true) configures and activates at start-up (a configure fault then ends
+the node with exit code 2); with false a lifecycle manager drives it.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from functools import partial
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+from .. import topics
+from ..core.errors import SoftcathError
+from .diagnostics import diagnostic_status, publish_statuses
+from .parameters import declare, refuse_unknown_parameters
+from .runtime import run_node
+
+MAX_MARKER_ID = 49   # the 4x4_50 dictionary
+
+
+class TrackerNode(LifecycleNode):
+    executor_name = "single"
+
+    def __init__(self, **node_options):
+        super().__init__(topics.TRACKER_NODE, **node_options)
+        p = partial(declare, self)
+        self.input = p("input", "0", "camera device index (0, 1, ...), video file or folder of images")
+        self.settings = dict(
+            mm_per_px=p("mm_per_px", 0.0, "image scale in the bending plane, mm/px (0: from ArUco markers, aruco_mm)",
+                        minimum=0.0, maximum=1e3) or None,
+            aruco_mm=p("aruco_mm", 0.0, "printed side of the ArUco markers (4x4_50), mm (0: mm_per_px gives the scale)",
+                       minimum=0.0, maximum=1e4) or None,
+            base_px=p("base_px", "", "X,Y: the body's centre where it leaves the clamp, px") or None,
+            toward_px=p("toward_px", "", "X,Y: a point on the unbent axis beyond the base, px") or None,
+            clamp_marker=p("clamp_marker", -1, "id of the ArUco marker on the clamp that gives base and axis (-1: none)",
+                           minimum=-1, maximum=MAX_MARKER_ID),
+            clamp_gap_mm=p("clamp_gap_mm", 0.0, "from the clamp marker's top edge to the base, mm", minimum=0.0,
+                           maximum=999.0),
+            length_m=p("length", 0.0, "the sample's length, m (R_C; 0: the backbone length seen)", minimum=0.0,
+                       maximum=9.0) or None,
+            cap_mm=p("cap_mm", 0.0, "the straight tip beyond the bending part, mm", minimum=0.0, maximum=99.0),
+            diameter_mm=p("diameter_mm", 0.0, "the body's width, mm (0: measured on the first frame)", minimum=0.0,
+                          maximum=1e3) or None,
+            color=p("color", "", "H,S,V:H,S,V: the body's colour range ('' : darker than the background)") or None,
+            mirror=p("mirror", False, "positive bending is to the left of the unbent axis as seen"))
+        if self.settings["clamp_marker"] < 0:
+            self.settings["clamp_marker"] = None
+        self.rate_hz = p("rate_hz", 30.0, "frames read per second (a camera: at most its own rate)",
+                         minimum=0.1, maximum=1000.0)
+        self.loop = p("loop", False, "replay a video or folder from its start when it ends")
+        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it)")
+        refuse_unknown_parameters(self)
+        self.source = self.frames = self.tracker = self.timer = None
+        self.pub_angle = self.pub_tip = None
+        self.measured = self.unmeasured = self._reported_unmeasured = 0
+        self.last_reason = ""
+        self.ended = False
+        self.state_name = "unconfigured"
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.create_timer(1.0, self.diagnostics)
+        self._autostart = autostart
+        if autostart:
+            self.trigger_configure()
+            if self.state_name != "inactive":
+                raise SoftcathError(f"configure failed: {self.last_reason}")
+            self.trigger_activate()
+
+    # -- lifecycle ----------------------------------------------------------------------------------
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        from ..bench.frames import FrameSource
+        from ..bench.tracker import Tracker, scene_from_settings
+
+        try:
+            source = FrameSource(self.input)
+            try:
+                first = source.first()
+                scene = scene_from_settings(first.pixels, flag="", **self.settings)
+            except SoftcathError:
+                source.close()
+                raise
+        except SoftcathError as exc:
+            self.last_reason = str(exc)
+            if not self._autostart:   # (at start-up the one line is the exit's)
+                self.get_logger().error(f"configure: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self.source, self.tracker = source, Tracker(scene)
+        self.frames = iter(source)
+        self.pub_angle = self.create_lifecycle_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
+        self.pub_tip = self.create_lifecycle_publisher(PoseStamped, topics.TIP_MEASURED, 100)
+        self.state_name = "inactive"
+        self._autostart = False
+        self.get_logger().info(f"configured: {self.input}, {scene.mm_per_px:.5f} mm/px, base {scene.base_px}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        self.timer = self.create_timer(1.0 / self.rate_hz, self.tick)
+        self.state_name = "active"
+        return super().on_activate(state)
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        self._stop_timer()
+        self.state_name = "inactive"
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        self._release()
+        self.state_name = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        self._release()
+        self.state_name = "finalized"
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_timer(self) -> None:
+        if self.timer is not None:
+            self.destroy_timer(self.timer)
+            self.timer = None
+
+    def _release(self) -> None:
+        self._stop_timer()
+        if self.source is not None:
+            self.source.close()
+        for pub in (self.pub_angle, self.pub_tip):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        self.source = self.frames = self.tracker = self.pub_angle = self.pub_tip = None
+
+    # -- frames -------------------------------------------------------------------------------------
+    def tick(self) -> None:
+        frame = next(self.frames, None)
+        if frame is None and self.loop and not self.source.live:
+            self.source.rewind()
+            self.frames = iter(self.source)
+            frame = next(self.frames, None)
+        if frame is None:
+            if not self.ended:
+                self.get_logger().info(f"{self.input}: no more frames")
+            self.ended = True
+            self._stop_timer()
+            return
+        stamp = self.get_clock().now()          # the time the frame was read
+        m = self.tracker.measure(frame.pixels, frame.index)
+        if not m.ok:                            # never a guessed reading
+            self.unmeasured += 1
+            self.last_reason = m.reason
+            return
+        self.measured += 1
+        theta = math.radians(m.bend_angle_deg)
+        a = Vector3Stamped()
+        a.header.stamp, a.header.frame_id = stamp.to_msg(), topics.FRAME_ID
+        a.vector.x = theta
+        self.pub_angle.publish(a)
+        t = PoseStamped()
+        t.header = a.header
+        t.pose.position.x, t.pose.position.z = m.tip_mm[0] * 1e-3, m.tip_mm[1] * 1e-3
+        t.pose.orientation.y, t.pose.orientation.w = math.sin(0.5 * theta), math.cos(0.5 * theta)
+        self.pub_tip.publish(t)
+
+    def diagnostics(self) -> None:
+        new = self.unmeasured - self._reported_unmeasured     # since the last report
+        self._reported_unmeasured = self.unmeasured
+        if self.state_name == "active" and not self.ended and new == 0:
+            level, message = DiagnosticStatus.OK, "measuring"
+        elif self.state_name == "active" and not self.ended:
+            level, message = DiagnosticStatus.WARN, f"{new} frame(s) not measured: {self.last_reason}"
+        elif self.ended:
+            level, message = DiagnosticStatus.WARN, "the input has no more frames"
+        else:
+            level, message = DiagnosticStatus.OK, f"{self.state_name}" + (f": {self.last_reason}" if self.last_reason else "")
+        publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.TRACKER_NODE, message, [
+            ("state", self.state_name), ("input", self.input), ("frames_measured", self.measured),
+            ("frames_not_measured", self.unmeasured), ("last_reason", self.last_reason)], hardware_id=self.input))
+
+
+def main(args=None) -> int:
+    return run_node(TrackerNode, args, startup_errors=(SoftcathError, ValueError))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,181 @@
+"""tracker_node over DDS on a folder of rendered frames (known truth): the rig contract's
+/softcath/bench/bend_angle and /softcath/tip_measured, stamped when the frame was read; a frame it
+cannot measure publishes nothing and is counted on /diagnostics; the lifecycle transitions
+(configure checks the input, activate streams, deactivate stops); bad inputs are one line."""
+import math
+import subprocess
+import sys
+import time
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+cv2 = pytest.importorskip("cv2", reason="the tracker needs the vision extra (opencv-python-headless)")
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseStamped, Vector3Stamped  # noqa: E402
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
+
+from softcath_ros import topics  # noqa: E402
+from softcath_ros.bench.tracker_render import SceneLook, render  # noqa: E402
+from softcath_ros.core.design import load_design  # noqa: E402
+from softcath_ros.graph import NodeGraph  # noqa: E402
+
+DESIGN = load_design("implemented_5mm")
+ANGLES = [0, 60, 120, 180]
+LOOK = SceneLook(base_px=(500.0, 560.0))
+PARAMS = {"mm_per_px": LOOK.mm_per_px, "base_px": "500,560", "toward_px": "500,100",
+          "length": DESIGN.length, "cap_mm": DESIGN.cap_thickness * 1e3, "rate_hz": 20.0, "loop": True}
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    root = tmp_path_factory.mktemp("frames")
+    truths = {}
+    for i, deg in enumerate(ANGLES):
+        frame, truth = render(math.radians(deg), DESIGN.length, DESIGN.outer_diameter, DESIGN.cap_thickness,
+                              SceneLook(**{**LOOK.__dict__, "seed": i}))
+        cv2.imwrite(str(root / f"f{i}.png"), frame)
+        truths[deg] = truth
+    blank = render(0.0, DESIGN.length, DESIGN.outer_diameter, DESIGN.cap_thickness, LOOK)[0]
+    blank[:] = 230                          # the sample is out of view in this one
+    cv2.imwrite(str(root / f"f{len(ANGLES)}.png"), blank)
+    return root, truths
+
+
+class Listener:
+    def __init__(self, domain):
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node("tracker_test_listener", context=self.context)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.angles, self.tips, self.status = [], [], None
+        self.node.create_subscription(Vector3Stamped, topics.BENCH_BEND_ANGLE, self.angles.append, 50)
+        self.node.create_subscription(PoseStamped, topics.TIP_MEASURED, self.tips.append, 100)
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, 10)
+
+    def _on_diag(self, msg):
+        for s in msg.status:
+            if s.name == topics.TRACKER_NODE:
+                self.status = {"level": s.level, "message": s.message, **{kv.key: kv.value for kv in s.values}}
+
+    def spin(self, seconds, until=None):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.02)
+            if until is not None and until():
+                return True
+        return False
+
+    def call(self, srv_type, name, request, timeout=20.0):
+        client = self.node.create_client(srv_type, name)
+        assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
+        future = client.call_async(request)
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+        assert future.done(), f"{name}: no answer"
+        return future.result()
+
+    def transition(self, transition_id):
+        node = "/" + topics.TRACKER_NODE
+        return self.call(ChangeState, f"{node}/change_state",
+                         ChangeState.Request(transition=Transition(id=transition_id))).success
+
+    def state(self):
+        return self.call(GetState, f"/{topics.TRACKER_NODE}/get_state", GetState.Request()).current_state.label
+
+    def close(self):
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+def stamp_s(header):
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def test_tracker_node_publishes_the_rig_contract_from_a_folder(folder):
+    root, truths = folder
+    with NodeGraph() as graph:
+        proc = graph.start("tracker_node", {**PARAMS, "input": str(root)})
+        graph.wait_ready(proc)
+        listener = Listener(graph.domain)
+        try:
+            got = listener.spin(60.0, until=lambda: len(listener.angles) >= 12 and listener.status is not None
+                                and int(listener.status["frames_not_measured"]) >= 2)
+            assert got, (len(listener.angles), listener.status)
+            now = time.time()
+            for a in listener.angles:
+                deg = math.degrees(a.vector.x)
+                nearest = min(truths, key=lambda d: abs(d - deg))
+                assert abs(deg - nearest) < 1.0 and a.header.frame_id == topics.FRAME_ID
+                assert a.vector.y == a.vector.z == 0.0
+                assert 0 < now - stamp_s(a.header) < 60          # stamped on this clock when read
+            assert {min(truths, key=lambda d: abs(d - math.degrees(a.vector.x))) for a in listener.angles} == set(ANGLES)
+            by_stamp = {(a.header.stamp.sec, a.header.stamp.nanosec): a.vector.x for a in listener.angles}
+            paired = 0
+            for t in listener.tips:
+                theta = by_stamp.get((t.header.stamp.sec, t.header.stamp.nanosec))
+                if theta is None:
+                    continue
+                paired += 1
+                truth = truths[min(truths, key=lambda d: abs(d - math.degrees(theta)))]
+                across, along = t.pose.position.x * 1e3, t.pose.position.z * 1e3
+                assert math.dist([across, along], truth["tip_mm"]) < 0.3 and t.pose.position.y == 0.0
+                assert t.pose.orientation.y == pytest.approx(math.sin(theta / 2))
+            assert paired >= 8
+            # the blank frame: nothing published for it, counted with its reason
+            assert "no body at the base" in listener.status["last_reason"]
+            assert listener.status["state"] == "active"
+        finally:
+            listener.close()
+        assert graph.stop()["tracker_node"] == 0
+
+
+def test_lifecycle_configure_activate_deactivate(folder, tmp_path):
+    root, _ = folder
+    with NodeGraph() as graph:
+        proc = graph.start("tracker_node", {**PARAMS, "input": str(tmp_path / "not_yet"), "autostart": False})
+        graph.wait_ready(proc)
+        listener = Listener(graph.domain)
+        try:
+            assert listener.state() == "unconfigured"
+            assert not listener.transition(Transition.TRANSITION_CONFIGURE)     # the input is missing
+            assert listener.state() == "unconfigured"
+            (tmp_path / "not_yet").symlink_to(root)                           # now it is there
+            assert listener.transition(Transition.TRANSITION_CONFIGURE)
+            assert listener.state() == "inactive"
+            assert not listener.spin(1.5, until=lambda: listener.angles)       # configured: not streaming
+            assert listener.transition(Transition.TRANSITION_ACTIVATE)
+            assert listener.spin(30.0, until=lambda: len(listener.angles) >= 3)
+            assert listener.transition(Transition.TRANSITION_DEACTIVATE)
+            listener.spin(0.5)
+            n = len(listener.angles)
+            assert not listener.spin(1.5, until=lambda: len(listener.angles) > n)   # deactivated: stopped
+            assert listener.state() == "inactive"
+        finally:
+            listener.close()
+        assert graph.stop()["tracker_node"] == 0
+        text = proc.stdout.read()
+    assert "Traceback" not in text and "configure: " in text     # the refused configure, said in one line
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"input": "/nonexistent/frames"}, "no such file, folder or camera"),
+    ({"base_px": "500;560"}, "base_px '500;560': expected X,Y"),
+    ({"mm_per_px": 0.0}, "give the scale: mm_per_px or aruco_mm"),
+    ({"mm_per_px": 0.0, "aruco_mm": 10.0, "base_px": None, "toward_px": None, "clamp_marker": 0}, "no ArUco marker"),
+])
+def test_bad_inputs_end_the_node_in_one_line(folder, params, words):
+    root, _ = folder
+    args = [f"{k}:={v}" for k, v in {**PARAMS, "input": str(root), **params}.items() if v is not None]
+    cmd = [sys.executable, "-m", "softcath_ros.nodes.tracker_node", "--ros-args"]
+    for a in args:
+        cmd += ["-p", a]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and "Traceback" not in proc.stderr, proc.stderr
