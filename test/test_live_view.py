@@ -112,30 +112,43 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     n.create_subscription(Marker, topics.BODY_MARKER, got["marker"].append, qos)
     n.create_subscription(Path, topics.BACKBONE_PATH, got["path"].append, qos)
     n.create_subscription(Float64, topics.RADIUS_L_OVER_THETA, got["radius"].append, qos)
-    node.client.spin_until(lambda: False, 1.0)   # discovery of the new subscriptions
+    node.sync()   # the node's view publishers have matched the new subscriptions
     t0 = time.monotonic()
     sent = 0
-    while time.monotonic() - t0 < 2.0:
+    # ~200 Hz of new commands for at least 2 s and until a few views arrived (a loaded machine only
+    # makes it last longer); then a distinct one, whose pose the last view must show.
+    while time.monotonic() - t0 < 2.0 or len(got["marker"]) < 4:
+        assert time.monotonic() - t0 < 60.0, f"{len(got['marker'])} views for {sent} commands in 60 s"
         node.client._pub.publish(node.client._msg_type(data=[20000.0 + sent % 100]))   # each one new
         sent += 1
         node.client.spin_until(lambda: False, 0.005)
-    last = node.client.send([30000.0])
-    assert last is not None
-    node.client.spin_until(lambda: got["path"] and got["path"][-1].poses[-1].pose.position.y ==
-                           pytest.approx(last.tip_position_m[1], abs=1e-15), 3.0)
+    # The answers to the stream may still be arriving: the last command's is the backbone ending at
+    # its predicted tip (closed form, as the node runs it).
+    from test_model_node import expected_tip
+
+    tip = expected_tip(30000.0)[0]
+    node.client._pub.publish(node.client._msg_type(data=[30000.0]))
+    bbs = node.client._backbones
+    assert node.client.spin_until(lambda: bbs and np.allclose([bbs[-1].poses[-1].position.y,
+                                                               bbs[-1].poses[-1].position.z], tip[1:], atol=1e-12), 30.0)
+    last = [[b.position.x, b.position.y, b.position.z] for b in bbs[-1].poses]
+    assert node.client.spin_until(lambda: got["path"] and got["path"][-1].poses[-1].pose.position.y == last[-1][1], 30.0)
     elapsed = time.monotonic() - t0
     n_markers, n_tips = len(got["marker"]), node.client.n_received
-    # At most the display rate (10 Hz), at least a third of it on a loaded machine; not one per pose.
-    assert 0.3 * 10 * (elapsed - 1.0) <= n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
+    # At most the display rate (10 Hz): not one per pose; a starved timer only makes fewer.
+    assert n_markers <= 10 * elapsed + 2, (n_markers, elapsed)
     assert n_tips > 2 * n_markers and sent > 2 * n_markers, (n_tips, sent, n_markers)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in got["marker"]]
+    assert stamps == sorted(set(stamps)), "every view shows a newer pose than the one before"
     m = got["marker"][-1]
     assert m.header.frame_id == topics.FRAME_ID and m.type == Marker.TRIANGLE_LIST
     assert len(m.points) == 7 * 12 * 2 * 3 and len(m.colors) == len(m.points)
     path = got["path"][-1]
     np.testing.assert_allclose([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in path.poses],
-                               last.backbone_m, atol=1e-15)
-    want = radius_l_over_theta(load_design("implemented_5mm").length, backbone_bend_angle(last.backbone_orientation_xyzw))
-    node.client.spin_until(lambda: got["radius"] and abs(got["radius"][-1].data - want) < 1e-9 * want, 2.0)
+                               last, atol=1e-15)
+    quats = [[b.orientation.x, b.orientation.y, b.orientation.z, b.orientation.w] for b in bbs[-1].poses]
+    want = radius_l_over_theta(load_design("implemented_5mm").length, backbone_bend_angle(quats))
+    node.client.spin_until(lambda: got["radius"] and abs(got["radius"][-1].data - want) < 1e-9 * want, 30.0)
     assert got["radius"][-1].data == pytest.approx(want, rel=1e-9)
     code, err = node.stop(signal.SIGTERM)
     assert code == 0 and "Traceback" not in err
@@ -183,12 +196,18 @@ def test_a_repeated_command_is_drawn_once_a_second(start_node):
     node = start_node("-p", "display_rate:=20.0")
     got = []
     node.client.node.create_subscription(Marker, topics.BODY_MARKER, got.append, stream_qos(100))
-    node.client.spin_until(lambda: False, 1.0)
+    node.sync()
+    # The same command at ~100 Hz for at least 2.5 s and until the view was redrawn once.
     t0 = time.monotonic()
-    while time.monotonic() - t0 < 2.5:
+    sent = 0
+    while time.monotonic() - t0 < 2.5 or len(got) < 2:
+        assert time.monotonic() - t0 < 60.0, f"{len(got)} views in 60 s of a repeated command"
         node.client._pub.publish(node.client._msg_type(data=[15000.0]))
+        sent += 1
         node.client.spin_until(lambda: False, 0.01)
-    assert 2 <= len(got) <= 4, len(got)   # first one, then about one a second; not 20 Hz
+    elapsed = time.monotonic() - t0
+    # first one, then about one a second (a 20 Hz view would draw 20 a second); never per command
+    assert 2 <= len(got) <= 2 + elapsed, (len(got), elapsed, sent)
 
 
 FAKE_TF2 = r"""
@@ -222,7 +241,7 @@ def test_where_tf2_is_importable_the_tip_frame_is_broadcast(start_node, tmp_path
                       env_extra={"PYTHONPATH": path, "SOFTCATH_TEST_TF_OUT": str(out)})
     pt = node.client.send([25000.0])
     assert pt is not None
-    node.client.spin_until(lambda: out.is_file() and out.read_text().strip(), 3.0)
+    node.client.spin_until(lambda: out.is_file() and out.read_text().strip(), 30.0)
     code, err = node.stop(signal.SIGTERM)
     assert code == 0 and "tf2_ros is not importable" not in err
     sent = [json.loads(line) for line in out.read_text().splitlines()]
@@ -236,7 +255,11 @@ def test_where_tf2_is_importable_the_tip_frame_is_broadcast(start_node, tmp_path
 
 def test_display_rate_zero_turns_the_view_off(start_node):
     node = start_node("-p", "display_rate:=0.0")
+    # start_node waited for a /diagnostics report: the node announces that publisher after the view's,
+    # so a view publisher would be known here
+    assert node.client.node.count_publishers(topics.DIAGNOSTICS) == 1
     assert node.client.node.count_publishers(topics.BODY_MARKER) == 0
+    assert node.client.node.count_publishers(topics.BACKBONE_PATH) == 0
     assert node.client.send([10000.0]) is not None
 
 

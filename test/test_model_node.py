@@ -57,6 +57,25 @@ class Running:
         self.diagnostics = []
         self.client.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.diagnostics.append, 10)
         self.client.wait_for_model_node(timeout_s=60.0)
+        self.sync()
+
+    def sync(self, timeout_s: float = 60.0) -> None:
+        """Wait until the node's publishers have matched every subscription this client has made so
+        far. The client seeing the node's publishers is not enough: each side pairs endpoints when it
+        reads the other's discovery announcements, and a reliable volatile publisher never delivers
+        what it published before it matched a reader (under load the node's side can lag by seconds;
+        its first answer was then lost). A participant's subscriptions are announced in order and read
+        in order, so a /diagnostics report arriving on a subscription made now proves the earlier ones
+        are matched too."""
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        got = []
+        sub = self.client.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, got.append, 10)
+        try:
+            if not self.client.spin_until(lambda: got, timeout_s):
+                raise TimeoutError(f"no /diagnostics from model_node within {timeout_s:g} s")
+        finally:
+            self.client.node.destroy_subscription(sub)
 
     def counters(self, timeout_s: float = 20.0, **wanted) -> dict:
         """The first /diagnostics report whose counters include ``wanted`` (waits for it)."""
@@ -174,21 +193,10 @@ def test_params_file_is_loaded(start_node):
     assert "design implemented_5mm" in err  # start-up line from the params file's design
 
 
-def _answered(client, pressures_pa, tries: int = 3):
-    """The node's answer to a command sent up to ``tries`` times: under load the node's reader may
-    match the client's writer a moment after the client saw the match, and a command published in
-    between is not delivered."""
-    for _ in range(tries):
-        point = client.send(pressures_pa)
-        if point is not None:
-            return point
-    return None
-
-
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signal_ends_node_cleanly(start_node, sig):
     node = start_node()
-    assert _answered(node.client, [5000.0]) is not None
+    assert node.client.send([5000.0]) is not None
     code, err = node.stop(sig)
     assert code == 0, f"exit code {code} on {sig.name}: {err}"
     assert "Traceback" not in err
