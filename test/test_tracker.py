@@ -14,7 +14,7 @@ import pytest
 cv2 = pytest.importorskip("cv2", reason="the tracker needs the vision extra (opencv-python-headless)")
 
 from softcath_ros.bench.tracker import Scene, Tracker, parse_hsv_range, parse_point  # noqa: E402
-from softcath_ros.bench.tracker_render import SceneLook, render  # noqa: E402
+from softcath_ros.bench.tracker_render import SceneLook, render, write_demo_frames  # noqa: E402
 from softcath_ros.cli import main  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.errors import SoftcathError  # noqa: E402
@@ -130,20 +130,15 @@ def test_scene_and_point_inputs_are_checked():
 
 # -- `softcath track` ---------------------------------------------------------------------------------
 
-ARUCO_LOOK = SceneLook(background="graph", mm_per_px=0.1, base_px=(500.0, 520.0), marker_mm=10.0,
-                       marker_gap_mm=2.0)
 ANGLES = [0, 45, 90, 135, 180]
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
-    """Rendered frames with an ArUco marker on the clamp; their truth beside them."""
+    """The demo frames (docs/tracker.md): graph paper, an ArUco marker on the clamp; their truth."""
     root = tmp_path_factory.mktemp("frames")
-    truths = []
-    for i, deg in enumerate(ANGLES):
-        frame, truth = render(math.radians(deg), L, D, CAP, SceneLook(**{**ARUCO_LOOK.__dict__, "seed": i}))
-        cv2.imwrite(str(root / f"frame_{i:03d}.png"), frame)
-        truths.append(truth)
+    truths = write_demo_frames(root, ANGLES)
+    (root / "truth.json").unlink()
     return root, truths
 
 
@@ -246,3 +241,42 @@ def test_a_video_file_is_tracked_with_its_own_clock(tmp_path):
     assert [round(f["time_s"], 3) for f in frames] == [0.0, 0.1, 0.2]
     for f, deg in zip(frames, [20, 60, 100]):
         assert f["ok"] and abs(f["bend_angle_deg"] - deg) < 1.5   # compressed at half the resolution
+
+
+def tracker_doc_lines(prefix: str) -> list[list[str]]:
+    """The lines of docs/tracker.md's code blocks that start with ``prefix``, split as a shell would."""
+    import shlex
+    from pathlib import Path
+
+    doc = Path(__file__).resolve().parents[1] / "docs" / "tracker.md"
+    fenced, out = False, []
+    for line in doc.read_text().splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+        elif fenced and line.strip().startswith(prefix):
+            out.append(shlex.split(line.strip(), comments=True))
+    return out
+
+
+def test_the_documented_commands_run_as_written(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+
+    (render_line,) = tracker_doc_lines("python -m softcath_ros.bench.tracker_render")
+    res = subprocess.run([sys.executable, *render_line[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    truths = json.loads((tmp_path / "frames" / "truth.json").read_text())
+    monkeypatch.chdir(tmp_path)
+    lines = tracker_doc_lines("softcath track")
+    assert len(lines) == 2
+    for argv in lines:
+        code, out, err = cli(*argv[1:])
+        assert code == 0, err
+        if "--json" in argv:
+            frames = json.loads(out)["frames"]
+            for f, truth in zip(frames, truths):
+                assert abs(f["bend_angle_deg"] - truth["bend_angle_deg"]) < ANGLE_DEG
+                assert math.dist(f["tip_mm"], truth["tip_mm"]) < TIP_MM
+            assert len(list((tmp_path / "overlay").glob("*.png"))) == len(truths)
+        else:
+            assert out.strip().splitlines()[-1].startswith(f"{len(truths)} of {len(truths)} frames measured")

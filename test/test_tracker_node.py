@@ -179,3 +179,20 @@ def test_bad_inputs_end_the_node_in_one_line(folder, params, words):
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_the_documented_node_line_runs_as_written(tmp_path):
+    from softcath_ros.bench.tracker_render import write_demo_frames
+    from test_tracker import tracker_doc_lines
+
+    write_demo_frames(tmp_path / "frames")
+    (line,) = tracker_doc_lines("tracker_node")
+    with NodeGraph() as graph:
+        proc = graph.start("tracker_node", extra_ros_args=line[2:], cwd=tmp_path)
+        graph.wait_ready(proc)
+        listener = Listener(graph.domain)
+        try:
+            assert listener.spin(30.0, until=lambda: len(listener.angles) >= 5 and len(listener.tips) >= 5)
+        finally:
+            listener.close()
+        assert graph.stop()["tracker_node"] == 0

@@ -114,3 +114,48 @@ def render(theta: float, length: float, diameter: float, cap: float = 1e-3, look
     frame = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     tip = bb[-1] * 1e3
     return frame, {"bend_angle_deg": math.degrees(theta), "tip_mm": [float(tip[0]), float(tip[1])]}
+
+
+DEMO_LOOK = SceneLook(background="graph", mm_per_px=0.1, base_px=(500.0, 520.0), marker_mm=10.0, marker_gap_mm=2.0)
+
+
+def write_demo_frames(folder, angles_deg=(0, 45, 90, 135, 180), design_name: str = "implemented_5mm") -> list[dict]:
+    """Frames of the design's body at ``angles_deg`` (graph paper, 0.1 mm/px, a 10 mm ArUco marker
+    on the clamp 2 mm below the base) as ``frame_NNN.png`` in ``folder``, their truth in
+    ``truth.json``; returns the truths."""
+    import json
+    from pathlib import Path
+
+    from ..core.design import load_design
+
+    cv2 = cv2_module()
+    design = load_design(design_name)
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    truths = []
+    for i, deg in enumerate(angles_deg):
+        frame, t = render(math.radians(deg), design.length, design.outer_diameter, design.cap_thickness,
+                          SceneLook(**{**DEMO_LOOK.__dict__, "seed": i}))
+        cv2.imwrite(str(out / f"frame_{i:03d}.png"), frame)
+        truths.append({"frame": i, **t})
+    (out / "truth.json").write_text(json.dumps(truths, indent=1))
+    return truths
+
+
+def main(argv=None) -> int:
+    """``python -m softcath_ros.bench.tracker_render FOLDER``: demo frames to try `softcath track` on."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m softcath_ros.bench.tracker_render",
+                                 description="render frames of the body with known truth (docs/tracker.md)")
+    ap.add_argument("folder")
+    args = ap.parse_args(argv)
+    truths = write_demo_frames(args.folder)
+    print(f"wrote {len(truths)} frames and truth.json to {args.folder}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())
