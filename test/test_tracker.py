@@ -206,6 +206,7 @@ def test_a_frame_that_cannot_be_read_is_said_and_the_run_goes_on(folder, tmp_pat
     (["{folder}", "--mm-per-px", "-1", "--base-px", "1,1", "--toward-px", "1,0"], ["must be positive"]),
     (["{folder}", "--mm-per-px", "0.1", "--base-px", "1,1", "--toward-px", "1,0", "--color", "red"], ["--color"]),
     (["{empty}", "--mm-per-px", "0.1", "--base-px", "1,1", "--toward-px", "1,0"], ["no images"]),
+    (["63", "--mm-per-px", "0.1", "--base-px", "1,1", "--toward-px", "1,0"], ["camera 63: cannot be opened"]),
 ])
 def test_bad_inputs_are_one_line_with_exit_2(folder, tmp_path, argv, words):
     root, _ = folder
@@ -223,6 +224,21 @@ def test_bad_inputs_are_one_line_with_exit_2(folder, tmp_path, argv, words):
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     for w in words:
         assert w in err, err
+
+
+def test_ctrl_c_keeps_what_was_measured(folder, monkeypatch):
+    root, _ = folder
+    real = Tracker.measure
+
+    def measure(self, frame, index=0, time_s=None):
+        if index == 2:
+            raise KeyboardInterrupt
+        return real(self, frame, index, time_s)
+
+    monkeypatch.setattr(Tracker, "measure", measure)
+    code, out, err = cli("track", root, "--aruco-mm", 10, "--clamp-marker", 0, "--clamp-gap-mm", 2, "--json")
+    doc = json.loads(out)
+    assert code == 130 and doc["interrupted"] and [f["frame"] for f in doc["frames"]] == [0, 1]
 
 
 def test_a_video_file_is_tracked_with_its_own_clock(tmp_path):

@@ -42,6 +42,9 @@ def cv2_module():
     except ImportError:
         raise SoftcathError("the camera tracker needs OpenCV: pip install 'softcath_ros[vision]' "
                             "(opencv-python-headless)") from None
+    # OpenCV's own warnings (a camera index it cannot open, a codec) would add lines to our one-line
+    # errors: they are said by us instead
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
     return cv2
 
 
@@ -397,10 +400,6 @@ class Tracker:
         except _LeavesImage:
             return fail("the body leaves the image")
 
-    @staticmethod
-    def _tip_angle(s_mid, phi, s_at):
-        return _tip_angle_fit(s_mid, phi, s_at)
-
     def _walk(self, images, index, time_s, shape) -> Measurement:
         sc = self.scene
         along, across = sc.axes
@@ -466,7 +465,7 @@ class Tracker:
         phi = np.unwrap(np.arctan2(chords @ across, chords @ along))
         s_mid = np.cumsum(seg) - 0.5 * seg
         s_end = float(seg.sum())
-        theta = self._tip_angle(s_mid, phi, s_end)
+        theta = _tip_angle_fit(s_mid, phi, s_end)
         # the tip: the body's end along the last tangent
         t_img = along * math.cos(theta) + across * math.sin(theta)
         v = np.arange(0.0, step + w, 0.5)
@@ -478,7 +477,7 @@ class Tracker:
             return Measurement(frame=index, ok=False, time_s=time_s, reason="the tip's end is not clear")
         cap = (sc.cap_mm or 0.0) / sc.mm_per_px
         if cap > 0:   # the bending part ends a cap before the tip: its tangent there, not extrapolated
-            theta = self._tip_angle(s_mid, phi, s_end + 0.5 * falls[0] - cap)
+            theta = _tip_angle_fit(s_mid, phi, s_end + 0.5 * falls[0] - cap)
             t_img = along * math.cos(theta) + across * math.sin(theta)
         tip = pts[-1] + 0.5 * falls[0] * t_img
         backbone = np.vstack([pts, tip])

@@ -76,6 +76,7 @@ def run(args) -> int:
             from tqdm import tqdm
 
             bar = tqdm(total=total, desc="track", unit="frame", file=sys.stderr)
+        interrupted = False
         try:
             for frame in source:
                 if args.max_frames is not None and frame.index >= args.max_frames:
@@ -91,6 +92,8 @@ def run(args) -> int:
                         raise SoftcathError(f"--overlay {overlay}: cannot write {target.name}")
                 if bar is not None:
                     bar.update(1)
+        except KeyboardInterrupt:   # Ctrl-C: what was measured is still reported (a camera ends so)
+            interrupted = True
         finally:
             if bar is not None:
                 bar.close()
@@ -102,13 +105,14 @@ def run(args) -> int:
                                                    "toward_px": list(scene.toward_px), "length_m": scene.length_m,
                                                    "mirror": scene.mirror, "cap_mm": scene.cap_mm,
                                                    "width_mm": (tracker.width_px or 0) * scene.mm_per_px},
-               "frames_total": len(results), "frames_measured": measured,
+               "frames_total": len(results), "frames_measured": measured, "interrupted": interrupted,
                "frames": [dict(m.as_dict(), name=name) for name, m in results]}
         json_output.dump(doc, sys.stdout, indent=1)
         print()
     else:
-        print(f"{measured} of {len(results)} frames measured (scale {scene.mm_per_px:.5f} mm/px)")
-    return 0
+        print(f"{measured} of {len(results)} frames measured (scale {scene.mm_per_px:.5f} mm/px)"
+              + (", interrupted" if interrupted else ""))
+    return 130 if interrupted and not source.live else 0
 
 
 def _line(name: str, m) -> str:
