@@ -31,6 +31,9 @@ def fine_polygon_integrals(outline, tol):
     sector_outline(Sector(1.25e-3, 2.0e-3, 90.0, 100.0, 0.1e-3)),
     sector_outline(Sector(0.0, 2.0e-3, 30.0, 200.0, 0.1e-3)).mirrored(0.3),
     polygon_outline(PolygonShape(((0, 0), (1e-3, 0), (1e-3, 1e-3), (0.5e-3, 0.4e-3), (0, 1e-3)), 0.1e-3)),
+    # flat arcs of large circles (integrated over their chords) and a major arc, either way round
+    Outline([(0, 0), (1e-3, 0), (1e-3, 1e-3), (0, 1e-3)], [0.02, -0.3, 0.0, 1e-4]),
+    Outline([(-1e-3, 0.2e-3), (1e-3, 0.2e-3)], [0.0, 2.5]),
 ])
 def test_exact_integrals_are_the_limit_of_fine_polygons(outline):
     exact = outline.integrals

@@ -82,24 +82,48 @@ def arc_of(p0, p1, bulge: float) -> Arc:
     return Arc(tuple(p0), tuple(p1), tuple(centre), radius, sweep)
 
 
+_GAUSS_U, _GAUSS_W = np.polynomial.legendre.leggauss(24)
+# Below this half-angle (rad) a segment is integrated over its chord (sector minus triangle would
+# lose digits to cancellation on a flat arc of a large circle).
+_FLAT_ARC = 0.5
+# An arc whose sagitta is below this (m) is a straight edge.
+FLAT_SAGITTA = 1e-12
+
+
 def _segment_integrals(arc: Arc) -> tuple[float, np.ndarray, np.ndarray]:
     """Signed integrals over the circular segment between an arc and its chord (the part an arc
     adds to, or for a clockwise arc takes from, the polygon of the vertices)."""
     r, alpha = arc.radius, 0.5 * abs(arc.sweep)
-    s, c = math.sin(alpha), math.cos(alpha)
-    # local frame: circle centre at the origin, x towards the arc's midpoint; sector minus triangle
-    area = alpha * r * r - r * r * s * c
-    sx = 2.0 / 3.0 * r**3 * s - 2.0 / 3.0 * r**3 * s * c * c
-    ixx = r**4 / 4.0 * (alpha + s * c) - r**4 * s * c**3 / 2.0
-    iyy = r**4 / 4.0 * (alpha - s * c) - r**4 * s**3 * c / 6.0
+    p0, p1 = np.asarray(arc.start), np.asarray(arc.end)
     mid_angle = arc.start_angle + 0.5 * arc.sweep
-    rot = np.array([[math.cos(mid_angle), -math.sin(mid_angle)], [math.sin(mid_angle), math.cos(mid_angle)]])
-    centre = np.asarray(arc.center)
-    s_rot = rot @ np.array([sx, 0.0])
-    second = rot @ np.diag([ixx, iyy]) @ rot.T + np.outer(centre, s_rot) + np.outer(s_rot, centre) \
-        + area * np.outer(centre, centre)
+    if alpha < _FLAT_ARC:
+        # chord frame: origin at the chord's midpoint, u along the chord, v towards the arc;
+        # height of the arc over the chord h(u) = (L^2/4 - u^2) / (sqrt(r^2 - u^2) + r cos(alpha))
+        half = 0.5 * float(np.hypot(*(p1 - p0)))
+        u = half * _GAUSS_U
+        w = half * _GAUSS_W
+        h = (half * half - u * u) / (r * np.sqrt(1.0 - (u / r) ** 2) + r * math.cos(alpha))
+        area = float(w @ h)
+        s_loc = np.array([w @ (u * h), w @ (h * h) / 2.0])
+        m_loc = np.array([[w @ (u * u * h), w @ (u * h * h) / 2.0], [w @ (u * h * h) / 2.0, w @ (h**3) / 3.0]])
+        e_u = (p1 - p0) / (2.0 * half)
+        e_v = np.array([math.cos(mid_angle), math.sin(mid_angle)])
+        rot = np.column_stack([e_u, e_v])
+        origin = 0.5 * (p0 + p1)
+    else:
+        # circle frame: origin at the centre, x towards the arc's midpoint; sector minus triangle
+        s, c = math.sin(alpha), math.cos(alpha)
+        area = alpha * r * r - r * r * s * c
+        s_loc = np.array([2.0 / 3.0 * r**3 * s - 2.0 / 3.0 * r**3 * s * c * c, 0.0])
+        ixx = r**4 / 4.0 * (alpha + s * c) - r**4 * s * c**3 / 2.0
+        iyy = r**4 / 4.0 * (alpha - s * c) - r**4 * s**3 * c / 6.0
+        m_loc = np.diag([ixx, iyy])
+        rot = np.array([[math.cos(mid_angle), -math.sin(mid_angle)], [math.sin(mid_angle), math.cos(mid_angle)]])
+        origin = np.asarray(arc.center)
+    s_rot = rot @ s_loc
+    second = rot @ m_loc @ rot.T + np.outer(origin, s_rot) + np.outer(s_rot, origin) + area * np.outer(origin, origin)
     sign = math.copysign(1.0, arc.sweep)
-    return sign * area, sign * (area * centre + s_rot), sign * second
+    return sign * area, sign * (area * origin + s_rot), sign * second
 
 
 class Outline:
@@ -110,6 +134,8 @@ class Outline:
         b = np.zeros(len(v)) if bulges is None else np.asarray(bulges, dtype=float).reshape(-1)
         if len(b) != len(v):
             raise ValueError("one bulge per vertex")
+        chords = np.hypot(*(np.roll(v, -1, axis=0) - v).T)
+        b = np.where(np.abs(b) * 0.5 * chords < FLAT_SAGITTA, 0.0, b)   # an arc flatter than a picometre is a line
         if len(v) < 2 or (len(v) == 2 and not np.any(b != 0)):
             raise ValueError("an outline needs at least three vertices, or two with an arc between them")
         if self._signed_area(v, b) < 0:        # keep every outline counter-clockwise
@@ -163,7 +189,8 @@ class Outline:
                 pts.append(e.start)
                 continue
             step = 2.0 * math.acos(max(-1.0, 1.0 - tolerance / e.radius)) if tolerance < e.radius else math.pi
-            n = max(1, math.ceil(abs(e.sweep) / step - 1e-9))
+            sagitta = e.radius * (1.0 - math.cos(0.5 * e.sweep))
+            n = 1 if sagitta <= tolerance else max(1, math.ceil(abs(e.sweep) / step - 1e-9))
             t = e.start_angle + e.sweep * np.arange(n) / n
             pts.extend(zip(e.center[0] + e.radius * np.cos(t), e.center[1] + e.radius * np.sin(t)))
         return np.asarray(pts, dtype=float)

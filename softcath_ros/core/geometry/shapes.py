@@ -25,6 +25,9 @@ _KEYS = {"circle": {"shape", "diameter", "center"},
          "polygon": {"shape", "points", "fillet"},
          "file": {"shape", "path", "units", "layer", "id"}}
 MAX_POINTS = 10_000
+MIN_EDGE = 1e-9   # m: points closer than this are one point
+# m: an outline must be simple on polygons this close to its arcs (and at the default chord tolerance)
+SIMPLE_CHECK_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -174,11 +177,12 @@ def _arc_bulge(start, end, centre, ccw: bool) -> float:
 
 
 def sector_outline(s: Sector, field_name: str = "sector") -> Outline:
-    ri, ro, f = s.inner_radius, s.outer_radius, s.fillet
+    ri, ro, f = s.inner_radius, s.outer_radius, (s.fillet if s.fillet >= MIN_EDGE else 0.0)
     a0 = math.radians(s.direction - 0.5 * s.span)
     a1 = math.radians(s.direction + 0.5 * s.span)
     span = a1 - a0
-    if ri == 0.0:   # a pie slice: its tip on the axis is a polygon corner
+    if ri * span < MIN_EDGE:   # an inner arc under 1 nm: a pie slice, its tip on the axis a polygon corner
+        ri = 0.0
         pts = [(0.0, 0.0, 0.0), (*(ro * _unit(a0)), math.tan(span / 4)), (*(ro * _unit(a1)), 0.0)]
         if f == 0:
             return Outline([p[:2] for p in pts], [p[2] for p in pts])
@@ -245,6 +249,8 @@ def _fillet_corners(points, f, field_name, neighbours=None):
             tangents.append((0.0, l1, l2))
             out.append([(v, 0.0)])
             continue
+        if theta < 1e-6:
+            raise DesignError(f"{field_name}.fillet", f, "a corner is too sharp to fillet")
         t = f / math.tan(0.5 * theta)
         tangents.append((t, l1, l2))
         sweep = math.pi - theta
@@ -272,10 +278,11 @@ def polygon_outline(s: PolygonShape, field_name: str = "polygon", points_field: 
     if np.any(np.abs(bulges) >= 1e6):
         raise DesignError(points_field, "bulge", "a bulge must be below 1e6 in size")
     steps = np.hypot(*(np.roll(pts, -1, axis=0) - pts).T)
-    if np.any(steps == 0):
-        i = int(np.flatnonzero(steps == 0)[0])
-        raise DesignError(f"{points_field}[{i}]", list(s.points[i]), "repeats the next point (an outline is closed by itself)")
-    if s.fillet == 0:
+    if np.any(steps < MIN_EDGE):
+        i = int(np.flatnonzero(steps < MIN_EDGE)[0])
+        raise DesignError(f"{points_field}[{i}]", list(s.points[i]), "repeats the next point (within 1 nm; an outline "
+                                                                       "is closed by itself)")
+    if s.fillet < MIN_EDGE:   # a fillet under 1 nm is none
         return _checked(lambda: Outline(pts, bulges), points_field)
     if np.any(bulges != 0):
         raise DesignError(f"{field_name}.fillet", s.fillet, "fillets apply to straight-edged polygons only")
@@ -302,9 +309,13 @@ def shape_outline(shape, field_name: str) -> Outline:
         field, value = f"{field_name}.path", shape.path
     import shapely
 
+    chords = np.hypot(*(np.roll(outline.vertices, -1, axis=0) - outline.vertices).T)
+    if chords.min() < MIN_EDGE:
+        raise DesignError(field, value, "an edge of the outline is shorter than 1 nm")
     poly = outline.shapely
-    if not poly.is_valid:
-        raise DesignError(field, value, f"the outline is not simple ({shapely.is_valid_reason(poly)})")
+    for p in (poly, outline.polygon(SIMPLE_CHECK_TOLERANCE)):   # at the default chords and within 1 nm of the arcs
+        if not p.is_valid:
+            raise DesignError(field, value, f"the outline is not simple ({shapely.is_valid_reason(p)})")
     if not outline.area > 0 or not poly.area > 0:
         raise DesignError(field, value, "the outline encloses no area")
     return outline

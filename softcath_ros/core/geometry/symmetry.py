@@ -91,15 +91,21 @@ def _candidate_mirror_angles(section: Section) -> list[float]:
         if np.hypot(*h.centroid) <= small:
             j = h.outline.integrals.centroidal_second
             w, v = np.linalg.eigh(j)
-            angles += [math.atan2(v[1, k], v[0, k]) for k in range(2)]
+            if w[1] - w[0] > 1e-9 * abs(w[1]):   # a circle on the axis has no axes of its own
+                angles += [math.atan2(v[1, k], v[0, k]) for k in range(2)]
     if not angles:
         angles = [0.0]
     angles += [a + math.pi / 2 for a in angles]
+    return _distinct(angles, 1e-9)
+
+
+def _distinct(angles, gap: float) -> list[float]:
+    """Mirror-line angles folded into [0, pi), those within ``gap`` rad of another dropped."""
     out = []
     for a in sorted(a % math.pi for a in angles):
-        if not out or min(abs(a - out[-1]), math.pi - abs(a - out[-1])) > 1e-9:
+        if not out or min(abs(a - out[-1]), math.pi - abs(a - out[-1])) > gap:
             out.append(a)
-    if len(out) > 1 and math.pi - out[-1] + out[0] <= 1e-9:
+    if len(out) > 1 and math.pi - out[-1] + out[0] <= gap:
         out.pop()
     return out
 
@@ -109,6 +115,8 @@ def symmetry(section: Section, tolerance: float | None = None) -> Symmetry:
     tol = 1e-5 * section.outer_radius if tolerance is None else tolerance
     mirrors = []
     for a in _candidate_mirror_angles(section):
+        if any(min(abs(a - m.angle), math.pi - abs(a - m.angle)) < 1e-4 for m in mirrors):
+            continue   # the same line found from another part
         perm = _matches(section, lambda o, a=a: o.mirrored(a), tol)
         if perm is not None:
             mirrors.append(Mirror(a, perm))
