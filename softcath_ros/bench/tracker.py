@@ -31,6 +31,7 @@ LENGTH_TOLERANCE = 0.25            # measured backbone length vs --length: relat
 DOWNSCALE = 8                      # background brightness is estimated on a frame this much smaller
 NO_BODY = "no body at the base point (darker than the background, or in the colour range)"
 SECTION_STEP = 0.25                # cross-sections this many body widths apart
+BASE_FIT_SECTIONS = 4              # the first centres that place the base on the centreline
 MAX_UNCLEAN_RUN = 4                # this many unclean cross-sections in a row: the body is lost
 MAX_TURN = 0.35                    # rad between chords (a body bends < 0.13 rad per step)
 
@@ -400,6 +401,16 @@ class Tracker:
         except _LeavesImage:
             return fail("the body leaves the image")
 
+    @staticmethod
+    def _base_on_centreline(pts, along, across):
+        """The base moved across onto the body's centreline: the first centres' offsets across the axis
+        fitted as a + c s^2 (the body leaves the clamp along the axis, so no linear term); a given base a
+        pixel or two off the centre would otherwise shift the tip and tilt the first chord."""
+        first = pts[1:1 + BASE_FIT_SECTIONS] - pts[0]
+        s, lateral = first @ along, first @ across
+        a, _ = np.linalg.lstsq(np.column_stack([np.ones_like(s), s * s]), lateral, rcond=None)[0]
+        return pts[0] + a * across
+
     def _walk(self, images, index, time_s, shape) -> Measurement:
         sc = self.scene
         along, across = sc.axes
@@ -459,6 +470,7 @@ class Tracker:
             return Measurement(frame=index, ok=False, time_s=time_s, reason=(
                 "too little body beyond the base" if len(centres) > 1 else NO_BODY))
         pts = np.asarray(centres)
+        pts[0] = base = self._base_on_centreline(pts, along, across)
         chords = np.diff(pts, axis=0)
         seg = np.hypot(chords[:, 0], chords[:, 1])
         # tangent angle from the unbent axis, positive towards the bending side, unwrapped
