@@ -64,8 +64,11 @@ class ShapedHole:
     shape: object                     # geometry.Sector | PolygonShape | FileShape
     center: tuple[float, float]
     field_name: str = field(default="", compare=False)
+    outline: geometry.Outline = field(default=None, compare=False, repr=False)   # built from shape if not given
 
     def __post_init__(self):
+        if self.outline is None:
+            object.__setattr__(self, "outline", geometry.shape_outline(self.shape, self.field_name or self.kind))
         c = self.outline.centroid
         if math.dist(c, self.center) > 1e-12 + 1e-9 * math.hypot(*c):
             raise DesignError(self.field_name or self.kind, list(self.center),
@@ -74,10 +77,6 @@ class ShapedHole:
     @property
     def kind(self) -> str:
         return self.shape.kind
-
-    @cached_property
-    def outline(self) -> geometry.Outline:
-        return geometry.shape_outline(self.shape, self.field_name or self.kind)
 
     @property
     def area(self) -> float:
@@ -440,7 +439,7 @@ def _hole(value, field_name, base_dir: Path | None = None) -> Hole | ShapedHole:
     if kind != "circle":
         shape = geometry.parse_shape(value, field_name, base_dir)
         outline = geometry.shape_outline(shape, field_name)
-        return ShapedHole(shape, tuple(float(c) for c in outline.centroid), field_name)
+        return ShapedHole(shape, tuple(float(c) for c in outline.centroid), field_name, outline)
     m = {k: v for k, v in value.items() if k != "shape"}
     return Hole(diameter=_positive(_req(m, "diameter", field_name), f"{field_name}.diameter"),
                 center=_point(_req(m, "center", field_name), f"{field_name}.center"))

@@ -138,9 +138,12 @@ class Outline:
         b = np.where(np.abs(b) * 0.5 * chords < FLAT_SAGITTA, 0.0, b)   # an arc flatter than a picometre is a line
         if len(v) < 2 or (len(v) == 2 and not np.any(b != 0)):
             raise ValueError("an outline needs at least three vertices, or two with an arc between them")
-        if self._signed_area(v, b) < 0:        # keep every outline counter-clockwise
-            v, b = v[::-1].copy(), -np.roll(b[::-1], -1)
         self.vertices, self.bulges = v, b
+        integrals = self._integrals()
+        if integrals.area < 0:        # keep every outline counter-clockwise (the integrals change sign)
+            self.vertices, self.bulges = v[::-1].copy(), -np.roll(b[::-1], -1)
+            integrals = SectionIntegrals(-integrals.area, -integrals.first, -integrals.second)
+        self.integrals = integrals
         self.vertices.setflags(write=False)
         self.bulges.setflags(write=False)
 
@@ -207,17 +210,9 @@ class Outline:
         return self.polygon()
 
     # ---------------------------------------------------------------- integrals
-    @staticmethod
-    def _signed_area(v, b) -> float:
-        x, y = v[:, 0], v[:, 1]
-        area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-        for i in np.flatnonzero(b):
-            area += _segment_integrals(arc_of(v[i], v[(i + 1) % len(v)], b[i]))[0]
-        return area
-
-    @cached_property
-    def integrals(self) -> SectionIntegrals:
-        """Exact area, first and second moments about the origin of the enclosed area."""
+    def _integrals(self) -> SectionIntegrals:
+        """Exact area, first and second moments about the origin of the enclosed area (signed by
+        the orientation; ``integrals`` holds them for the counter-clockwise outline)."""
         v = self.vertices
         x0, y0 = v[:, 0], v[:, 1]
         x1, y1 = np.roll(x0, -1), np.roll(y0, -1)

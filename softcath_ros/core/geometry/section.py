@@ -80,7 +80,7 @@ class Wall:
 
     thickness: float                      # m
     between: tuple[str, str]
-    points: tuple[tuple[float, float], tuple[float, float]]   # the nearest points, m
+    points: tuple[tuple[float, float], tuple[float, float]] | None   # the nearest points (m), if located
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,24 +123,28 @@ class Section:
         return Polygon(self.outer.polygon(tolerance).exterior, [h.outline.polygon(tolerance).exterior for h in self.holes])
 
     # ------------------------------------------------------------------ walls
-    def outer_wall(self, hole: SectionHole) -> Wall:
+    def outer_wall(self, hole: SectionHole, locate: bool = True) -> Wall:
+        """The wall between a hole and the body's surface (``locate``: with its end points)."""
         far = hole.outline.farthest_from_origin()
-        pts = hole.outline.polygon_points()
-        p = pts[int(np.argmax(np.hypot(pts[:, 0], pts[:, 1])))]
-        rim = p * self.outer_radius / max(float(np.hypot(*p)), 1e-300)
-        return Wall(self.outer_radius - far, (hole.name, "outer"), (tuple(p), tuple(rim)))
+        pts = None
+        if locate:
+            ring = hole.outline.polygon_points()
+            p = ring[int(np.argmax(np.hypot(ring[:, 0], ring[:, 1])))]
+            pts = (tuple(p), tuple(p * self.outer_radius / max(float(np.hypot(*p)), 1e-300)))
+        return Wall(self.outer_radius - far, (hole.name, "outer"), pts)
 
-    def wall_between(self, a: SectionHole, b: SectionHole) -> Wall:
+    def wall_between(self, a: SectionHole, b: SectionHole, locate: bool = True) -> Wall:
         """The wall between two holes; negative thickness (-1) when they overlap."""
-        from shapely import shortest_line
+        pts = None
+        if locate:
+            from shapely import shortest_line
 
-        line = shortest_line(a.polygon, b.polygon)
-        pts = tuple(tuple(c) for c in line.coords) if line is not None and not line.is_empty else ((0, 0), (0, 0))
-        if a.polygon.intersects(b.polygon):
-            if not (a.is_circle and b.is_circle):
-                return Wall(-1.0, (a.name, b.name), pts)
+            line = shortest_line(a.polygon, b.polygon)
+            pts = tuple(tuple(c) for c in line.coords)
         if a.is_circle and b.is_circle:
             gap = math.dist(a.shape.center, b.shape.center) - a.shape.radius - b.shape.radius
+        elif a.polygon.intersects(b.polygon):
+            return Wall(-1.0, (a.name, b.name), pts)
         elif a.is_circle or b.is_circle:
             c, other = (a, b) if a.is_circle else (b, a)
             gap = other.outline.distance_to_point(c.shape.center) - c.shape.radius
@@ -171,7 +175,7 @@ def check_section(section: Section, min_wall: float) -> None:
     """(Outlines are checked simple as they are built, ``shapes.shape_outline``.) Holes inside the body and apart, every wall >= ``min_wall`` (true minimum
     distance, ``WALL_TOLERANCE`` allowed), the fibre inside silicone. Refusals name the field."""
     for h in section.holes:
-        wall = section.outer_wall(h)
+        wall = section.outer_wall(h, locate=False)
         field, value = h.position_field()
         if wall.thickness < 0:
             what = f"hole of diameter {2 * h.shape.radius:g}" if h.is_circle else f"the {h.shape.kind}"
@@ -181,7 +185,7 @@ def check_section(section: Section, min_wall: float) -> None:
                                             f"{min_wall * 1e3:.3f} mm")
     for i, a in enumerate(section.holes):
         for b in section.holes[i + 1:]:
-            wall = section.wall_between(a, b)
+            wall = section.wall_between(a, b, locate=False)
             # name the later hole, or the shaped one of a circle and a shape (its fields place the wall)
             named, other = (a, b) if b.is_circle and not a.is_circle else (b, a)
             towards_axis = float(np.hypot(*other.centroid)) < float(np.hypot(*named.centroid))
