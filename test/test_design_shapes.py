@@ -150,7 +150,7 @@ def doc_commands() -> list[str]:
 
 def test_the_commands_in_the_design_file_page_run_as_written(tmp_path, monkeypatch, capsys):
     commands = doc_commands()
-    assert len(commands) >= 2
+    assert len(commands) >= 6
     shutil.copytree(EXAMPLES, tmp_path / "docs" / "examples")
     monkeypatch.chdir(tmp_path)
     for cmd in commands:
@@ -158,6 +158,8 @@ def test_the_commands_in_the_design_file_page_run_as_written(tmp_path, monkeypat
     out = capsys.readouterr().out
     assert "thinnest wall: 0.5000 mm" in out and "3-fold rotation" in out and "area ratio" in out
     assert (tmp_path / "sectors.png").stat().st_size > 10_000
+    for shape in ("circle", "sector", "polygon", "file"):   # the page's pictures, drawn again
+        assert (tmp_path / "docs" / "img" / f"design_{shape}.png").stat().st_size > 10_000
 
 
 def test_the_refusal_shown_in_the_page_is_the_one_given(design_dict):

@@ -128,3 +128,20 @@ def test_circle_only_code_refuses_shaped_holes_in_one_line(design_dict):
     d = design_from_dict(sector_design(design_dict))
     with pytest.raises(DesignError, match="reads circular holes only"):
         d.channels[0].radius
+
+
+@pytest.mark.parametrize("ri,direction,span", [(1.25e-3, 90.0, 95.0), (0.0, 30.0, 200.0), (0.3e-3, -17.0, 10.0)])
+def test_annular_sector_integrals_equal_the_polar_formulas(ri, direction, span):
+    ro = 2.0e-3
+    o = sector_outline(Sector(ri, ro, direction, span))
+    a0, a1 = math.radians(direction - span / 2), math.radians(direction + span / 2)
+    q2 = (ro**4 - ri**4) / 4.0
+    q1 = (ro**3 - ri**3) / 3.0
+    exact_xx = q2 * ((a1 - a0) / 2 + (math.sin(2 * a1) - math.sin(2 * a0)) / 4)
+    exact_yy = q2 * ((a1 - a0) / 2 - (math.sin(2 * a1) - math.sin(2 * a0)) / 4)
+    exact_xy = q2 * (math.sin(a1) ** 2 - math.sin(a0) ** 2) / 2
+    i = o.integrals
+    assert i.area == pytest.approx((ro**2 - ri**2) / 2 * (a1 - a0), rel=1e-13)
+    np.testing.assert_allclose(i.first, [q1 * (math.sin(a1) - math.sin(a0)), q1 * (math.cos(a0) - math.cos(a1))],
+                               atol=1e-13 * ro**3)
+    np.testing.assert_allclose(i.second, [[exact_xx, exact_xy], [exact_xy, exact_yy]], atol=1e-13 * ro**4)
