@@ -32,9 +32,11 @@ def run_offline(protocol, rig, dt=0.01, max_time=600.0):
     return events, streams
 
 
-def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True, extra=None):
+def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True, extra=None, rig=None):
     """Write an offline run as a bench recording would be written (same topics and types).
-    ``extra``: topic -> [(time ns, CDR bytes)] of further topics (types from topics.MESSAGE_TYPES)."""
+    ``extra``: topic -> [(time ns, CDR bytes)] of further topics (types from topics.MESSAGE_TYPES).
+    ``rig``: the simulated rig (SimulatedRig) whose parameters bench_node records, as sim_bench_node
+    announces them."""
     from rclpy.serialization import serialize_message
     from std_msgs.msg import Float64, Float64MultiArray, String
 
@@ -43,7 +45,12 @@ def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True, 
     with BagWriter(bag_dir, custom_data={"simulated": str(simulated).lower()}) as w:
         for topic in (topics.BENCH_STEP, topics.PRESSURE_MEASURED, topics.BENCH_ANGLE, topics.BENCH_FORCE):
             w.add_topic(topic, topics.MESSAGE_TYPES[topic])
-        w.add_metadata("softcath", {"simulated": str(simulated).lower(), "protocol": "test"})
+        meta = {"simulated": str(simulated).lower(), "protocol": "test"}
+        if rig is not None:
+            from dataclasses import asdict
+
+            meta["rig"] = json.dumps({"simulated": True, "model": rig.model.name, "rig": asdict(rig.params)})
+        w.add_metadata("softcath", meta)
         w.add_attachment("design.yaml", "application/yaml", design_yaml.encode())
         for topic in extra or {}:
             w.add_topic(topic, topics.MESSAGE_TYPES[topic])
@@ -64,3 +71,29 @@ def write_recording(bag_dir, events, streams, design_yaml: str, simulated=True, 
             else:
                 w.write(topics.BENCH_STEP, serialize_message(String(data=json.dumps(v))), t)
     return bag_dir / f"{bag_dir.name}_0.mcap"
+
+
+class TabulatedBlockingForce:
+    """The rig's blocking force (bench.blocking) of one truth and sample length, tabulated over the
+    curvature magnitude: a single channel bends in one direction, so the rod solve (~6 ms a reading)
+    is read from a table in runs over many seeds."""
+
+    def __init__(self, model, length: float, max_curvature: float = 400.0, n: int = 300):
+        import numpy as np
+
+        from softcath_ros.bench.blocking import BlockingForce
+
+        exact = BlockingForce(model)
+        self.length = length
+        bend = np.asarray(model.evaluate(np.full(model.n_channels, 0.5 * model.design.max_pressure)).curvature, float)
+        self.direction = bend / np.hypot(*bend)   # the stiffness differs between bending directions
+        self.k = np.linspace(0.0, max_curvature, n)
+        self.f = np.array([exact.from_curvature(k * self.direction, length) for k in self.k])
+
+    def from_curvature(self, curvature, length):
+        import numpy as np
+
+        assert abs(length - self.length) < 1e-12, "tabulated for one sample length"
+        mag = float(np.hypot(*curvature))
+        assert mag == 0 or not np.isfinite(mag) or abs(float(np.dot(curvature, self.direction)) - mag) < 1e-9 * mag
+        return np.interp(mag, self.k, self.f) if mag <= self.k[-1] else np.nan

@@ -241,49 +241,38 @@ def test_import_errors_name_the_row_and_column(tmp_path, capsys, row, column, ba
     assert len(err.splitlines()) == 1 and f"row {row}, column {column}:" in err and words in err, err
 
 
-@pytest.mark.parametrize("refuse_above_pa", [None, 0.15e5])
-def test_report_compares_predicted_and_measured_tip(tmp_path, implemented_design, refuse_above_pa):
-    """Synthesised: a tracker reading the tip 0.4 mm off in x (and 0.1 mm in z) from the prediction,
-    on a body as long as the quick protocol's angle sample (20 mm). With the prediction refused above
-    0.15 bar (model_node publishes nothing) those steps are not compared (the last pose of an earlier
-    step is no prediction for them); a 40 mm design's prediction is not compared with the 20 mm sample."""
-    from softcath_ros.core.kinematics import tip_pose
+def test_report_compares_predicted_and_measured_tip_for_each_sample_length(tmp_path, implemented_design):
+    """Synthesised: the 40 mm design on the quick protocol, whose angle sample is 20 mm long; a tracker
+    reads that sample's tip 0.4 mm off in x (and 0.1 mm in z) from the closed form's tip of a 20 mm body
+    at the step's commanded pressure. The report predicts each sample's own length, so every angle step
+    is compared and the error is the offset."""
+    from softcath_ros.core.prediction import predict
     from softcath_ros.recording.encode import encode, stamp
 
-    implemented_design = implemented_design.with_length(0.020)   # the quick protocol's angle sample
     model = make_model("closed_form", implemented_design)
     events, streams = run_offline(load_protocol("quick"), SimulatedRig(model, RigParams(seed=5)), dt=0.05)
     offset = np.array([0.4e-3, 0.0, 0.1e-3])
-    pose_type = topics.MESSAGE_TYPES[topics.TIP_POSE]
-    extra = {topics.TIP_POSE: [], topics.TIP_MEASURED: []}
-    for t, p in streams["pressure_measured"]:
-        k = model.evaluate(np.asarray(p)).curvature
-        pos, quat = tip_pose(np.asarray(k).reshape(2), implemented_design.length)
-        for topic, xyz, dt in ((topics.TIP_POSE, pos, 0), (topics.TIP_MEASURED, pos + offset, 0)):
-            if topic == topics.TIP_POSE and refuse_above_pa is not None and max(p) > refuse_above_pa:
-                continue
-            msg = {"header": {"stamp": stamp(t), "frame_id": topics.FRAME_ID},
-                   "pose": {"position": dict(zip("xyz", map(float, xyz))),
-                            "orientation": dict(zip("xyzw", map(float, quat)))}}
-            extra[topic].append((t + dt, encode(pose_type, msg)))
+    pose_type = topics.MESSAGE_TYPES[topics.TIP_MEASURED]
+    measured = []
+    for t, ev in events:
+        if ev["event"] == "sample" and ev["bench"] == "angle":
+            assert ev["sample_length_m"] == 0.020 != implemented_design.length
+            tip = predict(model, np.array([ev["pressure_cmd_pa"]]), 0.020)[0]
+            msg = {"header": {"stamp": stamp(t - 1), "frame_id": topics.FRAME_ID},
+                   "pose": {"position": dict(zip("xyz", map(float, np.array(tip.tip_position_m) + offset))),
+                            "orientation": dict(zip("xyzw", map(float, tip.tip_orientation_xyzw)))}}
+            measured.append((t - 1, encode(pose_type, msg)))
     path = write_recording(tmp_path / "tips", events, streams, yaml.safe_dump(implemented_design.to_dict()),
-                           extra=extra)
-    result = report_module.write_report(path, implemented_design)
+                           extra={topics.TIP_MEASURED: measured})
+    result = report_module.write_report(path, implemented_design, ["closed_form"])
     tips = result["tips"]
     angle_levels = {(s.phase, s.level) for s in result["stats"] if s.bench == "angle"}
-    if refuse_above_pa is None:
-        assert {(s.phase, s.level) for s in tips} == angle_levels and not result["tips_skipped"]
-    else:
-        assert {(s.phase, s.level) for s in tips} == {(ph, lv) for ph, lv in angle_levels if lv <= refuse_above_pa}
-        (why, levels), = result["tips_skipped"].items()
-        assert "no prediction" in why and {lv for _, _, lv in levels} == {lv for _, lv in angle_levels
-                                                                           if lv > refuse_above_pa}
+    assert {(s.phase, s.level) for s in tips} == angle_levels and not result["tips_skipped"]
     for s in tips:
-        assert s.error_mean == pytest.approx(np.linalg.norm(offset), rel=1e-6)
+        assert s.length == 0.020 and s.error_mean == pytest.approx(np.linalg.norm(offset), rel=1e-6)
         np.testing.assert_allclose(s.measured - s.predicted, offset, atol=1e-9)
+    top = max(tips, key=lambda s: s.level)
+    assert np.linalg.norm(top.predicted) < 0.025 and np.hypot(*top.predicted[:2]) > 1e-3   # the bent 20 mm tip
     text = Path(result["report"]).read_text()
-    assert "## Tip position: predicted against measured" in text and "| 0.41 | 0.41 |" in text
-    # the same recording read for a 40 mm body: no sample is that long
-    other = report_module.write_report(path, implemented_design.with_length(0.040), out_dir=tmp_path / "other")
-    assert not other["tips"] and any("20 mm long" in why for why in other["tips_skipped"])
-    assert "Not compared" in Path(other["report"]).read_text()
+    assert "## Tip position: predicted against measured" in text and "| 20 |" in text and "| 0.41 | 0.41 |" in text
+    assert "Not compared" not in text

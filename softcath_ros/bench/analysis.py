@@ -258,38 +258,71 @@ class Hysteresis:
     level: float            # the unloading step's level
     quantity: str           # "curvature" (1/m) or "force" (N)
     pressure: float         # Pa, the unloading step's mean measured pressure (largest channel)
-    loading: float          # the loading curve interpolated at ``pressure``
+    loading: float          # the loading curve's local model at ``pressure``
     unloading: float
     difference: float       # unloading - loading, at equal measured pressure
-    t_statistic: float      # Welch-type: difference / its standard error
+    t_statistic: float      # difference / its standard error
     significant: bool       # |t| beyond the family-wise threshold of its curve
     threshold: float = 0.0  # that threshold
 
 
-def _interp_terms(x: float, xs: np.ndarray, mus: np.ndarray, ses: np.ndarray, ns: np.ndarray):
-    """Linear interpolation of the mean at ``x``; returns (mean, [(variance term, n)]) where the
-    terms (1-w)^2 se_a^2 and w^2 se_b^2 make the interpolated mean's variance (independent
-    steps). Beyond the ends the end step is held (no extrapolation)."""
-    if x <= xs[0]:
-        return float(mus[0]), [(ses[0] ** 2, ns[0])]
-    if x >= xs[-1]:
-        return float(mus[-1]), [(ses[-1] ** 2, ns[-1])]
-    j = int(np.searchsorted(xs, x)) - 1
-    w = (x - xs[j]) / (xs[j + 1] - xs[j])
-    return (float((1 - w) * mus[j] + w * mus[j + 1]),
-            [((1 - w) ** 2 * ses[j] ** 2, ns[j]), (w ** 2 * ses[j + 1] ** 2, ns[j + 1])])
+def _lagrange(x: float, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights of the polynomial through ``nodes`` at ``x``, and of its slope at ``x``."""
+    w, dw = np.ones(len(nodes)), np.zeros(len(nodes))
+    for i, xi in enumerate(nodes):
+        others = np.delete(nodes, i)
+        den = float(np.prod(xi - others))
+        w[i] = float(np.prod(x - others)) / den
+        dw[i] = sum(float(np.prod(x - np.delete(others, j))) for j in range(len(others))) / den
+    return w, dw
+
+
+def _nearest(x: float, xs: np.ndarray, k: int) -> np.ndarray:
+    return np.sort(np.argsort(np.abs(xs - x), kind="stable")[:k])
+
+
+def loading_curve_at(x: float, xs, ys, var_y, var_x):
+    """The loading curve at pressure ``x`` (Pa) from its steps (mean pressures ``xs`` ascending, means
+    ``ys``, variances of those means ``var_y`` and ``var_x``): a quadratic through the three steps
+    nearest ``x``. Returns (value, [(variance term, which step)]): the steps' reading noise, their
+    pressure noise times the local slope, and the interpolation error (the cubic through the four
+    nearest steps minus the quadratic, step -1), so a convex curve between steps is not read as a
+    difference."""
+    order = 3 if len(xs) >= 3 else len(xs)
+    idx = _nearest(x, xs, order)
+    w, _ = _lagrange(x, xs[idx])
+    value = float(w @ ys[idx])
+    terms = []
+    for i, wi in zip(idx, w):
+        _, dw = _lagrange(xs[i], xs[idx])
+        slope = float(dw @ ys[idx])
+        terms += [(wi ** 2 * var_y[i], i), (wi ** 2 * slope ** 2 * var_x[i], i)]
+    if len(xs) >= 4:
+        idx4 = _nearest(x, xs, 4)
+        w4, _ = _lagrange(x, xs[idx4])
+        terms.append(((float(w4 @ ys[idx4]) - value) ** 2, -1))
+    return value, terms
+
+
+def loading_slope_at(x: float, xs, ys) -> float:
+    idx = _nearest(x, xs, 3 if len(xs) >= 3 else len(xs))
+    return float(_lagrange(x, xs[idx])[1] @ ys[idx])
 
 
 def hysteresis(stats: list[StepStats], family_alpha: float = 0.01) -> list[Hysteresis]:
     """Loading vs unloading at equal *measured* pressure, per curve (bench, drive).
 
-    Each unloading step is compared with the loading curve interpolated at the unloading
-    step's measured pressure: the regulator approaches a level from below on the way up and
-    from above on the way down, so comparing at equal commanded level would show a
-    difference from that lag alone. t = difference / its standard error, with
-    Welch-Satterthwaite degrees of freedom. A curve's levels are tested together: a level is
-    significant when |t| exceeds the two-sided Bonferroni threshold for ``family_alpha`` over
-    the curve's levels, so a run without hysteresis flags nothing in a curve with probability
+    Each unloading step is compared with the loading curve at the unloading step's measured
+    pressure (the regulator approaches a level from below on the way up and from above on the way
+    down, so equal commanded levels differ in pressure). The loading curve there is a quadratic
+    through its three nearest steps (``loading_curve_at``). The difference's variance holds every
+    error a rig without hysteresis shows: the reading noise of the steps, the noise of their mean
+    measured pressures times the curve's slope (on a steep curve a few tens of Pa of gauge noise
+    are a large difference in bend), and the interpolation error of a curved loading branch
+    between its steps. t = difference / its standard error, Welch-Satterthwaite degrees of freedom
+    (the interpolation error counted with one). A curve's levels are tested together: a level is
+    significant when |t| exceeds the two-sided Bonferroni threshold for ``family_alpha`` over the
+    curve's levels, so a run without hysteresis flags nothing in a curve with probability at least
     about 1 - family_alpha, however many levels it has.
     """
     from scipy.stats import t as student_t
@@ -299,19 +332,24 @@ def hysteresis(stats: list[StepStats], family_alpha: float = 0.01) -> list[Hyste
         curves.setdefault((s.bench, s.drive), {"loading": [], "unloading": []})[s.phase].append(s)
     out = []
     for (bench, drive), phases in curves.items():
-        up = sorted(phases["loading"], key=lambda s: s.pressure_magnitude)
-        down = phases["unloading"]
+        q = "curvature" if bench == "angle" else "force"
+        up = sorted((s for s in phases["loading"] if np.isfinite(getattr(s, f"{q}_mean"))),
+                    key=lambda s: s.pressure_magnitude)
+        down = [s for s in phases["unloading"] if np.isfinite(getattr(s, f"{q}_mean"))]
         if len(up) < 2 or not down:
             continue
-        q = "curvature" if bench == "angle" else "force"
         xs = np.array([s.pressure_magnitude for s in up])
-        mus = np.array([getattr(s, f"{q}_mean") for s in up])
-        ses = np.array([getattr(s, f"{q}_std") / math.sqrt(s.n) for s in up])
+        ys = np.array([getattr(s, f"{q}_mean") for s in up])
+        var_y = np.array([np.nan_to_num(getattr(s, f"{q}_std")) ** 2 / s.n for s in up])
+        var_x = np.array([_pressure_var(s) for s in up])
         ns = np.array([s.n for s in up])
         p_one = family_alpha / (2 * len(down))
         for d in down:
-            mu_l, terms = _interp_terms(d.pressure_magnitude, xs, mus, ses, ns)
-            terms.append((getattr(d, f"{q}_std") ** 2 / d.n, d.n))
+            x = d.pressure_magnitude
+            mu_l, terms = loading_curve_at(x, xs, ys, var_y, var_x)
+            terms = [(v, ns[i] if i >= 0 else 2) for v, i in terms]
+            slope = loading_slope_at(x, xs, ys)
+            terms += [(np.nan_to_num(getattr(d, f"{q}_std")) ** 2 / d.n, d.n), (slope ** 2 * _pressure_var(d), d.n)]
             var = sum(v for v, _ in terms)
             mu_d = getattr(d, f"{q}_mean")
             if var > 0:
@@ -320,10 +358,16 @@ def hysteresis(stats: list[StepStats], family_alpha: float = 0.01) -> list[Hyste
                 threshold = float(student_t.ppf(1.0 - p_one, dof))
             else:
                 t, threshold = 0.0, math.inf
-            out.append(Hysteresis(bench, drive, d.level, q, d.pressure_magnitude, mu_l, mu_d, mu_d - mu_l, t,
+            out.append(Hysteresis(bench, drive, d.level, q, x, mu_l, mu_d, mu_d - mu_l, t,
                                   abs(t) > threshold, threshold))
     out.sort(key=lambda h: (h.bench, h.drive, h.level))
     return out
+
+
+def _pressure_var(s: StepStats) -> float:
+    """Variance of a step's mean measured pressure (its largest channel)."""
+    c = int(np.argmax(s.pressure_mean))
+    return float(s.pressure_std[c]) ** 2 / s.n
 
 
 MODEL_QUANTITIES = ("curvature", "radius", "force")

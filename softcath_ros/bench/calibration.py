@@ -10,7 +10,9 @@ Residuals: every sample's bending angle per sample length theta / l (angle bench
 |k| x axial stretch) and tared blocking force (force
 bench), each divided by its step's spread (floored at the reading noise) so the two
 benches weigh comparably. scipy least squares; 95% confidence intervals from the
-Jacobian at the optimum, cov = (J^T J)^-1 * SSR / (n - k). The force bench's tare (each trial's
+Jacobian at the optimum, cov = (J^T J)^-1 * SSR / (n - k), or, where the residuals exceed the
+readings' noise (the model misfits, ``misfit_variance``), * the levels' mean square of their mean
+residuals when larger (a level's readings share its misfit), with a warning in the message. The force bench's tare (each trial's
 p = 0 reading) is one noisy reading shared by all of that trial's forces: each (sample, trial)
 gets a fitted force offset (nuisance parameters, k = 2 + their number), so the intervals of
 shift and scale include the tare's error instead of treating the trial's forces as independent. The bench's own biases
@@ -48,6 +50,7 @@ class CalibrationResult:
     rms_after: float
     success: bool
     message: str
+    misfit_factor: float = 1.0   # the intervals' widening for the model's misfit (1: it fits to the noise)
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -68,6 +71,42 @@ def _residual_setup(rows: list[SampleRow], curvature_floor: float, force_floor: 
             meas.append(r.force)
             sigma.append(max(s.force_std if np.isfinite(s.force_std) else 0.0, force_floor))
     return use, np.array(meas), np.array(sigma)
+
+
+MISFIT = "the model does not fit the readings to their noise"
+LACK_OF_FIT_ALPHA = 0.01
+
+
+def misfit_variance(residuals: np.ndarray, steps: list, n_params: int) -> tuple[float, float, str]:
+    """The variance factor of the fit's covariance, its ratio to SSR / (n - k), and a warning when
+    the model misfits.
+
+    The residuals are normalised by their level's spread, so a model that fits leaves a sum of
+    squares within chi-square(n - k); beyond its ``LACK_OF_FIT_ALPHA`` quantile the model does not fit
+    the readings to their noise. Its misfit is then shared by every reading of a level (``steps``: the
+    bench, drive, phase, level of each residual), so the readings are not independent: the factor
+    is the larger of SSR / (n - k) and the levels' mean square sum n_j rbar_j^2 / (levels - k), which
+    counts each level's misfit as one error (misfit e_j shared by a level's n_j readings gives the
+    estimate the covariance (J^T J)^-1 (1 + n var e), that mean square's expectation)."""
+    from scipy.stats import chi2
+
+    r = np.asarray(residuals, dtype=float)
+    n = len(r)
+    dof = max(n - n_params, 1)
+    ssr = float(r @ r)
+    usual = ssr / dof
+    p = float(chi2.sf(ssr, dof))
+    if p >= LACK_OF_FIT_ALPHA:
+        return usual, 1.0, ""
+    keys = sorted(set(steps), key=str)
+    idx = np.array([keys.index(s) for s in steps])
+    counts = np.bincount(idx, minlength=len(keys))
+    means = np.bincount(idx, r, minlength=len(keys)) / counts
+    levels = float(counts @ means ** 2) / (len(keys) - n_params) if len(keys) > n_params else usual
+    s2 = max(usual, levels)
+    return s2, math.sqrt(s2 / usual), (
+        f"{MISFIT} (normalised residual rms {math.sqrt(ssr / n):.2f}, chi-square p = {p:.1g}): intervals "
+        f"widened x{math.sqrt(s2):.1f} over the readings' noise alone, each level's misfit counted as one error")
 
 
 def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
@@ -118,8 +157,9 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
     sol = least_squares(residuals, x0=start, bounds=([-0.9, 0.05] + [-np.inf] * n_off, [0.9, 20.0] + [np.inf] * n_off),
                         x_scale=[0.1, 0.3] + [force_floor] * n_off, diff_step=1e-4)
     n, k = len(sol.fun), 2 + n_off
-    dof = max(n - k, 1)
-    s2 = float(sol.fun @ sol.fun) / dof
+    s2, widened, misfit = misfit_variance(sol.fun, [(r.bench, r.drive, r.phase, r.level) for r in use], k)
+    if misfit:
+        note = (note + "; " if note else "") + misfit
     try:
         cov = (np.linalg.inv(sol.jac.T @ sol.jac) * s2)[:2, :2]
         half = Z95 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -133,4 +173,5 @@ def calibrate(rows: list[SampleRow], design, rung: str = "closed_form", *,
                              covariance=[[float(v) for v in row] for row in cov],
                              correlation=corr, n_residuals=n,
                              rms_before=float(np.sqrt(np.mean(r0**2))), rms_after=float(np.sqrt(np.mean(sol.fun**2))),
-                             success=bool(sol.success), message="; ".join(x for x in (sol.message, note) if x))
+                             success=bool(sol.success), message="; ".join(x for x in (sol.message, note) if x),
+                             misfit_factor=widened)

@@ -26,18 +26,71 @@ def _model_cell(values: dict, quantity: str, scale: float, digits: int) -> str:
     return cell if half is None or not np.isfinite(half) else f"{cell} ± {_fmt(half, scale, digits)}"
 
 
+def simulated_rig(meta: dict) -> dict | None:
+    """The simulated rig's recorded parameters (sim_bench_node's /softcath/bench/rig: ``rig`` and the
+    truth's ``model``), or None for a rig that did not announce them."""
+    import json
+
+    try:
+        rig = json.loads(meta.get("rig", ""))
+    except ValueError:
+        return None
+    if not (isinstance(rig, dict) and rig.get("simulated") and isinstance(rig.get("rig"), dict)):
+        return None
+    return {**rig["rig"], "model": rig.get("model", "unknown")}
+
+
+def truth_note(rig: dict, recording) -> str:
+    """Why the uncalibrated overlays miss a simulated rig: its truth is shifted (RigParams)."""
+    shift, scale = float(rig.get("pressure_shift", 0.0)), float(rig.get("material_scale", 1.0))
+    return (f"The simulated rig's truth is the `{rig['model']}` rung bending as at (1 − {shift:g}) × the true pressure "
+            f"(its recorded `pressure_shift` {shift:g}, the published gap between model and experiment) on a "
+            f"material × {scale:g}, read with the bench's friction and out-of-plane biases: the uncalibrated overlays "
+            f"miss it by that much by design. `softcath calibrate {recording}` fits shift and scale and writes this "
+            "report again with the calibrated overlay.")
+
+
+def calibration_caveats(message: str, rig: dict | None) -> list[str]:
+    """What a calibration's intervals do not hold: the model's misfit (widened, warned) and the bench's
+    own biases (on a simulated rig, its recorded ones)."""
+    import math
+
+    from .calibration import MISFIT
+
+    lines = []
+    misfit = next((part for part in message.split("; ") if part.startswith(MISFIT)), None)
+    if misfit:
+        lines += [f"**Warning**: {misfit}. The shift and scale describe this rung only as well as it fits; "
+                  "the intervals count the misfit as error.", ""]
+    bias = ("The intervals hold the readings' noise" + (" and the model's misfit" if misfit else "") +
+            ", not the bench's own biases (friction, out-of-plane bending, the gauge's fixed error): the fit "
+            "absorbs those into shift and scale")
+    if rig is not None:
+        keep = 1.0 - float(rig.get("friction_underread", 0.0))
+        tilt = math.cos(float(rig.get("out_of_plane_tilt", 0.0)))
+        bias += (f"; this simulated rig reads the angle x{keep * tilt:.3f} and the force x{keep:.3f} and its gauge "
+                 f"is off by up to {float(rig.get('gauge_error', 0.0)) / PA_PER_BAR:g} bar, so its truth (shift "
+                 f"{rig.get('pressure_shift', '?')}, scale {rig.get('material_scale', '?')}) may lie outside them")
+    return lines + [bias + ".", ""]
+
+
 def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: list[Hysteresis],
              plots: list[str], calibration: dict | None = None, tips: list | None = None,
-             tips_skipped: dict | None = None) -> str:
+             tips_skipped: dict | None = None, overlay_note: str = "", tips_model: str = "the model",
+             rig: dict | None = None) -> str:
     labels = list(stats[0].model) if stats else []
     lines = [f"# {title}", ""]
     for k, v in info.items():
         lines.append(f"- **{k}**: {v}")
     lines.append("")
+    noted = False
     for bench in ("angle", "force"):
         rows = [s for s in stats if s.bench == bench]
         if not rows:
             continue
+        if overlay_note and not noted:
+            lines += [overlay_note, ""]
+            noted = True
         if bench == "angle":
             lines += ["## Angle bench: radius of curvature", "",
                       "R_C = l / theta per reading; mean ± std over trials and samples (— where the bend is "
@@ -65,9 +118,11 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
     if hyst:
         thresholds = sorted({round(h.threshold, 2) for h in hyst})
         lines += ["## Hysteresis: unloading minus loading at equal measured pressure", "",
-                  "Each unloading step against the loading curve interpolated at the unloading step's measured "
-                  "pressure (the regulator's lag makes equal commanded levels differ in pressure). t = difference "
-                  "/ its standard error (Welch); significant where |t| exceeds the Bonferroni threshold of its curve "
+                  "Each unloading step against the loading curve at the unloading step's measured pressure (the "
+                  "regulator's lag makes equal commanded levels differ in pressure): a quadratic through the three "
+                  "nearest loading steps. t = difference / its standard error, which holds the steps' reading noise, "
+                  "the noise of their mean measured pressures times the curve's slope, and the interpolation error "
+                  "(Welch); significant where |t| exceeds the Bonferroni threshold of its curve "
                   f"(1% family-wise; here {min(thresholds):g} to {max(thresholds):g}).", "",
                   "| bench | drive | level | p measured [bar] | quantity | loading | unloading | difference | t "
                   "| significant |",
@@ -83,7 +138,7 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
                   + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
     if tips or tips_skipped:
         from .tip_compare import markdown_section
-        lines += markdown_section(tips, tips_skipped)
+        lines += markdown_section(tips, tips_skipped, tips_model)
     if calibration:
         c = calibration.to_dict()
         lines += ["## Calibration", "",
@@ -97,10 +152,12 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
                   f"- parameter correlation: {calibration.correlation:.3f}",
                   f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
                   f"({c['n_residuals']} readings)", ""]
+        lines += calibration_caveats(c["message"], rig)
         if c["message"]:
             lines += [f"Solver: {c['message']}", ""]
     if plots:
-        lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
+        lines += ["## Plots", ""] + ([overlay_note, ""] if overlay_note else []) \
+            + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
     return "\n".join(lines)
 
 
@@ -195,10 +252,11 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
     check_rows_match_design(rows, design)
     out.mkdir(parents=True, exist_ok=True)   # after the checks: a refused report leaves no folder
     stats = summarise(rows)
-    overlaid = []
+    overlaid, built = [], {}
     for rung in rungs:
         opts = run_options(rung, cache=cache)
-        overlay_model(stats, build_model(rung, design, **opts), rung)
+        built[rung] = build_model(rung, design, **opts)
+        overlay_model(stats, built[rung], rung)
         overlaid.append(rung)
         if calibration is not None:
             def quantities(c, rung=rung, opts=opts):
@@ -206,7 +264,8 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
                 return np.stack([q[name] for name in MODEL_QUANTITIES])
 
             half = band95(calibration, quantities)
-            overlay_model(stats, build_model(rung, design, calibration, **opts), f"{rung} calibrated",
+            built[f"{rung} calibrated"] = build_model(rung, design, calibration, **opts)
+            overlay_model(stats, built[f"{rung} calibrated"], f"{rung} calibrated",
                           band95=dict(zip(MODEL_QUANTITIES, half)))
             overlaid.append(f"{rung} calibrated")
     hyst = hysteresis(stats)
@@ -218,16 +277,26 @@ def write_report(recording, design=None, rungs=DEFAULT_OVERLAY, calibration=None
             "protocol": meta.get("protocol", "unknown"),
             "readings": f"{len(rows)} ({sum(not r.settled for r in rows)} from unsettled steps)",
             "models overlaid": ", ".join(overlaid)}
+    rig = simulated_rig(meta)
     if meta.get("simulated") == "true":
         info["note"] = "simulated rig (sim_bench_node), not hardware"
+    if rig is not None:
+        info["simulated rig"] = (f"seed {rig.get('seed', '?')}, truth `{rig['model']}`, pressure shift "
+                                 f"{rig.get('pressure_shift', '?')}, material scale {rig.get('material_scale', '?')}, "
+                                 f"hysteresis {float(rig.get('hysteresis_pressure', 0.0)) / PA_PER_BAR:g} bar "
+                                 "(a rerun with this seed reproduces the noise)")
     if result is not None and result.get("complete") != "true":
         info["incomplete"] = (f"{result.get('completed_steps', '?')} of {result.get('n_steps', '?')} steps completed "
                               f"(only those are analysed): {result.get('reason', '')}")
     from .tip_compare import tips_from_recording
     tips_skipped: dict = {}
-    tips = tips_from_recording(path, design.length, tips_skipped)
+    # the first rung, calibrated if given
+    tips_label = (overlaid[1] if calibration is not None else overlaid[0]) if overlaid else ""
+    tips = tips_from_recording(path, built[tips_label], tips_skipped) if overlaid else []
     plots = plot(stats, out, "report")
-    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration, tips, tips_skipped)
+    text = markdown(f"Bench report: {design.name}", info, stats, hyst, plots, calibration, tips, tips_skipped,
+                    overlay_note=truth_note(rig, path) if rig is not None else "", tips_model=f"`{tips_label}`",
+                    rig=rig)
     md = out / "report.md"
     md.write_text(text)
     return {"report": str(md), "plots": plots, "stats": stats, "hysteresis": hyst, "rows": rows, "tips": tips,

@@ -24,6 +24,9 @@
 - Force bench: blocking force (bench.blocking), read low by the same friction, plus a
   scale offset (tared by the analysis with the p = 0 reading) and noise. With the tip
   blocked the angle reads zero (plus noise); on the angle bench the scale reads its offset.
+- Noise: drawn from ``seed``; a negative seed (``FRESH_SEED``, sim_bench_node's default) draws a fresh
+  one, kept in ``SimulatedRig.params.seed`` so the run says which it was and a rerun with it
+  reproduces the noise.
 - Tip tracker (``TipTracker``, a camera or an electromagnetic tracker): the true tip position
   at ``rate_hz`` plus white noise, delivered ``latency`` seconds after it was taken, with a
   fraction ``drop_fraction`` of the samples lost.
@@ -42,6 +45,8 @@ from ..core.kinematics import tip_pose_single
 from ..core.models import make_model
 from ..core.units import PA_PER_BAR
 
+FRESH_SEED = -1   # RigParams.seed: draw a fresh seed (recorded in the rig's parameters)
+
 
 @dataclass
 class RigParams:
@@ -57,7 +62,7 @@ class RigParams:
     hysteresis_pressure: float = 0.0        # Pa, width of the play between true and bending pressure
     actuator_time_constant: float = 0.0     # s, body's lag behind the regulated pressure (0: none)
     material_scale: float = 1.0             # truth's moduli = the design's x this (scaled_design)
-    seed: int = 0
+    seed: int = 0                           # of the noise; FRESH_SEED: a fresh one (module docstring)
 
     @classmethod
     def from_dict(cls, d: dict) -> "RigParams":
@@ -96,6 +101,8 @@ class SimulatedRig:
         """``model``: the truth (``truth_model`` applies the material scale)."""
         self.model = model
         self.params = params or RigParams()
+        if self.params.seed < 0:
+            self.params = replace(self.params, seed=int(np.random.SeedSequence().entropy % 2**32))
         self.rng = np.random.default_rng(self.params.seed)
         n = model.n_channels
         self.true_pressures = np.zeros(n)

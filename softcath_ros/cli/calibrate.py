@@ -24,7 +24,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..bench.analysis import rows_from_recording
-    from ..bench.calibration import calibrate
+    from ..bench.calibration import MISFIT, calibrate
     from ..bench.report import recording_design, write_report
     from ..core.calibration_file import from_fit
     from ..core.design import load_design
@@ -57,6 +57,9 @@ def run(args) -> int:
               f"correlation {calibration.correlation:.2f}")
         print(f"normalised residual rms {result.rms_before:.3g} -> {result.rms_after:.3g}"
               + ("" if result.success else f" (solver: {result.message})"))
+        misfit = next((part for part in result.message.split("; ") if part.startswith(MISFIT)), None)
+        if misfit:
+            print(f"warning: {misfit}")
         print(f"calibration: {out}  (use it with --calibration {out})")
         print(f"report (before/after): {rep['report']}")
     return 0

@@ -30,7 +30,7 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
-from ..bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
+from ..bench.sim_rig import FRESH_SEED, RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .diagnostics import diagnostic_status, publish_statuses
@@ -45,7 +45,7 @@ RIG_RANGES = {"regulator_time_constant": (1e-4, 10.0), "pressure_shift": (0.0, 0
               "gauge_error": (0.0, 1e6), "gauge_noise": (0.0, 1e6), "hysteresis_pressure": (0.0, 1e6),   # Pa
               "angle_noise": (0.0, 10.0),                                                             # rad
               "force_noise": (0.0, 10.0), "scale_offset": (0.0, 10.0),                                # N
-              "seed": (0, 2**32 - 1), "material_scale": (0.05, 20.0)}
+              "seed": (FRESH_SEED, 2**32 - 1), "material_scale": (0.05, 20.0)}
 
 
 class SimBenchNode(Node):
@@ -61,7 +61,8 @@ class SimBenchNode(Node):
                                  "(the rig contract's watchdog)", minimum=0.01, maximum=60.0)
         legacy = p("legacy_topics", True, "also publish the deprecated unstamped reading topics (one release)")
         values = {}
-        for name, default in asdict(RigParams()).items():
+        # every run its own noise unless a seed is given (-1: drawn, and published with the parameters)
+        for name, default in {**asdict(RigParams()), "seed": FRESH_SEED}.items():
             lo, hi = RIG_RANGES.get(name, (0, None))
             values[name] = p(name, default, f"simulated rig: {name} (bench/sim_rig.py RigParams)",
                              minimum=lo, maximum=hi)
@@ -92,7 +93,7 @@ class SimBenchNode(Node):
         self.pub_rig.publish(String(data=json.dumps({
             "simulated": True, "node": self.get_name(), "design": design.name,
             "design_hash": design.content_hash(), "model": model.name, "rate_hz": rate_hz,
-            "rig": asdict(params)})))
+            "rig": asdict(self.rig.params)})))
         self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 10)
         self.create_subscription(String, topics.BENCH_STEP, self.on_step, 100)
         self.dt = 1.0 / rate_hz
@@ -100,7 +101,7 @@ class SimBenchNode(Node):
         self.create_timer(self.dt, self.tick)
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"simulated bench: design {design.name}, rung {model.name}, "
-                               f"pressure shift {params.pressure_shift:g}, {1 / self.dt:g} Hz")
+                               f"pressure shift {params.pressure_shift:g}, seed {self.rig.params.seed}, {1 / self.dt:g} Hz")
         if self.legacy is not None:
             self.get_logger().warning(
                 f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
