@@ -29,7 +29,7 @@ setup(
     # share/softcath_ros/config, where softcath_ros.resources finds them by name from any route.
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
-        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name, ["package.xml", "LICENSE"]),
         *config_data_files(),
     ],
     python_requires=">=3.10",
@@ -83,7 +83,8 @@ setup(
     maintainer="softcath_ros developers",
     maintainer_email="softcath@example.org",
     description="Model, steering and bench nodes for a steerable soft fluidic catheter.",
-    license="Apache-2.0",
+    license="Apache-2.0",   # the text: LICENSE (package.xml says the same)
+    license_files=["LICENSE"],
     entry_points={
         "console_scripts": [
             "softcath = softcath_ros.cli:main",

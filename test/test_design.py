@@ -1,5 +1,6 @@
 """Design-file validation: every error names the field and the value."""
 import copy
+import math
 
 import pytest
 
@@ -86,6 +87,21 @@ def test_wall_thinner_than_minimum(design_dict):
     design_dict["channels"][0]["center"] = [0.0, 0.00105]
     design_dict["lumen"]["center"] = [0.0, -0.00100]      # wall to channel 0.45 mm
     expect_error(design_dict, "lumen.center", "wall to channels[0] is 0.450 mm")
+
+
+def test_a_wall_exactly_at_the_minimum_is_accepted(design_dict):
+    """A wall drawn at the minimum was refused ("0.500 mm is thinner than the minimum 0.500 mm"): a
+    channel placed at 60 deg with its centre typed to the micrometre has a 0.49994 mm wall. Walls
+    within half a micrometre of the minimum pass; one visibly under it is refused, and says so."""
+    r = 0.0025 - 0.00085 - 0.0005   # implemented_5mm: the channel's centre radius for a 0.5 mm outer wall
+    design_dict["min_wall_thickness"] = 0.0005
+    for deg in (90.0, 60.0, 120.0):
+        a = math.radians(deg)
+        design_dict["channels"][0]["center"] = [round(r * math.cos(a), 6), round(r * math.sin(a), 6)]
+        design = design_from_dict(design_dict)
+        assert design.section.thinnest_wall().thickness == pytest.approx(0.0005, abs=0.5e-6)
+    design_dict["channels"][0]["center"] = [0.0002, 0.001133]   # 80 deg to the micrometre: 0.49948 mm
+    expect_error(design_dict, "channels[0].center", "outer wall 0.499 mm", "minimum 0.500 mm")
 
 
 def test_fibre_outside_silicone(design_dict):

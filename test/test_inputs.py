@@ -234,7 +234,7 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
         (["envelope", "--cases", "1ch 40mm", "--out", str(tmp_path)], "a folder; name the envelope file"),
         (["envelope", "--cases", "1ch 40mm", "--out", str(tmp_path / "e.yaml"), "--results", str(out / "x" / "r")],
          "does not exist"),
-        (["import", str(binary), "--output-dir", str(out)], "not a CSV text file (not UTF-8 at byte 0)"),
+        (["import", str(binary), "--design", "implemented_5mm", "--output-dir", str(out)], "not a CSV text file (not UTF-8 at byte 0)"),
         (["chart", "--csv", str(binary)], "not a CSV text file"),
         (["chart", "--csv", str(chart_csv), "--out", str(out / "c.png")], "row 2: pressure_pa = 'abc' is not a number"),
         (["study", "sensitivity", "--design", "implemented_5mm", "--model", "closed_form", "--out",

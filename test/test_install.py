@@ -77,6 +77,16 @@ def _check(found: dict, root: Path, data_root: Path | None = None) -> None:
     assert found["checkout"] == (str(REPO) if root == REPO else "None")
 
 
+def test_the_licence_is_one_and_its_text_ships():
+    """setup.py and package.xml name the licence LICENSE holds (Apache-2.0, its full text)."""
+    import re
+
+    text = (REPO / "LICENSE").read_text()
+    assert "Apache License" in text and "Version 2.0, January 2004" in text and "END OF TERMS AND CONDITIONS" in text
+    assert 'license="Apache-2.0"' in (REPO / "setup.py").read_text()
+    assert re.findall(r"<license>(.*?)</license>", (REPO / "package.xml").read_text()) == ["Apache-2.0"]
+
+
 def test_source_checkout(tmp_path):
     found = _probe(REPO, tmp_path)
     _check(found, REPO)
@@ -90,6 +100,10 @@ def test_pip_wheel_install(tmp_path):
                            timeout=300)
     assert build.returncode == 0, build.stderr[-2000:]
     wheel = next(wheels.glob("softcath_ros-*.whl"))
+    import zipfile
+
+    with zipfile.ZipFile(wheel) as z:   # the licence text travels with the package
+        assert any(n.endswith(".dist-info/LICENSE") for n in z.namelist()), z.namelist()
     inst = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site),
                            str(wheel)], capture_output=True, text=True, timeout=300)
     assert inst.returncode == 0, inst.stderr[-2000:]
@@ -110,7 +124,7 @@ def test_colcon_style_install(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     site = next(prefix.glob("lib/python3*/site-packages"))
     share = prefix / "share" / "softcath_ros"
-    assert (share / "package.xml").is_file()
+    assert (share / "package.xml").is_file() and (share / "LICENSE").read_text() == (REPO / "LICENSE").read_text()
     params = {"model_node", "allocation_node", "bench_node", "sim_bench_node", "steer_node"}
     assert {p.stem for p in (share / "config").glob("*.yaml")} == params | {"ladder_envelope"}  # `--params-file`
     assert (share / "config" / "designs" / "implemented_5mm.yaml").is_file()

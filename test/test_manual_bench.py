@@ -207,7 +207,8 @@ def test_import_csv_to_report_and_calibrate(tmp_path, implemented_design):
             lines.append(lines[-1].replace(f",{v:g},", f",{v + 0.5:g},", 1))
     csv = tmp_path / "lab.csv"
     csv.write_text("\n".join(lines) + "\n")
-    assert main(["import", str(csv), "--output-dir", str(tmp_path), "--json", "--no-report"]) == 0
+    assert main(["import", str(csv), "--design", "implemented_5mm", "--output-dir", str(tmp_path), "--json",
+                 "--no-report"]) == 0
     bag = tmp_path / "bench_imported_lab"
     rows = rows_from_recording(bag)
     n_angle_extra = sum(s.bench == "angle" and s.level > 0 for s in steps)
@@ -219,6 +220,45 @@ def test_import_csv_to_report_and_calibrate(tmp_path, implemented_design):
     assert "Blocking-force bench" in (bag / "report.md").read_text()
     assert yaml.safe_load((tmp_path / "c.calibration.yaml").read_text())["material_scale"] == \
         pytest.approx(1.0, abs=0.1)
+
+
+def _small_csv(tmp_path) -> Path:
+    csv = tmp_path / "lab.csv"
+    csv.write_text("pressure_bar,reading,unit,trial,phase,sample_length_mm\n0,0,deg,1,loading,20\n"
+                   "0.1,20,deg,1,loading,20\n0.2,45,deg,1,loading,20\n0.1,21,deg,1,unloading,20\n"
+                   "0,0.5,deg,1,unloading,20\n")
+    return csv
+
+
+def test_import_names_its_design_and_overlays_what_report_overlays(tmp_path, capsys):
+    """--design is required (the CSV does not say which design; a silent implemented_5mm was wrong for
+    any other), the output names it, and its report overlays the same rungs as `softcath report`."""
+    csv = _small_csv(tmp_path)
+    assert main(["import", str(csv), "--output-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--design" in err[0] and "required" in err[0], err
+    assert main(["import", str(csv), "--design", "implemented_5mm", "--output-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "design implemented_5mm" in out and "overlaid: surrogate, closed_form" in out, out
+    bag = tmp_path / "bench_imported_lab"
+    imported = (bag / "report.md").read_text()
+    assert main(["report", str(bag), "--out", str(tmp_path / "again")]) == 0
+    again = (tmp_path / "again" / "report.md").read_text()
+    assert "**models overlaid**: surrogate, closed_form" in imported
+    assert report_form(imported) == report_form(again)
+    assert [x for x in imported.splitlines() if x.startswith("| ")] == \
+        [x for x in again.splitlines() if x.startswith("| ")]   # the same overlay, number for number
+
+
+def test_a_reimport_says_to_give_another_name(tmp_path, capsys):
+    csv = _small_csv(tmp_path)
+    base = ["import", str(csv), "--design", "implemented_5mm", "--output-dir", str(tmp_path), "--no-report"]
+    assert main(base) == 0
+    capsys.readouterr()
+    assert main(base) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bench_imported_lab already exists" in err[0] and "--name" in err[0], err
+    assert main([*base, "--name", "lab_again"]) == 0 and (tmp_path / "lab_again").is_dir()
 
 
 @pytest.mark.parametrize("row, column, bad, words", [
@@ -236,7 +276,7 @@ def test_import_errors_name_the_row_and_column(tmp_path, capsys, row, column, ba
     table[row - 2][header.index(column)] = bad
     csv = tmp_path / "bad.csv"
     csv.write_text("\n".join(",".join(r) for r in [header] + table) + "\n")
-    assert main(["import", str(csv), "--output-dir", str(tmp_path)]) == 2
+    assert main(["import", str(csv), "--design", "implemented_5mm", "--output-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"row {row}, column {column}:" in err and words in err, err
 

@@ -155,6 +155,11 @@ def _check_tare(path, rows: list[dict]) -> None:
                               "no loading reading at 0 bar, the tare its forces are taken from")
 
 
+def recording_name(csv_path, name: str | None = None) -> str:
+    """The recording folder an import writes: ``name``, or bench_imported_<the CSV's stem>."""
+    return name or f"bench_imported_{Path(csv_path).stem}"
+
+
 def import_csv(csv_path, design, output_dir, name: str | None = None) -> dict:
     """Write ``csv_path`` as a bench recording under ``output_dir``. Returns path and counts."""
     import time
@@ -192,7 +197,7 @@ def import_csv(csv_path, design, output_dir, name: str | None = None) -> dict:
         "benches": [{"kind": b, "samples": [{"name": n, "length": ln} for n, ln in samples.items()]}
                     for b, samples in benches.items()]})
     ticks = iter(range(time.time_ns(), 1 << 63, 1_000_000))  # 1 ms apart, in file order
-    name = name or f"bench_imported_{csv_path.stem}"
+    name = recording_name(csv_path, name)
     session = BenchSession(Path(output_dir) / name, protocol, design, steps,
                            rig={"kind": "import", "file": str(csv_path)}, clock=lambda: next(ticks))
     complete = False

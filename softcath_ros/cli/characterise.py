@@ -37,10 +37,10 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
-from ..bench.report import DEFAULT_OVERLAY
 from ..core.errors import SoftcathError
 from ..graph import READY_MARK, NodeGraph, stop_process
 from .common import bounded_float, check_rung_names
+from .report import add_overlay_arguments
 
 EXIT_CHILD_DIED = 5       # as bench_node's "rig lost"
 EXIT_DISK_FULL = 6        # as bench_node's "recording failed"
@@ -79,10 +79,8 @@ def register(sub) -> None:
     p.add_argument("--design", default=None, help="design (default: the protocol's)")
     p.add_argument("--sim-model", default="surrogate", help="rung that plays the rig's truth (default: the section "
                    "rung's table)")
-    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
-                   help="rung(s) overlaid in the report; the first also drives the nodes (default: %(default)s)")
+    add_overlay_arguments(p, "; the first also drives the nodes")
     p.add_argument("--output-dir", default="runs", help="where the recording directory goes (default runs/)")
-    p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
     p.add_argument("--timeout", type=bounded_float(1.0, 7 * 86400.0), default=170.0,
                    help="give up after this many seconds (at most a week)")
     p.add_argument("--wait-timeout", type=bounded_float(0.1, 3600.0), default=20.0,

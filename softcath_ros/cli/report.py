@@ -11,22 +11,28 @@ from ..core import json_output
 
 
 def register(sub) -> None:
-    from ..bench.report import DEFAULT_OVERLAY
-    from ..core.models import available_models
-
     p = sub.add_parser("report", help="analyse a bench recording: table + plots, model overlaid")
     p.add_argument("file", nargs="*", help="the bench recording (.mcap or its bag directory); several: the newest "
                                            f"(default: the newest under {DEFAULT_RUNS}/)")
     p.add_argument("--design", default=None, help="design to overlay (default: the one attached to the recording)")
-    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
-                   help=f"rung(s) to overlay (default: {' '.join(DEFAULT_OVERLAY)}, the section rung's table and "
-                        f"the fast, rough closed form): {', '.join(available_models())}")
+    add_overlay_arguments(p)
     p.add_argument("--calibration", default=None,
                    help="calibration file from `softcath calibrate`: each rung is overlaid calibrated too, with its band")
     p.add_argument("--out", default=None, help="output directory (default: beside the recording)")
-    p.add_argument("--no-cache", action="store_true", help="rungs that cache do not read their cache")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
+
+
+def add_overlay_arguments(p, note: str = "") -> None:
+    """``--model`` (the rungs a report overlays) and ``--no-cache``: one default for every command that
+    writes a report (report, import, characterise)."""
+    from ..bench.report import DEFAULT_OVERLAY
+    from ..core.models import available_models
+
+    p.add_argument("--model", nargs="+", default=list(DEFAULT_OVERLAY),
+                   help=f"rung(s) overlaid in the report{note} (default: {' '.join(DEFAULT_OVERLAY)}, the section "
+                        f"rung's table and the fast, rough closed form): {', '.join(available_models())}")
+    p.add_argument("--no-cache", action="store_true", help="the report's rungs do not read their cache")
 
 
 def pick_recording(paths: list[str], command: str) -> Path:

@@ -21,8 +21,10 @@ from .outline import Outline
 # Chord tolerance (m) of the approximations walls between two non-circular outlines are measured on;
 # such a wall is then within 2x this of the true minimum distance.
 WALL_CHORD_TOLERANCE = 1.0e-8
-# A wall this much (m) under the minimum still passes: a wall drawn at the minimum is accepted.
-WALL_TOLERANCE = 1.0e-9
+# A wall this much (m) under the minimum still passes: a wall drawn at the minimum (positions typed
+# to the micrometre, a wall measured on chords) is accepted, and a refused wall never reads as the
+# minimum at the micrometre the message shows. Far below what moulding holds.
+WALL_TOLERANCE = 0.5e-6
 
 
 @dataclass(frozen=True)
