@@ -322,8 +322,8 @@ def test_answer_load_reports_a_rung_too_slow_for_its_commands():
         ok = node._diagnostics._load_status()
         assert ok.level == DiagnosticStatus.OK and "keeping up" in ok.message
         node.model, node._fast = SlowRung(DESIGN), None
-        for _ in range(25):                              # back to back, as a queue of waiting commands
-            node._on_command(cmd)
+        for i in range(25):                              # back to back, as a queue of waiting commands
+            node._on_command(Float64MultiArray(data=[9000.0 + i]))   # each new: an unchanged one is not solved again
         slow = node._diagnostics._load_status()
         values = {kv.key: kv.value for kv in slow.values}
         assert slow.level == DiagnosticStatus.WARN and "falling behind" in slow.message, slow.message

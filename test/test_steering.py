@@ -13,8 +13,8 @@ from softcath_ros.core.allocation import Allocator
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose_single
 from softcath_ros.core.models import make_model
-from softcath_ros.core.steering import (SteeringController, SteeringError, SteeringParams, bend_of_tip,
-                                        steering_design)
+from softcath_ros.core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
+                                        bend_of_tip, steering_design)
 
 DESIGN = steering_design(load_design("three_channel_5mm"))
 
@@ -164,6 +164,18 @@ def test_watchdog_vents_when_targets_stop():
     assert out.state == "vented" and np.all(out.pressures == 0.0)
 
 
+def test_queued_targets_count_from_arrival_and_stale_ones_are_dropped():
+    """A target handled late (queued behind a busy controller) feeds the watchdog from its arrival,
+    and one older than command_timeout is dropped: the vent is not postponed by a backlog."""
+    ctrl = _controller(mode="open_loop", command_timeout=0.3)
+    ctrl.set_target(_tip_of_bend(0.15, -math.pi / 2), now=0.2, arrived=0.0)
+    assert ctrl.step(0.25).state == "open_loop"
+    assert ctrl.step(0.31).state == "vented"        # 0.3 s after it arrived, not after it was handled
+    with pytest.raises(SteeringError, match="stale"):
+        ctrl.set_target(_tip_of_bend(0.15, -math.pi / 2), now=0.7, arrived=0.35)
+    assert ctrl.step(0.71).state == "vented"
+
+
 def test_bad_inputs_are_one_line_errors():
     with pytest.raises(SteeringError):
         SteeringParams(mode="pid")
@@ -213,11 +225,22 @@ def test_steer_sim_bad_input_is_one_line_exit_2(argv, words, capsys):
     assert len(err) == 1 and err[0].startswith("softcath steer-sim: error:") and words in err[0]
 
 
-def test_steering_rung_options_are_the_rungs_own_settings():
-    """The options steering builds its surrogate with are settings the table builder has (a renamed
-    setting would only fail when a surrogate steering run starts)."""
-    from softcath_ros.core.models.surrogate import SurrogateSettings
-    from softcath_ros.core.steering import STEERING_RUNG_OPTIONS
+def test_steering_reads_the_shipped_surrogate_table_and_builds_none(monkeypatch):
+    """The controller's and the rig's surrogate are the shipped table of the design as shipped: no
+    table is built at start-up (a steering limit of 0.3 bar is the allocator's, not a new design)."""
+    from softcath_ros.bench.steering_sim import SteeringScenario, build
+    from softcath_ros.core.models.surrogate import SurrogateModel
+    from softcath_ros.core.steering import steering_allocator
 
-    settings = SurrogateSettings(**STEERING_RUNG_OPTIONS["surrogate"])
-    assert settings.pairs == "rotated" and settings.common_tolerance >= 1.0
+    def no_build(self):
+        raise AssertionError(f"a surrogate table was built for {self.design.name} "
+                             f"(max_pressure {self.design.max_pressure:g} Pa)")
+
+    monkeypatch.setattr(SurrogateModel, "_build", no_build)
+    alloc = steering_allocator("surrogate", load_design("three_channel_5mm"))
+    assert alloc.model.origin == "shipped" and alloc.max_pressure == STEERING_MAX_PRESSURE
+    assert np.all(alloc.allocate([0.0, -200.0]).pressures <= STEERING_MAX_PRESSURE)
+    allocator, truth, design = build(SteeringScenario(model="surrogate", truth="surrogate"))
+    assert allocator.model.origin == "shipped" and design.max_pressure == STEERING_MAX_PRESSURE
+
+

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..core.allocation import Allocator
 from ..core.design import load_design
-from ..core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringParams, make_steering_model,
-                             rung_options, steering_design)
+from ..core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringParams, steering_allocator,
+                             steering_design)
 from .sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 
 TRAJECTORIES = ("step", "circle")
@@ -104,18 +104,18 @@ class SteeringRun:
 
 
 def build(scenario: SteeringScenario):
-    """(controller model, truth model, design) for ``scenario``."""
-    design = steering_design(load_design(scenario.design), scenario.max_pressure)
-    model = make_steering_model(scenario.model, design)
-    truth = truth_model(scenario.truth, design, scenario.rig, **rung_options(scenario.truth))
-    return model, truth, design
+    """(controller's allocator, truth model, design with the steering limit) for ``scenario``; both
+    rungs on the design as shipped (a surrogate reads its shipped table)."""
+    shipped = load_design(scenario.design)
+    allocator = steering_allocator(scenario.model, shipped, scenario.max_pressure)
+    return allocator, truth_model(scenario.truth, shipped, scenario.rig), steering_design(shipped, scenario.max_pressure)
 
 
 def simulate(scenario: SteeringScenario, trajectory: str, duration: float, built=None) -> SteeringRun:
     """Run the loop for ``duration`` s of simulated time."""
-    model, truth, design = built or build(scenario)
+    allocator, truth, design = built or build(scenario)
     path = targets_for(trajectory, duration, truth, (1.0 - scenario.rig.pressure_shift) * design.max_pressure)
-    ctrl = SteeringController(Allocator(model), scenario.controller)
+    ctrl = SteeringController(allocator, scenario.controller)
     rig = SimulatedRig(truth, scenario.rig)
     tracker = TipTracker(scenario.tracker)
     dt = 1.0 / scenario.output_hz

@@ -59,12 +59,6 @@ MODES = ("integral", "adaptive", "open_loop")
 # Steering range of the 3-channel body: on the section rung one channel at 0.3 bar bends it past
 # 60 degrees, and beyond that it balloons towards lumen contact (over 9 rad at 0.5 bar).
 STEERING_MAX_PRESSURE = 3.0e4   # Pa
-# Rung options for steering: a surrogate table over the steering range, pair 0-1 rotated
-# (builds in about 15 s; measured error against the section rung in its error_bound).
-STEERING_RUNG_OPTIONS = {"surrogate": {"pairs": "rotated", "common_tolerance": 1e6,
-                                         "common_direction_tolerance": 1e6}}
-# (common_tolerance: a rate-limited change of sector briefly has three channels pressurised;
-# the table answers those approximately instead of refusing: error_bound['common_mode'].)
 STATES = ("waiting", "closed_loop", "open_loop", "vented")
 
 
@@ -116,15 +110,15 @@ def steering_design(design, max_pressure: float = STEERING_MAX_PRESSURE):
     return replace(design, max_pressure=min(float(max_pressure), float(design.max_pressure)))
 
 
-def rung_options(rung: str) -> dict:
-    """The options steering builds ``rung`` with (the same for model and simulated truth)."""
-    return dict(STEERING_RUNG_OPTIONS.get(rung, {}))
+def steering_allocator(rung: str, design, max_pressure: float = STEERING_MAX_PRESSURE) -> Allocator:
+    """The feed-forward: ``rung`` on ``design`` as shipped, its inverse limited to ``max_pressure``
+    (Pa, the steering range; never above the design's). The rung sees the design unchanged, so a
+    surrogate reads the table shipped for it (a lowered limit would be another design, whose table
+    would be built at start-up)."""
+    from .calibration_file import build_model
 
-
-def make_steering_model(rung: str, design):
-    from .models import make_model
-
-    return make_model(rung, design, **rung_options(rung))
+    limit = steering_design(design, max_pressure).max_pressure
+    return Allocator(build_model(rung, design), max_pressure=limit)
 
 
 def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
@@ -198,8 +192,14 @@ class SteeringController:
 
     # ------------------------------------------------------------------ inputs
 
-    def set_target(self, tip, now: float) -> None:
-        """A new tip target (m, softcath_base); feeds the command watchdog."""
+    def set_target(self, tip, now: float, arrived: float | None = None) -> None:
+        """A new tip target (m, softcath_base) that arrived at ``arrived`` (default ``now``); feeds
+        the command watchdog from its arrival. One older than ``command_timeout`` is stale:
+        SteeringError (command_shaping's freshness rule)."""
+        arrived = now if arrived is None else arrived
+        if not self.watchdog.fresh(arrived, now):
+            raise SteeringError(f"stale tip target dropped: it arrived {now - arrived:.3f} s ago, more than "
+                                f"command_timeout {self.params.command_timeout:g} s")
         p = np.asarray(tip, dtype=float).ravel()
         if p.size != 3 or not np.all(np.isfinite(p)):
             raise SteeringError(f"tip target {p.tolist()} m must be three finite numbers")
@@ -210,7 +210,7 @@ class SteeringController:
         theta = math.hypot(*self.target_bend)
         if theta > 1e-4:   # below, the direction is noise: keep the frame
             self._frame = (self.target_bend[0] / theta, self.target_bend[1] / theta)
-        self.watchdog.feed(now)
+        self.watchdog.feed(arrived)
 
     def on_measurement(self, tip, stamp: float, now: float) -> str:
         """A measured tip position (m) taken at ``stamp``; returns "accepted" or why it was rejected."""
@@ -386,5 +386,5 @@ class SteeringController:
         self.state, self.reason = state, reason
 
 
-__all__ = ["MODES", "STEERING_MAX_PRESSURE", "make_steering_model", "rung_options", "steering_design", "STATES", "MeasurementCounters", "SteeringController", "SteeringError", "SteeringParams",
+__all__ = ["MODES", "STEERING_MAX_PRESSURE", "steering_allocator", "steering_design", "STATES", "MeasurementCounters", "SteeringController", "SteeringError", "SteeringParams",
            "SteeringStep", "bend_of_tip"]

@@ -2,9 +2,18 @@
 
 Subscribes /softcath/bend_cmd (geometry_msgs/Vector3Stamped, curvature x, y in 1/m in
 softcath_base, z ignored) and /softcath/tip_target (geometry_msgs/PointStamped, m);
-publishes /softcath/pressure_cmd (std_msgs/Float64MultiArray, Pa, one per channel) at
-``publish_rate`` and /diagnostics. The physics is the core Allocator on the chosen rung;
-this node parses, checks, rate-limits, watches the command stream and reports.
+publishes /softcath/pressure_cmd (std_msgs/Float64MultiArray, Pa, one per channel) and
+/diagnostics. The physics is the core Allocator on the chosen rung; the stream (rate limit,
+watchdog, keep-alive) is the core PressureStream; this node parses, checks and reports.
+
+Output rate: a new command goes out at once; while the output ramps it goes out at
+``publish_rate``; an unchanged output (idle, or holding a target) is re-sent every
+KEEP_ALIVE_PERIOD (0.1 s, five per the rig's 0.5 s command watchdog), and an idle node (vented,
+at zero) only wakes for that keep-alive, so an idle graph costs little
+(benchmarks/idle_graph.py).
+Backlog: each callback takes every command waiting and allocates only the newest (the others
+are superseded); the watchdog counts from a command's arrival and a command older than
+``command_timeout`` when handled is dropped, so no backlog holds pressure past timeout + ramp.
 
 Parameters: design, model, max_pressure_rate (Pa/s), command_timeout (s), frame_id,
 publish_rate (Hz), max_request_curvature (1/m), max_tip_distance (m), hysteresis_deg,
@@ -28,14 +37,14 @@ from std_msgs.msg import Float64MultiArray
 from .. import topics
 from ..core.allocation import Allocator
 from ..core.errors import SoftcathError
-from ..core.command_shaping import CommandWatchdog, RateLimiter, check_frame, check_vector
+from ..core.command_shaping import KEEP_ALIVE_PERIOD, PressureStream, check_frame, check_vector
 from ..core.design import load_design
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
-from .runtime import EXECUTORS, run_node
+from .runtime import EXECUTORS, run_node, take_waiting
 
 NODE_NAME = topics.ALLOCATION_NODE
 RCLError = _rclpy.RCLError
@@ -54,7 +63,8 @@ class AllocationNode(Node):
         self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped",
                          minimum=1e-3, maximum=3600.0)
         self.frame_id = p("frame_id", topics.FRAME_ID, "frame commands must be expressed in")
-        publish_rate = p("publish_rate", 200.0, "pressure_cmd publishing rate, Hz", minimum=0.1, maximum=10000.0)
+        publish_rate = p("publish_rate", 200.0, "pressure_cmd rate while the output ramps or a target is held, Hz "
+                         "(idle: the keep-alive, 10 Hz)", minimum=0.1, maximum=10000.0)
         self.max_request_curvature = p("max_request_curvature", 1000.0,
                                        "bend_cmd above this |k| (1/m) is a fault and rejected (below it saturates)",
                                        minimum=0.0)
@@ -93,22 +103,22 @@ class AllocationNode(Node):
                                   minimum=0.0)
 
         n = self.design.n_channels
-        self.limiter = RateLimiter(n, self.max_rate)
-        self.watchdog = CommandWatchdog(self.timeout)
-        self.target = np.zeros(n)
+        self.stream = PressureStream(n, self.max_rate, self.timeout, time.monotonic)
         self.last = None            # last Allocation
-        self.vented = True          # no command yet counts as vented
+        self._last_request = None   # (kind, request) of self.last: an unchanged command is not re-allocated
         self.counters = InputCounters(extra={"design": self.design.name, "model": model_name,
                                              "max_pressure_pa": f"{self.max_pressure:g}"})
         self.published = 0
-        self._last_publish = time.monotonic()
 
         qos = stream_qos(depth, reliability)
         self.pub = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, qos)
-        self.create_subscription(Vector3Stamped, topics.BEND_CMD, self._on_bend, qos)
-        self.create_subscription(PointStamped, topics.TIP_TARGET, self._on_tip, qos)
+        self._bend_sub = self.create_subscription(Vector3Stamped, topics.BEND_CMD, self._on_bend, qos)
+        self._tip_sub = self.create_subscription(PointStamped, topics.TIP_TARGET, self._on_tip, qos)
         self.period = 1.0 / publish_rate
-        self.create_timer(self.period, self._tick)
+        # Ticks at publish_rate while a target is held or the output ramps (the watchdog is checked
+        # on time); idle (vented, at zero) only the keep-alive timer runs.
+        self._ramp_timer = self.create_timer(self.period, self._tick)
+        self.create_timer(KEEP_ALIVE_PERIOD, self._keep_alive)
         # Two statuses: the shared input counters (accepted/rejected, as every node reports them)
         # and this node's output state (watchdog, saturation), published on each change too.
         self._inputs_report = DiagnosticsReporter(self, self.counters, f"{NODE_NAME}: commands",
@@ -128,70 +138,110 @@ class AllocationNode(Node):
         c.last_reason = reason
         self.get_logger().warning(f"rejected command ({c.rejected} so far): {reason}", throttle_duration_sec=1.0)
 
+    @property
+    def vented(self) -> bool:
+        return self.stream.vented
+
     def _on_bend(self, msg: Vector3Stamped) -> None:
+        self._take(msg, getattr(self, "_bend_sub", None), self._bend_request)
+
+    def _on_tip(self, msg: PointStamped) -> None:
+        self._take(msg, getattr(self, "_tip_sub", None), self._tip_request)
+
+    def _bend_request(self, msg: Vector3Stamped):
         k = (msg.vector.x, msg.vector.y)
         for check in (check_frame(msg.header.frame_id, self.frame_id),
                       check_vector(k, self.max_request_curvature, "bend_cmd curvature", "1/m")):
             if not check.ok:
-                return self._reject(check.reason)
-        self._apply(lambda: self.allocator.allocate(k))
+                return check.reason
+        return ("bend", k), lambda: self.allocator.allocate(k)
 
-    def _on_tip(self, msg: PointStamped) -> None:
+    def _tip_request(self, msg: PointStamped):
         tip = (msg.point.x, msg.point.y, msg.point.z)
         for check in (check_frame(msg.header.frame_id, self.frame_id),
                       check_vector(tip, self.max_tip_distance, "tip_target", "m")):
             if not check.ok:
-                return self._reject(check.reason)
-        self._apply(lambda: self.allocator.allocate_tip(tip))
+                return check.reason
+        return ("tip", tip), lambda: self.allocator.allocate_tip(tip)
 
-    def _apply(self, allocate) -> None:
-        try:
-            result = allocate()
-        except SoftcathError as exc:
-            return self._reject(str(exc))
-        if not result.reachable:
-            return self._reject(result.message)
-        if not result.converged:
-            self.counters.model_failed += 1
-            self.counters.last_reason = result.message
-            self.get_logger().warning(result.message, throttle_duration_sec=1.0)
+    def _take(self, msg, subscription, request_of) -> None:
+        """``msg`` (arrived now) and every command waiting behind it: each is checked (bad ones
+        rejected), the newest valid one is allocated (the others superseded) unless it is stale."""
+        batch = [(msg, time.monotonic())] + (take_waiting(subscription) if subscription is not None else [])
+        valid = []
+        for m, arrived in batch:
+            request = request_of(m)
+            if isinstance(request, str):
+                self._reject(request)
+            else:
+                valid.append((request, arrived))
+        if not valid:
             return
+        if len(valid) > 1:
+            self.counters.superseded += len(valid) - 1
+            self.counters.last_reason = "command superseded by a newer one before it was allocated"
+        (request, allocate), arrived = valid[-1]
+        if not self.stream.fresh(arrived):
+            self.stream.dropped += 1
+            return self._reject(f"stale command dropped: it arrived more than command_timeout "
+                                f"{self.timeout:g} s ago")
+        self._apply(request, allocate, arrived)
+
+    def _apply(self, request, allocate, arrived: float) -> None:
+        if request == self._last_request and self.last is not None:
+            result = self.last       # an unchanged command: the same allocation, no model call
+        else:
+            try:
+                result = allocate()
+            except SoftcathError as exc:
+                return self._reject(str(exc))
+            if not result.reachable:
+                return self._reject(result.message)
+            if not result.converged:
+                self.counters.model_failed += 1
+                self.counters.last_reason = result.message
+                self.get_logger().warning(result.message, throttle_duration_sec=1.0)
+                return
+        was_vented = self.stream.vented
+        if not self.stream.command(result.pressures, arrived):   # went stale while it was allocated
+            return self._reject(f"stale command dropped: it arrived more than command_timeout {self.timeout:g} s ago")
         self.counters.accepted += 1
-        self.last = result
-        self.target = result.pressures
-        self.watchdog.feed(time.monotonic())
-        if self.vented:
-            self.vented = False
+        self.last, self._last_request = result, request
+        if was_vented:
+            self._ramp_timer.reset()
             self.get_logger().info("command stream resumed")
             self._publish_diagnostics()
         # A new target goes out at once (rate limited): a fast command stream sets the output rate
         # and costs one callback per command instead of two.
-        self._publish_step(time.monotonic())
+        self._send(self.stream.output(force=True))
 
     # ------------------------------------------------------------------ output
 
-    def _tick(self) -> None:
-        """Timer: the output never falls below publish_rate, and the watchdog is checked."""
-        now = time.monotonic()
-        if self.watchdog.expired(now) and not self.vented:
-            self.vented = True
+    def _keep_alive(self) -> None:
+        self._tick(keep_alive=True)
+
+    def _tick(self, keep_alive: bool = False) -> None:
+        """Timers: ramps at publish_rate, re-sends an unchanged output at the keep-alive rate
+        (``keep_alive``: this is that timer, so send), and vents when the watchdog expires."""
+        if self.stream.check_watchdog():
             self.get_logger().warning(f"no command for {self.timeout:g} s: venting (ramping all pressures to zero)")
             self._publish_diagnostics()
-        if now - self._last_publish >= 0.9 * self.period or self.vented:
-            self._publish_step(now)
+        self._send(self.stream.output(force=keep_alive))
+        if self.stream.vented and self.stream.settled and not self._ramp_timer.is_canceled():
+            self._ramp_timer.cancel()     # idle: the keep-alive timer alone
 
-    def _publish_step(self, now: float) -> None:
-        dt, self._last_publish = now - self._last_publish, now
-        target = np.zeros_like(self.target) if self.vented else self.target
-        out = self.limiter.step(target, dt)
+    def _send(self, out) -> None:
+        if out is None:
+            return
         # Last guard before the wire: the limit is enforced here whatever happened upstream.
         check = check_pressure_command(out, self.design.n_channels, self.max_pressure, out_of_range="clamp")
         if check.status == "rejected":  # non-finite: nothing safe to send but zero
             self.get_logger().error(f"refusing to publish {out.tolist()}: {check.reason}; sending zeros")
-            self.limiter.output = np.zeros_like(out)
-            values = self.limiter.output
+            values = np.zeros_like(out)
         else:
             values = check.pressures
+        if check.status != "ok":
+            self.stream.sent(values)
         try:
             self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
         except RCLError:
@@ -214,8 +264,9 @@ class AllocationNode(Node):
             "watchdog": "vented" if self.vented else "ok",
             "saturated": str(bool(last is not None and last.saturated and not self.vented)).lower(),
             "active_channels": "" if last is None else ",".join(map(str, last.active_channels)),
-            "target_pa": ",".join(f"{v:.1f}" for v in self.target),
-            "output_pa": ",".join(f"{v:.1f}" for v in self.limiter.output),
+            "target_pa": ",".join(f"{v:.1f}" for v in self.stream.target),
+            "output_pa": ",".join(f"{v:.1f}" for v in self.stream.limiter.output),
+            "stale_dropped": str(self.stream.dropped),
             "max_pressure_pa": f"{self.max_pressure:g}",
             "messages_published": str(self.published),
         }

@@ -8,16 +8,18 @@ read on entry to the callback). Bad commands are rejected or clamped per
 ``out_of_range`` (core.pressure_command), counted, warned about (throttled) and
 reported on /diagnostics; a model that does not converge publishes nothing.
 
-Commands faster than the rung: the newest command is answered, never a backlog; the older
-ones waiting are superseded (counted on /diagnostics). A rung that answers a command in under
-``INLINE_ANSWER_S`` (closed form, surrogate: ~10 us, timed at start-up) answers in the
+Every command is answered while the rung keeps up. Only a stale one is superseded (counted on
+/diagnostics): one that has waited longer than SUPERSEDE_AGE (10 ms, core.command_shaping) while
+a newer one waits; the newest is always answered. So a scheduling pause of a few ms costs no
+answers, and a rung slower than the stream answers the newest, never a growing backlog (a
+steering loop wants the pose for the pressures it commands now). A rung that answers a command
+in under ``INLINE_ANSWER_S`` (closed form, surrogate: ~10 us, timed at start-up) answers in the
 subscription callback, where the latency is lowest; after each answer the callback takes every
-command that arrived meanwhile from the subscription and answers only the newest, then returns
+command that arrived meanwhile from the subscription and answers those not stale, then returns
 (so timers run between). Every slower rung (rod, section, fe3d) answers on its own solve
-thread: the callback only stores the command (so the executor, and with it /diagnostics, never
-waits for a solve), and a command still waiting when a newer one arrives is superseded. A
-steering loop wants the pose for the pressures it commands now; answering a queue of stale
-commands would only make every answer later.
+thread: the callback only queues the command (so the executor, and with it /diagnostics, never
+waits for a solve). An unchanged command costs no model call: the last answer is kept and sent
+again, newly stamped.
 
 At ``display_rate`` (default 30 Hz, independent of the pose stream) it also publishes the live
 3D view (nodes/live_view.py): the body as a Marker, the backbone as a Path, R_C; the tip on
@@ -33,6 +35,7 @@ import math
 import sys
 import threading
 import time
+from collections import deque
 from functools import partial
 
 import numpy as np
@@ -43,6 +46,7 @@ from std_msgs.msg import Float64MultiArray
 
 from .. import topics
 from ..core.answer_load import AnswerLoad
+from ..core.command_shaping import SUPERSEDE_AGE, is_superseded
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.kinematics import backbone_poses
@@ -53,7 +57,7 @@ from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
-from .runtime import EXECUTORS, run_node
+from .runtime import EXECUTORS, run_node, take_waiting
 
 FRAME_ID = topics.FRAME_ID
 WARN_THROTTLE_S = 1.0
@@ -141,7 +145,11 @@ class ModelNode(Node):
         self._tip, self._backbone = self._new_messages()
         # Rungs slower than INLINE_ANSWER_S solve on their own thread; either way the newest command
         # is answered (module docstring).
-        self._pending = None                      # (msg, stamp_ns) waiting for the solve thread
+        self._pending = deque()                   # (msg, stamp_ns, arrived) waiting for the solve thread
+        self.supersede_age = SUPERSEDE_AGE        # s: a command waiting longer, with a newer one behind it, is stale
+        self._clock_s = time.monotonic            # ages of waiting commands (a test may drive it)
+        self._answered_key = None                 # the last answered pressures (bytes) and their pose
+        self._answered_pose = None
         self._wake = threading.Condition()
         self._stopping = False
         self._solver = None
@@ -149,7 +157,7 @@ class ModelNode(Node):
             self._solver = threading.Thread(target=self._solve_newest, name="model_node_solve", daemon=True)
             self._solver.start()
         self._command_sub = self.create_subscription(
-            Float64MultiArray, topics.PRESSURE_CMD, self._on_command_newest if self._solver is None else self._hand_over,
+            Float64MultiArray, topics.PRESSURE_CMD, self._on_command_inline if self._solver is None else self._hand_over,
             qos)
         self.view = None
         if display_rate > 0:
@@ -165,8 +173,8 @@ class ModelNode(Node):
             f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
             f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
             f"executor={self.executor_name}, qos {reliability} depth {depth}, messages {self.preparation}, commands "
-            + ("answered newest first in the callback" if self._solver is None
-               else "answered newest first on the solve thread"))
+            + ("answered in the callback" if self._solver is None else "answered on the solve thread")
+            + f" (a command waiting over {self.supersede_age * 1e3:g} ms behind a newer one is superseded)")
 
     def _make_model(self, model_name: str):
         """The rung, saying so when start-up waits for it: a surrogate whose table is neither shipped
@@ -216,47 +224,56 @@ class ModelNode(Node):
                 return False
         return True
 
-    def _on_command_newest(self, msg: Float64MultiArray) -> None:
-        """Subscription callback for a fast rung: answer ``msg``, then the newest of the commands
-        that arrived meanwhile (the others superseded), and return."""
+    def _on_command_inline(self, msg: Float64MultiArray) -> None:
+        """Subscription callback for a fast rung: answer ``msg``, then the commands that arrived
+        meanwhile (a stale one superseded), and return."""
         self._on_command(msg)
-        newest = self._newest_waiting()
-        if newest is not None:
-            self._on_command(newest)
+        waiting = take_waiting(self._command_sub)
+        if waiting:
+            self._answer_waiting(waiting)
 
-    def _newest_waiting(self):
-        """Take every command waiting in the subscription; the newest, or None (the older count as
-        superseded). The executor finds nothing to take for their events and skips them."""
-        sub, newest = self._command_sub, None
-        with sub.handle:
-            while True:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is None:
-                    return newest
-                if newest is not None:
-                    self.counters.superseded += 1
-                    self.counters.last_reason = "command superseded by a newer one before it was answered"
-                newest = taken[0]
+    def _answer_waiting(self, waiting) -> None:
+        """Answer ``waiting`` ((msg, arrival s), oldest first) in order, skipping the stale ones."""
+        last = len(waiting) - 1
+        for i, (msg, arrived) in enumerate(waiting):
+            if is_superseded(arrived, self._clock_s(), i < last, self.supersede_age):
+                self._supersede()
+            else:
+                self._on_command(msg)
+
+    def _supersede(self) -> None:
+        self.counters.superseded += 1
+        self.counters.last_reason = (f"command superseded: it waited over {self.supersede_age * 1e3:g} ms "
+                                     "behind a newer one")
 
     def _hand_over(self, msg: Float64MultiArray) -> None:
-        """Subscription callback for a solve thread: keep only the newest command."""
+        """Subscription callback for a solve thread: queue the command for it."""
         stamp_ns = self._now_ns()
         with self._wake:
-            if self._pending is not None:
-                self.counters.superseded += 1
-                self.counters.last_reason = "command superseded by a newer one before the rung answered it"
-            self._pending = (msg, stamp_ns)
+            self._pending.append((msg, stamp_ns, self._clock_s()))
             self._wake.notify()
+
+    def _next_pending(self):
+        """The oldest waiting command that is not stale (the stale ones superseded), or None when
+        stopping. Holds ``self._wake``."""
+        while True:
+            while not self._pending and not self._stopping:
+                self._wake.wait()
+            if self._stopping:
+                return None
+            msg, stamp_ns, arrived = self._pending.popleft()
+            if is_superseded(arrived, self._clock_s(), bool(self._pending), self.supersede_age):
+                self._supersede()
+                continue
+            return msg, stamp_ns
 
     def _solve_newest(self) -> None:
         while True:
             with self._wake:
-                while self._pending is None and not self._stopping:
-                    self._wake.wait()
-                if self._stopping:
-                    return
-                msg, stamp_ns = self._pending
-                self._pending = None
+                got = self._next_pending()
+            if got is None:
+                return
+            msg, stamp_ns = got
             started = time.perf_counter()
             try:
                 self._answer(msg, stamp_ns)
@@ -293,27 +310,32 @@ class ModelNode(Node):
             c.clamped += 1
             self.get_logger().warning(f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}",
                                    throttle_duration_sec=WARN_THROTTLE_S)
-        if self._fast is not None:
-            curvature, stretch = self._fast(check.pressures)
-            solved = None
+        key = check.pressures.tobytes()
+        if key == self._answered_key:    # an unchanged command: the same pose, no model call
+            positions, quats = self._answered_pose
         else:
-            try:
-                state = self.model.evaluate(check.pressures)
-            except SoftcathError as exc:  # a rung refusing this command (e.g. outside its range)
-                return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
-            if not bool(state.converged):
-                return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
-            curvature, stretch, solved = state.curvature, float(state.axial_stretch), state.backbone
-        # a free body bent through itself or its shaft is no prediction (core/body_contact.py)
-        reached = body_reach(curvature, self.arc_length * stretch, self.cap, self.body_radius, solved)
-        if reached is not None:
-            return self._model_failed(f"no pose for {check.pressures.tolist()} Pa: {reached.describe()}")
-        if solved is None and self._fast is not None:
-            positions, quats = backbone_poses(curvature, self.arc_length * stretch, self.n_points, self.cap)
-        else:
-            positions, quats = state_backbone(state, self.arc_length, self.cap, self.n_points)
-        if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
-            return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
+            if self._fast is not None:
+                curvature, stretch = self._fast(check.pressures)
+                solved = None
+            else:
+                try:
+                    state = self.model.evaluate(check.pressures)
+                except SoftcathError as exc:  # a rung refusing this command (e.g. outside its range)
+                    return self._model_failed(f"model refused {check.pressures.tolist()} Pa: {exc}")
+                if not bool(state.converged):
+                    return self._model_failed(f"model did not converge: {state.message or 'no reason given'}")
+                curvature, stretch, solved = state.curvature, float(state.axial_stretch), state.backbone
+            # a free body bent through itself or its shaft is no prediction (core/body_contact.py)
+            reached = body_reach(curvature, self.arc_length * stretch, self.cap, self.body_radius, solved)
+            if reached is not None:
+                return self._model_failed(f"no pose for {check.pressures.tolist()} Pa: {reached.describe()}")
+            if solved is None and self._fast is not None:
+                positions, quats = backbone_poses(curvature, self.arc_length * stretch, self.n_points, self.cap)
+            else:
+                positions, quats = state_backbone(state, self.arc_length, self.cap, self.n_points)
+            if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
+                return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
+            self._answered_key, self._answered_pose = key, (positions, quats)
         c.accepted += 1
         if self.view is not None:   # the display timer picks it up (a reference, no copy)
             # the rung's own bending angle (its solved tip's, else |k| x the deformed arc): R_C past 180 deg

@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from typing import Callable
 
 from ..core.errors import SoftcathError, shown
@@ -43,6 +44,25 @@ def make_executor(name: str):
 
         return MultiThreadedExecutor()
     raise ValueError(f"executor {name!r} is not one of {EXECUTORS}")
+
+
+def take_waiting(subscription) -> list[tuple[object, float]]:
+    """Every message waiting in ``subscription``, oldest first, each with when it arrived in
+    time.monotonic seconds (the middleware's reception stamp; now where it gives none). The
+    executor then finds nothing to take for their events and skips them."""
+    taken = []
+    with subscription.handle:
+        while True:
+            got = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            if got is None:
+                break
+            taken.append(got)
+    now, wall_ns = time.monotonic(), time.time_ns()
+    out = []
+    for msg, info in taken:
+        received = int((info or {}).get("received_timestamp", 0) or 0)
+        out.append((msg, now - max(wall_ns - received, 0) * 1e-9 if received > 0 else now))
+    return out
 
 
 def set_realtime_priority(priority: int) -> str:

@@ -31,11 +31,12 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
 from ..bench.sim_rig import FRESH_SEED, RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
+from ..core.command_shaping import CommandWatchdog
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
-from .runtime import run_node
+from .runtime import run_node, take_waiting
 
 # Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
 # would make the simulated readings meaningless.
@@ -75,7 +76,9 @@ class SimBenchNode(Node):
         self.rejected = 0
         self.unanswered = 0   # readings not published: the truth rung refused the pressures (outside its table)
         self.command = np.zeros(design.n_channels)
-        self.t_command, self.silent = -math.inf, False
+        self.watchdog = CommandWatchdog(self.command_timeout)   # fed from each command's arrival
+        self.silent = False
+        self.stale = 0        # commands dropped: older than command_timeout when handled
         self.pub_pc = [self.create_publisher(FluidPressure, topics.pressure_measured_topic(c), 10)
                        for c in range(design.n_channels)]
         self.pub_angle = self.create_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
@@ -94,7 +97,7 @@ class SimBenchNode(Node):
             "simulated": True, "node": self.get_name(), "design": design.name,
             "design_hash": design.content_hash(), "model": model.name, "rate_hz": rate_hz,
             "rig": asdict(self.rig.params)})))
-        self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 10)
+        self._command_sub = self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 10)
         self.create_subscription(String, topics.BENCH_STEP, self.on_step, 100)
         self.dt = 1.0 / rate_hz
         self.t_last = time.monotonic()
@@ -144,6 +147,15 @@ class SimBenchNode(Node):
             self.pub_tip.publish(self._pose(round(stamp * 1e9), pos, self._tip_quat))
 
     def on_command(self, msg):
+        """The regulator's input: the newest command waiting, unless stale (command_shaping's
+        freshness rule: the watchdog counts from arrival, so a backlog never holds pressure)."""
+        arrived = time.monotonic()
+        waiting = take_waiting(self._command_sub)
+        if waiting:
+            msg, arrived = waiting[-1]
+        if not self.watchdog.fresh(arrived, time.monotonic()):
+            self.stale += 1
+            return
         p = np.asarray(msg.data, dtype=float)
         if p.shape != self.command.shape or not np.all(np.isfinite(p)):
             self.rejected += 1
@@ -151,7 +163,8 @@ class SimBenchNode(Node):
                                    f"{self.command.size} finite values)", throttle_duration_sec=2.0)
             return
         self.command = p  # the regulator clamps to [0, max_pressure]
-        self.t_command, self.silent = time.monotonic(), False
+        self.watchdog.feed(arrived)
+        self.silent = False
 
     def on_step(self, msg):
         try:
@@ -169,10 +182,10 @@ class SimBenchNode(Node):
         # timer fires late, and a fixed dt would slow the simulated rig down.
         now = time.monotonic()
         dt, self.t_last = min(now - self.t_last, 0.5), now
-        if now - self.t_command > self.command_timeout and not self.silent:
+        if self.watchdog.expired(now) and not self.silent:
             self.silent = True  # the commander went silent: vent (said once per silence)
             self.command = np.zeros_like(self.command)
-            if self.t_command > -math.inf:
+            if self.watchdog.last_feed is not None:
                 self.get_logger().warning(f"no pressure command for {self.command_timeout:g} s: venting")
         self.rig.advance(dt, self.command)
         r = self.rig.read()
@@ -206,7 +219,7 @@ class SimBenchNode(Node):
                    + (f", {self.unanswered} readings withheld (the truth rung refused the pressures)"
                       if self.unanswered else ""))
         publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.SIM_BENCH_NODE, message, [
-            ("rejected_commands", self.rejected), ("withheld_readings", self.unanswered), ("bench", self.rig.bench),
+            ("rejected_commands", self.rejected), ("stale_commands", self.stale), ("withheld_readings", self.unanswered), ("bench", self.rig.bench),
             ("sample_length_m", f"{self.rig.length:g}")], hardware_id="simulated"))
 
 def main(args=None) -> int:

@@ -34,7 +34,7 @@ from ..bench.sim_rig import RigParams, truth_model
 from ..bench.steering_sim import TRAJECTORIES, metrics, targets_for
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..core.steering import STEERING_MAX_PRESSURE, rung_options, steering_design
+from ..core.steering import STEERING_MAX_PRESSURE, steering_design
 from ..recording import BagWriter
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
@@ -52,7 +52,7 @@ class SteerDriver(Node):
         super().__init__(topics.STEER_DRIVER, **kwargs)
         p = partial(declare, self)
         design = load_design(p("design", "three_channel_5mm", "design file or shipped design name"))
-        truth = p("truth", "closed_form", "rung the simulated rig plays (for targets on its workspace)")
+        truth = p("truth", "surrogate", "rung the simulated rig plays (for targets on its workspace)")
         shift = p("pressure_shift", 0.25, "the rig's pressure shift", minimum=0.0, maximum=0.99)
         scale = p("material_scale", 1.2, "the rig's material scale", minimum=0.05, maximum=20.0)
         max_pressure = p("max_pressure", STEERING_MAX_PRESSURE, "the controller's pressure limit, Pa", minimum=1.0)
@@ -62,10 +62,10 @@ class SteerDriver(Node):
         self.wait_timeout = p("wait_timeout", 60.0, "seconds to wait for the rig and the controller", minimum=0.1)
         out = p("output", "runs/steer", "recording directory (MCAP bag)")
         refuse_unknown_parameters(self)    # before a recording is opened on a typo's default
-        design = steering_design(design, max_pressure)
         rig = RigParams(pressure_shift=shift, material_scale=scale)
-        self.path = targets_for(self.kind, self.duration, truth_model(truth, design, rig, **rung_options(truth)),
-                                (1.0 - shift) * design.max_pressure)
+        truth_rung = truth_model(truth, design, rig)     # the design as shipped (a surrogate: its shipped table)
+        design = steering_design(design, max_pressure)
+        self.path = targets_for(self.kind, self.duration, truth_rung, (1.0 - shift) * design.max_pressure)
         self.writer = BagWriter(Path(out), background=True, custom_data={"design": design.name,
                                                                         "trajectory": self.kind})
         self.recorder = TopicRecorder(self, self.writer, list(topics.STEERING_RECORDED), message_info=True)

@@ -12,7 +12,11 @@ not (the integral, the adapted gain, the measurement's health) and stricter rule
 back to open loop on a stale or jumping measurement), and allocation_node's contract stays as
 characterise uses it. The two both publish /softcath/pressure_cmd: run one or the other.
 
-Parameters: design, model, mode (integral | adaptive | open_loop), the SteeringParams fields,
+Targets waiting behind a busy controller: each callback takes every target waiting and uses the
+newest; the watchdog counts from its arrival, and one older than ``command_timeout`` is dropped
+(core.command_shaping's freshness rule), so no backlog holds pressure past timeout + ramp.
+
+Parameters: design, model (default surrogate: the shipped table), mode (integral | adaptive | open_loop), the SteeringParams fields,
 publish_rate (Hz), frame_id, max_tip_distance (m), diagnostics_period (s), executor;
 max_pressure (Pa, read-only, default the steering range 0.3 bar, never above the design's).
 Time is the node's ROS clock, which the tracker's stamps are compared with.
@@ -20,6 +24,7 @@ Time is the node's ROS clock, which the tracker's stamps are compared with.
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import asdict, fields
 from functools import partial
 
@@ -31,17 +36,16 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from .. import topics
-from ..core.allocation import Allocator
 from ..core.command_shaping import check_frame, check_vector
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
 from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
-                             make_steering_model, steering_design)
+                             steering_allocator, steering_design)
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
-from .runtime import EXECUTORS, run_node
+from .runtime import EXECUTORS, run_node, take_waiting
 
 NODE_NAME = topics.STEER_NODE
 _DESCRIPTIONS = {
@@ -66,7 +70,7 @@ class SteerNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = partial(declare, self)
         design_name = p("design", "three_channel_5mm", "design file or shipped design name")
-        model_name = p("model", "closed_form", "model rung of the feed-forward")
+        model_name = p("model", "surrogate", "model rung of the feed-forward (surrogate: the shipped table)")
         mode = p("mode", SteeringParams.mode, f"feedback: {' | '.join(MODES)}", choices=MODES)
         values = {"mode": mode}
         for f in fields(SteeringParams):
@@ -87,10 +91,11 @@ class SteerNode(Node):
                                       f"{design.max_pressure:g} Pa: using the design's")
         self.design = steering_design(design, requested_max)
         self.max_pressure = self.design.max_pressure
+        allocator = steering_allocator(model_name, design, self.max_pressure)   # the rung on the shipped design
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
                                   "tip_target farther than this from the base (m) is a fault and rejected", minimum=0.0)
         self.params = SteeringParams(**values)
-        self.ctrl = SteeringController(Allocator(make_steering_model(model_name, self.design)), self.params)
+        self.ctrl = SteeringController(allocator, self.params)
         self.counters = InputCounters(extra={"design": self.design.name, "model": model_name, "mode": mode,
                                              "max_pressure_pa": f"{self.max_pressure:g}"})
         self.published = 0
@@ -99,7 +104,7 @@ class SteerNode(Node):
 
         qos = stream_qos(100)
         self.pub = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, qos)
-        self.create_subscription(PointStamped, topics.TIP_TARGET, self._on_target, qos)
+        self._target_sub = self.create_subscription(PointStamped, topics.TIP_TARGET, self._on_target, qos)
         self.create_subscription(PoseStamped, topics.TIP_MEASURED, self._on_measured, qos)
         self.create_timer(1.0 / publish_rate, self._tick)
         self._inputs_report = DiagnosticsReporter(self, self.counters, f"{NODE_NAME}: targets", self.design.name,
@@ -114,13 +119,19 @@ class SteerNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_target(self, msg: PointStamped) -> None:
+        now, arrived = self._now(), time.monotonic()
+        waiting = take_waiting(self._target_sub)
+        if waiting:                        # only the newest target matters
+            self.counters.superseded += len(waiting)
+            msg, arrived = waiting[-1]
+        arrived = now - (time.monotonic() - arrived)   # on the node's clock
         tip = (msg.point.x, msg.point.y, msg.point.z)
         for check in (check_frame(msg.header.frame_id, self.frame_id),
                       check_vector(tip, self.max_tip_distance, "tip_target", "m")):
             if not check.ok:
                 return self._reject(check.reason)
         try:
-            self.ctrl.set_target(tip, self._now())
+            self.ctrl.set_target(tip, now, arrived)
         except SteeringError as exc:
             return self._reject(str(exc))
         self.counters.accepted += 1
