@@ -312,7 +312,7 @@ class ModelNode(Node):
                                    throttle_duration_sec=WARN_THROTTLE_S)
         key = check.pressures.tobytes()
         if key == self._answered_key:    # an unchanged command: the same pose, no model call
-            positions, quats = self._answered_pose
+            positions, quats, angle = self._answered_pose
         else:
             if self._fast is not None:
                 curvature, stretch = self._fast(check.pressures)
@@ -335,12 +335,12 @@ class ModelNode(Node):
                 positions, quats = state_backbone(state, self.arc_length, self.cap, self.n_points)
             if not (np.isfinite(positions).all() and np.isfinite(quats).all()):
                 return self._model_failed(f"model gave non-finite pose for {check.pressures.tolist()} Pa")
-            self._answered_key, self._answered_pose = key, (positions, quats)
-        c.accepted += 1
-        if self.view is not None:   # the display timer picks it up (a reference, no copy)
             # the rung's own bending angle (its solved tip's, else |k| x the deformed arc): R_C past 180 deg
             angle = float(state.tip.angle) if solved is not None and state.tip is not None else \
                 math.hypot(curvature[0], curvature[1]) * self.arc_length * stretch
+            self._answered_key, self._answered_pose = key, (positions, quats, angle)
+        c.accepted += 1
+        if self.view is not None:   # the display timer picks it up (a reference, no copy)
             self.view.latest = (stamp_ns, positions, quats, check.pressures, angle)
         if self.preparation == "serialized":
             self._publish_serialized(stamp_ns, positions, quats)
