@@ -145,3 +145,32 @@ def test_annular_sector_integrals_equal_the_polar_formulas(ri, direction, span):
     np.testing.assert_allclose(i.first, [q1 * (math.sin(a1) - math.sin(a0)), q1 * (math.cos(a0) - math.cos(a1))],
                                atol=1e-13 * ro**3)
     np.testing.assert_allclose(i.second, [[exact_xx, exact_xy], [exact_xy, exact_yy]], atol=1e-13 * ro**4)
+
+
+def facing_arcs(design_dict, c, rho=0.5e-3, theta=math.radians(60), wall=0.3e-3):
+    """Two D-shaped channels whose round sides face each other across x = 0: wall 2 (c - rho)."""
+    x, y, b = -c + rho * math.cos(theta), rho * math.sin(theta), math.tan(theta / 2)
+    d = copy.deepcopy(design_dict)
+    d.update(limiting_fibre=None, lumen=None, min_wall_thickness=wall, channels=[
+        {"shape": "polygon", "points": [[x, -y, b], [x, y]]},
+        {"shape": "polygon", "points": [[-x, y, b], [-x, -y]]}])
+    return d
+
+
+def test_a_wall_between_two_arcs_at_the_minimum_is_accepted_and_1_um_under_refused(design_dict):
+    d = design_from_dict(facing_arcs(design_dict, c=0.65e-3))
+    wall = d.section.wall_between(*d.section.holes)
+    assert wall.thickness == pytest.approx(0.3e-3, abs=1e-7)
+    with pytest.raises(DesignError) as info:
+        design_from_dict(facing_arcs(design_dict, c=0.65e-3 - 0.5e-6))
+    assert info.value.field == "channels[1].points" and "wall to channels[0]" in str(info.value)
+
+
+def test_a_wall_between_two_radial_edges_at_the_minimum_is_accepted_and_1_um_under_refused(design_dict):
+    ri, w = 1.25e-3, 0.5e-3
+    gap = 2 * math.degrees(math.asin(w / (2 * ri)))     # between the inner corners of the two sectors
+    d = design_from_dict(sector_design(design_dict, span=180.0 - gap, fillet=0.0, n=2, ri=ri))
+    assert d.section.wall_between(*d.section.channels).thickness == pytest.approx(w, abs=1e-12)
+    gap_under = 2 * math.degrees(math.asin((w - 1e-6) / (2 * ri)))
+    with pytest.raises(DesignError, match="thinner than the minimum"):
+        design_from_dict(sector_design(design_dict, span=180.0 - gap_under, fillet=0.0, n=2, ri=ri))

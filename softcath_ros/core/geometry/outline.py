@@ -183,26 +183,37 @@ class Outline:
         return len(self.vertices) == 2 and bool(np.all(np.abs(self.bulges - self.bulges[0]) < 1e-12)) \
             and abs(abs(self.bulges[0]) - 1.0) < 1e-12
 
-    def polygon_points(self, tolerance: float = CHORD_TOLERANCE) -> np.ndarray:
-        """Vertices of a polygonal approximation (M, 2), counter-clockwise, not repeated at the end:
-        every arc cut into chords that stray from it by at most ``tolerance`` (m)."""
+    def polygon_points(self, tolerance: float = CHORD_TOLERANCE, side: str = "on") -> np.ndarray:
+        """Vertices of a polygonal approximation (M, 2), counter-clockwise, not repeated at the end,
+        within ``tolerance`` (m) of every arc. ``side``: ``on`` (vertices on the arcs, chords
+        between), ``outside`` (a polygon containing the outline: tangent lines round arcs that bulge
+        out, chords of arcs that bulge in) or ``inside`` (a polygon inside the outline)."""
+        if side not in ("on", "outside", "inside"):
+            raise ValueError(f"side must be 'on', 'outside' or 'inside', not {side!r}")
         pts = []
         for e in self.edges():
+            pts.append(e.start)
             if isinstance(e, Line):
-                pts.append(e.start)
                 continue
             step = 2.0 * math.acos(max(-1.0, 1.0 - tolerance / e.radius)) if tolerance < e.radius else math.pi
             sagitta = e.radius * (1.0 - math.cos(0.5 * e.sweep))
             n = 1 if sagitta <= tolerance else max(1, math.ceil(abs(e.sweep) / step - 1e-9))
-            t = e.start_angle + e.sweep * np.arange(n) / n
-            pts.extend(zip(e.center[0] + e.radius * np.cos(t), e.center[1] + e.radius * np.sin(t)))
+            tangents = side != "on" and (side == "outside") == (e.sweep > 0)
+            if not tangents:
+                t = e.start_angle + e.sweep * np.arange(1, n) / n
+                radius = e.radius
+            else:   # the corners of tangent lines, each piece at most a quarter turn
+                n = max(n, math.ceil(abs(e.sweep) / (0.5 * math.pi) - 1e-9))
+                t = e.start_angle + e.sweep * (np.arange(n) + 0.5) / n
+                radius = e.radius / math.cos(0.5 * e.sweep / n)
+            pts.extend(zip(e.center[0] + radius * np.cos(t), e.center[1] + radius * np.sin(t)))
         return np.asarray(pts, dtype=float)
 
-    def polygon(self, tolerance: float = CHORD_TOLERANCE):
-        """The shapely polygon of ``polygon_points(tolerance)``."""
+    def polygon(self, tolerance: float = CHORD_TOLERANCE, side: str = "on"):
+        """The shapely polygon of ``polygon_points(tolerance, side)``."""
         from shapely.geometry import Polygon
 
-        return Polygon(self.polygon_points(tolerance))
+        return Polygon(self.polygon_points(tolerance, side))
 
     @cached_property
     def shapely(self):

@@ -5,7 +5,7 @@ validation and its walls.
 ``SectionHole``: design field name, role ``channel`` | ``lumen``, exact ``outline``, shapely
 ``polygon``, the ``shape`` as written), ``fibre`` (a ``Circle`` or None). Walls are true minimum
 distances: exact where one side is a circle (the body, a circular hole, the fibre), otherwise
-between polygonal approximations within ``WALL_CHORD_TOLERANCE`` of the arcs.
+bracketed between polygons outside and inside the outlines (``bracketed_gap``).
 """
 from __future__ import annotations
 
@@ -18,12 +18,11 @@ import numpy as np
 from ..errors import DesignError
 from .outline import Outline
 
-# Chord tolerance (m) of the approximations walls between two non-circular outlines are measured on;
-# such a wall is then within 2x this of the true minimum distance.
-WALL_CHORD_TOLERANCE = 1.0e-8
+# Width (m) within which a wall between two non-circular outlines is bracketed (``bracketed_gap``).
+WALL_CHORD_TOLERANCE = 1.0e-7
 # A wall this much (m) under the minimum still passes: a wall drawn at the minimum (positions typed
-# to the micrometre, a wall measured on chords) is accepted, and a refused wall never reads as the
-# minimum at the micrometre the message shows. Far below what moulding holds.
+# to the micrometre) is accepted, and a refused wall never reads as the minimum at the micrometre
+# the message shows. Far below what moulding holds.
 WALL_TOLERANCE = 0.5e-6
 
 
@@ -135,8 +134,9 @@ class Section:
             pts = (tuple(p), tuple(p * self.outer_radius / max(float(np.hypot(*p)), 1e-300)))
         return Wall(self.outer_radius - far, (hole.name, "outer"), pts)
 
-    def wall_between(self, a: SectionHole, b: SectionHole, locate: bool = True) -> Wall:
-        """The wall between two holes; negative thickness (-1) when they overlap."""
+    def wall_between(self, a: SectionHole, b: SectionHole, locate: bool = True, decide_at: float | None = None) -> Wall:
+        """The wall between two holes; negative thickness (-1) when they overlap. ``decide_at``: a
+        thickness the answer must be on the right side of (see ``bracketed_gap``)."""
         pts = None
         if locate:
             from shapely import shortest_line
@@ -145,13 +145,11 @@ class Section:
             pts = tuple(tuple(c) for c in line.coords)
         if a.is_circle and b.is_circle:
             gap = math.dist(a.shape.center, b.shape.center) - a.shape.radius - b.shape.radius
-        elif a.polygon.intersects(b.polygon):
-            return Wall(-1.0, (a.name, b.name), pts)
         elif a.is_circle or b.is_circle:
             c, other = (a, b) if a.is_circle else (b, a)
             gap = other.outline.distance_to_point(c.shape.center) - c.shape.radius
         else:
-            gap = a.outline.polygon(WALL_CHORD_TOLERANCE).distance(b.outline.polygon(WALL_CHORD_TOLERANCE))
+            gap = bracketed_gap(a.outline, b.outline, decide_at)
         return Wall(gap, (a.name, b.name), pts)
 
     def walls(self) -> list[Wall]:
@@ -173,6 +171,27 @@ class Section:
         return 2.0 * line.length
 
 
+def bracketed_gap(a: Outline, b: Outline, decide_at: float | None = None) -> float:
+    """The true minimum distance between two outlines (-1 when they overlap), bracketed: polygons
+    containing the outlines give a lower bound, polygons inside them an upper bound. The chords are
+    refined until the bracket is within ``WALL_CHORD_TOLERANCE`` and wholly on one side of
+    ``decide_at`` (the acceptance threshold), or narrower than ``WALL_TOLERANCE``: a wall is
+    accepted or refused exactly, and one at the threshold to within 1 nm is accepted."""
+    tol = WALL_CHORD_TOLERANCE / 4   # each bound within 2 tol of the truth
+    while True:
+        inner_a, inner_b = a.polygon(tol, "inside"), b.polygon(tol, "inside")
+        if inner_a.intersects(inner_b):
+            return -1.0
+        upper = inner_a.distance(inner_b)
+        outer_a, outer_b = a.polygon(tol, "outside"), b.polygon(tol, "outside")
+        lower = 0.0 if outer_a.intersects(outer_b) else outer_a.distance(outer_b)
+        straddles = decide_at is not None and lower < decide_at <= upper
+        if (not straddles and upper - lower <= WALL_CHORD_TOLERANCE) or upper - lower <= WALL_TOLERANCE \
+                or tol < 1e-11:
+            return upper if straddles else 0.5 * (lower + upper)
+        tol *= 0.1
+
+
 def check_section(section: Section, min_wall: float) -> None:
     """(Outlines are checked simple as they are built, ``shapes.shape_outline``.) Holes inside the body and apart, every wall >= ``min_wall`` (true minimum
     distance, ``WALL_TOLERANCE`` allowed), the fibre inside silicone. Refusals name the field."""
@@ -187,7 +206,7 @@ def check_section(section: Section, min_wall: float) -> None:
                                             f"{min_wall * 1e3:.3f} mm")
     for i, a in enumerate(section.holes):
         for b in section.holes[i + 1:]:
-            wall = section.wall_between(a, b, locate=False)
+            wall = section.wall_between(a, b, locate=False, decide_at=min_wall - WALL_TOLERANCE)
             # name the later hole, or the shaped one of a circle and a shape (its fields place the wall)
             named, other = (a, b) if b.is_circle and not a.is_circle else (b, a)
             towards_axis = float(np.hypot(*other.centroid)) < float(np.hypot(*named.centroid))
