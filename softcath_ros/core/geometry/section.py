@@ -175,8 +175,8 @@ def bracketed_gap(a: Outline, b: Outline, decide_at: float | None = None) -> flo
     """The true minimum distance between two outlines (-1 when they overlap), bracketed: polygons
     containing the outlines give a lower bound, polygons inside them an upper bound. The chords are
     refined until the bracket is within ``WALL_CHORD_TOLERANCE`` and wholly on one side of
-    ``decide_at`` (the acceptance threshold), or narrower than ``WALL_TOLERANCE``: a wall is
-    accepted or refused exactly, and one at the threshold to within 1 nm is accepted."""
+    ``decide_at`` (the acceptance threshold), or narrower than 1 nm: a wall is accepted or refused
+    exactly, and one at the threshold to within 1 nm is accepted."""
     tol = WALL_CHORD_TOLERANCE / 4   # each bound within 2 tol of the truth
     while True:
         inner_a, inner_b = a.polygon(tol, "inside"), b.polygon(tol, "inside")
@@ -186,15 +186,15 @@ def bracketed_gap(a: Outline, b: Outline, decide_at: float | None = None) -> flo
         outer_a, outer_b = a.polygon(tol, "outside"), b.polygon(tol, "outside")
         lower = 0.0 if outer_a.intersects(outer_b) else outer_a.distance(outer_b)
         straddles = decide_at is not None and lower < decide_at <= upper
-        if (not straddles and upper - lower <= WALL_CHORD_TOLERANCE) or upper - lower <= WALL_TOLERANCE \
-                or tol < 1e-11:
+        if (not straddles and upper - lower <= WALL_CHORD_TOLERANCE) or upper - lower <= 1e-9 or tol < 1e-11:
             return upper if straddles else 0.5 * (lower + upper)
         tol *= 0.1
 
 
 def check_section(section: Section, min_wall: float) -> None:
-    """(Outlines are checked simple as they are built, ``shapes.shape_outline``.) Holes inside the body and apart, every wall >= ``min_wall`` (true minimum
-    distance, ``WALL_TOLERANCE`` allowed), the fibre inside silicone. Refusals name the field."""
+    """Holes inside the body and apart, every wall >= ``min_wall`` (true minimum distance,
+    ``WALL_TOLERANCE`` allowed), the fibre inside silicone; refusals name the field. (Outlines are
+    checked simple as they are built, ``shapes.shape_outline``.)"""
     for h in section.holes:
         wall = section.outer_wall(h, locate=False)
         field, value = h.position_field()
