@@ -240,3 +240,27 @@ def test_envelope_command_refuses_unknown_cases_in_one_line(capsys):
     assert softcath(["envelope", "--cases", "2ch 10mm"]) == 2
     err = capsys.readouterr().err.strip()
     assert "unknown" in err and "1ch 40mm" in err and len(err.splitlines()) == 1
+
+
+def test_a_node_refuses_an_offline_rung_and_the_envelope_agrees_with_each_declaration():
+    """RungInfo.live is the decision; the measured envelope backs it: every live rung answers a command
+    in well under a second on each measured design, the offline one (fe3d) takes a minute or more."""
+    from softcath_ros.core.model_selection import require_live_rung
+    from softcath_ros.core.models import available_models, rung_info
+
+    envelope = load_envelope()
+    for name in available_models():
+        costs = [d["cost_s_per_eval"] for d in envelope["rungs"].get(name, {}).get("designs", {}).values()]
+        assert costs, name
+        if rung_info(name).live:
+            assert max(costs) < 1.0, (name, costs)
+            require_live_rung(name, "implemented_5mm", envelope)
+        else:
+            assert min(costs) > 10.0, (name, costs)
+    assert not rung_info("fe3d").live
+    require_live_rung("auto", "implemented_5mm", envelope)       # a chooser, not a rung
+    with pytest.raises(ModelError, match=r"fe3d is no live rung: one command takes about 83 s for design "
+                                         r"implemented_5mm .*model:=surrogate"):
+        require_live_rung("fe3d", "implemented_5mm", envelope)
+    with pytest.raises(ModelError, match="takes a minute or more"):   # a design the envelope did not measure
+        require_live_rung("fe3d", "my_design", envelope)

@@ -238,3 +238,13 @@ def test_no_shipped_params_file_puts_a_node_on_a_real_time_class():
     for name in shipped_names("params"):
         for section, body in load_yaml_file(find("params", name)).items():
             assert body["ros__parameters"].get("realtime_priority", 0) == 0, (name, section)
+
+
+@pytest.mark.parametrize("node", ["allocation_node", "model_node", "sim_bench_node", "steer_node"])
+def test_a_node_refuses_an_offline_rung_at_once(node):
+    """model:=fe3d used to start silently and spend its first minutes timing one solve: refused in
+    one line, before any rung is built (the timeout is far below one fe3d solve)."""
+    proc = _start(node, "-p", "model:=fe3d", timeout=30.0)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "model fe3d is no live rung" in lines[0] and "model:=surrogate" in lines[0], proc.stderr

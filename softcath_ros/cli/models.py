@@ -20,7 +20,7 @@ def run(args) -> int:
         info = rung_info(name)
         doc[name] = {"summary": info.summary, "models": list(info.models), "linear_gain": info.linear_gain,
                      "solves_backbone": info.solves_backbone, "depends_on_length": info.depends_on_length,
-                     "needs": info.needs,
+                     "needs": info.needs, "live": info.live,
                      "options": {o.name: {"kind": o.kind, "description": o.description} for o in info.options},
                      "more_options": info.more_options}
     if args.json:
@@ -28,6 +28,7 @@ def run(args) -> int:
         return 0
     for name, d in doc.items():
         flags = [f for f in ("linear_gain", "solves_backbone", "depends_on_length") if d[f]]
+        flags += [] if d["live"] else ["offline only (no node serves it)"]
         print(f"{name}: {d['summary']}")
         print(f"  models: {', '.join(d['models'])}" + (f"; {', '.join(flags)}" if flags else "")
               + (f"; needs the '{d['needs']}' extra" if d["needs"] else ""))

@@ -82,6 +82,25 @@ def select_model(scene: Scene, envelope: dict | None = None) -> Selection:
     return Selection(rung=name, reason=reason, rejected=rejected)
 
 
+def require_live_rung(name: str, design_name: str, envelope: dict | None = None) -> None:
+    """ModelError unless rung ``name`` may answer a node's commands live: a rung that declares itself
+    offline only (``RungInfo.live``) is refused at once, with the seconds per command the measured
+    envelope gives for ``design_name`` where it has them (a node would otherwise wait that long at
+    start, then answer nothing meanwhile). Names that are no rung (auto) pass."""
+    from .models import RUNGS, rung_info
+
+    if name not in RUNGS or rung_info(name).live:
+        return
+    try:
+        measured = (envelope or load_envelope())["rungs"][name]["designs"][design_name]
+        cost = f"about {float(measured['cost_s_per_eval']):.0f} s for design {design_name} (the measured envelope)"
+    except (ModelError, KeyError, TypeError, ValueError):
+        cost = "a minute or more"
+    raise ModelError(f"model {name} is no live rung: one command takes {cost} and a node would answer nothing "
+                     f"meanwhile; live, use model:=surrogate (the section rung's shipped table); {name} offline: "
+                     f"`softcath predict --model {name}` or `softcath sweep --model {name}`")
+
+
 def error_over(measured: dict, high: float):
     """The measured R_C error that applies to pressures up to ``high`` (Pa): the worst at the measured
     pressures up to it and, unless ``high`` is one of them, at the next one above (which brackets the

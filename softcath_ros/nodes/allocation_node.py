@@ -39,6 +39,7 @@ from ..core.allocation import Allocator
 from ..core.errors import SoftcathError
 from ..core.command_shaping import KEEP_ALIVE_PERIOD, PressureStream, check_frame, check_vector
 from ..core.design import load_design
+from ..core.model_selection import require_live_rung
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
@@ -81,6 +82,7 @@ class AllocationNode(Node):
         refuse_unknown_parameters(self, later=("max_pressure", "max_tip_distance"))   # before the rung is built
 
         design = load_design(design_name)
+        require_live_rung(model_name, design.name)
         requested_max = p("max_pressure", design.max_pressure, "safety limit on every published pressure, Pa")
         if not requested_max > 0:
             raise SoftcathError(f"max_pressure {requested_max} Pa must be positive")

@@ -16,10 +16,11 @@ steering loop wants the pose for the pressures it commands now). A rung that ans
 in under ``INLINE_ANSWER_S`` (closed form, surrogate: ~10 us, timed at start-up) answers in the
 subscription callback, where the latency is lowest; after each answer the callback takes every
 command that arrived meanwhile from the subscription and answers those not stale, then returns
-(so timers run between). Every slower rung (rod, section, fe3d) answers on its own solve
-thread: the callback only queues the command (so the executor, and with it /diagnostics, never
-waits for a solve). An unchanged command costs no model call: the last answer is kept and sent
-again, newly stamped.
+(so timers run between). A rung that declares itself offline only (fe3d: a minute or more per
+command; ``RungInfo.live``) is refused at start, in one line. Every slower rung (rod, section)
+answers on its own solve thread: the callback only queues the command (so the executor, and
+with it /diagnostics, never waits for a solve). An unchanged command costs no model call: the
+last answer is kept and sent again, newly stamped.
 
 At ``display_rate`` (default 30 Hz, independent of the pose stream) it also publishes the live
 3D view (nodes/live_view.py): the body as a Marker, the backbone as a Path, R_C; the tip on
@@ -49,6 +50,7 @@ from ..core.answer_load import AnswerLoad
 from ..core.command_shaping import SUPERSEDE_AGE, is_superseded
 from ..core.design import load_design
 from ..core.errors import SoftcathError
+from ..core.model_selection import require_live_rung
 from ..core.kinematics import backbone_poses
 from ..core.prediction import arc_and_cap, body_reach, state_backbone
 from ..core.calibration_file import build_model, load_calibration
@@ -103,6 +105,7 @@ class ModelNode(Node):
         refuse_unknown_parameters(self, later=("max_pressure",))   # before a rung is built on a typo's default
 
         self.design = load_design(design_name)
+        require_live_rung(model_name, self.design.name)   # fe3d: refused at once, not after a first solve
         self.calibration = load_calibration(calibration_file) if calibration_file else None
         if model_name == "auto":
             from ..core.scene import load_scene

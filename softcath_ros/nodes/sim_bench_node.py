@@ -33,6 +33,7 @@ from .. import topics
 from ..bench.sim_rig import FRESH_SEED, RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 from ..core.command_shaping import CommandWatchdog
 from ..core.design import load_design
+from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
@@ -70,6 +71,7 @@ class SimBenchNode(Node):
         params = RigParams(**values)
         refuse_unknown_parameters(self, later=tuple(f"tracker_{n}" for n in asdict(TrackerParams())))
         design = load_design(design_name)
+        require_live_rung(model_name, design.name)
         model = truth_model(model_name, design, params)
         self.rig = SimulatedRig(model, params)
         self._start_tracker(p)

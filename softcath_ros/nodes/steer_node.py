@@ -38,6 +38,7 @@ from std_msgs.msg import Float64MultiArray
 from .. import topics
 from ..core.command_shaping import check_frame, check_vector
 from ..core.design import load_design
+from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
 from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
@@ -84,6 +85,7 @@ class SteerNode(Node):
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
         refuse_unknown_parameters(self, later=("max_pressure", "max_tip_distance"))   # before the rung is built
         design = load_design(design_name)
+        require_live_rung(model_name, design.name)
         requested_max = p("max_pressure", min(STEERING_MAX_PRESSURE, design.max_pressure),
                           "safety limit on every published pressure, Pa (never above the design's)", minimum=1.0)
         if requested_max > design.max_pressure:

@@ -43,6 +43,8 @@ class RungInfo:
     options: tuple[Option, ...] = ()
     more_options: str = ""           # where options not listed go (e.g. "passed to the source rung"); "" = refused
     needs: str = ""                  # optional dependency ("fe" extra), "" = none
+    live: bool = True                # answers a command within a second or so, so a node may serve it; False:
+                                     # offline only (fe3d: a minute or more per command), a node refuses it
 
     def __post_init__(self):
         unknown = [f for f in self.models if f not in FEATURES]

@@ -64,6 +64,7 @@ class Fe3dModel(BendModel):
     info = RungInfo(
         summary="3D finite elements of the whole body (NGSolve), pressure ramped with continuation",
         models=("free_bending", "device_stiffness"), needs="fe", depends_on_length=True, arc_spans_cap=True,
+        live=False,
         options=(Option("mesh_size", "float", "scales the base mesh in the section (default 1.4; 0.5 = twice as "
                                               "fine as the base)"),
                  Option("layer_h", "float", "prism height along the body in metres (default 1.2e-3; None: the "
