@@ -31,7 +31,7 @@ def star_polygon(draw):
     cx, cy = draw(st.floats(-2 * MM, 2 * MM)), draw(st.floats(-2 * MM, 2 * MM))
     angles = sorted(draw(st.lists(st.floats(0, 2 * math.pi), min_size=n, max_size=n)))
     radii = draw(st.lists(st.floats(0.0, 1.5 * MM), min_size=n, max_size=n))
-    bulges = draw(st.lists(st.one_of(st.just(0.0), st.floats(-1.5, 1.5)), min_size=n, max_size=n))
+    bulges = draw(st.lists(st.one_of(st.just(0.0), st.floats(-1.5, 1.5), st.floats(-2e6, 2e6)), min_size=n, max_size=n))
     pts = [[cx + r * math.cos(a), cy + r * math.sin(a)] + ([b] if b else []) for a, r, b in zip(angles, radii, bulges)]
     if draw(st.booleans()):                       # shuffled: often crossing itself
         pts = draw(st.permutations(pts))

@@ -26,6 +26,7 @@ _KEYS = {"circle": {"shape", "diameter", "center"},
          "file": {"shape", "path", "units", "layer", "id"}}
 MAX_POINTS = 10_000
 MIN_EDGE = 1e-9   # m: points closer than this are one point
+MAX_REACH = 0.1   # m: no hole of a catheter-scale section reaches further from the axis (design.PLAUSIBLE_SIZE)
 # m: an outline must be simple on polygons this close to its arcs (and at the default chord tolerance)
 SIMPLE_CHECK_TOLERANCE = 1e-9
 
@@ -312,6 +313,11 @@ def shape_outline(shape, field_name: str) -> Outline:
     chords = np.hypot(*(np.roll(outline.vertices, -1, axis=0) - outline.vertices).T)
     if chords.min() < MIN_EDGE:
         raise DesignError(field, value, "an edge of the outline is shorter than 1 nm")
+    reach = outline.farthest_from_origin()
+    if reach > MAX_REACH:   # before any polygon of it is made: a slip of units, not a catheter
+        hint = "; drawn in mm? (units: mm)" if isinstance(shape, FileShape) and shape.units == "m" else \
+            ": design files are in metres"
+        raise DesignError(field, value, f"the outline reaches {reach:.3g} m from the body axis, implausible{hint}")
     poly = outline.shapely
     for p in (poly, outline.polygon(SIMPLE_CHECK_TOLERANCE)):   # at the default chords and within 1 nm of the arcs
         if not p.is_valid:
