@@ -16,6 +16,7 @@ from domains import private_env
 from softcath_ros import topics
 from softcath_ros.graph import wait_ready
 from softcath_ros.graph import graph_env
+from softcath_ros.recording.reader import read_metadata
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -155,7 +156,14 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
     assert counts[topics.TIP_POSE] > 50 and counts[topics.BACKBONE] > 50
     assert counts[topics.PRESSURE_CMD] > 50 and topics.BEND_CMD not in counts  # no allocation_node
-    assert "## Hysteresis" in Path(result["report"]).read_text()
+    text = Path(result["report"]).read_text()
+    assert "## Hysteresis" in text
+    # the rig's fresh seed is recorded and shown; the overlay says why it misses; the 20 mm sample's tips
+    # are compared with the model's for 20 mm (not left out as "not the design's 40 mm")
+    rig = json.loads(read_metadata(result["recording"])["softcath"]["rig"])["rig"]
+    assert 0 <= rig["seed"] < 2**32 and f"seed {rig['seed']}," in text
+    assert f"(1 − {rig['pressure_shift']:g}) × the true pressure" in text and "softcath calibrate" in text
+    assert "| 20 |" in text.split("## Tip position")[1] and "Not compared" not in text
     # the logs stay out of the README's `softcath report runs/bench_default_*/` glob
     run_dir = Path(result["recording"]).parent
     assert [p.name for p in tmp_path.glob("bench_quick_*/")] == [run_dir.name]
