@@ -135,9 +135,9 @@ def test_a_device_must_fit_a_shaped_lumen(design_dict):
     d["lumen"] = {"shape": "polygon", "points": [[-0.0006, -0.0018], [0.0006, -0.0018], [0.0006, -0.0006],
                                                  [-0.0006, -0.0006]]}
     d["limiting_fibre"] = None
-    d["device"] = {"diameter": 0.0011, "bending_stiffness": 1e-6}
+    d["device"] = {"diameter": 0.0012, "bending_stiffness": 1e-6}    # the square's inscribed circle
     design_from_dict(d)
-    d["device"]["diameter"] = 0.0013
+    d["device"]["diameter"] = 0.0012 + 1e-7
     with pytest.raises(DesignError, match="largest circle the polygon lumen holds"):
         design_from_dict(d)
 
@@ -197,3 +197,30 @@ def test_check_of_a_bad_design_is_one_line_and_exit_2(tmp_path, capsys, design_d
     import json
     doc = json.loads(capsys.readouterr().out)
     assert doc["thinnest_wall"]["thickness_m"] == pytest.approx(0.6e-3) and doc["symmetry"]["rotation_order"] == 1
+
+
+def test_dxf_polyline_reversed_chains_and_two_loops(design_dict, tmp_path):
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    msp = doc.modelspace()
+    square = [(-0.5, 0.5), (0.5, 0.5), (0.5, 1.5), (-0.5, 1.5)]
+    msp.add_polyline2d(square, close=True, dxfattribs={"layer": "POLY"})
+    # a D from a line drawn right to left and an arc (ARCs run counter-clockwise): joined end to end
+    msp.add_line((0.6, 1.0), (-0.6, 1.0), dxfattribs={"layer": "CHAIN"})
+    msp.add_arc((0, 1.0), 0.6, 0, 180, dxfattribs={"layer": "CHAIN"})
+    msp.add_circle((0, 1.0), 0.3, dxfattribs={"layer": "TWO"})
+    msp.add_circle((0, -1.0), 0.3, dxfattribs={"layer": "TWO"})
+    msp.add_line((0, 0), (1, 0), dxfattribs={"layer": "GAP"})
+    msp.add_line((1, 0.01), (1, 1), dxfattribs={"layer": "GAP"})
+    msp.add_line((1, 1), (0, 0), dxfattribs={"layer": "GAP"})
+    path = tmp_path / "parts.dxf"
+    doc.saveas(path)
+    ch = {"shape": "file", "path": str(path), "units": "mm"}
+    poly = design_from_dict(with_channel(design_dict, {**ch, "layer": "POLY"}))
+    assert poly.channels[0].area == pytest.approx(1e-6, rel=1e-12)
+    chain = design_from_dict(with_channel(design_dict, {**ch, "layer": "CHAIN"}))
+    assert chain.channels[0].area == pytest.approx(math.pi * 0.6e-3**2 / 2, rel=1e-12)
+    for layer, words in (("TWO", "expected one closed polyline or circle"), ("GAP", "open")):
+        with pytest.raises(DesignError, match=words):
+            design_from_dict(with_channel(design_dict, {**ch, "layer": layer}))

@@ -402,7 +402,7 @@ def design_from_dict(data, source: str | None = None) -> Design:
     check_geometry(design)
     if device is not None and isinstance(lumen, ShapedHole):
         room = design.section.largest_inscribed_diameter(design.section.lumen)
-        if device.diameter > room:
+        if device.diameter > room + 1e-8:   # a device drawn to the lumen's size fits
             raise DesignError("device.diameter", device.diameter,
                               f"larger than the largest circle the {lumen.kind} lumen holds ({room:.6g} m)")
     return design

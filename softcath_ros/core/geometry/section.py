@@ -167,7 +167,8 @@ class Section:
             return 2.0 * hole.shape.radius
         from shapely import maximum_inscribed_circle
 
-        line = maximum_inscribed_circle(hole.polygon, tolerance=WALL_CHORD_TOLERANCE * 10)
+        # on a polygon within 1 nm of the arcs, the centre found to 1 nm: the diameter to within ~4 nm
+        line = maximum_inscribed_circle(hole.outline.polygon(1e-9), tolerance=1e-9)
         return 2.0 * line.length
 
 
