@@ -13,7 +13,7 @@ rclpy = pytest.importorskip("rclpy")
 cv2 = pytest.importorskip("cv2", reason="the tracker needs the vision extra (opencv-python-headless)")
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped, Vector3Stamped  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
@@ -145,6 +145,8 @@ def test_lifecycle_configure_activate_deactivate(folder, tmp_path):
             assert listener.state() == "unconfigured"
             assert not listener.transition(Transition.TRANSITION_CONFIGURE)     # the input is missing
             assert listener.state() == "unconfigured"
+            assert listener.spin(10.0, until=lambda: listener.status and listener.status["level"] == DiagnosticStatus.ERROR)
+            assert "configure failed" in listener.status["message"] and "no such file" in listener.status["message"]
             (tmp_path / "not_yet").symlink_to(root)                           # now it is there
             assert listener.transition(Transition.TRANSITION_CONFIGURE)
             assert listener.state() == "inactive"

@@ -26,6 +26,7 @@ class SceneLook:
     base_px: tuple[float, float] = (640.0, 660.0)
     axis_deg: float = -90.0                  # the unbent axis in the image (-90: straight up)
     background: str = "plain"                # or "graph" (1 mm and 10 mm lines)
+    grid_darkness: tuple = (0.12, 0.22)      # share of the paper's brightness the 1 mm / 10 mm lines take
     light: float = 0.35                      # brightness falls by up to this share across the frame
     blur_px: float = 1.2                     # Gaussian blur sigma (focus), px
     noise: float = 4.0                       # Gaussian noise sigma, grey levels
@@ -83,7 +84,7 @@ def render(theta: float, length: float, diameter: float, cap: float = 1e-3, look
     img = np.full((h, w), float(look.paper_grey), np.float32)
     if look.background == "graph":
         ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-        for pitch_mm, darken, half_px in ((1.0, 0.12, 0.6), (10.0, 0.22, 1.0)):
+        for pitch_mm, darken, half_px in ((1.0, look.grid_darkness[0], 0.6), (10.0, look.grid_darkness[1], 1.0)):
             pitch = pitch_mm / look.mm_per_px
             for coord in (xs, ys):
                 d = np.abs(((coord + 0.5) % pitch) - pitch / 2) - (pitch / 2 - half_px)

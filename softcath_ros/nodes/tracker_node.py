@@ -70,7 +70,7 @@ class TrackerNode(LifecycleNode):
         self.pub_angle = self.pub_tip = None
         self.measured = self.unmeasured = self._reported_unmeasured = 0
         self.last_reason = ""
-        self.ended = False
+        self.ended = self.configure_failed = False
         self.state_name = "unconfigured"
         from diagnostic_msgs.msg import DiagnosticArray
 
@@ -97,11 +97,12 @@ class TrackerNode(LifecycleNode):
                 source.close()
                 raise
         except SoftcathError as exc:
-            self.last_reason = str(exc)
+            self.last_reason, self.configure_failed = str(exc), True
             if not self._autostart:   # (at start-up the one line is the exit's)
                 self.get_logger().error(f"configure: {exc}")
             return TransitionCallbackReturn.FAILURE
         self.source, self.tracker = source, Tracker(scene)
+        self.configure_failed, self.last_reason = False, ""
         self.frames = iter(source)
         self.pub_angle = self.create_lifecycle_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
         self.pub_tip = self.create_lifecycle_publisher(PoseStamped, topics.TIP_MEASURED, 100)
@@ -184,8 +185,10 @@ class TrackerNode(LifecycleNode):
             level, message = DiagnosticStatus.WARN, f"{new} frame(s) not measured: {self.last_reason}"
         elif self.ended:
             level, message = DiagnosticStatus.WARN, "the input has no more frames"
+        elif self.configure_failed:
+            level, message = DiagnosticStatus.ERROR, f"configure failed: {self.last_reason}"
         else:
-            level, message = DiagnosticStatus.OK, f"{self.state_name}" + (f": {self.last_reason}" if self.last_reason else "")
+            level, message = DiagnosticStatus.OK, self.state_name
         publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.TRACKER_NODE, message, [
             ("state", self.state_name), ("input", self.input), ("frames_measured", self.measured),
             ("frames_not_measured", self.unmeasured), ("last_reason", self.last_reason)], hardware_id=self.input))
