@@ -1,6 +1,7 @@
 """core/geometry: exact outlines, section properties, walls, symmetry; shaped holes in designs."""
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -174,3 +175,21 @@ def test_a_wall_between_two_radial_edges_at_the_minimum_is_accepted_and_1_um_und
     gap_under = 2 * math.degrees(math.asin((w - 1e-6) / (2 * ri)))
     with pytest.raises(DesignError, match="thinner than the minimum"):
         design_from_dict(sector_design(design_dict, span=180.0 - gap_under, fillet=0.0, n=2, ri=ri))
+
+
+def test_a_design_turned_keeps_its_shapes_and_its_answers_turn_with_it(design_dict):
+    from softcath_ros.core.design import load_design
+
+    for d in (design_from_dict(sector_design(design_dict, n=3)), load_design("implemented_5mm"),
+              load_design(Path(__file__).resolve().parents[1] / "docs/examples/polygon.yaml")):
+        turned = d.rotated(math.radians(120.0))
+        c, s = math.cos(math.radians(120.0)), math.sin(math.radians(120.0))
+        rot = np.array([[c, -s], [s, c]])
+        for a, b in zip(d.section.holes, turned.section.holes):
+            assert b.area == pytest.approx(a.area, rel=1e-12)
+            np.testing.assert_allclose(b.centroid, rot @ a.centroid, atol=1e-15)
+        k0 = make_model("closed_form", d).curvature_per_pa
+        k1 = make_model("closed_form", turned).curvature_per_pa
+        np.testing.assert_allclose(k1, rot @ k0, atol=1e-12 * np.abs(k0).max())
+    three = design_from_dict(sector_design(design_dict, n=3))
+    assert symmetry(three.rotated(0.3).section).rotation_order == 3

@@ -184,6 +184,29 @@ class Design:
     def with_length(self, length: float) -> "Design":
         return replace(self, length=plausible_length(_positive(length, "length")))
 
+    def rotated(self, angle: float) -> "Design":
+        """The design with its section turned by ``angle`` (rad, counter-clockwise) about the body
+        axis: every hole (any shape) and the fibre, re-validated; the body is a circle."""
+        c, s = math.cos(angle), math.sin(angle)
+
+        def turn(p):
+            return [c * p[0] - s * p[1], s * p[0] + c * p[1]] + list(p[2:])
+
+        def turn_hole(spec: dict) -> dict:
+            if "center" in spec:
+                return {**spec, "center": turn(spec["center"])}
+            if spec["shape"] == "sector":
+                return {**spec, "direction": spec["direction"] + math.degrees(angle)}
+            return {**spec, "points": [turn(p) for p in spec["points"]]}
+
+        data = self.to_dict()
+        data["channels"] = [turn_hole(h) for h in data["channels"]]
+        if data["lumen"] is not None:
+            data["lumen"] = turn_hole(data["lumen"])
+        if data["limiting_fibre"] is not None:
+            data["limiting_fibre"]["center"] = turn(data["limiting_fibre"]["center"])
+        return design_from_dict(data, source=self.source)
+
     def to_dict(self) -> dict:
         """The design as a plain mapping in the design-file schema (round-trips through load)."""
         d = {
