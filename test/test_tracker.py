@@ -245,6 +245,17 @@ def test_bad_inputs_are_one_line_with_exit_2(folder, tmp_path, argv, words):
         assert w in err, err
 
 
+def test_long_inputs_show_progress(folder, monkeypatch):
+    import softcath_ros.cli.track as track
+
+    root, _ = folder
+    monkeypatch.setattr(track, "PROGRESS_FROM", 3)     # (50 frames in use)
+    code, out, err = cli("track", root, "--aruco-mm", 10, "--clamp-marker", 0, "--clamp-gap-mm", 2, "--json")
+    assert code == 0 and f"{len(ANGLES)}/{len(ANGLES)}" in err and json.loads(out)["frames_measured"] == len(ANGLES)
+    code, out, err = cli("track", root, "--aruco-mm", 10, "--clamp-marker", 0, "--clamp-gap-mm", 2, "--max-frames", 2)
+    assert code == 0 and err == "" and "2 of 2 frames measured" in out      # short: no bar
+
+
 def test_ctrl_c_keeps_what_was_measured(folder, monkeypatch):
     root, _ = folder
     real = Tracker.measure
