@@ -152,9 +152,12 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
                   f"- parameter correlation: {calibration.correlation:.3f}",
                   f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
                   f"({c['n_residuals']} readings)", ""]
+        from .calibration import MISFIT
+
         lines += calibration_caveats(c["message"], rig)
-        if c["message"]:
-            lines += [f"Solver: {c['message']}", ""]
+        solver = "; ".join(part for part in c["message"].split("; ") if part and not part.startswith(MISFIT))
+        if solver:
+            lines += [f"Solver: {solver}", ""]
     if plots:
         lines += ["## Plots", ""] + ([overlay_note, ""] if overlay_note else []) \
             + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]

@@ -66,7 +66,7 @@ def tip_pairs(measured: list[tuple[dict, np.ndarray]], model, skipped: dict | No
             if answer.converged:
                 out.append((ev, np.array(answer.tip_position_m), xyz))
             else:
-                skipped.setdefault(f"the {model.name} rung has no answer ({answer.reason[:80]})", []).append(level)
+                skipped.setdefault(f"the {model.name} rung has no answer ({answer.reason[:200]})", []).append(level)
     return out
 
 
@@ -125,7 +125,7 @@ def markdown_section(stats: list[TipStats], skipped: dict | None = None, model_l
                          f"{xyz(s.predicted)} | {xyz(s.measured)} | {s.error_mean * 1e3:.2f} | {s.error_max * 1e3:.2f} |")
         worst = max(stats, key=lambda s: s.error_mean)
         lines += ["", f"Largest mean error {worst.error_mean * 1e3:.2f} mm ({worst.drive}, {worst.phase}, "
-                  f"level {worst.level:g}).", ""]
+                  f"{_level(worst.drive, worst.level)}).", ""]
     for why, levels in skipped.items():
         steps = sorted(set(levels), key=lambda x: (x[0], x[1] != "loading", x[2] if x[1] == "loading" else -x[2]))
         shown = ", ".join(f"{d} {ph} {_level(d, lv)}" for d, ph, lv in steps[:8]) + (" ..." if len(steps) > 8 else "")
