@@ -35,6 +35,7 @@ def fine_polygon_integrals(outline, tol):
     # flat arcs of large circles (integrated over their chords) and a major arc, either way round
     Outline([(0, 0), (1e-3, 0), (1e-3, 1e-3), (0, 1e-3)], [0.02, -0.3, 0.0, 1e-4]),
     Outline([(-1e-3, 0.2e-3), (1e-3, 0.2e-3)], [0.0, 2.5]),
+    Outline([(0, 0), (0, 1e-3), (1e-3, 1e-3), (1e-3, 0)], [0.3, 0, 0, 0]),   # given clockwise
 ])
 def test_exact_integrals_are_the_limit_of_fine_polygons(outline):
     exact = outline.integrals

@@ -142,6 +142,7 @@ class Outline:
         integrals = self._integrals()
         if integrals.area < 0:        # keep every outline counter-clockwise (the integrals change sign)
             self.vertices, self.bulges = v[::-1].copy(), -np.roll(b[::-1], -1)
+            del self._edges   # the edges of the other orientation
             integrals = SectionIntegrals(-integrals.area, -integrals.first, -integrals.second)
         self.integrals = integrals
         self.vertices.setflags(write=False)
@@ -170,13 +171,17 @@ class Outline:
 
     # ---------------------------------------------------------------- edges
     def edges(self) -> list[Line | Arc]:
-        """The exact edges in order: ``Line`` or ``Arc``."""
+        """The exact edges in order: ``Line`` or ``Arc`` (a new list of the kept edges)."""
+        return list(self._edges)
+
+    @cached_property
+    def _edges(self) -> tuple[Line | Arc, ...]:
         out = []
         n = len(self.vertices)
         for i in range(n):
             p0, p1, b = self.vertices[i], self.vertices[(i + 1) % n], self.bulges[i]
             out.append(Line(tuple(p0), tuple(p1)) if b == 0 else arc_of(p0, p1, b))
-        return out
+        return tuple(out)
 
     @property
     def is_circle(self) -> bool:
@@ -191,7 +196,7 @@ class Outline:
         if side not in ("on", "outside", "inside"):
             raise ValueError(f"side must be 'on', 'outside' or 'inside', not {side!r}")
         pts = []
-        for e in self.edges():
+        for e in self._edges:
             pts.append(e.start)
             if isinstance(e, Line):
                 continue
@@ -234,7 +239,7 @@ class Outline:
         iyy = ((y0 * y0 + y0 * y1 + y1 * y1) * cross).sum() / 12.0
         ixy = ((x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0) * cross).sum() / 24.0
         second = np.array([[ixx, ixy], [ixy, iyy]])
-        for e in self.edges():
+        for e in self._edges:
             if isinstance(e, Arc):
                 a, s, m = _segment_integrals(e)
                 area, first, second = area + a, first + s, second + m
@@ -253,7 +258,7 @@ class Outline:
         """Exact shortest distance from ``p`` to the outline's edges (not signed)."""
         p = np.asarray(p, float)
         best = math.inf
-        for e in self.edges():
+        for e in self._edges:
             a, b = np.asarray(e.start), np.asarray(e.end)
             if isinstance(e, Line):
                 d = b - a
@@ -271,7 +276,7 @@ class Outline:
     def farthest_from_origin(self) -> float:
         """Exact largest distance of the outline from the origin (the body axis)."""
         far = float(np.max(np.hypot(self.vertices[:, 0], self.vertices[:, 1])))
-        for e in self.edges():
+        for e in self._edges:
             if isinstance(e, Arc):
                 c = np.asarray(e.center)
                 rho = float(np.hypot(*c))
