@@ -6,9 +6,9 @@ docs/tracker.md). A managed (lifecycle) node around ``softcath_ros.bench.tracker
   is one line and the transition fails;
 - activate: reads frames at ``rate_hz`` (a camera at its own pace) and, for each frame it can
   measure, publishes /softcath/bench/bend_angle (geometry_msgs/Vector3Stamped, vector.x = theta in
-  rad, signed) and /softcath/tip_measured (geometry_msgs/PoseStamped in softcath_base: x across, z
-  along the unbent axis, m; orientation the tip's rotation about y by theta), both stamped with the
-  time the frame was read; a frame it cannot measure publishes nothing and is counted, with its
+  rad, signed) and /softcath/tip_measured (geometry_msgs/PoseStamped in softcath_base: z along the
+  unbent axis, the across side along ``bending_direction_deg`` in the x-y plane, m; orientation the
+  tip's rotation by theta, as core/kinematics), both stamped with the time the frame was read; a frame it cannot measure publishes nothing and is counted, with its
   reason, on /diagnostics;
 - deactivate stops reading; cleanup closes the input.
 
@@ -61,6 +61,9 @@ class TrackerNode(LifecycleNode):
             mirror=p("mirror", False, "positive bending is to the left of the unbent axis as seen"))
         if self.settings["clamp_marker"] < 0:
             self.settings["clamp_marker"] = None
+        bending = math.radians(p("bending_direction_deg", 0.0, "where the positive across side points in softcath_base's "
+                                 "x-y plane, deg from +x (implemented_5mm bends to -y: -90)", minimum=-360.0, maximum=360.0))
+        self.bending = (math.cos(bending), math.sin(bending))
         self.rate_hz = p("rate_hz", 30.0, "frames read per second (a camera: at most its own rate)",
                          minimum=0.1, maximum=1000.0)
         self.loop = p("loop", False, "replay a video or folder from its start when it ends")
@@ -172,8 +175,11 @@ class TrackerNode(LifecycleNode):
         self.pub_angle.publish(a)
         t = PoseStamped()
         t.header = a.header
-        t.pose.position.x, t.pose.position.z = m.tip_mm[0] * 1e-3, m.tip_mm[1] * 1e-3
-        t.pose.orientation.y, t.pose.orientation.w = math.sin(0.5 * theta), math.cos(0.5 * theta)
+        bx, by = self.bending        # the bending plane in softcath_base: (bx, by, 0) and z
+        across, along = m.tip_mm[0] * 1e-3, m.tip_mm[1] * 1e-3
+        t.pose.position.x, t.pose.position.y, t.pose.position.z = across * bx, across * by, along
+        half = math.sin(0.5 * theta)  # rotation by theta about z x (bx, by, 0), as core/kinematics
+        t.pose.orientation.x, t.pose.orientation.y, t.pose.orientation.w = -by * half, bx * half, math.cos(0.5 * theta)
         self.pub_tip.publish(t)
 
     def diagnostics(self) -> None:
