@@ -224,3 +224,23 @@ def test_dxf_polyline_reversed_chains_and_two_loops(design_dict, tmp_path):
     for layer, words in (("TWO", "expected one closed polyline or circle"), ("GAP", "open")):
         with pytest.raises(DesignError, match=words):
             design_from_dict(with_channel(design_dict, {**ch, "layer": layer}))
+
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+DXF_TEXT = (EXAMPLES / "d_channel.dxf").read_bytes()
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(0, len(DXF_TEXT)), junk=st.binary(max_size=200), suffix=st.sampled_from([".dxf", ".svg"]))
+def test_malformed_cad_files_are_one_line_refusals(design_dict, tmp_path, cut, junk, suffix):
+    """A truncated or corrupted drawing is refused naming the field, never a traceback."""
+    data = DXF_TEXT[:cut] + junk if suffix == ".dxf" else SVG.encode()[: cut % len(SVG)] + junk
+    path = tmp_path / f"bad{suffix}"
+    path.write_bytes(data)
+    key = {"layer": "CHANNEL"} if suffix == ".dxf" else {"id": "d"}
+    try:
+        design_from_dict(with_channel(design_dict, {"shape": "file", "path": str(path), **key}))
+    except DesignError as exc:
+        assert "\n" not in str(exc) and exc.field.startswith("channels[0]")

@@ -28,14 +28,23 @@ def read_outline(path: Path, units: str, layer, element_id, field_name: str):
     if suffix == ".dxf":
         if layer is None or element_id is not None:
             raise DesignError(f"{field_name}.layer", layer, "a DXF outline is named by its layer (and no id)")
-        loop = _dxf_loop(path, str(layer), field_name)
+        read = lambda: _dxf_loop(path, str(layer), field_name)   # noqa: E731
     elif suffix == ".svg":
         if element_id is None or layer is not None:
             raise DesignError(f"{field_name}.id", element_id, "an SVG outline is named by its element id (and no layer)")
-        loop = _svg_loop(path, str(element_id), field_name, scale)
+        read = lambda: _svg_loop(path, str(element_id), field_name, scale)   # noqa: E731
     else:
         raise DesignError(f"{field_name}.path", str(path), "must be a .dxf or .svg file")
-    return tuple((x * scale, y * scale, b) for x, y, b in loop)
+    try:
+        loop = read()
+    except DesignError:
+        raise
+    except Exception as exc:   # the CAD readers raise many kinds on a malformed file: one line, not a traceback
+        raise DesignError(f"{field_name}.path", str(path), f"not a readable {suffix[1:].upper()} outline "
+                                                           f"({type(exc).__name__})") from None
+    if not all(math.isfinite(v) for p in loop for v in p):
+        raise DesignError(f"{field_name}.path", str(path), "the outline has a coordinate that is not a finite number")
+    return tuple((float(x) * scale, float(y) * scale, float(b)) for x, y, b in loop)
 
 
 # ------------------------------------------------------------------------------ DXF
