@@ -175,6 +175,8 @@ def test_lifecycle_configure_activate_deactivate(folder, tmp_path):
     ({"input": "/nonexistent/frames"}, "no such file, folder or camera"),
     ({"base_px": "500;560"}, "base_px '500;560': expected X,Y"),
     ({"mm_per_px": 0.0}, "give the scale: mm_per_px or aruco_mm"),
+    ({"lenght": 0.04}, "'lenght' (did you mean 'length'?)"),
+    ({"rate_hz": 0.0}, "rate_hz"),
     ({"mm_per_px": 0.0, "aruco_mm": 10.0, "base_px": None, "toward_px": None, "clamp_marker": 0}, "no ArUco marker"),
 ])
 def test_bad_inputs_end_the_node_in_one_line(folder, params, words):
