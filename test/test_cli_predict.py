@@ -60,14 +60,16 @@ def test_bad_input_is_one_line_error(args, fragment):
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
-def test_every_subcommand_has_help():
-    from softcath_ros.cli import SUBCOMMANDS, command_names
+def test_every_subcommand_has_help(capsys):
+    """In this process: one start-up for all (the other tests here run the CLI as a process)."""
+    from softcath_ros.cli import SUBCOMMANDS, command_names, main
 
     names = command_names()
     assert len(names) == len(SUBCOMMANDS) and "import" in names
     for name in names:
-        r = softcath(name, "--help")
-        assert r.returncode == 0 and "usage" in r.stdout
+        assert main([name, "--help"]) == 0, name
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: softcath {name}"), (name, out[:200])
 
 
 def test_predict_reports_the_rods_own_tip_and_contact_force():
@@ -77,8 +79,10 @@ def test_predict_reports_the_rods_own_tip_and_contact_force():
     from softcath_ros.core.prediction import predict
     from softcath_ros.core.scene import load_scene
 
+    from test_rod import COARSE, GRID   # the rod tests' coarse section law: what is tested is the rung's tip
+
     bench = load_scene("blocking_force_bench")
-    rod = make_model("rod", bench.design, loads=bench.loads, mesh_size=0.005 / 12)
+    rod = make_model("rod", bench.design, loads=bench.loads, grid=GRID, cache=False, **COARSE)
     (r,) = predict(rod, np.array([[10000.0]]))
     assert r.converged and abs(r.tip_position_m[1]) < 1e-9 and r.contact_force_n > 0.005
     assert "contact_force_n" in r.to_json()
