@@ -90,7 +90,7 @@ def run_check(args) -> int:
 
 def draw_section(design, out: Path) -> Path:
     """The cross-section to ``out`` (PNG): silicone grey, channels blue, lumen orange, fibre black,
-    device dashed, thinnest wall red, neutral axis a cross; axes in mm."""
+    device dashed, thinnest wall red, neutral axis a cross, mirror lines dotted; axes in mm."""
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle as CirclePatch
     from matplotlib.patches import Polygon as PolygonPatch
@@ -113,6 +113,12 @@ def draw_section(design, out: Path) -> Path:
         centre = _device_centre(section.lumen)
         ax.add_patch(CirclePatch(centre * mm, 0.5 * design.device.diameter * mm, fill=False, ls="--", color="C2",
                                  label=f"device {design.device.diameter * mm:.2f} mm"))
+    from ..core.geometry import symmetry
+
+    r_out = section.outer_radius * mm
+    for i, m in enumerate(symmetry(section).mirrors):   # mirror lines found from the outlines
+        dx, dy = r_out * np.cos(m.angle), r_out * np.sin(m.angle)
+        ax.plot([-dx, dx], [-dy, dy], ls=":", color="0.45", lw=0.8, label="mirror lines" if i == 0 else None)
     na = transformed_section(design).neutral_axis * mm
     ax.plot(*na, "x", color="C3", ms=6, label="neutral axis")
     wall = section.thinnest_wall()
