@@ -107,8 +107,10 @@ def test_the_colour_range_segments_a_coloured_body_on_a_coloured_background():
     coloured[..., 0] = np.where(body, 40, 150) * g * 2
     coloured[..., 1] = np.where(body, 190, 160) * np.where(body, 1.0, g)
     coloured[..., 2] = np.where(body, 40, 230) * np.where(body, 1.0, g)
-    m = Tracker(scene_for(look, hsv_range=parse_hsv_range("40,100,60:80,255,255"))).measure(coloured)
-    assert_within_targets(m, truth)
+    tracker = Tracker(scene_for(look, hsv_range=parse_hsv_range("40,100,60:80,255,255")))
+    assert_within_targets(tracker.measure(coloured), truth)
+    m = tracker.measure(coloured[:, :, 1])
+    assert not m.ok and "needs colour frames" in m.reason
 
 
 def test_unmeasurable_frames_are_said_never_guessed():

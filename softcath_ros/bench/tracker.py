@@ -283,12 +283,10 @@ class Tracker:
 
     # -- the body score: 0 on the background, larger on the body -------------------------------
     def _score_images(self, frame):
-        """(image to sample, background to sample or None, its downscale): score = 1 - image / background,
-        or the colour mask itself (0..1) with ``--color``."""
+        """(image, background): score = 1 - image / background (the background sampled at 1/DOWNSCALE),
+        or (the colour mask itself (0..1), None) with ``--color``."""
         cv2 = self.cv2
         if self.scene.hsv_range is not None:
-            if frame.ndim != 3:
-                raise SoftcathError("--color needs colour frames; this input is grey")
             lo, hi = self.scene.hsv_range
             mask = cv2.inRange(cv2.cvtColor(frame, cv2.COLOR_BGR2HSV), lo, hi)
             return cv2.GaussianBlur(mask, (5, 5), 0).astype(np.float32) * (1 / 255.0), None
@@ -390,6 +388,8 @@ class Tracker:
 
         if frame is None or getattr(frame, "ndim", 0) not in (2, 3) or frame.size == 0:
             return fail("unreadable frame")
+        if self.scene.hsv_range is not None and (frame.ndim != 3 or frame.shape[2] != 3):
+            return fail("a colour range needs colour frames; this one is grey")
         images = self._score_images(frame)
         if self.contrast is None:
             why = self._calibrate(images)

@@ -73,7 +73,7 @@ class TrackerNode(LifecycleNode):
         self.pub_angle = self.pub_tip = None
         self.measured = self.unmeasured = self._reported_unmeasured = 0
         self.last_reason = ""
-        self.ended = self.configure_failed = False
+        self.ended = self.configure_failed = self.live = False
         self.state_name = "unconfigured"
         from diagnostic_msgs.msg import DiagnosticArray
 
@@ -104,7 +104,7 @@ class TrackerNode(LifecycleNode):
             if not self._autostart:   # (at start-up the one line is the exit's)
                 self.get_logger().error(f"configure: {exc}")
             return TransitionCallbackReturn.FAILURE
-        self.source, self.tracker = source, Tracker(scene)
+        self.source, self.tracker, self.live = source, Tracker(scene), source.live
         self.configure_failed, self.last_reason = False, ""
         self.frames = iter(source)
         self.pub_angle = self.create_lifecycle_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
@@ -189,6 +189,8 @@ class TrackerNode(LifecycleNode):
             level, message = DiagnosticStatus.OK, "measuring"
         elif self.state_name == "active" and not self.ended:
             level, message = DiagnosticStatus.WARN, f"{new} frame(s) not measured: {self.last_reason}"
+        elif self.ended and self.live:
+            level, message = DiagnosticStatus.ERROR, "the camera stopped delivering frames"
         elif self.ended:
             level, message = DiagnosticStatus.WARN, "the input has no more frames"
         elif self.configure_failed:
