@@ -92,6 +92,8 @@ def main() -> int:
     ap.add_argument("--realtime-priority", type=int, default=0,
                     help="SCHED_FIFO priority for the probe's threads (0: normal), as for the node")
     ap.add_argument("--discovery-timeout", type=float, default=20.0)
+    ap.add_argument("--top-pressure", type=float, default=0.0,
+                    help="Pa: drive channel 0 over 0.9 x this (default 0: the rung's own valid range)")
     args = ap.parse_args()
     # The sender thread must get the GIL within ~0.1 ms of its deadline, not after the
     # default 5 ms switch interval while the receiving thread runs callbacks.
@@ -116,7 +118,8 @@ def main() -> int:
     n_warm = int(round(args.warmup * args.rate))
     n_meas = int(round(args.duration * args.rate))
     n_total = n_warm + n_meas
-    pressures = command_pressures(n_total, design.n_channels, top_pressure(model))
+    top = args.top_pressure or top_pressure(model)
+    pressures = command_pressures(n_total, design.n_channels, top)
     state = model.evaluate(pressures[:RESIDUES])
     arc, cap = arc_and_cap(model, design.length)
     expected_tip, _ = tip_pose(state.curvature, arc * state.axial_stretch, cap)
@@ -252,7 +255,7 @@ def main() -> int:
         "node_cpu_cores": busy(window["node_cpu0"], node_cpu) / wall,
         "probe_cpu_cores": busy(window["probe_cpu0"], probe_cpu) / wall,
         "publishers": publishers,
-        "model": args.model, "design": args.design, "top_pressure_pa": top_pressure(model),
+        "model": args.model, "design": args.design, "top_pressure_pa": top,
         "node_diagnostics": diagnostics_summary(diagnostics),
     }
     out = Path(args.out)

@@ -351,6 +351,35 @@ def test_the_shipped_two_dof_pair_works_together():
             stop(proc)
 
 
+def test_a_command_backlog_does_not_hold_pressure_past_timeout_and_ramp():
+    """The default rung, saturating bend_cmd at 200 Hz for 2 s: allocations slower than the stream
+    queue commands (before the freshness rule, the watchdog was fed as each queued command was
+    handled, seconds late). Now the last command's arrival starts the 0.5 s timeout, then the
+    0.25 s ramp (50 kPa at 2e5 Pa/s): zero by +0.75 s; 1.5 s of slack for a loaded machine."""
+    domain = private_domain()
+    proc = start_node(EXE, domain, "model:=surrogate", "command_timeout:=0.5", "max_pressure_rate:=2.0e5")
+    op = Operator(domain)
+    burst = op.node.create_publisher(Vector3Stamped, topics.BEND_CMD, 1000)   # the node's queue, not ours, fills
+    try:
+        assert op.spin(60.0, until=lambda: len(op.pressures) > 3 and burst.get_subscription_count() > 0)
+        mark = len(op.pressures)
+        end, last = time.monotonic() + 2.0, None
+        while time.monotonic() < end:
+            m = Vector3Stamped()
+            m.header.frame_id = topics.FRAME_ID
+            m.vector.x, m.vector.y = 0.0, -200.0     # far beyond reach: saturates
+            last = time.monotonic()
+            burst.publish(m)
+            op.spin(0.005)
+        assert op.spin(15.0, until=lambda: any(t > last and max(p) == 0.0 for t, p in op.pressures[mark:]))
+        vented = next(t for t, p in op.pressures[mark:] if t > last and max(p) == 0.0)
+        assert max(max(p) for _, p in op.pressures[mark:]) > 40e3        # it did saturate
+        assert vented - last < 0.5 + 0.25 + 1.5, vented - last
+    finally:
+        op.close()
+        stop(proc)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_exit_on_signal(sig):
     proc = start_node(EXE, private_domain())

@@ -242,5 +242,9 @@ def test_steering_reads_the_shipped_surrogate_table_and_builds_none(monkeypatch)
     assert np.all(alloc.allocate([0.0, -200.0]).pressures <= STEERING_MAX_PRESSURE)
     allocator, truth, design = build(SteeringScenario(model="surrogate", truth="surrogate"))
     assert allocator.model.origin == "shipped" and design.max_pressure == STEERING_MAX_PRESSURE
+    # the rig's truth answers all three channels pressurised (a rate-limited change of sector), the
+    # controller's table refuses beyond its measured common-mode limit
+    three = np.array([[8e3, 12e3, 4e3]])
+    assert truth.evaluate(three).converged.all() and not allocator.model.evaluate(three).converged.any()
 
 

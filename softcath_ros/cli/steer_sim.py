@@ -31,7 +31,8 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=6.0, help="seconds of targets (default 6)")
     p.add_argument("--open-loop", action="store_true", help="run the controller open loop (feed-forward only)")
     p.add_argument("--mode", choices=("integral", "adaptive"), default="adaptive", help="feedback (closed loop)")
-    p.add_argument("--model", default="closed_form", help="rung of the controller and of the rig's truth")
+    p.add_argument("--model", default="surrogate", help="rung of the controller and of the rig's truth (default "
+                   "surrogate: the section rung's shipped table)")
     p.add_argument("--max-pressure", default=None, metavar="P",
                    help="pressure limit, e.g. 0.25bar (default 0.3 bar, lowered to the design's)")
     add_unit_argument(p, "--max-pressure")

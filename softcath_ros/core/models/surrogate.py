@@ -132,19 +132,24 @@ class SurrogateModel(BendModel):
             Option("workers", "int", "processes that build the table (default: the machine's cores, at most 8)"),
             Option("progress", "bool", "progress bars while building"),
             Option("rebuild", "bool", "build the table even if the cache or the package holds it"),
-            Option("build", "bool", "False: refuse (one line, saying why) instead of building a missing table")))
+            Option("build", "bool", "False: refuse (one line, saying why) instead of building a missing table"),
+            Option("answer_common", "bool", "answer commands whose common pressure is beyond the measured limit too "
+                   "(as pure stretch, off by more than common_tolerance there): a simulated rig's truth")))
 
     def __init__(self, design: Design, source: str = "section", source_options: dict | None = None,
                  cache: bool | str | Path = True, progress: bool = False, rebuild: bool = False,
                  table: str | Path = "", shipped: bool = True, workers: int | None = None, build: bool = True,
-                 **table_settings):
+                 answer_common: bool = False, **table_settings):
         """``source``: the rung to tabulate; ``source_options``: its options (mesh_size, ...).
         ``cache``: True (the project cache), a cache root directory, or False (build every time).
         ``table``: a table file to use (must be current). ``shipped``: use the package's table.
         ``workers``: build processes. ``progress``: tqdm bars while building. ``build``: False refuses
-        (ModelError) instead of building a table it does not find current.
+        (ModelError) instead of building a table it does not find current. ``answer_common``: answer
+        commands with all three channels pressurised beyond the measured common-mode limit too (to
+        the end of the equal-pressure table; not part of the table's key).
         ``table_settings``: ``SurrogateSettings`` fields."""
         super().__init__(design)
+        self.answer_common = bool(answer_common)
         try:
             self.settings = SurrogateSettings(source=source, source_options=dict(source_options or {}),
                                               **table_settings)
@@ -571,7 +576,8 @@ class SurrogateModel(BendModel):
             self._rotated = tab.shape[0] == 1
             self._all_ok = bool(self._cell_ok.all())
             self._cp, self._cs = t["common_p"], t["common_stretch"]
-            self._max_common = float(self.meta["max_common_pressure"])
+            self._max_common = float(self.meta.get("max_common_table_pressure", self.meta["max_common_pressure"])
+                                     if self.answer_common else self.meta["max_common_pressure"])
             self._stretch0 = float(np.interp(0.0, self._cp, self._cs)) if len(self._cp) else 1.0
             self._rot = [(float(c), float(s)) for c, s in zip(_COS, _SIN)]
 
