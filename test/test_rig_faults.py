@@ -385,8 +385,8 @@ def test_a_bench_node_that_never_spins_is_started_once_more(tmp_path, monkeypatc
     monkeypatch.setattr(characterise, "BENCH_READY_S", 3.0)
     for key, value in private_env().items():
         monkeypatch.setenv(key, value)
-    code = softcath(["characterise", "--protocol", "quick", "--output-dir", str(tmp_path)])
+    code = softcath(["characterise", "--protocol", str(_short_protocol(tmp_path)), "--output-dir", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0, out
     assert len(starts) == 2 and "not spinning after 3 s" in out and "started again" in out
-    assert len(list(tmp_path.glob("bench_quick_*/*.mcap"))) == 1
+    assert len(list(tmp_path.glob("bench_short_*/*.mcap"))) == 1
