@@ -194,3 +194,15 @@ def test_a_design_turned_keeps_its_shapes_and_its_answers_turn_with_it(design_di
         np.testing.assert_allclose(k1, rot @ k0, atol=1e-12 * np.abs(k0).max())
     three = design_from_dict(sector_design(design_dict, n=3))
     assert symmetry(three.rotated(0.3).section).rotation_order == 3
+
+
+def test_symmetry_survives_positions_typed_to_the_micrometre_and_not_a_10_um_shift(design_dict):
+    d = sector_design(design_dict, n=3)
+    r = 1.625e-3
+    d["channels"] = [{"diameter": 0.55e-3, "center": [round(r * math.cos(a), 6), round(r * math.sin(a), 6)]}
+                     for a in np.radians([90, 210, 330])]
+    sym = symmetry(design_from_dict(d).section)
+    assert sym.rotation_order == 3 and len(sym.mirrors) == 3
+    d["channels"][1]["center"][0] += 10e-6
+    sym = symmetry(design_from_dict(d).section)
+    assert sym.rotation_order == 1 and sym.mirrors == ()

@@ -3,7 +3,8 @@
 ``symmetry(section)`` returns the mirror lines through the body axis and the largest n-fold
 rotation that map the section onto itself: every hole onto a hole of the same role (the
 permutation says which), the fibre onto itself. Two outlines match when their polygons lie within
-``tolerance`` of each other (Hausdorff distance), so a shape drawn with other vertices still counts.
+``tolerance`` of each other (Hausdorff distance; default 2 um), so a shape drawn with other vertices,
+or positions typed to the micrometre, still count.
 """
 from __future__ import annotations
 
@@ -16,6 +17,9 @@ from .outline import Outline
 from .section import Section
 
 MAX_ORDER = 12
+# m: outlines this close after a mirror or turn are the same (positions typed to the micrometre are
+# each within 0.7 um of where they were meant: two of them within 1.4 um)
+SYMMETRY_TOLERANCE = 2e-6
 
 
 @dataclass(frozen=True)
@@ -44,16 +48,12 @@ class Symmetry:
         return None
 
 
-def _same_moments(a: Outline, b: Outline, tol: float) -> bool:
-    """Cheap exact test first: equal area, centroid and centroidal second moments."""
+def _alike(a: Outline, b: Outline) -> bool:
+    """Cheap first test: about the same area and place (the outlines decide, ``_matches``)."""
     ia, ib = a.integrals, b.integrals
-    if np.hypot(*(ia.centroid - ib.centroid)) > tol:
-        return False
-    scale = max(ia.area, ib.area)
-    if abs(ia.area - ib.area) > 1e-6 * scale:
-        return False
-    ja, jb = ia.centroidal_second, ib.centroidal_second
-    return bool(np.abs(ja - jb).max() <= 1e-6 * max(np.abs(ja).max(), np.abs(jb).max()))
+    size = math.sqrt(max(ia.area, ib.area))
+    return abs(ia.area - ib.area) <= 0.05 * max(ia.area, ib.area) and \
+        float(np.hypot(*(ia.centroid - ib.centroid))) <= 0.05 * size
 
 
 def _matches(section: Section, transform, tol: float):
@@ -63,10 +63,10 @@ def _matches(section: Section, transform, tol: float):
         moved = transform(hole.outline)
         found = None
         for j, other in enumerate(section.holes):
-            if other.role != hole.role or j in perm or not _same_moments(moved, other.outline, tol):
+            if other.role != hole.role or j in perm or not _alike(moved, other.outline):
                 continue
-            # the outlines themselves, coarsely (chords within 10 tol): the moments could agree by chance
-            if moved.polygon(10 * tol).hausdorff_distance(other.outline.polygon(10 * tol)) <= 21 * tol:
+            # the outlines themselves: within tol of each other (their polygons' chords within tol / 4)
+            if moved.polygon(tol / 4).hausdorff_distance(other.outline.polygon(tol / 4)) <= 1.5 * tol:
                 found = j
                 break
         if found is None:
@@ -111,11 +111,14 @@ def _distinct(angles, gap: float) -> list[float]:
 
 
 def symmetry(section: Section, tolerance: float | None = None) -> Symmetry:
-    """Mirror lines and rotation order of ``section`` (``tolerance`` m, default 1e-5 of the radius)."""
-    tol = 1e-5 * section.outer_radius if tolerance is None else tolerance
+    """Mirror lines and rotation order of ``section``: outlines that land within ``tolerance`` (m;
+    default ``SYMMETRY_TOLERANCE``, at most 1e-3 of the radius) of each other match, so a design
+    typed to the micrometre keeps its symmetry."""
+    tol = min(SYMMETRY_TOLERANCE, 1e-3 * section.outer_radius) if tolerance is None else tolerance
+    same_line = max(1e-4, 10.0 * tol / section.outer_radius)   # rad: one mirror line found twice
     mirrors = []
     for a in _candidate_mirror_angles(section):
-        if any(min(abs(a - m.angle), math.pi - abs(a - m.angle)) < 1e-4 for m in mirrors):
+        if any(min(abs(a - m.angle), math.pi - abs(a - m.angle)) < same_line for m in mirrors):
             continue   # the same line found from another part
         perm = _matches(section, lambda o, a=a: o.mirrored(a), tol)
         if perm is not None:
