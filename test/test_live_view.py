@@ -239,11 +239,19 @@ def test_where_tf2_is_importable_the_tip_frame_is_broadcast(start_node, tmp_path
     path = os.pathsep.join([str(tmp_path)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
     node = start_node("-p", "tip_frame:=catheter_tip", "-p", "display_rate:=20.0",
                       env_extra={"PYTHONPATH": path, "SOFTCATH_TEST_TF_OUT": str(out)})
+    from visualization_msgs.msg import Marker
+
+    from softcath_ros.nodes.qos import stream_qos
+
+    views = []     # whether the view was drawn, should no transform come
+    node.client.node.create_subscription(Marker, topics.BODY_MARKER, views.append, stream_qos(10))
+    node.sync()
     pt = node.client.send([25000.0])
     assert pt is not None
     node.client.spin_until(lambda: out.is_file() and out.read_text().strip(), 30.0)
     code, err = node.stop(signal.SIGTERM)
-    assert code == 0 and "tf2_ros is not importable" not in err
+    assert code == 0 and "tf2_ros is not importable" not in err and "tf2_ros failed" not in err, err
+    assert out.is_file(), f"no transform broadcast ({len(views)} view(s) drawn); the node said: {err[-1500:]}"
     sent = [json.loads(line) for line in out.read_text().splitlines()]
     assert sent, "no transform broadcast"
     t = sent[-1]
