@@ -72,6 +72,9 @@ setup(
                  # the camera tracker's tests (the `vision` extra)
                  "opencv-python-headless>=4.8"],
         "bench": ["psutil>=5.9"],
+        # regulator_node and scale_node on real devices: serial line protocols and Modbus TCP
+        # (docs/lab.md), imported lazily by the serial and modbus backends.
+        "hardware": ["pyserial>=3.5", "pymodbus>=3.6"],
         # `softcath track` and tracker_node: the camera measurement (OpenCV with ArUco, imported lazily).
         "vision": ["opencv-python-headless>=4.8"],
         # 3D finite-element rung (fe3d): NGSolve with the netgen mesher, imported lazily.
@@ -95,6 +98,8 @@ setup(
             "steer_node = softcath_ros.nodes.steer_node:main",
             "steer_driver = softcath_ros.nodes.steer_driver:main",
             "tracker_node = softcath_ros.nodes.tracker_node:main",
+            "regulator_node = softcath_ros.nodes.regulator_node:main",
+            "scale_node = softcath_ros.nodes.scale_node:main",
         ],
     },
 )

@@ -16,6 +16,7 @@ BENCH_FORCE = "/softcath/bench/force"              # DEPRECATED (unstamped): mea
 # The rig contract (docs/rig.md): stamped measurements from the standard message packages.
 PRESSURE_MEASURED_CHANNEL = "/softcath/pressure_measured/ch{channel}"  # one FluidPressure per channel, Pa
 BENCH_BEND_ANGLE = "/softcath/bench/bend_angle"    # measured bending angle (vector.x), rad
+BENCH_TARE = "/softcath/bench/tare"                # std_msgs/Empty: zero the scale (scale_node)
 BENCH_WRENCH = "/softcath/bench/wrench"            # scale reading (force.z), N, frame SCALE_FRAME_ID
 TIP_TRUE = "/softcath/bench/tip_true"              # simulated rig only: the true tip pose, for scoring
 BENCH_STEP = "/softcath/bench/step"                # protocol markers (JSON)
@@ -94,6 +95,8 @@ SIM_BENCH_NODE = "softcath_sim_bench"
 STEER_NODE = "softcath_steer"
 STEER_DRIVER = "softcath_steer_driver"
 TRACKER_NODE = "softcath_tracker"
+REGULATOR_NODE = "softcath_regulator"
+SCALE_NODE = "softcath_scale"
 # What steer-sim records.
 STEERING_RECORDED = [TIP_TARGET, TIP_MEASURED, TIP_TRUE, PRESSURE_CMD, PRESSURE_MEASURED, DIAGNOSTICS]
 

@@ -1,0 +1,125 @@
+"""The managed (lifecycle) node shape of the hardware drivers (regulator_node, scale_node) around a
+pure core of bench/hardware (``Regulator``, ``Scale``): configure builds the core and checks the
+device (a fault is one line and a failed transition; at start-up with ``autostart`` exit code 2),
+activate starts the ``tick`` timer at ``rate_hz``, deactivate stops it (the core vents), cleanup,
+shutdown and the way out on SIGINT/SIGTERM (``finish``, runtime.run_node) close the core (which
+vents first). A core that goes to ``error`` is logged and on /diagnostics at once."""
+from __future__ import annotations
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+from .. import topics
+from ..bench.hardware.devices import DeviceFault
+from ..core.errors import SoftcathError
+
+
+class DeviceNode(LifecycleNode):
+    executor_name = "single"
+    rate_hz = 50.0
+    core = None
+
+    def make_core(self):
+        """The unconfigured core (Regulator or Scale) on its device."""
+        raise NotImplementedError
+
+    def make_publishers(self) -> list:
+        """The lifecycle publishers of the readings (created at configure)."""
+        raise NotImplementedError
+
+    def start(self, autostart: bool) -> None:
+        """Call at the end of __init__, once every parameter is declared."""
+        self.core = self.timer = None
+        self.pubs = []
+        self.configure_failed, self.last_reason = False, ""
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.create_timer(1.0, self.diagnostics)
+        self._autostart = autostart
+        if autostart:
+            self.trigger_configure()
+            if self.core is None:
+                raise SoftcathError(f"configure failed: {self.last_reason}")
+            self.trigger_activate()
+
+    @property
+    def state_name(self) -> str:
+        return "unconfigured" if self.core is None else self.core.state
+
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        try:
+            core = self.make_core()
+            ok = core.configure(time.sleep)
+            reason = core.reason
+        except (DeviceFault, SoftcathError, ValueError) as exc:
+            core, ok, reason = None, False, str(exc)
+        if not ok:
+            self.last_reason, self.configure_failed = reason, True
+            if not self._autostart:   # (at start-up the one line is the exit's)
+                self.get_logger().error(f"configure: {reason}")
+            self.diagnostics()
+            return TransitionCallbackReturn.FAILURE
+        self.core, self.configure_failed, self.last_reason = core, False, ""
+        self.pubs = self.make_publishers()
+        self._autostart = False
+        self.get_logger().info(f"configured: {core.device.name}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        self.core.activate()
+        self.timer = self.create_timer(1.0 / self.rate_hz, self._tick)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        self._stop_timer()
+        self.core.deactivate()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def finish(self) -> int:
+        """On the way out (SIGINT/SIGTERM or a fault): the core vents and closes its device."""
+        self._release()
+        return 0
+
+    def _stop_timer(self) -> None:
+        if self.timer is not None:
+            self.destroy_timer(self.timer)
+            self.timer = None
+
+    def _release(self) -> None:
+        self._stop_timer()
+        if self.core is not None:
+            self.core.close()
+            self.core = None
+            for pub in self.pubs:
+                self.destroy_lifecycle_publisher(pub)
+            self.pubs = []
+
+    def _tick(self) -> None:
+        was = self.core.state
+        self.tick()
+        if self.core.state == "error" and was != "error":
+            self.get_logger().error(self.core.reason)
+            self.diagnostics()                      # at once, not at the next 1 Hz report
+
+    def level_and_message(self, problems: list[str]) -> tuple[int, str]:
+        """/diagnostics level and message: ERROR when configure failed or the core is in error,
+        WARN with ``problems`` (what the core counted), else OK with the state."""
+        if self.core is None:
+            if self.configure_failed:
+                return DiagnosticStatus.ERROR, f"configure failed: {self.last_reason}"
+            return DiagnosticStatus.OK, "unconfigured"
+        if self.core.state == "error":
+            return DiagnosticStatus.ERROR, self.core.reason
+        problems = [p for p in problems if p]
+        if problems:
+            return DiagnosticStatus.WARN, "; ".join(problems)
+        return DiagnosticStatus.OK, self.core.state

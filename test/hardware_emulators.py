@@ -1,0 +1,198 @@
+"""Emulated devices for the hardware tests: a serial regulator and a serial scale on a
+pseudo-terminal (the host opens the pty's name with pyserial, as a USB serial port), and a Modbus
+TCP regulator (pymodbus server on 127.0.0.1, a free port). Each can be told to die, lie or flood.
+
+Run in a thread (``start()``) they behave as firmware does, for the node tests; the pure tests drive
+the pty by hand (``say`` / ``heard``) so that nothing depends on timing."""
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import threading
+import time
+
+MODES = ("ok", "dead", "nan", "range", "flood", "garbage")
+
+
+class PtyDevice:
+    """The device end of a pseudo-terminal; ``port`` is what the host opens."""
+
+    def __init__(self):
+        self.master, slave = os.openpty()
+        self.port = os.ttyname(slave)
+        self._slave = slave          # kept open so the line stays up while the host reopens it
+        import tty
+
+        tty.setraw(slave)
+        os.set_blocking(self.master, False)
+        self._pending = b""
+        self._outbox = b""
+        self.lines: list[str] = []   # every line the host sent
+        self.mode = "ok"
+        self._stop = threading.Event()
+        self._thread = None
+
+    def say(self, text: str) -> None:
+        """Queue ``text`` and write what the pty takes now (``flush`` writes the rest later); a host
+        that does not read loses the oldest bytes beyond 64 kB, as a device's buffer would."""
+        self._outbox = (self._outbox + text.encode("latin-1"))[-65536:]
+        self.flush()
+
+    def flush(self) -> int:
+        """Write what the pty takes of the queue; the bytes still waiting."""
+        while self._outbox:
+            try:
+                n = os.write(self.master, self._outbox[:4096])
+            except (BlockingIOError, OSError):
+                break
+            self._outbox = self._outbox[n:]
+        return len(self._outbox)
+
+    def heard(self) -> list[str]:
+        """Read what the host sent since the last call (complete lines)."""
+        new = []
+        while True:
+            try:
+                data = os.read(self.master, 65536)
+            except (BlockingIOError, OSError):
+                break
+            if not data:
+                break
+            self._pending += data
+        *done, self._pending = self._pending.split(b"\n")
+        for raw in done:
+            line = raw.decode("ascii", errors="replace").strip()
+            self.lines.append(line)
+            new.append(line)
+        return new
+
+    def start(self, period: float = 0.02):
+        self._thread = threading.Thread(target=self._run, args=(period,), daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self, period):
+        while not self._stop.is_set():
+            for line in self.heard():
+                self.on_line(line)
+            if self.mode != "dead":
+                try:
+                    self.say(self.report())
+                except OSError:
+                    pass
+            time.sleep(period)
+
+    def close(self):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        for fd in (self.master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class SerialRegulatorEmulator(PtyDevice):
+    """Firmware of firmware/regulator: follows SET at once, vents on VENT, reports ``P`` lines."""
+
+    def __init__(self, n_channels: int = 1):
+        super().__init__()
+        self.setpoints = [0.0] * n_channels
+
+    def on_line(self, line):
+        parts = line.split()
+        if parts == ["VENT"]:
+            self.setpoints = [0.0] * len(self.setpoints)
+        elif len(parts) == 3 and parts[0] == "SET":
+            self.setpoints[int(parts[1])] = float(parts[2])
+
+    def report(self) -> str:
+        if self.mode == "nan":
+            return "".join(f"P {c} nan\n" for c in range(len(self.setpoints)))
+        if self.mode == "range":
+            return "".join(f"P {c} 99000000\n" for c in range(len(self.setpoints)))
+        if self.mode == "garbage":
+            return "\x00\xff" * 500
+        lines = "".join(f"P {c} {p:.0f}\n" for c, p in enumerate(self.setpoints))
+        return lines * (200 if self.mode == "flood" else 1)
+
+
+class SerialScaleEmulator(PtyDevice):
+    """Firmware of firmware/scale: ``F`` lines of ``load - tare``; ``TARE`` zeroes at the present load."""
+
+    def __init__(self, load: float = 0.0):
+        super().__init__()
+        self.load, self.offset, self.tares = load, 0.0, 0
+
+    def on_line(self, line):
+        if line == "TARE":
+            self.offset, self.tares = self.load, self.tares + 1
+
+    def report(self) -> str:
+        if self.mode == "nan":
+            return "F nan\n"
+        return f"F {self.load - self.offset:.5f}\n"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ModbusRegulatorEmulator:
+    """A valve terminal on Modbus TCP: holding registers 0.. are the setpoints (counts), input
+    registers 100.. the readings, which follow the setpoints (``mode`` 'range': 65535 counts,
+    a reading beyond any sensor). ``stop()`` kills it (connections refused from then on)."""
+
+    def __init__(self, n_channels: int = 1, reading_base: int = 100, unit: int = 1):
+        from pymodbus.server import ModbusTcpServer
+        from pymodbus.simulator import DataType, SimData, SimDevice
+
+        self.n, self.base, self.mode = n_channels, reading_base, "ok"
+        self.writes: list[tuple[int, int]] = []      # (register, counts) the host wrote
+        self.port = free_port()
+        device = SimDevice(id=unit, simdata=[SimData(0, count=reading_base + n_channels, values=0,
+                                                     datatype=DataType.REGISTERS)], action=self._action)
+        self.loop = asyncio.new_event_loop()
+        self.server = None
+        self._make = lambda: ModbusTcpServer(device, address=("127.0.0.1", self.port))
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+        self._wait_listening()
+
+    async def _action(self, function_code, start_address, address, count, registers, set_values):
+        if set_values is not None:
+            self.writes += [(address + i, int(v)) for i, v in enumerate(set_values)]
+            return None
+        for c in range(self.n):
+            registers[self.base + c - start_address] = 65535 if self.mode == "range" else registers[c - start_address]
+        return None
+
+    def _serve(self):
+        async def serve():
+            self.server = self._make()          # (pymodbus builds its transport on the running loop)
+            await self.server.serve_forever()
+
+        asyncio.set_event_loop(self.loop)
+        try:
+            self.loop.run_until_complete(serve())
+        except Exception:
+            pass
+
+    def _wait_listening(self, timeout: float = 20.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
+                return
+            except OSError:
+                time.sleep(0.02)
+        raise RuntimeError("the Modbus emulator did not start listening")
+
+    def stop(self):
+        if self.loop.is_running() and self.server is not None:
+            asyncio.run_coroutine_threadsafe(self.server.shutdown(), self.loop).result(timeout=10)
+        self._thread.join(timeout=10)
