@@ -51,6 +51,7 @@ from ..core.command_shaping import SUPERSEDE_AGE, is_superseded
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..core.model_selection import require_live_rung
+from ..core.models import RUNGS, rung_info, run_options
 from ..core.kinematics import backbone_poses
 from ..core.prediction import arc_and_cap, body_reach, state_backbone
 from ..core.calibration_file import build_model, load_calibration
@@ -59,7 +60,7 @@ from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
-from .runtime import EXECUTORS, run_node, take_waiting
+from .runtime import EXECUTORS, interruptible_start, run_node, take_waiting
 
 FRAME_ID = topics.FRAME_ID
 WARN_THROTTLE_S = 1.0
@@ -180,12 +181,17 @@ class ModelNode(Node):
             + f" (a command waiting over {self.supersede_age * 1e3:g} ms behind a newer one is superseded)")
 
     def _make_model(self, model_name: str):
-        """The rung, saying so when start-up waits for it: a surrogate whose table is neither shipped
-        nor in the cache builds it here (seconds for 1 channel, tens of seconds for 3 channels)."""
-        if model_name == "surrogate":
-            self.get_logger().info("model surrogate: loading its table (built now if neither shipped nor cached)")
+        """The rung, saying so when start-up may wait for it: a rung that builds something when neither
+        shipped nor cached (``RungInfo.builds``: the surrogate's table, the rod's law) says what and how
+        long, and shows its progress bars (stderr)."""
+        builds = rung_info(model_name).builds if model_name in RUNGS else ""
+        if builds:
+            self.get_logger().info(f"model {model_name}: loading; if neither shipped nor cached it builds {builds} "
+                                   "now, with progress below (SIGINT stops it)")
         t0 = time.perf_counter()
-        model = build_model(model_name, self.design, self.calibration)
+        with interruptible_start():
+            model = build_model(model_name, self.design, self.calibration,
+                                **(run_options(model_name, progress=True) if builds else {}))
         took = time.perf_counter() - t0
         if model.built_now:
             self.get_logger().warning(

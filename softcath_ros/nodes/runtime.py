@@ -21,6 +21,7 @@ import os
 import signal
 import sys
 import time
+from contextlib import contextmanager
 from typing import Callable
 
 from ..core.errors import SoftcathError, shown
@@ -114,6 +115,31 @@ def params_files(argv: list[str]) -> list[str]:
     """The ``--params-file PATH`` arguments among the ROS arguments of ``argv``."""
     ros = ros_arguments(argv)
     return [ros[i + 1] if i + 1 < len(ros) else "" for i, a in enumerate(ros) if a == "--params-file"]
+
+
+_start_interruptible = [False]
+_sigint_seen = [False]
+
+
+def _on_sigint(signum, frame) -> None:
+    _sigint_seen[0] = True
+    if _start_interruptible[0]:
+        _start_interruptible[0] = False
+        raise KeyboardInterrupt
+
+
+@contextmanager
+def interruptible_start():
+    """Long start-up work (a rung building its table) that SIGINT stops at once, also a SIGINT that
+    came just before it: run_node ends the process cleanly (exit 0, one line) instead of letting
+    the build finish first."""
+    if _sigint_seen[0]:
+        raise KeyboardInterrupt
+    _start_interruptible[0] = True
+    try:
+        yield
+    finally:
+        _start_interruptible[0] = False
 
 
 def started_params_files() -> list[str]:
@@ -223,8 +249,9 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
     # (an except clause, the bench recording's finalisation) and print a traceback. A no-op
     # Python handler, installed before rclpy.init so rclpy still chains to it, leaves the
-    # shutdown to the context alone, as for SIGTERM.
-    signal.signal(signal.SIGINT, lambda signum, frame: None)
+    # shutdown to the context alone, as for SIGTERM. Inside ``interruptible_start`` (a table
+    # being built at start-up) it raises KeyboardInterrupt, so the build stops at once.
+    signal.signal(signal.SIGINT, _on_sigint)
     default_to_localhost_discovery()
     try:
         argv = sys.argv if args is None else list(args)
@@ -248,6 +275,9 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
         except startup_errors as exc:
             print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:      # SIGINT inside interruptible_start
+            print("[INFO] stopped during start-up (SIGINT)", file=sys.stderr)
+            return 0
         try:    # each node refuses these itself before acting on its parameters; this covers every node
             refuse_unknown_parameters(node)
         except SoftcathError as exc:

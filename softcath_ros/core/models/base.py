@@ -45,6 +45,8 @@ class RungInfo:
     needs: str = ""                  # optional dependency ("fe" extra), "" = none
     live: bool = True                # answers a command within a second or so, so a node may serve it; False:
                                      # offline only (fe3d: a minute or more per command), a node refuses it
+    builds: str = ""                 # what constructing it computes when neither shipped nor cached (a node says
+                                     # so at start and shows progress: its ``progress`` option); "" = nothing slow
 
     def __post_init__(self):
         unknown = [f for f in self.models if f not in FEATURES]
