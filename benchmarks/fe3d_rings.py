@@ -26,7 +26,7 @@ from harness import save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
-from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.experimental.fe3d_variants import Fe3dVariantModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     mesh = dataclasses.replace(MeshSettings().scaled(args.mesh_size), layer_h=args.layer)
     out = {}
     for model_name in ("membrane", "rings"):
-        model = Fe3dModel(design, mesh=mesh, reinforcement=model_name, progress=True, threads=args.threads)
+        model = Fe3dVariantModel(design, mesh=mesh, reinforcement=model_name, progress=True, threads=args.threads)
         t0 = time.perf_counter()
         state = model.evaluate(pressures[:, None] * PA_PER_BAR)
         out[model_name] = (state, model.problem.fes.ndof, time.perf_counter() - t0)

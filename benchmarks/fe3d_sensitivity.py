@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import RESULTS, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
-from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.experimental.fe3d_variants import Fe3dVariantModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 NAME = "fe3d_sensitivity"
@@ -91,7 +91,7 @@ VARIANTS = {
 def run_variant(name: str, length: float, threads: int) -> dict:
     what, change, options = VARIANTS[name]
     design = change(load_design("implemented_5mm").with_length(length))
-    model = Fe3dModel(design, cache=True, progress=True, threads=threads, **options)
+    model = Fe3dVariantModel(design, cache=True, progress=True, threads=threads, **options)
     pressures = np.array(PRESSURES_BAR)[:, None] * PA_PER_BAR
     t0 = time.perf_counter()
     state = model.evaluate(pressures)

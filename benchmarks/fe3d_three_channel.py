@@ -37,7 +37,8 @@ from harness import RESULTS, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
-from softcath_ros.core.models.fe3d import DEFAULT_MESH_SIZE, Fe3dModel  # noqa: E402
+from softcath_ros.core.models.fe3d import DEFAULT_MESH_SIZE  # noqa: E402
+from softcath_ros.experimental.fe3d_variants import Fe3dVariantModel  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 DIRECTIONS = {"one": (1.0, 0.0, 0.0), "pair": (1.0, 1.0, 0.0), "pair21": (1.0, 0.5, 0.0)}
@@ -104,7 +105,7 @@ def run(args) -> int:
     control = default_step_control()
     if args.max_step is not None:
         control = dataclasses.replace(control, max_step=args.max_step * PA_PER_BAR)
-    model = Fe3dModel(design, mesh_size=args.mesh_size, half=not args.full, cache=False, progress=True,
+    model = Fe3dVariantModel(design, mesh_size=args.mesh_size, half=not args.full, cache=False, progress=True,
                       threads=args.threads, mirror_mesh=args.full and args.mirror_mesh, step_control=control,
                       **contact)
     prof = Profile()

@@ -24,6 +24,7 @@ from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
+from softcath_ros.experimental.fe3d_variants import Fe3dVariantModel  # noqa: E402
 
 COARSE = MeshSettings(section_h=1.0e-3, wall_h=0.7e-3, layer_h=4.5e-3, cap_layers=1)
 # Plain P2 / P0, for the tests that impose a displacement field by GridFunction.Set or read a mode's
@@ -156,7 +157,9 @@ def test_lumen_fill_is_a_soft_contact_proxy(short_design, base_ramp):
     with pytest.raises(ModelError, match="lumen_fill"):
         Fe3dModel(short_design, mesh=COARSE, lumen_fill=1.5)
     with pytest.raises(ModelError, match="formulation"):
-        Fe3dModel(short_design, mesh=COARSE, formulation="reduced")
+        Fe3dVariantModel(short_design, mesh=COARSE, formulation="reduced")
+    with pytest.raises(TypeError, match="formulation"):   # comparison-only: not an option of the rung
+        Fe3dModel(short_design, mesh=COARSE, formulation="displacement")
 
 
 def test_results_are_cached_by_design_mesh_and_settings(short_design):
@@ -260,7 +263,7 @@ def test_discrete_rings_are_resolved_bands_on_the_outer_surface(short_design):
     wide, on the outer surface; the membrane option keeps one 'outer' surface; bad names refused."""
     import ngsolve as ng
 
-    rings = Fe3dModel(short_design, mesh=COARSE, cache=False, reinforcement="rings").problem
+    rings = Fe3dVariantModel(short_design, mesh=COARSE, cache=False, reinforcement="rings").problem
     r = short_design.reinforcement
     n = int(short_design.length / r.pitch + 1e-9)
     band_area = ng.Integrate(ng.CF(1.0), rings.mesh, definedon=rings.mesh.Boundaries("ring")) * rings.mirror
@@ -268,7 +271,7 @@ def test_discrete_rings_are_resolved_bands_on_the_outer_surface(short_design):
     membrane = Fe3dModel(short_design, mesh=COARSE, cache=False).problem
     assert "ring" not in membrane.mesh.GetBoundaries()
     with pytest.raises(ModelError, match="reinforcement"):
-        Fe3dModel(short_design, mesh=COARSE, reinforcement="helix")
+        Fe3dVariantModel(short_design, mesh=COARSE, reinforcement="helix")
 
 
 def test_contact_barrier_is_c2_and_zero_beyond_its_distance():
@@ -523,7 +526,7 @@ def test_half_model_on_a_mirror_plane_equals_the_mirrored_full_model():
     problem = half_model.problem_for(p[0] / p[0].max())
     assert problem.half and math.degrees(problem.rotation) == pytest.approx(120.0)
     half = half_model.evaluate(p)
-    full_model = Fe3dModel(design, mesh=COARSE, cache=False, threads=1, half=False, mirror_mesh=True,
+    full_model = Fe3dVariantModel(design, mesh=COARSE, cache=False, threads=1, half=False, mirror_mesh=True,
                            contact_distance=None,
                            step_control=steps)
     assert not full_model.problem_for(p[0] / p[0].max()).half
@@ -940,3 +943,68 @@ def test_reused_factorisations_and_skipped_pair_searches_leave_the_ramp_unchange
     assert f_fact < f_its and u_fact >= u_its
     assert u_skip == 0 and f_skip > 0 and f_search > 0
     assert fast.min_gap_m[-1][1] < 0.02 * short_design.lumen.diameter   # the walls closed: contact active
+
+
+def test_a_channel_wall_through_the_body_axis_is_measured_not_a_netgen_traceback(implemented_design):
+    """The implemented design with its channel 0.2 mm lower: the channel's wall touches the body axis,
+    where the backbone used to be read (netgen's "Meshpoint 0 not in mesh!" as a traceback). The
+    axis point is carried with the section's rigid fit instead; a point in no element is a ModelError
+    of one line."""
+    from softcath_ros.core.fe3d.measure import _axis_in_solid, _evaluate, deformed_backbone, measure
+
+    ch = implemented_design.channels[0]
+    low = dataclasses.replace(implemented_design.with_length(0.010), min_wall_thickness=0.2e-3,
+                              channels=(dataclasses.replace(ch, center=(0.0, ch.center[1] - 0.2e-3)),))
+    problem = Fe3dModel(low, mesh=COARSE, cache=False, threads=1).problem
+    assert not _axis_in_solid(problem)
+    out = measure(problem)   # the unloaded body
+    assert out["bending_angle_rad"] == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(out["tip_position_m"], [0.0, 0.0, low.length], atol=1e-12)
+    backbone = deformed_backbone(problem, 2e-3)
+    np.testing.assert_allclose(backbone[:, :2], 0.0, atol=1e-12)
+    assert _axis_in_solid(Fe3dModel(implemented_design.with_length(0.010), mesh=COARSE, cache=False).problem)
+    with pytest.raises(ModelError, match=r"cannot read the displacement at x = 9\.000") as err:
+        _evaluate(problem, np.array([[9e-3, 0.0, 1e-3]]))
+    assert "\n" not in str(err.value)
+
+
+@pytest.fixture
+def sector_design():
+    """docs/examples/sectors.yaml (three 96 deg sectors round a central lumen), 10 mm, no device."""
+    from pathlib import Path
+
+    from softcath_ros.core.design import load_design
+
+    path = Path(__file__).resolve().parents[1] / "docs" / "examples" / "sectors.yaml"
+    return dataclasses.replace(load_design(path).with_length(0.010), device=None)
+
+
+def test_sector_channels_are_meshed_from_their_outlines_and_bend_the_body_away(sector_design):
+    """A sector design through fe3d: the section face built from the outlines (its arcs' mesh points
+    moved so the polygons enclose the exact areas, as the circles'), the half body on the mirror
+    plane of channel 0 found from the geometry, channels 1 and 2 mirror partners; pressurising
+    channel 0 (at +y) bends the body towards -y, inflates the channel and reports the whole body's
+    channel volumes."""
+    from softcath_ros.core.fe3d.measure import channel_area
+    from softcath_ros.core.fe3d.mesh import can_use_half_model, mirror_plane
+
+    d = sector_design
+    assert not can_use_half_model(d)   # channels 1 and 2 lie off x = 0
+    assert mirror_plane(d, (1.0, 0.0, 0.0)) == pytest.approx(math.pi / 2)
+    assert mirror_plane(d, (1.0, 1.0, 0.0)) is not None and mirror_plane(d, (1.0, 0.5, 0.0)) is None
+    model = Fe3dModel(d, mesh=COARSE, cache=False, threads=1, half=True, contact_distance=None,
+                      step_control=default_step_control(step=3000.0))
+    problem = model.problem_for(np.array([1.0, 0.0, 0.0]))
+    assert problem.half and problem.rotation == 0.0
+    v_open = np.array([h.area for h in d.channels]) * (d.length - d.cap_thickness)
+    rest = problem.channel_volumes()
+    np.testing.assert_allclose(rest, v_open, rtol=1e-9)   # the arcs snapped like the circles
+    rest_area = channel_area(problem, 0)
+    assert rest_area == pytest.approx(d.channels[0].area, rel=1e-9)
+    state = model.evaluate(np.array([[6000.0, 0.0, 0.0]]))
+    assert state.converged.all(), state.message
+    kx, ky = state.curvature[0]
+    assert ky < 0 and abs(kx) < 1e-6 * abs(ky)
+    vol = state.diagnostics.channel_volume[0]
+    assert vol[0] > rest[0] and vol[1] == pytest.approx(vol[2], rel=1e-9)
+    assert state.diagnostics.channel_area[0][0] > rest_area

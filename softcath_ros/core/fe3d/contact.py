@@ -35,6 +35,7 @@ import math
 import numpy as np
 
 from ..section_fe.terms.contact import KAPPA_SCALE, barrier
+from .mesh import hole_size
 
 # energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c, the section rung's
 KAPPA = KAPPA_SCALE
@@ -108,7 +109,7 @@ class LumenContact:
         # pairs are searched up to maxdist: far more than d_hat, so a wall closing by more than
         # d_hat in one Newton step is still paired at the next search, and well below the
         # lumen's radius, so the smooth wall never pairs with itself
-        self.maxdist = max(20.0 * self.d_hat, 0.15 * lumen.radius)
+        self.maxdist = max(20.0 * self.d_hat, 0.15 * hole_size(lumen))
         self.intorder = intorder
         self.tolerance = TOLERANCE * self.d_hat
         # search the pairs again at convergence and iterate on until they no longer change
@@ -152,7 +153,7 @@ class LumenContact:
         weight = weight * smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
         # and the two points must be apart on the reference wall: a neighbour along the wall
         # is not a contact partner (the section rung's exclusion of incident segments)
-        ref = ng.Norm(X.Other() - X) / lumen.radius
+        ref = ng.Norm(X.Other() - X) / hole_size(lumen)
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
         # compiled: the same values, several times faster to assemble

@@ -25,9 +25,26 @@ def best_fit_rotation(ref: np.ndarray, cur: np.ndarray) -> np.ndarray:
 
 
 def _evaluate(problem, pts: np.ndarray) -> np.ndarray:
+    """The displacement at reference points (N, 3), m. A point in no element (netgen's "Meshpoint
+    not in mesh") is a ModelError naming it, never netgen's traceback."""
+    from ..errors import ModelError
+
     mesh = problem.mesh
-    vals = problem.u(mesh(pts[:, 0], pts[:, 1], pts[:, 2]))
+    try:
+        vals = problem.u(mesh(pts[:, 0], pts[:, 1], pts[:, 2]))
+    except Exception as exc:   # netgen raises its own NgException (a RuntimeError subclass or not)
+        outside = [p for p in pts if not _in_mesh(mesh, p)]
+        where = outside[0] if outside else pts[0]
+        raise ModelError(f"fe3d: cannot read the displacement at x = {where[0] * 1e3:.3f}, y = {where[1] * 1e3:.3f}, "
+                         f"z = {where[2] * 1e3:.3f} mm: {' '.join(str(exc).split())}") from None
     return np.asarray(vals).reshape(len(pts), 3)
+
+
+def _in_mesh(mesh, p) -> bool:
+    try:
+        return mesh(float(p[0]), float(p[1]), float(p[2])).nr >= 0
+    except Exception:
+        return False
 
 
 def _mirror(pts: np.ndarray, off_plane: np.ndarray) -> np.ndarray:
@@ -115,13 +132,27 @@ def _section_pose(problem, z: float) -> tuple[np.ndarray, np.ndarray]:
     return rot, point
 
 
+# the body axis counts as in material when every empty hole's wall is at least this fraction of
+# the outer radius from it: a wall through (or at) the axis leaves the axis point on no element
+AXIS_CLEARANCE = 1e-3
+
+
 def _axis_in_solid(problem) -> bool:
-    """Whether the body axis is in material (not in an empty lumen), at the tip and at mid-length.
-    A lumen with a device or a fill is solid; the designs' channels lie off the axis."""
-    lumen = problem.design.lumen
-    if lumen is None or problem.design.device is not None or getattr(problem, "has_fill", False):
-        return True
-    return math.hypot(*lumen.center) > lumen.radius
+    """Whether the body axis is inside material (not in an empty hole nor on its wall), at the tip
+    and at mid-length. A lumen with a device or a fill is solid; a channel is empty below the cap.
+    Else the axis point is carried with the section's rigid fit."""
+    d = problem.design
+    holes = list(d.channels)
+    if d.lumen is not None and d.device is None and not getattr(problem, "has_fill", False):
+        holes.append(d.lumen)
+    clearance = AXIS_CLEARANCE * d.outer_radius
+    for h in holes:
+        if getattr(h, "kind", "circle") == "circle":
+            if math.hypot(*h.center) < h.radius + clearance:
+                return False
+        elif h.outline.contains((0.0, 0.0)) or h.outline.distance_to_point((0.0, 0.0)) < clearance:
+            return False
+    return True
 
 
 def measure(problem) -> dict:
@@ -168,14 +199,9 @@ def channel_area(problem, i: int) -> float:
     source, factor = prism.channel_shares[i]
     if source != i:
         return channel_area(problem, source)
-    hole = problem.design.channels[i]
     z_mid = prism.z_levels[prism.n_layers_channel // 2]
-    on = np.abs(np.hypot(sec.points[:, 0] - hole.center[0], sec.points[:, 1] - hole.center[1])
-                - hole.radius) < 0.1 * hole.radius
-    pts2 = sec.points[on]
-    ang = np.arctan2(pts2[:, 1] - hole.center[1], pts2[:, 0] - hole.center[0])
-    order = np.argsort(ang)  # counter-clockwise; a cut channel (x >= 0) runs -90 -> +90 deg
-    ref = np.column_stack([pts2[order], np.full(len(order), z_mid)])
+    loop = _wall_loop(sec, f"channel{i}")   # counter-clockwise; a cut channel's from x = 0 to x = 0
+    ref = np.column_stack([sec.points[loop], np.full(len(loop), z_mid)])
     cur = ref + _evaluate(problem, ref)
     if factor == 2.0:
         back = cur[::-1].copy()
@@ -183,6 +209,35 @@ def channel_area(problem, i: int) -> float:
         cur = np.vstack([cur, back])
     nxt = np.roll(cur, -1, axis=0)
     return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))
+
+
+def _wall_loop(sec, region: str) -> np.ndarray:
+    """The section's points on the wall of hole ``region`` (the edges between its triangles and
+    the silicone's), chained in order counter-clockwise about the hole: a closed wall from any
+    point, one the half model's plane cuts from its end on x = 0 to its other end."""
+    owners: dict[tuple[int, int], list[int]] = {}
+    for t, tri in enumerate(sec.triangles):
+        for j in range(3):
+            a, b = int(tri[j]), int(tri[(j + 1) % 3])
+            owners.setdefault((min(a, b), max(a, b)), []).append(t)
+    nxt = {}
+    for (a, b), ts in owners.items():
+        inside = [t for t in ts if sec.region[t] == region]
+        if len(inside) != 1 or len(ts) != 2:
+            continue
+        tri = [int(v) for v in sec.triangles[inside[0]]]
+        k = tri.index(a)
+        # the hole's triangle is left of a -> b where it runs a -> b counter-clockwise: so does the hole
+        start, end = (a, b) if tri[(k + 1) % 3] == b else (b, a)
+        nxt[start] = end
+    if not nxt:
+        return np.zeros(0, dtype=int)
+    ends = set(nxt.values())
+    first = next((p for p in nxt if p not in ends), next(iter(nxt)))   # an open wall starts at its end
+    loop = [first]
+    while loop[-1] in nxt and nxt[loop[-1]] != first and len(loop) <= len(nxt):
+        loop.append(nxt[loop[-1]])
+    return np.array(loop, dtype=int)
 
 
 def _curve_nodes(problem, surface: str) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,10 @@
 """Prism mesh of the actuator: the cross-section meshed in 2D (netgen), extruded along z.
 
-The body is a straight extrusion, so prisms fit it far better than tetrahedra: the
-section can be fine where the walls are thin while layers along z stay long.
+The section is a netgen OCC face built from the design's outlines (core/geometry: circles,
+sectors, polygons, CAD outlines; lines and circular arcs as OCC edges), meshed in 2D and
+extruded into prisms. The body is a straight extrusion, so prisms fit it far better than
+tetrahedra (an OCC solid extruded and meshed in 3D): the section can be fine where the walls
+are thin while layers along z stay long, and the circle designs keep their mesh and answers.
 Layers are split at z = L - cap so the channels end in a silicone cap.
 
 Regions of the 2D section: ``silicone``, ``fibre`` (strain-limiting thread), ``channel{i}``,
@@ -41,21 +44,49 @@ class MeshSettings:
 
 
 def can_use_half_model(design: Design) -> bool:
-    """Mirror symmetry about the y-z plane: every hole and the fibre centred on x = 0."""
-    return all(abs(centre[0]) < 1e-12 for _, centre, _, _ in _features(design))
+    """Mirror symmetry about the y-z plane with every hole and the fibre on it (centroid at x = 0)."""
+    return all(abs(centre[0]) < 1e-12 for _, centre, _, _ in _features(design)) and \
+        mirror_partners(design, math.pi / 2) is not None
 
 
-def _features(design: Design, direction=None) -> list[tuple[str, tuple[float, float], float, float]]:
-    """(kind, centre, radius, pressure per unit) of every hole and the fibre: what a mirror must map
-    onto its like."""
+def is_circle(hole) -> bool:
+    """A circular hole (``design.Hole``); any other is a ``ShapedHole`` with an outline."""
+    return getattr(hole, "kind", "circle") == "circle"
+
+
+def hole_size(hole) -> float:
+    """A hole's radius (m): a circle's own, else that of the circle of equal area (for mesh sizes
+    and scales of distance)."""
+    return hole.radius if is_circle(hole) else math.sqrt(hole.area / math.pi)
+
+
+def _features(design: Design, direction=None) -> list[tuple[str, tuple[float, float], object, float]]:
+    """(kind, centre, shape, pressure per unit) of every hole and the fibre: what a mirror must map
+    onto its like. ``shape``: a circle's radius (m), else the hole's outline."""
     d = [0.0] * design.n_channels if direction is None else [float(v) for v in direction]
-    out = [("channel", c.center, c.radius, p) for c, p in zip(design.channels, d)]
+    holes = [("channel", c, p) for c, p in zip(design.channels, d)]
     if design.lumen is not None:
-        out.append(("lumen", design.lumen.center, design.lumen.radius, 0.0))
+        holes.append(("lumen", design.lumen, 0.0))
+    out = [(kind, h.center, h.radius if is_circle(h) else h.outline, p) for kind, h, p in holes]
     if design.limiting_fibre is not None:
         f = design.limiting_fibre
         out.append(("fibre", f.center, 0.5 * f.diameter, 0.0))
     return out
+
+
+def _same_shape(a, b, angle: float, scale: float) -> bool:
+    """Whether shape ``a`` mirrored about the plane at ``angle`` is shape ``b`` (radii within
+    ``scale`` m; outlines: equal area and centroidal second moments, and within ``scale`` of
+    each other)."""
+    if isinstance(a, float) or isinstance(b, float):
+        return isinstance(a, float) and isinstance(b, float) and abs(a - b) <= scale
+    image = a.mirrored(angle)
+    ia, ib = image.integrals, b.integrals
+    ja, jb = ia.centroidal_second, ib.centroidal_second
+    if abs(ia.area - ib.area) > 1e-6 * ib.area or np.abs(ja - jb).max() > 1e-6 * np.abs(jb).max():
+        return False
+    tol = max(scale, 1e-7)
+    return image.polygon(tol).hausdorff_distance(b.polygon(tol)) <= 3 * tol
 
 
 def _reflect(point, angle: float) -> np.ndarray:
@@ -72,11 +103,11 @@ def mirror_partners(design: Design, angle: float, direction=None, tol: float = 1
     feats = _features(design, direction)
     scale = tol * design.outer_radius
     partner = []
-    for kind, centre, radius, p in feats:
+    for kind, centre, shape, p in feats:
         image = _reflect(centre, angle)
-        match = [j for j, (k2, c2, r2, p2) in enumerate(feats)
-                 if k2 == kind and abs(r2 - radius) <= scale and np.hypot(*(image - c2)) <= scale
-                 and abs(p2 - p) <= tol * max(1.0, abs(p))]
+        match = [j for j, (k2, c2, s2, p2) in enumerate(feats)
+                 if k2 == kind and np.hypot(*(image - c2)) <= scale
+                 and abs(p2 - p) <= tol * max(1.0, abs(p)) and _same_shape(shape, s2, angle, scale)]
         if not match:
             return None
         partner.append(match[0])
@@ -104,7 +135,8 @@ def mirror_plane(design: Design, direction=None) -> float | None:
 
 def rotated_section(design: Design, angle: float) -> Design:
     """The design with its section rotated by ``angle`` (rad, counter-clockwise) about the body
-    axis: every hole and the fibre moved; the body (a circle, hoop reinforcement) is unchanged."""
+    axis: every hole and the fibre moved (a shaped hole's outline turned with its centroid, its
+    shape as written kept); the body (a circle, hoop reinforcement) is unchanged."""
     from dataclasses import replace
 
     c, s = math.cos(angle), math.sin(angle)
@@ -113,8 +145,13 @@ def rotated_section(design: Design, angle: float) -> Design:
         q = (c * p[0] - s * p[1], s * p[0] + c * p[1])
         return tuple(0.0 if abs(v) < 1e-12 * design.outer_radius else v for v in q)
 
-    return replace(design, channels=tuple(replace(h, center=turn(h.center)) for h in design.channels),
-                   lumen=None if design.lumen is None else replace(design.lumen, center=turn(design.lumen.center)),
+    def moved(h):
+        if is_circle(h):
+            return replace(h, center=turn(h.center))
+        return replace(h, center=turn(h.center), outline=h.outline.rotated(angle))
+
+    return replace(design, channels=tuple(moved(h) for h in design.channels),
+                   lumen=None if design.lumen is None else moved(design.lumen),
                    limiting_fibre=None if design.limiting_fibre is None else
                    replace(design.limiting_fibre, center=turn(design.limiting_fibre.center)))
 
@@ -149,6 +186,29 @@ class SectionMesh:
     region: list[str]       # region name per triangle
 
 
+def _outline_face(outline):
+    """The netgen OCC face inside an outline (core/geometry ``Outline``: lines and circular arcs)."""
+    from netgen.occ import ArcOfCircle, Face, Pnt, Segment, Wire
+
+    edges = []
+    for e in outline.edges():
+        p0, p1 = Pnt(e.start[0], e.start[1], 0.0), Pnt(e.end[0], e.end[1], 0.0)
+        if hasattr(e, "sweep"):   # an arc: through its middle point
+            a = e.start_angle + 0.5 * e.sweep
+            mid = Pnt(e.center[0] + e.radius * math.cos(a), e.center[1] + e.radius * math.sin(a), 0.0)
+            edges.append(ArcOfCircle(p0, mid, p1))
+        else:
+            edges.append(Segment(p0, p1))
+    return Face(Wire(edges))
+
+
+def _hole_face(hole):
+    """A hole's OCC face: netgen's own circle for a circle (the mesh the circle designs always had)."""
+    from netgen.occ import Circle, Pnt
+
+    return Circle(Pnt(*hole.center), hole.radius).Face() if is_circle(hole) else _outline_face(hole.outline)
+
+
 def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionMesh:
     """Triangulate the section with netgen's OCC kernel (imported lazily)."""
     from netgen.occ import Circle, Glue, OCCGeometry, Pnt, Rectangle
@@ -159,15 +219,14 @@ def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionM
         disk = disk * Rectangle(2 * big_r, 4 * big_r).Face().Move((0, -2 * big_r, 0))
     parts = []
     body = disk
-    holes = [(f"channel{i}", c.center, c.radius) for i, c in enumerate(design.channels)
+    holes = [(f"channel{i}", c.center, hole_size(c), _hole_face(c)) for i, c in enumerate(design.channels)
              if not half or c.center[0] > -1e-9 * big_r]   # the half model keeps x >= 0
     if design.lumen is not None:
-        holes.append(("lumen", design.lumen.center, design.lumen.radius))
+        holes.append(("lumen", design.lumen.center, hole_size(design.lumen), _hole_face(design.lumen)))
     if design.limiting_fibre is not None:
         f = design.limiting_fibre
-        holes.append(("fibre", f.center, 0.5 * f.diameter))
-    for name, centre, radius in holes:
-        face = Circle(Pnt(*centre), radius).Face()
+        holes.append(("fibre", f.center, 0.5 * f.diameter, Circle(Pnt(*f.center), 0.5 * f.diameter).Face()))
+    for name, centre, radius, face in holes:
         body = body - face
         piece = face * disk if half else face
         piece.name = name
@@ -196,16 +255,24 @@ def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionM
         tris.append(v)
         region.append(names[el.index - 1])
     section = SectionMesh(points=pts, triangles=np.array(tris, dtype=int), region=region)
-    _snap_circles(section, design, holes, half)
+    kept = {"fibre": None, "lumen": design.lumen, **{f"channel{i}": c for i, c in enumerate(design.channels)}}
+    circles = [(c, r) for name, c, r, _ in holes if name == "fibre" or is_circle(kept[name])]
+    _snap_circles(section, design, circles, half)
+    for name, _, _, _ in holes:
+        if name != "fibre" and not is_circle(kept[name]):
+            for arc in kept[name].outline.edges():
+                if hasattr(arc, "sweep"):
+                    _snap_arc(section.points, arc)
     return section
 
 
 def _snap_circles(section: SectionMesh, design: Design, holes, half: bool) -> None:
-    """Move the vertices of each polygonal circle outward so the polygon encloses the circle's
-    exact area: straight-sided elements would otherwise shrink the channel by ~1/n^2,
-    which is a systematic error in the pressure's moment."""
+    """Move the vertices of each polygonal circle (the body and ``holes``: (centre, radius)) outward
+    so the polygon encloses the circle's exact area: straight-sided elements would otherwise shrink
+    the channel by ~1/n^2, which is a systematic error in the pressure's moment. (The arcs of
+    shaped outlines are not snapped: their chords lose that ~1/n^2 of the arcs' segments.)"""
     pts = section.points
-    circles = [(design.outer_radius, (0.0, 0.0))] + [(r, c) for _, c, r in holes]
+    circles = [(design.outer_radius, (0.0, 0.0))] + [(r, c) for c, r in holes]
     for radius, centre in circles:
         d = np.hypot(pts[:, 0] - centre[0], pts[:, 1] - centre[1])
         on = np.abs(d - radius) < 1e-6 * max(radius, 1e-4)
@@ -219,6 +286,29 @@ def _snap_circles(section: SectionMesh, design: Design, holes, half: bool) -> No
         polygon = 0.5 * np.sum(np.sin(gaps))   # area of the inscribed polygon / r^2
         exact = 0.5 * np.sum(gaps)
         pts[idx] = np.asarray(centre) + (pts[idx] - np.asarray(centre)) * math.sqrt(exact / polygon)
+
+
+def _snap_arc(pts: np.ndarray, arc) -> None:
+    """A shaped outline's arc (core/geometry ``Arc``) as ``_snap_circles`` does a circle: the mesh
+    points inside the arc move radially by one factor so that the polyline through them (its ends
+    held) encloses the arc's exact sector area about its centre."""
+    c = np.asarray(arc.center, dtype=float)
+    rel = pts - c
+    on = np.nonzero(np.abs(np.hypot(rel[:, 0], rel[:, 1]) - arc.radius) < 1e-6 * max(arc.radius, 1e-4))[0]
+    ang = np.arctan2(rel[on, 1], rel[on, 0])
+    along = ((ang - arc.start_angle) * math.copysign(1.0, arc.sweep)) % (2 * math.pi)
+    along = np.where(along > 2 * math.pi - 1e-9, 0.0, along)   # the start itself, rounded below it
+    keep = along <= abs(arc.sweep) + 1e-9
+    idx, along = on[keep], along[keep]
+    if len(idx) < 3:
+        return
+    order = np.argsort(along)
+    idx, gaps = idx[order], np.diff(along[order])
+    ends = math.sin(gaps[0]) + math.sin(gaps[-1])      # fan triangles with one moved point
+    middle = float(np.sum(np.sin(gaps[1:-1])))          # with two
+    exact = float(np.sum(gaps))
+    f = exact / ends if middle == 0.0 else (-ends + math.sqrt(ends * ends + 4.0 * middle * exact)) / (2.0 * middle)
+    pts[idx[1:-1]] = c + (pts[idx[1:-1]] - c) * f
 
 
 def mirrored_section(half: SectionMesh, design: Design) -> SectionMesh:

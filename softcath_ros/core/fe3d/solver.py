@@ -5,7 +5,7 @@ Lagrangian, statically condensed). Total potential, stationary at equilibrium:
 
     Pi(u, q) = int W_iso(F) + q (J - 1) - q^2 / (2 K) dX        (body, fibre, device)
              + int W_fill(F) dX                                   (optional soft lumen fill)
-             + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement: outer surface, or ring bands)
+             + int k_hoop / 2 (lambda_theta - 1)^2 dA             (reinforcement: outer surface)     
              - s sum_i d_i V_i(u)                                 (follower pressure on channel i)
 
 with s the load factor and d_i the pressure per unit s of channel i. V_i, the enclosed
@@ -22,22 +22,26 @@ Its shear modulus is a small fraction of the silicone's so that it barely stiffe
 before the walls come close (measured: benchmarks/fe3d_sensitivity.py, variant lumen_fill).
 
 Because q is element-wise constant, its optimum for a given u is the element mean of
-K (J - 1); after each Newton update q is reset to it, so Pi becomes the condensed,
-minimised energy and a backtracking line search on Pi is meaningful.
+K (J - 1); with q reset to it Pi becomes the condensed, minimised energy: the merit of
+the shifted-tangent steps.
+
+Comparison-only variants (a displacement-only element, resolved rings) live in
+softcath_ros/experimental/fe3d_variants.py, which overrides ``_build_prism``,
+``_body_energy`` and ``_reinforcement_energy``.
 """
 from __future__ import annotations
 
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..design import Design
 from ..energy import isochoric_i1, neo_hookean, yeoh
 from .contact import INTORDER, LumenContact
-from .mesh import MeshSettings, PrismMesh, build_mesh
+from .mesh import MeshSettings, PrismMesh, build_mesh, hole_size
 
 log = logging.getLogger(__name__)
 
@@ -47,9 +51,7 @@ class NewtonSettings:
     max_iterations: int = 12
     rtol: float = 1e-8          # residual norm relative to the load's norm
     energy_tol: float = 1e-9    # |du . r| relative to c1 * volume (displacement error ~ sqrt of it)
-    min_step: float = 1.0 / 64  # smallest line-search factor before the step is rejected
-    line_search: bool = False   # backtrack on the condensed energy (q reset to its optimum); experimental:
-                                # in trials it stalled where plain Newton converged
+    min_step: float = 1.0 / 64  # smallest step factor (halved from 1 while a step is rejected) before the solve fails
     threads: int = 2
     # where the Newton step is no descent direction of the energy, or every step length is
     # rejected (an indefinite tangent: past a saddle), step with the tangent shifted by
@@ -99,6 +101,19 @@ def check_element(pressure_order, interior_order) -> None:
         raise ValueError(f"interior_order must be an integer >= 3 or None, not {interior_order!r}")
 
 
+@dataclass
+class _Solve:
+    """The bookkeeping of one Newton solve (Fe3dProblem._newton)."""
+    budget: float               # iterations allowed (those on a reused factorisation count less)
+    tol: float                  # |du.r| (J) below which an iterate is converged
+    searches: int = 0           # contact pair searches at convergence
+    work: float = math.inf      # the last iteration's |du.r|
+    works: list = field(default_factory=list)   # |du.r| per iteration since the last such search
+    chord: np.ndarray | None = None   # where the last step, taken with a reused factorisation, began
+    last_work: float = math.inf       # the last increment's |du.r|
+    cuts_in_row: int = 0        # iterations in a row whose full step was rejected
+
+
 class NewtonFailure(Exception):
     """One Newton solve failed; ``reason`` says how (diverged, inverted, max iterations)."""
 
@@ -123,15 +138,11 @@ class Fe3dProblem:
 
     def __init__(self, design: Design, mesh_settings: MeshSettings = MeshSettings(),
                  newton: NewtonSettings = NewtonSettings(), half: bool | None = None,
-                 lumen_fill: float | None = None, formulation: str = "mixed", reinforcement: str = "membrane",
-                 contact_distance: float | None = None, pressure_order: int = 0, interior_order: int | None = None,
+                 lumen_fill: float | None = None, contact_distance: float | None = None, pressure_order: int = 0, interior_order: int | None = None,
                  contact_intorder: int = INTORDER):
         """``lumen_fill``: shear modulus of a soft fill in an empty lumen as a fraction of the
-        silicone's (2 c1); None leaves the lumen empty. ``formulation``: "mixed" (u, q) or
-        "displacement" (u only, volumetric energy K/2 (J-1)^2: locks, for comparison).
-        ``reinforcement``: "membrane" (homogenised hoop layer, stiffness E A / pitch on the whole
-        outer surface) or "rings" (discrete rings: E A / thread width on the bands under the
-        threads only, the mesh resolving each band). ``pressure_order``: the element pressure q's
+        silicone's (2 c1); None leaves the lumen empty. The reinforcement is a homogenised hoop
+        layer (stiffness E A / pitch) on the whole outer surface. ``pressure_order``: the element pressure q's
         order (0: P2/P0, 1: a discontinuous linear q). ``interior_order``: order (>= 3) of the
         displacement's element-interior bubbles added to P2, condensed with q (order 3: two per
         component and prism, the triangle's cubic bubble times the axial quadratic and cubic ones):
@@ -142,10 +153,8 @@ class Fe3dProblem:
         ng = _ng()
         ng.SetNumThreads(newton.threads)
         self.design = design
-        self.formulation = formulation
         self.newton_settings = newton
-        self.prism: PrismMesh = build_mesh(design, mesh_settings, half, lumen_fill=bool(lumen_fill),
-                                           rings=reinforcement == "rings")
+        self.prism: PrismMesh = self._build_prism(design, mesh_settings, half, bool(lumen_fill))
         self.half = self.prism.half
         self.mirror = 2.0 if self.half else 1.0
         mesh = self.mesh = ng.Mesh(self.prism.ngmesh)
@@ -170,12 +179,8 @@ class Fe3dProblem:
         if self.has_fill:
             mu = 2.0 * design.material.c1 * float(lumen_fill)
             a += ng.Variation(self._fill_energy(F, mu).Compile() * ng.dx(definedon=mesh.Materials("fill")))
-        r = design.reinforcement
-        if r is not None and reinforcement == "rings":
-            a += ng.Variation(self._hoop_energy(u, r.youngs_modulus * r.thread_area / r.thread_diameter)
-                              * ng.ds("ring"))
-        elif r is not None:
-            a += ng.Variation(self._hoop_energy(u, r.hoop_stiffness_per_length) * ng.ds("outer"))
+        if design.reinforcement is not None:
+            a += self._reinforcement_energy(u)
         self.volume_forms = []
         for i, _ in enumerate(design.channels):
             vol_i = self._volume_density(u)
@@ -200,7 +205,7 @@ class Fe3dProblem:
 
         self.contact = None
         if contact_distance is not None and "lumen" in mesh.GetBoundaries():
-            self.contact = LumenContact(self, float(contact_distance) * 2.0 * design.lumen.radius,
+            self.contact = LumenContact(self, float(contact_distance) * 2.0 * hole_size(design.lumen),
                                         intorder=contact_intorder)
         self.J = ng.Det(ng.Id(3) + ng.Grad(self.u))
         self.bulk_cf = mesh.MaterialCF({k: m[3] for k, m in mats.items()}, default=0.0)
@@ -218,6 +223,15 @@ class Fe3dProblem:
         self.iterations_total = 0
 
     # ------------------------------------------------------------------ energies
+    def _build_prism(self, design: Design, mesh_settings: MeshSettings, half, lumen_fill: bool) -> PrismMesh:
+        return build_mesh(design, mesh_settings, half, lumen_fill=lumen_fill)
+
+    def _reinforcement_energy(self, u):
+        """The rings homogenised: a hoop membrane of stiffness E A / pitch on the outer surface."""
+        ng = _ng()
+        stiffness = self.design.reinforcement.hoop_stiffness_per_length
+        return ng.Variation(self._hoop_energy(u, stiffness) * ng.ds("outer"))
+
     def _materials(self):
         d = self.design
         mats = {"silicone": (d.material.c1, d.material.c2, d.material.c3, d.material.bulk_modulus)}
@@ -255,8 +269,6 @@ class Fe3dProblem:
         # 0 in the fill (its own energy handles volume), where q then stays 0
         mixed = mesh.MaterialCF({k: 1.0 for k in mats}, default=0.0)
         iso = yeoh(isochoric_i1(ng.Trace(C), J), c1, c2, c3)
-        if self.formulation == "displacement":   # q decouples (stays 0); volume penalised directly
-            return iso + mixed * 0.5 * bulk * (J - 1.0) ** 2 - q * q / 2.0
         return iso + mixed * q * (J - 1.0) - q * q / (2.0 * bulk)
 
     @staticmethod
@@ -266,7 +278,7 @@ class Fe3dProblem:
         return neo_hookean(ng.Trace(F.trans * F), ng.log(ng.Det(F)), mu, mu)
 
     def _hoop_energy(self, u, stiffness_per_length):
-        """Homogenised rings: a membrane on the outer surface that resists only hoop stretch."""
+        """A membrane that resists only hoop stretch (per unit reference area, N/m)."""
         ng = _ng()
         rad = ng.sqrt(ng.x * ng.x + ng.y * ng.y)
         e_theta = ng.CF((-ng.y / rad, ng.x / rad, 0.0))
@@ -299,8 +311,6 @@ class Fe3dProblem:
         """Element-wise optimum of q for the current u (L2 projection onto constants), with the
         energy's quadrature: the default one of ``Set`` (exact for constants only) put the
         condensed energy of a bent 20 mm body 10x off (-1.03e-2 J instead of -1.01e-3 J at 0.24 bar)."""
-        if self.formulation == "displacement":
-            return
         self.q.Set(self.bulk_cf * (self.J - 1.0), bonus_intorder=4)
 
     def channel_volumes(self) -> np.ndarray:
@@ -350,12 +360,12 @@ class Fe3dProblem:
         el = self.mesh[ng.ElementId(ng.VOL, i)]
         centre = np.mean([self.mesh[v].point for v in el.vertices], axis=0)
         d = self.design
-        surfaces = {f"channel{k} wall": (c.center, c.radius) for k, c in enumerate(d.channels)}
+        surfaces = {f"channel{k} wall": c.outline for k, c in enumerate(d.channels)}
         if d.lumen is not None:
-            surfaces["lumen wall"] = (d.lumen.center, d.lumen.radius)
-        surfaces["outer surface"] = ((0.0, 0.0), d.outer_radius)
-        near = min(surfaces, key=lambda n: abs(math.hypot(centre[0] - surfaces[n][0][0],
-                                                          centre[1] - surfaces[n][0][1]) - surfaces[n][1]))
+            surfaces["lumen wall"] = d.lumen.outline
+        near = min(surfaces, key=lambda n: surfaces[n].distance_to_point(centre[:2]))
+        if d.outer_radius - math.hypot(centre[0], centre[1]) < surfaces[near].distance_to_point(centre[:2]):
+            near = "outer surface"
         return (f"{el.mat} element at x = {centre[0] * 1e3:.2f}, y = {centre[1] * 1e3:.2f}, "
                 f"z = {centre[2] * 1e3:.1f} mm, next to the {near}, {what}")
 
@@ -466,37 +476,28 @@ class Fe3dProblem:
             raise
 
     def _newton(self) -> int:
+        """Newton's loop: each iteration an increment (``_increment``), the shifted tangent's step
+        where the plain one is no descent, a step length halved while the step is rejected
+        (``_step_length``), then the convergence test (``_converged``)."""
         ng = _ng()
         st = self.newton_settings
         with ng.TaskManager():
             if not self.min_jacobian_ok():
                 raise NewtonFailure("the predictor inverted an element (det F <= 0; "
                                     f"{self.worst_element()})", 0)
-            e0 = None   # the line search's reference energy
-            if st.line_search:
-                self._update_pressure_field()
-                e0 = self.energy()
             if self.contact is not None:
                 self.contact.update()
-            # max_iterations per pairing: a new search (at convergence) starts a fresh budget
-            budget, searches, it = st.max_iterations, 0, 0
             self.sigma, self._shifted_in_solve = 0.0, 0
-            tol = st.energy_tol * self.energy_scale
-            work = math.inf
-            works: list[float] = []   # |du.r| per iteration since the last pairing search at convergence
-            chord = None              # the state where the last step, taken with a reused factorisation, began
-            last_work = math.inf      # the last step's |du.r|
-            cuts_in_row = 0           # iterations in a row whose full step was rejected
             self.last_effort = 0.0
-            while it < budget:
+            # max_iterations per pairing: a new search (at convergence) starts a fresh budget
+            s = _Solve(budget=st.max_iterations, tol=st.energy_tol * self.energy_scale)
+            it = 0
+            while it < s.budget:
                 it += 1
-                if st.stall_iterations is not None and len(works) > st.stall_iterations and \
-                        works[-1] > 0.1 * works[-1 - st.stall_iterations]:
-                    raise NewtonFailure(f"stalled: |du.r| {works[-1]:.2e} J, not a tenth of its "
-                                        f"{works[-1 - st.stall_iterations]:.2e} J {st.stall_iterations} "
-                                        "iterations before", it - 1)
+                self._check_stall(s, it)
                 t_it = time.perf_counter()
-                if self.contact is not None and it > 1 and searches == 0 and work >= self.contact.search_above * tol:
+                if self.contact is not None and it > 1 and s.searches == 0 and \
+                        s.work >= self.contact.search_above * s.tol:
                     # far from convergence the pairs of an earlier iterate are stale (the walls slide):
                     # fixed, they make the energy so nonconvex that full Newton steps cycle. After a
                     # search at convergence the pairs are fresh and stay fixed: searched again at every
@@ -504,122 +505,136 @@ class Fe3dProblem:
                     # was the state just left (a 5-iteration cycle on the coarse body at 0.3155 bar)
                     self.contact.update()
                 self.a.Apply(self.gf.vec, self.res)
-                rnorm = ng.Norm(self.res)
-                if not math.isfinite(rnorm):
+                if not math.isfinite(ng.Norm(self.res)):
                     raise NewtonFailure("residual is not finite", it)
-                fresh = self._refactor_now(it)
-                base = self.get_state()
-                if not fresh:
-                    # the increment with the factorisation held: kept while the last step contracted
-                    self._solve(self.res, self.du)
-                    self.a.Apply(self.gf.vec, self.res)
-                    slope = ng.InnerProduct(self.du, self.res)
-                    if not abs(slope) <= st.reuse_ratio * last_work:
-                        if chord is not None:
-                            # the step with the reused factorisation did not contract: back to its start
-                            # for Newton's own step there
-                            self.set_state(chord)
-                            base = chord
-                            self.a.Apply(self.gf.vec, self.res)
-                            if works:
-                                works.pop()
-                            budget += 1
-                        fresh = True
-                    elif not (slope > 0.0 and self._full_step_admissible(base)):
-                        fresh = True   # no descent, or not admissible: Newton's own step instead
-                chord = None if fresh else base
-                if not fresh:
-                    budget += 1.0 - REUSED_ITERATION_COST   # max_iterations counts full iterations' worth
-                if fresh:
-                    self._factorize()
-                    self._solve(self.res, self.du)
-                    self.a.Apply(self.gf.vec, self.res)   # (condensation overwrote it)
-                    slope = ng.InnerProduct(self.du, self.res)   # > 0: -du descends the energy
-                last_work = abs(slope)
-                self.factor_age += 1
-                self.last_effort += 1.0 if fresh else REUSED_ITERATION_COST
-                work = abs(slope)
-                if not math.isfinite(work):
+                base, slope, fresh = self._increment(s, it)
+                s.work = abs(slope)
+                if not math.isfinite(s.work):
                     raise NewtonFailure("Newton increment is not finite", it)
-                if self.shift is not None and (self.sigma > 0.0 or slope < -st.energy_tol * self.energy_scale):
+                if self.shift is not None and (self.sigma > 0.0 or slope < -s.tol):
                     # past a saddle: the plain step only once it descends the energy again
                     if not (slope > 0.0 and self._plain_step_descends(base, slope)):
-                        work, budget, e0 = self._shifted_iteration(base, it, budget, e0)
+                        s.work, s.budget = self._shifted_iteration(base, it, s.budget)
                         continue
                     self.sigma = 0.0   # Newton recovered
-                overlap0 = self.contact.overlap_area() if self.contact is not None and \
-                    self.contact.backtrack_on_overlap else 0.0
-                alpha = 1.0
-                while True:
-                    self.gf.vec.data = base
-                    self.gf.vec.data -= alpha * self.du
-                    if st.line_search:
-                        # merit: the energy with q at its optimum for u (see module docstring)
-                        self._update_pressure_field()
-                        e = self.energy()
-                        ok = math.isfinite(e) and e <= e0 + 1e-12 * abs(e0)
-                        cut = "raises the energy"
-                    else:
-                        ok = True
-                    if ok:
-                        # an inverted element, or a step through the other wall, which jumps over
-                        # the barrier (it acts only at the pairs' points): halve it
-                        cut = self._rejection(locate=False)
-                        ok = not cut
-                    if ok and self.contact is not None and self.contact.backtrack_on_overlap:
-                        # no step into the barrier's continuation (the walls' overlap must not grow)
-                        ok = self.contact.overlap_area() <= overlap0 * (1.0 + 1e-9)
-                        cut = "pushes paired walls past the barrier's log range"
-                    if ok:
-                        break
-                    if alpha == 1.0:
-                        full_cut = cut
-                    alpha *= 0.5
-                    if alpha < st.min_step:
-                        if self.shift is not None:
-                            break
-                        why = self._rejection() or cut
-                        raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}",
-                                            it)
-                if alpha < st.min_step:   # every length rejected: the shifted tangent's step instead
-                    work, budget, e0 = self._shifted_iteration(base, it, budget, e0)
+                alpha, full_cut = self._step_length(base, it)
+                if alpha is None:   # every length rejected: the shifted tangent's step instead
+                    s.work, s.budget = self._shifted_iteration(base, it, s.budget)
                     continue
-                cuts_in_row = cuts_in_row + 1 if alpha < 1.0 else 0
-                if st.cut_iterations is not None and cuts_in_row >= st.cut_iterations:
+                s.cuts_in_row = s.cuts_in_row + 1 if alpha < 1.0 else 0
+                if st.cut_iterations is not None and s.cuts_in_row >= st.cut_iterations:
                     self.set_state(base)
                     self.gf.vec.data -= self.du   # the full step again, to say where it fails
                     why = self._rejection() or full_cut
-                    raise NewtonFailure(f"{cuts_in_row} Newton steps in a row cut short (the last full step {why})", it)
-                if st.line_search:
-                    e0 = e
+                    raise NewtonFailure(f"{s.cuts_in_row} Newton steps in a row cut short (the last full step "
+                                        f"{why})", it)
                 self.iterations_total += 1
-                self.last_work = work
-                works.append(work)
+                self.last_work = s.work
+                s.works.append(s.work)
                 log.debug("load %.1f Pa it %d du.r %.3e alpha %g%s (%.2f s)", self.load.Get(), it, slope,
                           alpha, "" if self.factor_age == 1 else f" (tangent of {self.factor_age} iterations)",
                           time.perf_counter() - t_it)
-                if alpha == 1.0 and work < (tol if fresh else REUSED_TOLERANCE * tol):
-                    if self.contact is not None and self.contact.settle and not self._contact_pairs_settled():
-                        # converged for the old pairs: iterate on with the new ones
-                        searches += 1
-                        if searches > self.contact.max_searches:
-                            raise NewtonFailure(f"the contact pairs did not settle in {searches} searches", it)
-                        budget = it + st.max_iterations
-                        works, chord = [], None
-                        if st.line_search:
-                            e0 = self.energy()   # the new pairs' energy
-                        continue
-                    if self.contact is not None:
-                        gap = self.contact.min_gap()
-                        if gap < -self.contact.tolerance:
-                            raise NewtonFailure("the lumen wall passes through itself (a section's wall "
-                                                "polygon crosses itself)", it)
-                        self.last_min_gap = gap
-                        self.last_min_gap_state = self.get_state()   # measure() reuses the gap of this state
+                if alpha == 1.0 and s.work < (s.tol if fresh else REUSED_TOLERANCE * s.tol) and \
+                        self._converged(s, it):
                     return it
             raise NewtonFailure(f"no convergence in {st.max_iterations} Newton iterations "
-                                f"(last |du.r| = {work:.2e} J)", it)
+                                f"(last |du.r| = {s.work:.2e} J)", it)
 
+    def _check_stall(self, s: "_Solve", it: int) -> None:
+        """NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold."""
+        n = self.newton_settings.stall_iterations
+        if n is not None and len(s.works) > n and s.works[-1] > 0.1 * s.works[-1 - n]:
+            raise NewtonFailure(f"stalled: |du.r| {s.works[-1]:.2e} J, not a tenth of its "
+                                f"{s.works[-1 - n]:.2e} J {n} iterations before", it - 1)
+
+    def _increment(self, s: "_Solve", it: int) -> tuple[np.ndarray, float, bool]:
+        """The iteration's increment self.du for the residual self.res: with the held factorisation
+        while the last step contracted (NewtonSettings.reuse_ratio), else with a fresh one (from the
+        start of the last step when that step was the reused one). Returns (the state the step
+        starts from, du . r, whether the factorisation is fresh)."""
+        ng = _ng()
+        st = self.newton_settings
+        fresh = self._refactor_now(it)
+        base = self.get_state()
+        if not fresh:
+            self._solve(self.res, self.du)
+            self.a.Apply(self.gf.vec, self.res)
+            slope = ng.InnerProduct(self.du, self.res)
+            if not abs(slope) <= st.reuse_ratio * s.last_work:
+                if s.chord is not None:
+                    # the step with the reused factorisation did not contract: back to its start
+                    # for Newton's own step there
+                    self.set_state(s.chord)
+                    base = s.chord
+                    self.a.Apply(self.gf.vec, self.res)
+                    if s.works:
+                        s.works.pop()
+                    s.budget += 1
+                fresh = True
+            elif not (slope > 0.0 and self._full_step_admissible(base)):
+                fresh = True   # no descent, or not admissible: Newton's own step instead
+        s.chord = None if fresh else base
+        if not fresh:
+            s.budget += 1.0 - REUSED_ITERATION_COST   # max_iterations counts full iterations' worth
+        if fresh:
+            self._factorize()
+            self._solve(self.res, self.du)
+            self.a.Apply(self.gf.vec, self.res)   # (condensation overwrote it)
+            slope = ng.InnerProduct(self.du, self.res)   # > 0: -du descends the energy
+        s.last_work = abs(slope)
+        self.factor_age += 1
+        self.last_effort += 1.0 if fresh else REUSED_ITERATION_COST
+        return base, slope, fresh
+
+    def _step_length(self, base: np.ndarray, it: int) -> tuple[float | None, str]:
+        """Take base - alpha du with alpha halved from 1 while the state is not admissible: an
+        inverted element, a step through the other wall, which jumps over the barrier (it acts only
+        at the pairs' points), or (``contact.backtrack_on_overlap``) a growing overlap of the walls.
+        Returns (alpha, why the full step was cut, "" if not); alpha None below ``min_step`` with the
+        shifted tangent on; without it that raises NewtonFailure."""
+        st = self.newton_settings
+        backtrack = self.contact is not None and self.contact.backtrack_on_overlap
+        overlap0 = self.contact.overlap_area() if backtrack else 0.0
+        alpha, full_cut = 1.0, ""
+        while True:
+            self.gf.vec.data = base
+            self.gf.vec.data -= alpha * self.du
+            cut = self._rejection(locate=False)
+            if not cut and backtrack and self.contact.overlap_area() > overlap0 * (1.0 + 1e-9):
+                # no step into the barrier's continuation (the walls' overlap must not grow)
+                cut = "pushes paired walls past the barrier's log range"
+            if not cut:
+                return alpha, full_cut
+            if alpha == 1.0:
+                full_cut = cut
+            alpha *= 0.5
+            if alpha < st.min_step:
+                if self.shift is not None:
+                    return None, full_cut
+                why = self._rejection() or cut
+                raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}", it)
+
+    def _converged(self, s: "_Solve", it: int) -> bool:
+        """At a converged iterate: with contact, search the pairs again (``_contact_pairs_settled``);
+        when they move, iterate on with the new ones (a fresh budget; False), and check the wall
+        does not pass through itself (NewtonFailure). True: the solve is done."""
+        if self.contact is None:
+            return True
+        if self.contact.settle and not self._contact_pairs_settled():
+            # converged for the old pairs: iterate on with the new ones
+            s.searches += 1
+            if s.searches > self.contact.max_searches:
+                raise NewtonFailure(f"the contact pairs did not settle in {s.searches} searches", it)
+            s.budget = it + self.newton_settings.max_iterations
+            s.works, s.chord = [], None
+            return False
+        gap = self.contact.min_gap()
+        if gap < -self.contact.tolerance:
+            raise NewtonFailure("the lumen wall passes through itself (a section's wall "
+                                "polygon crosses itself)", it)
+        self.last_min_gap = gap
+        self.last_min_gap_state = self.get_state()   # measure() reuses the gap of this state
+        return True
 
     # ------------------------------------------------------------------ shifted tangent
     # the first shift relative to the shear modulus 2 c1, its growth factor and its largest value
@@ -627,17 +642,16 @@ class Fe3dProblem:
     SHIFT_START, SHIFT_GROW, SHIFT_MAX = 1e-3, 4.0, 1e3
     ARMIJO = 1e-4
 
-    def _shifted_iteration(self, base: np.ndarray, it: int, budget: int, e0):
+    def _shifted_iteration(self, base: np.ndarray, it: int, budget: float):
         """One Newton iteration taken by the shifted tangent (``_shifted_step``) in place of the plain
         step. A shifted step does not use up the iterations of the plain steps that follow, but at most
-        ``shifted_steps`` per solve. Returns (its du . r, the iteration budget, the line search's
-        reference energy: the condensed energy at the step's end, or ``e0`` without line search)."""
+        ``shifted_steps`` per solve. Returns (its du . r, the iteration budget)."""
         work = self._shifted_step(base, it)
         self._shifted_in_solve += 1
         if self._shifted_in_solve > self.newton_settings.shifted_steps:
             raise NewtonFailure(f"no stable state in {self._shifted_in_solve - 1} shifted-tangent steps "
                                 f"(shift {self.sigma:.3g} Pa)", it)
-        return work, budget + 1, self._condensed_energy() if self.newton_settings.line_search else e0
+        return work, budget + 1
 
     def _condensed_energy(self) -> float:
         """The energy of the current u with q at its optimum for u (module docstring): the merit

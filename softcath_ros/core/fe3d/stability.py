@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .mesh import is_circle
+
 
 # the second solve's shift, in 2 c1 (module docstring): negative eigenvalues seen at stops are -0.003 to -0.13
 LOWEST_SHIFT = 1.0
@@ -182,7 +184,10 @@ def _locate(problem, modes, near, share: float = 0.9):
     w = d * volumes
     lumen = problem.design.lumen
     if lumen is not None:
-        dist = np.abs(np.hypot(centres[:, 0] - lumen.center[0], centres[:, 1] - lumen.center[1]) - lumen.radius)
+        if is_circle(lumen):
+            dist = np.abs(np.hypot(centres[:, 0] - lumen.center[0], centres[:, 1] - lumen.center[1]) - lumen.radius)
+        else:
+            dist = np.array([lumen.outline.distance_to_point(c[:2]) for c in centres])
         lumen_share = float(w[dist < near].sum() / w.sum())
     else:
         lumen_share = float("nan")

@@ -78,12 +78,8 @@ class Fe3dModel(BendModel):
                  Option("cache", "object", "True (the project cache), a cache root directory, or False"),
                  Option("progress", "bool", "a progress bar per ramp"),
                  Option("threads", "int", "solver threads"),
-                 Option("mirror_mesh", "bool", "a full model meshed as the half section and its mirror image "
-                                              "(shares the half model's discretisation; for comparisons)"),
                  Option("lumen_fill", "float", "fill the lumen with a soft solid of this fraction of the "
                                                    "silicone's shear modulus"),
-                 Option("formulation", "str", "'mixed' (default) or 'displacement'"),
-                 Option("reinforcement", "str", "'membrane' (default) or 'rings'"),
                  Option("contact_distance", "float", "lumen wall self-contact: barrier distance as a fraction of "
                                                          "the lumen diameter (default 0.02; None: off)"),
                  Option("pressure_order", "int", "the element pressure's order: 0 (P2/P0) or 1 (P2/P1, default)"),
@@ -95,9 +91,8 @@ class Fe3dModel(BendModel):
     def __init__(self, design: Design, mesh_size: float = DEFAULT_MESH_SIZE, mesh=None, newton=None,
                  step_control=None, tangent_predictor: bool = True, half: bool | None = None,
                  cache=True, progress: bool = False, threads: int = 2,
-                 lumen_fill: float | None = None, formulation: str = "mixed",
-                 reinforcement: str = "membrane", contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
-                 mirror_mesh: bool = False, pressure_order: int = DEFAULT_PRESSURE_ORDER,
+                 lumen_fill: float | None = None, contact_distance: float | None = DEFAULT_CONTACT_DISTANCE,
+                 pressure_order: int = DEFAULT_PRESSURE_ORDER,
                  interior_order: int | None = DEFAULT_INTERIOR_ORDER, layer_h: float | None = DEFAULT_LAYER_H,
                  contact_intorder: int = DEFAULT_CONTACT_INTORDER):
         """``mesh_size`` scales the base mesh (``MeshSettings()``) in the section and, with ``layer_h``
@@ -108,11 +103,6 @@ class Fe3dModel(BendModel):
         ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty lumen with a soft solid
         of this fraction of the silicone's shear modulus (a self-contact proxy that lets short bodies
         pass the lumen's collapse; core/fe3d/solver.py).
-        ``formulation``: "mixed" (P2 displacement + element-wise pressure, the default) or
-        "displacement" (P2 displacement only, which locks for nearly incompressible silicone;
-        kept to measure how much a standard element would stiffen the body).
-        ``reinforcement``: "membrane" (homogenised hoop layer, the default) or "rings" (each
-        ring resolved by the mesh along z: many more layers, for the comparison).
         ``contact_distance``: the empty lumen wall's frictionless self-contact (core/fe3d/contact.py),
         its barrier distance as a fraction of the lumen diameter; None switches it off (the ramp
         then stops where the lumen's shoulders fold, about 0.25 bar). Ignored where the lumen is
@@ -120,14 +110,15 @@ class Fe3dModel(BendModel):
         mirror symmetric about x = 0; True: for each direction on a mirror plane of the section (the
         3-channel design: one channel, or two equal), the half body about that plane, the section
         turned so that it is x = 0 (core/fe3d/mesh.py ``mirror_plane``), the full body for the
-        others; False: the full body. ``mirror_mesh``: the full body meshed as the half section and
-        its mirror image (so a full model shares the half model's discretisation: comparisons).
+        others; False: the full body.
         ``pressure_order``, ``interior_order``: the element (Fe3dProblem): by default P2 with order-3
         interior bubbles and a P1 pressure, the element that passes the lumen shoulders' fold to
         0.35 bar at 20 mm; P2/P0 (``pressure_order=0, interior_order=None``), the former default,
         stops near 0.23 bar there (docs/models/fe3d.md). ``contact_intorder``: the contact's
         quadrature order on the lumen wall; the pair search, at every such point, is a large part
-        of a Newton iteration in contact (docs/models/fe3d.md, "Newton and the ramp")."""
+        of a Newton iteration in contact (docs/models/fe3d.md, "Newton and the ramp").
+        Comparison-only variants (displacement-only element, resolved rings, a mirrored full mesh):
+        softcath_ros/experimental/fe3d_variants.py."""
         super().__init__(design)
         try:
             import ngsolve  # noqa: F401
@@ -142,16 +133,9 @@ class Fe3dModel(BendModel):
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
-        self.half = (can_use_half_model(design) and not mirror_mesh) if half is None else half
+        self.half = can_use_half_model(design) if half is None else half
         self.lumen_fill = lumen_fill_fraction(lumen_fill, "fe3d")
-        if formulation not in ("mixed", "displacement"):
-            raise ModelError(f"fe3d: formulation = {formulation!r} must be 'mixed' or 'displacement'")
-        self.formulation = formulation
-        if reinforcement not in ("membrane", "rings"):
-            raise ModelError(f"fe3d: reinforcement = {reinforcement!r} must be 'membrane' or 'rings'")
-        self.reinforcement = reinforcement
         self.contact_distance = _contact_distance(contact_distance, design, self.lumen_fill)
-        self.mirror_mesh = bool(mirror_mesh)
         try:
             check_element(pressure_order, interior_order)
         except ValueError as exc:
@@ -160,38 +144,40 @@ class Fe3dModel(BendModel):
         if isinstance(contact_intorder, bool) or not isinstance(contact_intorder, int) or not 2 <= contact_intorder <= 12:
             raise ModelError(f"fe3d: contact_intorder = {contact_intorder!r} must be an integer in 2..12")
         self.contact_intorder = contact_intorder
-        if self.mirror_mesh and self.half is True:
-            raise ModelError("fe3d: mirror_mesh meshes the full body: it needs half = False")
         self.store = store_for(cache)
         self.use_cache = self.store is not None
         self.progress = progress
         self._problems = {}   # (half, rotation rad) -> Fe3dProblem
         self.last_ramps = []
-        self._cache_parts = [design.content_hash(), asdict(self.mesh_settings),
-                             _without_later_defaults(self.newton_settings, stall_iterations=None),
-                             _without_later_defaults(self.step_control, retry_from_last=True),
-                             tangent_predictor, self.half,
-                             # options added later enter the key only when set
-                             *([] if self.lumen_fill is None else [{"lumen_fill": self.lumen_fill}]),
-                             *([] if formulation == "mixed" else [{"formulation": formulation}]),
-                             *([] if reinforcement == "membrane" else [{"reinforcement": reinforcement}]),
-                             {"contact_distance": self.contact_distance},
-                             *([] if not self.mirror_mesh else [{"mirror_mesh": True}]),
-                             *([] if pressure_order == 0 else [{"pressure_order": pressure_order}]),
-                             *([] if interior_order is None else [{"interior_order": interior_order}]),
-                             *([] if contact_intorder == DEFAULT_CONTACT_INTORDER else
-                               [{"contact_intorder": contact_intorder}])]
+        self._cache_parts = [design.content_hash(), asdict(self.mesh_settings), asdict(self.newton_settings),
+                             asdict(self.step_control),
+                             {"tangent_predictor": tangent_predictor, "half": self.half,
+                              "lumen_fill": self.lumen_fill, "contact_distance": self.contact_distance,
+                              "pressure_order": pressure_order, "interior_order": interior_order,
+                              "contact_intorder": contact_intorder, **self._variant()}]
         self.cache_key = CacheStore.key(self.solver_version, self._cache_parts)
 
     # ------------------------------------------------------------------ plumbing
+    def _variant(self) -> dict:
+        """What a variant (softcath_ros/experimental) changes: enters the cache key."""
+        return {}
+
+    def _problem_options(self) -> dict:
+        """Keyword arguments a variant adds to its problem class."""
+        return {}
+
+    problem_class = None   # Fe3dProblem (imported lazily); a variant's subclass
+
+    def _turns_to_mirror(self) -> bool:
+        """Whether a direction on a mirror plane gets a problem turned to that plane."""
+        return bool(self.half)
+
     @property
     def problem(self):
         """The problem of a direction-independent model: the half body when the whole design is
         symmetric about x = 0 and ``half`` allows, else the full body."""
         from ..fe3d.mesh import can_use_half_model
 
-        if self.mirror_mesh:
-            return self.problem_for(None)
         return self._problem_on(bool(self.half) and can_use_half_model(self.design), 0.0)
 
     def mirror_rotation(self, direction) -> float | None:
@@ -200,7 +186,7 @@ class Fe3dModel(BendModel):
         is (0 when x = 0 is one); None when the direction lies on no mirror plane (full model)."""
         from ..fe3d.mesh import can_use_half_model, mirror_plane
 
-        if not self.half and not self.mirror_mesh:
+        if not self._turns_to_mirror():
             return None
         if can_use_half_model(self.design):
             return 0.0
@@ -210,15 +196,8 @@ class Fe3dModel(BendModel):
     def problem_for(self, direction):
         """The problem a ramp along ``direction`` (pressure per unit, per channel) runs on: the half
         body about the direction's mirror plane (the section turned so that it is x = 0) when
-        ``half`` is True and there is one, else the full body (``mirror_mesh``: meshed mirror
-        symmetric about the direction's mirror plane, or one of the section's)."""
+        ``half`` is True and there is one, else the full body."""
         turn = self.mirror_rotation(direction)
-        if self.mirror_mesh:
-            if turn is None:
-                turn = self.mirror_rotation(None)
-            if turn is None:
-                raise ModelError(f"fe3d: mirror_mesh: {self.design.name}'s section has no mirror plane")
-            return self._problem_on("mirror", turn)
         return self._problem_on(turn is not None, turn or 0.0)
 
     def _problem_on(self, half: bool, turn: float):
@@ -228,11 +207,11 @@ class Fe3dModel(BendModel):
         key = (half, round(turn, 12))
         if key not in self._problems:
             design = rotated_section(self.design, turn) if turn else self.design
-            problem = Fe3dProblem(design, self.mesh_settings, self.newton_settings, half,
-                                  lumen_fill=self.lumen_fill, formulation=self.formulation,
-                                  reinforcement=self.reinforcement, contact_distance=self.contact_distance,
-                                  pressure_order=self.pressure_order, interior_order=self.interior_order,
-                                  contact_intorder=self.contact_intorder)
+            problem = (self.problem_class or Fe3dProblem)(
+                design, self.mesh_settings, self.newton_settings, half, lumen_fill=self.lumen_fill,
+                contact_distance=self.contact_distance, pressure_order=self.pressure_order,
+                interior_order=self.interior_order, contact_intorder=self.contact_intorder,
+                **self._problem_options())
             problem.rotation = turn   # measure() turns its results back into the design's frame
             self._problems[key] = problem
         return self._problems[key]
@@ -321,12 +300,6 @@ class Fe3dModel(BendModel):
             return state, (self.last_ramps[0] if self.last_ramps else None)
         finally:
             self.use_cache = saved
-
-
-def _without_later_defaults(settings, **later) -> dict:
-    """``settings`` as a dict for the cache key without the fields added later (``later``: their
-    defaults) while they hold their defaults, so earlier cache entries stay valid."""
-    return {k: v for k, v in asdict(settings).items() if not (k in later and v == later[k])}
 
 
 def _contact_distance(value, design: Design, lumen_fill) -> float | None:
