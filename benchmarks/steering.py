@@ -1,14 +1,13 @@
 """Closed-loop steering against open loop (issue 16 targets).
 
 Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_channel_5mm design,
-controller and rig truth on the section-rung surrogate (steering table, 0-0.3 bar), the rig
-25% pressure-shifted with material scale 1.2, a 10 Hz actuator behind the 80 ms regulator, a
-100 Hz tip tracker with 0.1 mm noise, 20% of the samples dropped, latency 50 ms and 150 ms;
-trajectories: three steps, and a 0.2 Hz circle. Modes: open_loop, integral, adaptive. The
-controller's CPU is the time spent in its calls per simulated second (100 Hz measurements,
-200 Hz output). Plus one DDS run (`softcath steer-sim`, separate processes, closed-form rung:
-the rig node builds its truth with the rung's default options, and the surrogate's default
-table over the design's full 0.5 bar is not feasible here).
+controller and rig truth on the section-rung surrogate (the table shipped for the design, the
+controller's inverse limited to 0.3 bar), the rig 25% pressure-shifted with material scale 1.2,
+a 10 Hz actuator behind the 80 ms regulator, a 100 Hz tip tracker with 0.1 mm noise, 20% of the
+samples dropped, latency 50 ms and 150 ms; trajectories: three steps, and a 0.2 Hz circle.
+Modes: open_loop, integral, adaptive. The controller's CPU is the time spent in its calls per
+simulated second (100 Hz measurements, 200 Hz output). Plus one DDS run (`softcath steer-sim`,
+separate processes, its defaults: the same surrogate).
 
     .venv/bin/python benchmarks/steering.py [--quick]
 
@@ -82,8 +81,8 @@ def dds_run() -> dict:
         if res.returncode != 0:
             raise SystemExit(f"steer-sim failed: {res.stderr[-1000:]}")
         r = json.loads(res.stdout)
-    return {"source": "dds (steer-sim)", "trajectory": "step", "mode": r["mode"], "model": "closed_form",
-            "truth": "closed_form", "latency_ms": 50.0, "dropped": 0.2, "duration_s": 6.0,
+    return {"source": "dds (steer-sim)", "trajectory": "step", "mode": r["mode"], "model": r["model"],
+            "truth": r["model"], "latency_ms": 50.0, "dropped": 0.2, "duration_s": 6.0,
             "tip_error_rms_mm": r["tip_error_rms_mm"], "steady_state_error_mm": r["steady_state_error_mm"],
             "settling_time_s": r["settling_time_s"], "controller_core_fraction": None,
             "final_gain": None, "wall_s": time.perf_counter() - t0}

@@ -114,3 +114,26 @@ def test_tracker_loss_falls_back_and_watchdog_vents():
             assert op.spin(3.0, lambda: op.pressures and max(op.pressures[-1]) == 0.0)
         finally:
             op.close()
+
+
+def test_steer_node_defaults_to_the_surrogate_on_its_shipped_table(monkeypatch):
+    """In-process: with its defaults steer_node's feed-forward is the surrogate, read from the table
+    shipped for the design (none is built at start-up; the 0.3 bar limit is the allocator's)."""
+    from softcath_ros.core.models.surrogate import SurrogateModel
+    from softcath_ros.core.steering import STEERING_MAX_PRESSURE
+    from softcath_ros.nodes.steer_node import SteerNode
+
+    def no_build(self):
+        raise AssertionError("steer_node built a surrogate table at start-up")
+
+    monkeypatch.setattr(SurrogateModel, "_build", no_build)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=private_domain())
+    try:
+        node = SteerNode(context=context)
+        model = node.ctrl.allocator.model
+        assert model.name == "surrogate" and model.origin == "shipped"
+        assert node.ctrl.max_pressure == STEERING_MAX_PRESSURE
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -33,13 +33,20 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .design import PLAUSIBLE_PRESSURE, pressure_guess
 from .errors import ModelError, SoftcathError
 from .kinematics import curvature_for_tip, tip_pose_single
 from .prediction import arc_and_cap, body_reach
 from .models.base import BendModel
+
+
+def brentq(*args, **kwargs):
+    """scipy's brentq, imported on first use: scipy.optimize takes a second or more to import, which
+    a node would otherwise pay at start-up before answering its first command."""
+    from scipy.optimize import brentq as scipy_brentq
+
+    return scipy_brentq(*args, **kwargs)
 
 TWO_PI = 2.0 * math.pi
 # A request counts as beyond reach only past this relative margin, so the boundary itself

@@ -114,7 +114,9 @@ class SteerNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.create_timer(diag_period, self._publish_diagnostics)
         self.get_logger().info(
-            f"design {self.design.name}, model {model_name}, mode {mode}, max_pressure {self.max_pressure:g} Pa, "
+            f"design {self.design.name}, model {model_name}"
+            + (f" ({allocator.model.origin} table)" if getattr(allocator.model, "origin", "") else "")
+            + f", mode {mode}, max_pressure {self.max_pressure:g} Pa, "
             f"measurement timeout {self.params.measurement_timeout:g} s, publishing at {publish_rate:g} Hz")
 
     def _now(self) -> float:

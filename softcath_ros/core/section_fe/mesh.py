@@ -18,7 +18,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import Delaunay
 
 from ..errors import ModelError
 
@@ -340,6 +339,8 @@ def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds:
 
 def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], maps=None, group=None,
                  filled: tuple[int, ...] = ()) -> np.ndarray:
+    from scipy.spatial import Delaunay   # here, not at import: nodes that only read a table skip scipy.spatial
+
     tri = Delaunay(points).simplices
     centroids = points[tri].mean(axis=1)
     tri = tri[_region(centroids, outer, holes, filled) >= 0]
