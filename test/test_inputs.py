@@ -1,6 +1,7 @@
 """Inputs a user gets wrong: unit slips in design files, pressures above the limit, exit codes that
 agree between predict and sweep, --no-cache wherever a command reads the cache, the documented
 report command on a runs/ folder."""
+import math
 import os
 import time
 
@@ -173,6 +174,17 @@ def test_pressure_sweep_table_reports_r_c_as_l_over_theta():
     theta = 30.0 * length * stretch
     assert float(cells[1]) == pytest.approx(length / theta * 1e3, abs=0.006)   # printed to 0.01 mm
     assert float(cells[2]) == pytest.approx(1e3 / 30.0, abs=0.006)
+    # past 180 degrees the angle is the received backbone's integrated tangent angle, not the tip's folded one
+    from softcath_ros.core.kinematics import backbone_poses
+
+    k = np.array([0.0, -math.radians(283.0) / (length * stretch)])
+    pos, quat = backbone_poses(k, length * stretch, 20)
+    point = SweepPoint([25000.0], pos[-1].tolist(), quat[-1].tolist(), pos.tolist(), 0, quat.tolist())
+    out = io.StringIO()
+    print_table([point], [[25000.0]], length, file=out)
+    cells = out.getvalue().splitlines()[1].split()
+    assert float(cells[3]) == pytest.approx(283.0, abs=0.006)
+    assert float(cells[1]) == pytest.approx(length / math.radians(283.0) * 1e3, abs=0.006)
 
 
 def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
