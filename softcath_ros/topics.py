@@ -42,6 +42,7 @@ MESSAGE_TYPES = {
     BENCH_WRENCH: "geometry_msgs/msg/WrenchStamped",
     BENCH_STEP: "std_msgs/msg/String",
     BENCH_RIG: "std_msgs/msg/String",
+    BENCH_TARE: "std_msgs/msg/Empty",
     BODY_MARKER: "visualization_msgs/msg/Marker",
     BACKBONE_PATH: "nav_msgs/msg/Path",
     RADIUS_L_OVER_THETA: "std_msgs/msg/Float64",

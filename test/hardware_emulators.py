@@ -147,13 +147,13 @@ class ModbusRegulatorEmulator:
     registers 100.. the readings, which follow the setpoints (``mode`` 'range': 65535 counts,
     a reading beyond any sensor). ``stop()`` kills it (connections refused from then on)."""
 
-    def __init__(self, n_channels: int = 1, reading_base: int = 100, unit: int = 1):
+    def __init__(self, n_channels: int = 1, reading_base: int = 100, unit: int = 1, port: int | None = None):
         from pymodbus.server import ModbusTcpServer
         from pymodbus.simulator import DataType, SimData, SimDevice
 
         self.n, self.base, self.mode = n_channels, reading_base, "ok"
         self.writes: list[tuple[int, int]] = []      # (register, counts) the host wrote
-        self.port = free_port()
+        self.port = port or free_port()
         device = SimDevice(id=unit, simdata=[SimData(0, count=reading_base + n_channels, values=0,
                                                      datatype=DataType.REGISTERS)], action=self._action)
         self.loop = asyncio.new_event_loop()

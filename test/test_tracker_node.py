@@ -13,11 +13,11 @@ rclpy = pytest.importorskip("rclpy")
 cv2 = pytest.importorskip("cv2", reason="the tracker needs the vision extra (opencv-python-headless)")
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped, Vector3Stamped  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
-from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 
+from lifecycle_listener import LifecycleListener  # noqa: E402
 from softcath_ros import topics  # noqa: E402
 from softcath_ros.bench.tracker_render import SceneLook, render  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
@@ -47,52 +47,11 @@ def folder(tmp_path_factory):
     return root, truths
 
 
-class Listener:
+class Listener(LifecycleListener):
     def __init__(self, domain):
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node("tracker_test_listener", context=self.context)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.angles, self.tips, self.status = [], [], None
-        self.node.create_subscription(Vector3Stamped, topics.BENCH_BEND_ANGLE, self.angles.append, 50)
-        self.node.create_subscription(PoseStamped, topics.TIP_MEASURED, self.tips.append, 100)
-        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, 10)
-
-    def _on_diag(self, msg):
-        for s in msg.status:
-            if s.name == topics.TRACKER_NODE:
-                self.status = {"level": s.level, "message": s.message, **{kv.key: kv.value for kv in s.values}}
-
-    def spin(self, seconds, until=None):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.02)
-            if until is not None and until():
-                return True
-        return False
-
-    def call(self, srv_type, name, request, timeout=20.0):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
-        future = client.call_async(request)
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.05)
-        assert future.done(), f"{name}: no answer"
-        return future.result()
-
-    def transition(self, transition_id):
-        node = "/" + topics.TRACKER_NODE
-        return self.call(ChangeState, f"{node}/change_state",
-                         ChangeState.Request(transition=Transition(id=transition_id))).success
-
-    def state(self):
-        return self.call(GetState, f"/{topics.TRACKER_NODE}/get_state", GetState.Request()).current_state.label
-
-    def close(self):
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+        super().__init__(domain, topics.TRACKER_NODE, {topics.BENCH_BEND_ANGLE: Vector3Stamped,
+                                                       topics.TIP_MEASURED: PoseStamped})
+        self.angles, self.tips = self.got[topics.BENCH_BEND_ANGLE], self.got[topics.TIP_MEASURED]
 
 
 def stamp_s(header):
