@@ -95,7 +95,8 @@ def _start(node: str, *ros_args: str, timeout: float = 60.0, cwd=None) -> subpro
                           env=env, capture_output=True, text=True, timeout=timeout, cwd=cwd)
 
 
-EVERY_NODE = ["allocation_node", "bench_node", "model_node", "sim_bench_node", "steer_driver", "steer_node"]
+EVERY_NODE = ["allocation_node", "bench_node", "model_node", "regulator_node", "scale_node", "sim_bench_node",
+              "steer_driver", "steer_node", "tracker_node"]
 
 
 @pytest.mark.parametrize("node", EVERY_NODE)
@@ -105,7 +106,8 @@ def test_a_misspelt_parameter_is_refused_in_one_line(tmp_path, node):
     proc = _start(node, "-p", "desgin:=three_channel_5mm", cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "'desgin' (did you mean 'design'?)" in lines[0], proc.stderr
+    assert len(lines) == 1 and "has no parameter 'desgin'" in lines[0], proc.stderr
+    assert ("(did you mean 'design'?)" in lines[0]) == (" design," in lines[0]), lines[0]   # where it has one
     assert list(tmp_path.iterdir()) == []         # no recording folder, nothing written
 
 
