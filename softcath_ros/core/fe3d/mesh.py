@@ -432,6 +432,19 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | str | None =
             m.Add(nm.Element3D(dom_index[dom], [pid(a, k), pid(b, k), pid(c, k),
                                                   pid(a, k + 1), pid(b, k + 1), pid(c, k + 1)]))
 
+    _add_faces(m, sec, layer_domain, pid, n_open, under_ring, half, design.outer_radius)
+    return PrismMesh(ngmesh=m, z_levels=z, section=sec, half=half, n_layers_channel=n_open,
+                     channel_shares=channel_shares(design, half))
+
+
+def _add_faces(m, sec: SectionMesh, layer_domain, pid, n_open: int, under_ring, half: bool, outer_r: float) -> None:
+    """The boundary faces of the prism mesh ``m``: quads on the section's free and hole edges per
+    layer (``outer``/``ring``, ``sym``, ``channel{i}``, ``lumen``), triangles on the base, the tip and
+    the channels' cap faces. ``layer_domain[k][t]``: the 3D domain of section triangle t in layer k
+    (None: empty); ``pid(i, k)``: the mesh point of section point i on level k."""
+    import netgen.meshing as nm
+
+    n_lev = len(layer_domain) + 1
     bc_names: list[str] = []
 
     def bc(name: str) -> int:
@@ -448,7 +461,6 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | str | None =
             a, b = int(tri[j]), int(tri[(j + 1) % 3])
             edge_tris.setdefault((min(a, b), max(a, b)), []).append(t)
     pts = sec.points
-    outer_r = design.outer_radius
     for k in range(n_lev - 1):
         for (a, b), ts in edge_tris.items():
             doms = [layer_domain[k][t] for t in ts]
@@ -488,5 +500,3 @@ def build_mesh(design: Design, settings: MeshSettings, half: bool | str | None =
         if reg.startswith("channel"):
             # The cap's inner face, seen from the channel below: normal -z out of the cap.
             m.Add(nm.Element2D(bc(reg), [pid(a, n_open), pid(c, n_open), pid(b, n_open)]))
-    return PrismMesh(ngmesh=m, z_levels=z, section=sec, half=half, n_layers_channel=n_open,
-                     channel_shares=channel_shares(design, half))

@@ -169,27 +169,7 @@ class Fe3dProblem:
         self.load = ng.Parameter(0.0)   # load factor s; pressure of channel i is s * d_i
         self.direction = [ng.Parameter(0.0) for _ in design.channels]
 
-        (u, qq) = fes.TrialFunction()
-        F = ng.Id(3) + ng.Grad(u)
-        mats = self._materials()
-        energy = self._body_energy(F, qq, mats)
-        self.a = a = ng.BilinearForm(fes, symmetric=True, condense=True)
-        a += ng.Variation(energy.Compile() * ng.dx)
-        self.has_fill = "fill" in mesh.GetMaterials()
-        if self.has_fill:
-            mu = 2.0 * design.material.c1 * float(lumen_fill)
-            a += ng.Variation(self._fill_energy(F, mu).Compile() * ng.dx(definedon=mesh.Materials("fill")))
-        if design.reinforcement is not None:
-            a += self._reinforcement_energy(u)
-        self.volume_forms = []
-        for i, _ in enumerate(design.channels):
-            vol_i = self._volume_density(u)
-            # The model's share of the volume (half of it in the half model, like every energy).
-            a += ng.Variation(-self.load * self.direction[i] * vol_i * ng.ds(f"channel{i}"))
-            # The same volume alone: its value (Energy) and derivative (Apply) for the tangent.
-            bv = ng.BilinearForm(fes, symmetric=True)
-            bv += ng.Variation(vol_i * ng.ds(f"channel{i}"))
-            self.volume_forms.append(bv)
+        u, mats = self._assemble(lumen_fill)
 
         self.shift = None
         if newton.shifted_tangent:
@@ -223,6 +203,34 @@ class Fe3dProblem:
         self.iterations_total = 0
 
     # ------------------------------------------------------------------ energies
+    def _assemble(self, lumen_fill):
+        """The bilinear form ``self.a`` of the total potential (module docstring) and the channels'
+        volume forms; returns the trial displacement and the materials."""
+        ng = _ng()
+        fes, mesh, design = self.fes, self.mesh, self.design
+        (u, qq) = fes.TrialFunction()
+        F = ng.Id(3) + ng.Grad(u)
+        mats = self._materials()
+        energy = self._body_energy(F, qq, mats)
+        self.a = a = ng.BilinearForm(fes, symmetric=True, condense=True)
+        a += ng.Variation(energy.Compile() * ng.dx)
+        self.has_fill = "fill" in mesh.GetMaterials()
+        if self.has_fill:
+            mu = 2.0 * design.material.c1 * float(lumen_fill)
+            a += ng.Variation(self._fill_energy(F, mu).Compile() * ng.dx(definedon=mesh.Materials("fill")))
+        if design.reinforcement is not None:
+            a += self._reinforcement_energy(u)
+        self.volume_forms = []
+        for i, _ in enumerate(design.channels):
+            vol_i = self._volume_density(u)
+            # The model's share of the volume (half of it in the half model, like every energy).
+            a += ng.Variation(-self.load * self.direction[i] * vol_i * ng.ds(f"channel{i}"))
+            # The same volume alone: its value (Energy) and derivative (Apply) for the tangent.
+            bv = ng.BilinearForm(fes, symmetric=True)
+            bv += ng.Variation(vol_i * ng.ds(f"channel{i}"))
+            self.volume_forms.append(bv)
+        return u, mats
+
     def _build_prism(self, design: Design, mesh_settings: MeshSettings, half, lumen_fill: bool) -> PrismMesh:
         return build_mesh(design, mesh_settings, half, lumen_fill=lumen_fill)
 
