@@ -166,7 +166,7 @@ def main() -> int:
     executor = EventsExecutor()
     executor.add_node(node)
     if args.realtime_priority:
-        from softcath_ros.nodes.runtime import set_realtime_priority
+        from softcath_ros.nodes.realtime import set_realtime_priority
 
         problem = set_realtime_priority(args.realtime_priority)
         if problem:

@@ -121,7 +121,7 @@ RECORDER = textwrap.dedent("""
     import json, sys, time, rclpy
     from softcath_ros.recording import BagWriter
     from softcath_ros.nodes.recorder import TopicRecorder
-    from softcath_ros.nodes.runtime import make_executor
+    from softcath_ros.nodes.executors import make_executor
     n, path, config = int(sys.argv[1]), sys.argv[2], sys.argv[3]
     events = config == "events_queue"
     rclpy.init()

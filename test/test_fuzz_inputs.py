@@ -251,7 +251,7 @@ def test_params_files_are_checked_at_least_as_strictly_as_rcl(tmp_path_factory, 
     import yaml as pyyaml
 
     rclpy = pytest.importorskip("rclpy")
-    from softcath_ros.nodes.runtime import check_params_file
+    from softcath_ros.nodes.command_line import check_params_file
 
     doc = _mutated(PARAMS, data)
     path = tmp_path_factory.mktemp("params") / "p.yaml"

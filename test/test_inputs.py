@@ -91,9 +91,7 @@ def test_predict_and_sweep_agree_on_exit_codes(half_failing, capsys, tmp_path):
 
 
 def _subparsers():
-    parser = build_parser()
-    action = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
-    return action.choices
+    return build_parser().subcommands
 
 
 @pytest.mark.parametrize("command", ["predict", "sweep", "allocate", "report", "calibrate", "characterise",

@@ -54,7 +54,7 @@ PRESSURE_OPTIONS = {
 def _pressure_options():
     """(command, option) of every option whose help says it takes a pressure."""
     found = set()
-    for name, sub in build_parser()._subparsers._group_actions[0].choices.items():
+    for name, sub in build_parser().subcommands.items():
         for action in sub._actions:
             help_text = (action.help or "").lower()
             if action.option_strings and "pressure" in help_text and action.dest != "unit" \
@@ -67,7 +67,7 @@ def test_every_pressure_option_follows_the_rule():
     """A new pressure option is listed here (and so tested below), takes text (the rule parses it), and its
     command has the shared --unit."""
     assert _pressure_options() == set(PRESSURE_OPTIONS)
-    subs = build_parser()._subparsers._group_actions[0].choices
+    subs = build_parser().subcommands
     for name, option in PRESSURE_OPTIONS:
         actions = {a.option_strings[0]: a for a in subs[name]._actions if a.option_strings}
         assert actions[option].type is None and actions["--unit"].type.__name__ == "unit_name", (name, option)

@@ -46,13 +46,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     for name in SUBCOMMANDS:
         importlib.import_module(f"{__name__}.{name}").register(sub)
+    parser.subcommands = sub.choices   # name as typed -> its parser (argparse keeps no public handle)
     return parser
 
 
 def command_names() -> list[str]:
     """The subcommands as typed (a module may register another name: import_csv -> import)."""
-    parser = build_parser()
-    return [name for action in parser._subparsers._group_actions for name in action.choices]
+    return list(build_parser().subcommands)
 
 
 def main(argv: list[str] | None = None) -> int:

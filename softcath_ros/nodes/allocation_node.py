@@ -45,7 +45,8 @@ from ..core.pressure_command import check_pressure_command
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
-from .runtime import EXECUTORS, run_node, take_waiting
+from .executors import EXECUTORS, take_waiting
+from .runtime import run_node
 
 NODE_NAME = topics.ALLOCATION_NODE
 RCLError = _rclpy.RCLError

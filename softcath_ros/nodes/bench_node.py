@@ -57,7 +57,8 @@ from ..recording import BagWriter, RecordingError
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .recorder import TopicRecorder
-from .runtime import EXECUTORS, run_node
+from .executors import EXECUTORS
+from .runtime import run_node
 
 DEFAULT_TOPICS = topics.RECORDED
 

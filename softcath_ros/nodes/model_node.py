@@ -60,7 +60,8 @@ from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
 from .diagnostics import DiagnosticsReporter, InputCounters
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
-from .runtime import EXECUTORS, interruptible_start, run_node, take_waiting
+from .executors import EXECUTORS, take_waiting
+from .runtime import interruptible_start, run_node
 
 FRAME_ID = topics.FRAME_ID
 WARN_THROTTLE_S = 1.0

@@ -67,9 +67,10 @@ def refuse_unknown_parameters(node, params_files: list[str] | None = None, later
     started with (runtime.run_node); ``later``: names the node declares after this check."""
     import difflib
 
-    from .runtime import started_params_files
+    from .command_line import started_params_files
 
-    declared = set(node._parameters) | set(later)
+    declared = set(node.list_parameters([], 0).names) | set(later)
+    # rclpy keeps the -p / params-file values only in Node._parameter_overrides: no public getter exists
     unknown = sorted(set(node._parameter_overrides) - declared)
     name = node.get_fully_qualified_name()
     if unknown:
@@ -84,7 +85,7 @@ def refuse_unknown_parameters(node, params_files: list[str] | None = None, later
 
 
 def params_file_sections(path: str) -> list[str]:
-    """The node paths of a (checked, runtime.check_params_file) params file: '/ns/node', '/**', ..."""
+    """The node paths of a (checked, command_line.check_params_file) params file: '/ns/node', '/**', ..."""
     from ..core.yaml_io import load_yaml_file
 
     out = []

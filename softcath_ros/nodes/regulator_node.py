@@ -35,7 +35,8 @@ from ..core.errors import SoftcathError
 from .device_node import DeviceNode
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
-from .runtime import run_node, take_waiting
+from .executors import take_waiting
+from .runtime import run_node
 
 BACKENDS = ("serial", "modbus", "sim")
 

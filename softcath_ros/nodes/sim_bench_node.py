@@ -37,7 +37,8 @@ from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
-from .runtime import run_node, take_waiting
+from .executors import take_waiting
+from .runtime import run_node
 
 # Ranges of the rig's parameters (RigParams fields): a time constant of 0 or a negative noise
 # would make the simulated readings meaningless.

@@ -46,7 +46,8 @@ from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, S
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
-from .runtime import EXECUTORS, run_node, take_waiting
+from .executors import EXECUTORS, take_waiting
+from .runtime import run_node
 
 NODE_NAME = topics.STEER_NODE
 _DESCRIPTIONS = {
