@@ -1,7 +1,7 @@
 """fe3d benchmark and validation runs: pressure sweeps through the 3D rung, timed, with peak memory.
 
     .venv/bin/python benchmarks/fe3d_sweep.py                      # 0 -> 0.20 bar, 40 mm, the rung's defaults
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_sweep_20mm
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_20mm
     .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 1.2 --name fe3d_mesh_1.2   # finer in the section
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.03 --name fe3d_contact_0.03

@@ -5,7 +5,7 @@ mirror plane (``half=True``: core/fe3d/mesh.py ``mirror_plane``).
     .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --full --name fe3d_3ch_profile_full
     .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --full --mirror-mesh --name fe3d_3ch_full_mirror
     .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --name fe3d_3ch_profile_half
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --name fe3d_three_channel    # the timed sweep
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --name fe3d_three_channel_default    # the timed sweep
     .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --direction pair --name fe3d_three_channel_pair
     .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --max-step 0.05 --name fe3d_three_channel_step0.05
     .venv/bin/python benchmarks/fe3d_three_channel.py --compare fe3d_3ch_profile_full fe3d_3ch_profile_half
