@@ -74,6 +74,7 @@ def diagnostics_summary(reports: list[dict]) -> dict:
     if counters:
         last = counters[-1]["values"]
         out.update(model_failed=int(last.get("model_failed", 0)), rejected=int(last.get("rejected", 0)),
+                   superseded=int(last.get("superseded", 0)),   # stale: waited over 10 ms behind a newer one
                    model=last.get("model"), last_reason=last.get("last_reason", ""))
     return out
 

@@ -157,6 +157,7 @@ def median_row(name: str, runs: list[dict]) -> dict:
         "node_busy_fraction_max": max((r["node_diagnostics"].get("busy_fraction_max") or 0.0) for r in runs),
         "node_answer_load_warn_reports": sum(r["node_diagnostics"].get("answer_load_warn_reports", 0) for r in runs),
         "node_model_failed_max": max(r["node_diagnostics"].get("model_failed", 0) for r in runs),
+        "node_superseded_max": max(r["node_diagnostics"].get("superseded", 0) for r in runs),
         "loadavg_1min": med(lambda r: r["loadavg_1min_at_start"]),
     }
 
