@@ -82,6 +82,18 @@ def _fmt(v) -> str:
     return str(v).replace("|", "/")
 
 
+MAX_CELL = 40   # longer cells (a refusal's reason) go to a note under the table: rows stay terminal-wide
+
+
+def _cell(text: str, notes: list[str]) -> str:
+    """The table cell for ``text``: itself, or its head before ':' and a numbered note holding it all."""
+    if len(text) <= MAX_CELL:
+        return text
+    notes.append(text)
+    head = text.split(":", 1)[0] if ":" in text[:MAX_CELL] else ""
+    return f"{head} (note {len(notes)})".strip()
+
+
 def markdown(result: StudyResult, ctx: StudyContext, accuracy: dict, files: dict) -> str:
     lines = [f"# {result.title} ({result.design})", "",
              f"- rung: `{ctx.rung}`; {accuracy['note']}",
@@ -93,8 +105,11 @@ def markdown(result: StudyResult, ctx: StudyContext, accuracy: dict, files: dict
     lines += [f"- {f}" for f in result.findings]
     lines += ["", "## Table", "", "| " + " | ".join(h for _, h in result.columns) + " |",
               "| " + " | ".join("---" for _ in result.columns) + " |"]
+    notes: list[str] = []
     for r in result.rows:
-        lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in result.columns) + " |")
+        lines.append("| " + " | ".join(_cell(_fmt(r.get(k)), notes) for k, _ in result.columns) + " |")
+    if notes:
+        lines += ["", "Notes:", ""] + [f"{i}. {n}" for i, n in enumerate(notes, 1)]
     lines += ["", f"![{result.name}]({Path(files['png']).name})", ""]
     return "\n".join(lines)
 
