@@ -1008,3 +1008,35 @@ def test_sector_channels_are_meshed_from_their_outlines_and_bend_the_body_away(s
     vol = state.diagnostics.channel_volume[0]
     assert vol[0] > rest[0] and vol[1] == pytest.approx(vol[2], rel=1e-9)
     assert state.diagnostics.channel_area[0][0] > rest_area
+
+
+def _scaled_design(design, s: float):
+    """``design`` with every length scaled by ``s`` (section, body, cap, reinforcement, walls)."""
+    def hole(h):
+        return dataclasses.replace(h, diameter=h.diameter * s, center=tuple(c * s for c in h.center))
+
+    r = design.reinforcement
+    return dataclasses.replace(
+        design, name=f"{design.name}_x{s:g}", length=design.length * s, outer_diameter=design.outer_diameter * s,
+        channels=tuple(hole(h) for h in design.channels), lumen=hole(design.lumen),
+        limiting_fibre=hole(design.limiting_fibre), cap_thickness=design.cap_thickness * s,
+        min_wall_thickness=design.min_wall_thickness * s,
+        reinforcement=dataclasses.replace(r, pitch=r.pitch * s, thread_diameter=r.thread_diameter * s))
+
+
+def test_a_design_scaled_as_a_whole_is_meshed_alike_and_bends_alike(implemented_design):
+    """The solid's equations have no length scale: the implemented design scaled to a 2 mm body
+    bends by the same angle at the same pressure when its mesh scales with it (the rung's mesh
+    lengths are for a 5 mm body, scaled by the outer diameter; they used to be absolute, so a
+    2 mm body got 2.5x longer prisms relative to its size)."""
+    p = np.array([[5000.0]])
+    big = implemented_design.with_length(0.010)
+    small = _scaled_design(big, 0.4)
+    models = [Fe3dModel(d, cache=False, threads=1, mesh_size=3.0, layer_h=4e-3, contact_distance=None)
+              for d in (big, small)]
+    assert models[1].mesh_settings.layer_h == pytest.approx(0.4 * models[0].mesh_settings.layer_h)
+    states = [m.evaluate(p) for m in models]
+    assert all(s.converged.all() for s in states), [s.message for s in states]
+    assert models[0].problem.fes.ndof == models[1].problem.fes.ndof
+    assert states[1].tip.angle[0] == pytest.approx(states[0].tip.angle[0], rel=1e-5)
+    assert states[1].curvature[0, 1] * 0.4 == pytest.approx(states[0].curvature[0, 1], rel=1e-5)

@@ -36,11 +36,28 @@ DEFAULT_LAYER_H = 1.2e-3          # prism height along the body, m
 DEFAULT_PRESSURE_ORDER = 1        # P2 + interior bubbles / P1
 DEFAULT_INTERIOR_ORDER = 3
 DEFAULT_CONTACT_INTORDER = INTORDER   # quadrature order of the lumen contact on the wall (its pair search's points)
+# the body the mesh sizes are for (m): a body of another outer diameter gets every mesh length scaled
+# by its diameter over this one, so a design scaled as a whole is meshed alike (and, the solid's
+# equations being free of a length scale, answers alike at the same pressure)
+REFERENCE_DIAMETER = 5.0e-3
 
 
-def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = DEFAULT_LAYER_H):
+def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = DEFAULT_LAYER_H,
+                  outer_diameter: float = REFERENCE_DIAMETER):
     """The rung's mesh: the base ``MeshSettings()`` scaled by ``mesh_size``, its prisms ``layer_h`` high
-    (m; None: scaled too). ModelError (one line) for a value out of range."""
+    (m; None: scaled too), for a body of ``REFERENCE_DIAMETER``; every length then scaled by
+    ``outer_diameter / REFERENCE_DIAMETER``. ModelError (one line) for a value out of range."""
+    from ..fe3d.mesh import MeshSettings
+
+    mesh = _reference_mesh(mesh_size, layer_h)
+    body = float(outer_diameter) / REFERENCE_DIAMETER
+    if body == 1.0:
+        return mesh
+    return MeshSettings(mesh.section_h * body, mesh.wall_h * body, mesh.layer_h * body, mesh.cap_layers,
+                        None if mesh.lumen_h is None else mesh.lumen_h * body)
+
+
+def _reference_mesh(mesh_size, layer_h):
     from ..fe3d.mesh import MeshSettings
 
     if isinstance(mesh_size, bool) or not 0.1 <= float(mesh_size) <= 10.0:
@@ -68,7 +85,8 @@ class Fe3dModel(BendModel):
         options=(Option("mesh_size", "float", "scales the base mesh in the section (default 1.4; 0.5 = twice as "
                                               "fine as the base)"),
                  Option("layer_h", "float", "prism height along the body in metres (default 1.2e-3; None: the "
-                                            "base mesh's scaled by mesh_size)"),
+                                            "base mesh's scaled by mesh_size); mesh_size and layer_h are for "
+                                            "a 5 mm body, scaled with the body's outer diameter"),
                  Option("mesh", "object", "an explicit MeshSettings"),
                  Option("newton", "object", "NewtonSettings"),
                  Option("step_control", "object", "a continuation StepControl"),
@@ -96,8 +114,9 @@ class Fe3dModel(BendModel):
                  interior_order: int | None = DEFAULT_INTERIOR_ORDER, layer_h: float | None = DEFAULT_LAYER_H,
                  contact_intorder: int = DEFAULT_CONTACT_INTORDER):
         """``mesh_size`` scales the base mesh (``MeshSettings()``) in the section and, with ``layer_h``
-        None, along the body; ``layer_h`` (m) is the prism height along the body; ``mesh`` is an
-        explicit ``MeshSettings`` (then ``layer_h`` is its own). The defaults (mesh 1.4, 1.2 mm
+        None, along the body; ``layer_h`` (m) is the prism height along the body; both are for a
+        body of ``REFERENCE_DIAMETER`` (5 mm), every mesh length scaled by the design's outer
+        diameter over it. ``mesh`` is an explicit ``MeshSettings`` (absolute; ``layer_h`` its own). The defaults (mesh 1.4, 1.2 mm
         layers, P2 + bubbles / P1, barrier 0.02 of the lumen diameter) are the converged set.
         ``step_control``: a continuation ``StepControl`` (adaptive=False is plain load stepping).
         ``progress`` shows a tqdm bar per ramp. ``lumen_fill``: fill an empty lumen with a soft solid
@@ -129,7 +148,7 @@ class Fe3dModel(BendModel):
         from ..fe3d.ramp import default_step_control
         from ..fe3d.solver import NewtonSettings, check_element
 
-        self.mesh_settings = mesh if mesh is not None else mesh_settings(mesh_size, layer_h)
+        self.mesh_settings = mesh if mesh is not None else mesh_settings(mesh_size, layer_h, design.outer_diameter)
         self.newton_settings = newton if newton is not None else NewtonSettings(threads=threads)
         self.step_control = step_control if step_control is not None else default_step_control()
         self.tangent_predictor = tangent_predictor
