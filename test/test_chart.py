@@ -72,3 +72,28 @@ def test_chart_marks_each_points_reference(tmp_path):
     assert all(p.stat().st_size > 1000 for p in written if p.suffix == ".png")
     assert _reference_legend(rows) == "filled circle: fe3d mesh 1.4, 1.2 mm layers, open diamond: section D/20"
     assert _reference_marker("") == "x"
+
+
+def test_no_legend_covers_an_axes(tmp_path, monkeypatch):
+    """Every chart's legends sit outside all of its axes (below or beside them), so none covers a point."""
+    from softcath_ros.cli import chart
+
+    figures = []
+
+    def keep(plt, fig, path):
+        fig.canvas.draw()
+        legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+        renderer = fig.canvas.get_renderer()
+        figures.append((path, [lg.get_window_extent(renderer) for lg in legends],
+                        [ax.get_window_extent(renderer) for ax in fig.axes]))
+        plt.close(fig)
+        return path
+
+    monkeypatch.setattr(chart, "_save", keep)
+    chart.draw_all(_rows(), tmp_path / "ladder.png")
+    assert len(figures) == 3
+    for path, legends, axes in figures:
+        assert legends, path
+        for legend in legends:
+            covered = [a for a in axes if legend.overlaps(a)]
+            assert not covered, f"{path}: a legend at {legend} covers an axes at {covered[0]}"

@@ -109,9 +109,21 @@ def _pyplot():
 
 def _save(plt, fig, path: str) -> str:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    # bbox "tight" grows the image to hold the legends placed outside the axes
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+def _legend_below(ax, *args, fontsize: int = 6, ncol: int = 1) -> None:
+    """A legend under the axes (beneath a one-line x label), so it never covers the plotted points."""
+    ax.legend(*args, fontsize=fontsize, ncol=ncol, loc="upper center", bbox_to_anchor=(0.5, -0.2),
+              borderaxespad=0.0)
+
+
+def _legend_right(ax, *args, fontsize: int = 6) -> None:
+    """A legend right of the (last) axes, beside them, for axes whose x labels take several lines."""
+    ax.legend(*args, fontsize=fontsize, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
 
 
 def _colours(rows: list[dict]) -> dict:
@@ -172,7 +184,7 @@ def draw(rows: list[dict], path: str) -> str:
     a1.set_xlabel("time per evaluation [s] (shared 2-core machine)")
     a1.set_ylabel("worst R_C error against the reference [%]")
     a1.set_title("speed against accuracy (o: 1 channel, lengths; ^: 3 channels, directions)", fontsize=9)
-    a1.legend(fontsize=6)
+    _legend_below(a1)
     # error against pressure on the first case
     first = [r for r in rows if r["case"] == cases[0]]
     for s in dict.fromkeys(r["setting"] for r in first):
@@ -183,7 +195,7 @@ def draw(rows: list[dict], path: str) -> str:
     a2.set_ylabel("R_C = l / theta error [%]")
     a2.set_title(f"error against pressure: {cases[0]}\n(marker: the point's reference, "
                  f"{_reference_legend(first)})", fontsize=9)
-    a2.legend(fontsize=7)
+    _legend_below(a2, fontsize=7, ncol=2)
     # failure boundary per setting and case
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     for j, case in enumerate(cases):
@@ -207,7 +219,7 @@ def draw(rows: list[dict], path: str) -> str:
     a3.set_title("failure boundaries per case:\nwhere each rung stops, where its error leaves 5 %", fontsize=9)
     handles, labels = a3.get_legend_handles_labels()
     uniq = dict(zip(labels, handles))
-    a3.legend(uniq.values(), uniq.keys(), fontsize=6)
+    _legend_right(a3, uniq.values(), uniq.keys())
     return _save(plt, fig, path)
 
 
@@ -237,7 +249,7 @@ def draw_lengths(rows: list[dict], path: str) -> str:
         axes[1, j].set_ylabel("tip position error [mm]")
         axes[2, j].set_ylabel("R_C = l / theta [mm]")
         axes[2, j].set_xlabel("pressure [bar]")
-    axes[0, 0].legend(fontsize=7)
+    _legend_below(axes[-1, 0], *axes[0, 0].get_legend_handles_labels(), fontsize=7, ncol=2)
     fig.suptitle("1-channel design: error against pressure per length, 0-0.5 bar, with lumen contact", fontsize=10)
     return _save(plt, fig, path)
 
@@ -271,7 +283,7 @@ def draw_directions(rows: list[dict], path: str) -> str:
     axes[2].set_ylim(bottom=1e-3)   # the one-channel direction is exact to ~1e-13 deg for every rung
     refs = sorted({r["reference"] for r in rows if r["reference"]})
     pressures = sorted({r["pressure_pa"] / PA_PER_BAR for r in rows})
-    axes[0].legend(fontsize=7)
+    _legend_right(axes[-1], *axes[0].get_legend_handles_labels(), fontsize=7)
     fig.suptitle(f"3-channel design: error against bending direction, {', '.join(f'{p:g}' for p in pressures)} bar "
                  f"(largest channel); reference: {'/'.join(refs)}", fontsize=10)
     return _save(plt, fig, path)
