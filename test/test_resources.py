@@ -10,8 +10,8 @@ from softcath_ros.resources import ResourceNotFound, envelope_path, find, shippe
 def test_shipped_names_per_kind():
     assert {"implemented_5mm", "three_channel_5mm"} <= set(shipped_names("design"))
     assert "free_bending_live" in shipped_names("scene") and "quick" in shipped_names("protocol")
-    assert shipped_names("params") == ["allocation_node", "bench_node", "model_node", "sim_bench_node",
-                                      "steer_node", "two_dof_pair"]
+    assert shipped_names("params") == ["allocation_node", "bench_node", "model_node", "regulator_node", "scale_node",
+                                      "sim_bench_node", "steer_node", "two_dof_pair"]
     assert shipped_names("envelope") == ["ladder_envelope"] and find("envelope", "ladder_envelope") == envelope_path()
     assert isinstance(shipped_names("surrogate_table"), list)   # none shipped yet: still a kind
     with pytest.raises(ValueError, match="unknown resource kind 'designs'"):
