@@ -2,11 +2,14 @@
 pseudo-terminal (the host opens the pty's name with pyserial, as a USB serial port), and a Modbus
 TCP regulator (pymodbus server on 127.0.0.1, a free port). Each can be told to die, lie or flood.
 
-Run in a thread (``start()``) they behave as firmware does, for the node tests; the pure tests drive
-the pty by hand (``say`` / ``heard``) so that nothing depends on timing."""
+Started (``start()``) a serial device runs in its own process and behaves as firmware does, for
+the node tests (its own process: a busy test process cannot starve it into a silence the node
+would rightly call a dead device); the pure tests drive the pty by hand (``say`` / ``heard``) so
+that nothing depends on timing."""
 from __future__ import annotations
 
 import asyncio
+import multiprocessing
 import os
 import socket
 import threading
@@ -28,10 +31,30 @@ class PtyDevice:
         os.set_blocking(self.master, False)
         self._pending = b""
         self._outbox = b""
-        self.lines: list[str] = []   # every line the host sent
-        self.mode = "ok"
-        self._stop = threading.Event()
-        self._thread = None
+        self._lines: list[str] = []  # every line the host sent
+        self._context = multiprocessing.get_context("fork")
+        self._mode = self._context.Value("i", 0)          # index into MODES, shared with the process
+        self._heard = self._context.Queue()               # lines the process heard
+        self._stop = self._context.Event()
+        self._process = None
+        self._in_process = False
+
+    @property
+    def mode(self) -> str:
+        return MODES[self._mode.value]
+
+    @mode.setter
+    def mode(self, value: str) -> None:
+        self._mode.value = MODES.index(value)
+
+    @property
+    def lines(self) -> list[str]:
+        """Every line the host sent so far."""
+        while True:
+            try:
+                self._lines.append(self._heard.get_nowait())
+            except Exception:     # queue.Empty
+                return self._lines
 
     def say(self, text: str) -> None:
         """Queue ``text`` and write what the pty takes now (``flush`` writes the rest later); a host
@@ -63,18 +86,21 @@ class PtyDevice:
         *done, self._pending = self._pending.split(b"\n")
         for raw in done:
             line = raw.decode("ascii", errors="replace").strip()
-            self.lines.append(line)
             new.append(line)
+            if not self._in_process:     # (the process sends them to the parent instead)
+                self._lines.append(line)
         return new
 
     def start(self, period: float = 0.02):
-        self._thread = threading.Thread(target=self._run, args=(period,), daemon=True)
-        self._thread.start()
+        self._process = self._context.Process(target=self._run, args=(period,), daemon=True)
+        self._process.start()
         return self
 
     def _run(self, period):
+        self._in_process = True
         while not self._stop.is_set():
             for line in self.heard():
+                self._heard.put(line)
                 self.on_line(line)
             if self.mode != "dead":
                 try:
@@ -85,8 +111,11 @@ class PtyDevice:
 
     def close(self):
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5)
+        if self._process is not None:
+            self._process.join(timeout=5)
+            if self._process.is_alive():
+                self._process.kill()
+            self._process = None
         for fd in (self.master, self._slave):
             try:
                 os.close(fd)
@@ -124,11 +153,15 @@ class SerialScaleEmulator(PtyDevice):
 
     def __init__(self, load: float = 0.0):
         super().__init__()
-        self.load, self.offset, self.tares = load, 0.0, 0
+        self.load, self.offset = load, 0.0
+
+    @property
+    def tares(self) -> int:
+        return self.lines.count("TARE")
 
     def on_line(self, line):
         if line == "TARE":
-            self.offset, self.tares = self.load, self.tares + 1
+            self.offset = self.load
 
     def report(self) -> str:
         if self.mode == "nan":

@@ -1,7 +1,7 @@
 """The hardware core without ROS or devices: the serial line protocol refuses what is malformed,
 non-finite or out of range; the regulator's state machine on a fake clock clamps every setpoint,
 vents on command timeout, on deactivate and close, and when the device stops giving valid readings
-for 0.5 s (ERROR); configure checks that every channel answers; the scale's tare and silence."""
+for 0.4 s (ERROR within 0.5 s); configure checks that every channel answers; the scale's tare and silence."""
 import math
 
 import numpy as np
@@ -219,8 +219,8 @@ def test_a_device_that_goes_silent_is_vented_and_in_error_within_half_a_second()
         clock.t += 0.02
         reg.tick()
         assert clock() - t_dead < 1.0
-    assert 0.5 < clock() - t_dead <= 0.52 + 1e-9
-    assert ("vent",) in dev.log[n:] and "no valid reading for 0.5" in reg.reason
+    assert 0.4 < clock() - t_dead <= 0.42 + 1e-9             # at 50 Hz ticks: within 0.5 s
+    assert ("vent",) in dev.log[n:] and "no valid reading for 0.4" in reg.reason
     reg.command([20000.0, 20000.0], clock())           # latched: commands do nothing, it keeps venting
     n = len(dev.log)
     run(clock, reg, 0.5)

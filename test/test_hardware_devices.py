@@ -186,7 +186,7 @@ def test_a_modbus_device_that_dies_is_in_error_within_half_a_second(modbus):
     while reg.state == "active":
         clock.t += 0.02
         assert reg.tick() == []
-    assert 0.5 < clock() - dead <= 0.52 + 1e-9 and "modbus:127.0.0.1" in reg.reason
+    assert 0.4 < clock() - dead <= 0.42 + 1e-9 and "modbus:127.0.0.1" in reg.reason
     reg.close()
 
 

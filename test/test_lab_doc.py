@@ -1,7 +1,7 @@
 """docs/lab.md's node and tracker lines run as written, against emulated devices: the only change
 is the device each names (the serial ports /dev/ttyACM0 and /dev/ttyUSB0 become the emulators'
 pseudo-terminals, the Modbus address 192.168.0.10:502 the emulator on 127.0.0.1, camera 0 a folder
-of rendered frames). Its `softcath` lines parse in test_docs_commands.py; `softcath track` runs here."""
+of rendered frames, replayed in a loop as a camera never ends). Its `softcath` lines parse in test_docs_commands.py; `softcath track` runs here."""
 import shlex
 from pathlib import Path
 
@@ -36,7 +36,7 @@ def lab_lines(prefix: str) -> list[list[str]]:
 
 def run_line(argv, devices: dict, topic: str, msg_type, node_name: str, cwd=ROOT):
     """Start the line (devices replaced), wait until ``topic`` carries a message, stop it: exit 0."""
-    args = [devices.get(a, a) for a in argv[1:]]
+    args = [b for a in argv[1:] for b in devices.get(a, [a])]
     assert args[0] == "--ros-args"
     with NodeGraph() as graph:
         proc = graph.start(argv[0], extra_ros_args=args[1:], cwd=cwd)
@@ -52,8 +52,8 @@ def run_line(argv, devices: dict, topic: str, msg_type, node_name: str, cwd=ROOT
 def test_the_regulator_lines_run_as_written():
     serial = SerialRegulatorEmulator(1).start()
     modbus = ModbusRegulatorEmulator(1)
-    devices = {"port:=/dev/ttyACM0": f"port:={serial.port}", "modbus_host:=192.168.0.10": "modbus_host:=127.0.0.1",
-               "modbus_port:=502": f"modbus_port:={modbus.port}"}
+    devices = {"port:=/dev/ttyACM0": [f"port:={serial.port}"], "modbus_host:=192.168.0.10": ["modbus_host:=127.0.0.1"],
+               "modbus_port:=502": [f"modbus_port:={modbus.port}"]}
     try:
         lines = lab_lines("regulator_node")
         assert {("backend:=sim" in line, "backend:=modbus" in line) for line in lines} == {
@@ -70,7 +70,7 @@ def test_the_scale_line_runs_as_written():
     scale = SerialScaleEmulator(load=0.1).start()
     try:
         (line,) = lab_lines("scale_node")
-        run_line(line, {"port:=/dev/ttyUSB0": f"port:={scale.port}"}, topics.BENCH_WRENCH, WrenchStamped,
+        run_line(line, {"port:=/dev/ttyUSB0": [f"port:={scale.port}"]}, topics.BENCH_WRENCH, WrenchStamped,
                  topics.SCALE_NODE)
     finally:
         scale.close()
@@ -88,5 +88,6 @@ def test_the_camera_lines_run_as_written(tmp_path, monkeypatch):
     assert main(track[1:]) == 0
     assert list((tmp_path / "overlay").iterdir())
     (line,) = lab_lines("tracker_node")
-    run_line(line, {"input:=0": f"input:={tmp_path / 'frames'}"}, topics.BENCH_BEND_ANGLE, Vector3Stamped,
+    # the camera never ends: its stand-in, the folder, loops
+    run_line(line, {"input:=0": [f"input:={tmp_path / 'frames'}", "-p", "loop:=true"]}, topics.BENCH_BEND_ANGLE, Vector3Stamped,
              topics.TRACKER_NODE, cwd=tmp_path)

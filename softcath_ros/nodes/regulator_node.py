@@ -12,7 +12,7 @@ bench/hardware/protocol.py), ``modbus`` (Modbus TCP, the register map in the par
   here, as throughout the rig contract, ``fluid_pressure`` is the *gauge* pressure in Pa), stamped
   when it was read from the device;
 - vents on command timeout, on deactivate, cleanup, SIGINT/SIGTERM, and when the device gives no
-  valid reading for ``silence_timeout`` (0.5 s): ERROR on /diagnostics at once, latched until
+  valid reading for ``silence_timeout`` (0.4 s): ERROR on /diagnostics at once, latched until
   deactivated.
 
 ``autostart`` (default true) configures and activates at start-up (a configure fault then ends
@@ -29,7 +29,7 @@ from std_msgs.msg import Float64MultiArray
 
 from .. import topics
 from ..bench.hardware.devices import ModbusRegulator, RegisterMap, SerialLines, SimRegulator
-from ..bench.hardware.regulator import SILENCE_TIMEOUT, Regulator
+from ..bench.hardware.regulator import MAX_SILENCE_TIMEOUT, SILENCE_TIMEOUT, Regulator
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .device_node import DeviceNode
@@ -56,7 +56,7 @@ class RegulatorNode(DeviceNode):
         self.command_timeout = p("command_timeout", 0.5, "no pressure command for this long (s): vent",
                                  minimum=0.01, maximum=60.0)
         self.silence_timeout = p("silence_timeout", SILENCE_TIMEOUT, "no valid reading for this long (s): vent, ERROR",
-                                 minimum=0.05, maximum=SILENCE_TIMEOUT)
+                                 minimum=0.05, maximum=MAX_SILENCE_TIMEOUT)
         self.check_timeout = p("check_timeout", 2.0, "configure: every channel must answer within this, s",
                                minimum=0.1, maximum=60.0)
         self.max_rate = p("max_rate", 1e9, "setpoint rate limit, Pa/s (1e9: none); venting is immediate", minimum=1.0, maximum=1e9)
@@ -71,8 +71,8 @@ class RegulatorNode(DeviceNode):
         self.modbus = dict(
             host=p("modbus_host", "192.168.0.10", "modbus: the device's address"),
             port=p("modbus_port", 502, "modbus: TCP port", minimum=1, maximum=65535),
-            timeout=p("modbus_timeout", 0.1, "modbus: answer timeout per request, s", minimum=0.01,
-                      maximum=SILENCE_TIMEOUT))
+            timeout=p("modbus_timeout", 0.05, "modbus: answer timeout per request, s (a silent device is "
+                      "declared within silence_timeout + this)", minimum=0.005, maximum=0.1))
         self.registers = dict(
             setpoints=p("setpoint_registers", list(range(self.n)), "modbus: holding register of each channel's setpoint"),
             readings=p("reading_registers", list(range(100, 100 + self.n)), "modbus: register of each channel's reading"),

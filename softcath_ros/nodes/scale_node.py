@@ -8,7 +8,7 @@ bench/hardware/protocol.py: ``F <newtons>`` lines, host ``TARE``) as the rig con
   it refuses (malformed, NaN, beyond ``max_force``) is counted on /diagnostics, never published;
 - a message on /softcath/bench/tare (std_msgs/Empty) sends ``TARE``: the board zeroes at the
   present load;
-- no valid reading for ``silence_timeout`` (0.5 s): ERROR on /diagnostics at once.
+- no valid reading for ``silence_timeout`` (0.4 s): ERROR on /diagnostics at once.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from std_msgs.msg import Empty
 
 from .. import topics
 from ..bench.hardware.devices import SerialLines
-from ..bench.hardware.regulator import SILENCE_TIMEOUT
+from ..bench.hardware.regulator import MAX_SILENCE_TIMEOUT, SILENCE_TIMEOUT
 from ..bench.hardware.scale import Scale
 from ..core.errors import SoftcathError
 from .device_node import DeviceNode
@@ -42,7 +42,7 @@ class ScaleNode(DeviceNode):
         self.rate_hz = p("rate_hz", 100.0, "port polls per second (each publishes the newest reading)",
                          minimum=20.0, maximum=1000.0)
         self.silence_timeout = p("silence_timeout", SILENCE_TIMEOUT, "no valid reading for this long (s): ERROR",
-                                 minimum=0.05, maximum=SILENCE_TIMEOUT)
+                                 minimum=0.05, maximum=MAX_SILENCE_TIMEOUT)
         self.check_timeout = p("check_timeout", 2.0, "configure: a reading must come within this, s",
                                minimum=0.1, maximum=60.0)
         autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it)")

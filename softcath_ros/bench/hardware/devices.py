@@ -132,7 +132,7 @@ class ModbusRegulator:
     """A proportional regulator or valve terminal on Modbus TCP (pymodbus' synchronous client)."""
 
     def __init__(self, host: str, port: int, registers: RegisterMap, n_channels: int, low: float, high: float,
-                 timeout: float = 0.1):
+                 timeout: float = 0.05):
         registers.check(n_channels)
         self.host, self.port, self.map = host, int(port), registers
         self.n_channels, self.low, self.high, self.timeout = n_channels, low, high, timeout

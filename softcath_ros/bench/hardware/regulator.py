@@ -9,8 +9,8 @@ cleanup/shutdown vent and close. While active, each ``tick()``:
   every ``keep_alive`` (the firmware's own watchdog), and vents (at once) when no command arrived
   for ``command_timeout`` (the silence counts from a command's arrival: core/command_shaping.py);
 - returns the new valid readings (the newest per channel; refused lines are counted, never returned);
-- when no valid reading came for ``silence_timeout`` (0.5 s) the device is declared silent: vent and
-  go to ``error`` (latched: it keeps venting until deactivated or cleaned up).
+- when no valid reading came for ``silence_timeout`` (0.4 s) the device is declared silent: vent and
+  go to ``error`` (ticks at 50 Hz: within 0.5 s of the last reading) (latched: it keeps venting until deactivated or cleaned up).
 """
 from __future__ import annotations
 
@@ -24,7 +24,10 @@ from ...core.pressure_command import check_pressure_command
 from .devices import DeviceFault
 from .protocol import DeviceError, Reading, Refused
 
-SILENCE_TIMEOUT = 0.5      # s without a valid reading: the device is silent (issue: ERROR within 0.5 s)
+# s without a valid reading: the device is silent. ERROR must come within 0.5 s of the device going
+# silent: this, plus a tick (20 ms at 50 Hz) and a Modbus request's timeout (50 ms), stays below it.
+SILENCE_TIMEOUT = 0.4
+MAX_SILENCE_TIMEOUT = 0.45
 
 
 @dataclass
