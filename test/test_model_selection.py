@@ -230,8 +230,9 @@ def test_envelope_command_writes_what_selection_reads(tmp_path, monkeypatch):
     closed = env["rungs"]["closed_form"]["designs"]["implemented_5mm"]
     assert closed["error_rc_rel_max"] > 1.0 > 0.05 > section["error_rc_rel_max"]
     assert closed["cost_s_per_eval"] < section["cost_s_per_eval"]
-    assert select_model(scene(required_accuracy=0.05, required_rate=1.0), env).rung == "section"
-    assert select_model(scene(required_accuracy=5.0, required_rate=1.0), env).rung == "closed_form"
+    # a rate every measured cost meets, also on a loaded machine: the choice here is by accuracy and cost order
+    assert select_model(scene(required_accuracy=0.05, required_rate=0.01), env).rung == "section"
+    assert select_model(scene(required_accuracy=5.0, required_rate=0.01), env).rung == "closed_form"
 
 
 def test_envelope_command_refuses_unknown_cases_in_one_line(capsys):
