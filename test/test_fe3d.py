@@ -1040,3 +1040,31 @@ def test_a_design_scaled_as_a_whole_is_meshed_alike_and_bends_alike(implemented_
     assert models[0].problem.fes.ndof == models[1].problem.fes.ndof
     assert states[1].tip.angle[0] == pytest.approx(states[0].tip.angle[0], rel=1e-5)
     assert states[1].curvature[0, 1] * 0.4 == pytest.approx(states[0].curvature[0, 1], rel=1e-5)
+
+
+def test_a_shaped_lumen_wall_is_chained_edge_to_edge_for_its_contact(implemented_design):
+    """A U-shaped lumen (its centroid in the notch: not star-shaped about it, so its wall cannot be
+    ordered by angle): its wall points are ordered by the section's edges (each next point shares a
+    wall edge), the half wall from the plane to the plane, and its contact's barrier is scaled by
+    the equal-area radius."""
+    from softcath_ros.core.design import ShapedHole
+    from softcath_ros.core.fe3d.measure import _edge_owners, lumen_wall_nodes
+    from softcath_ros.core.geometry import PolygonShape, shape_outline
+
+    shape = PolygonShape(((-0.0007, -0.0016), (0.0007, -0.0016), (0.0007, -0.0006), (0.00035, -0.0006),
+                          (0.00035, -0.0012), (-0.00035, -0.0012), (-0.00035, -0.0006), (-0.0007, -0.0006)),
+                         fillet=0.0001)
+    outline = shape_outline(shape, "lumen")
+    assert not outline.contains(outline.centroid)
+    d = dataclasses.replace(implemented_design.with_length(0.010),
+                            lumen=ShapedHole(shape, tuple(outline.centroid), "lumen", outline))
+    problem = Fe3dModel(d, mesh=COARSE, cache=False, threads=1).problem
+    assert problem.half and problem.contact is not None
+    assert problem.contact.d_hat == pytest.approx(0.02 * 2.0 * math.sqrt(outline.area / math.pi))
+    pts, _ = lumen_wall_nodes(problem)
+    sec = problem.prism.section
+    index = {tuple(p): i for i, p in enumerate(sec.points)}
+    chain = [index[tuple(p)] for p in pts]
+    owners = _edge_owners(sec)
+    assert all((min(a, b), max(a, b)) in owners for a, b in zip(chain[:-1], chain[1:]))
+    assert abs(pts[0][0]) < 1e-12 and abs(pts[-1][0]) < 1e-12 and len(set(chain)) == len(chain)

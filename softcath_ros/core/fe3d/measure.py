@@ -211,15 +211,21 @@ def channel_area(problem, i: int) -> float:
     return float(0.5 * np.linalg.norm(np.cross(cur, nxt).sum(axis=0)))
 
 
-def _wall_loop(sec, region: str) -> np.ndarray:
-    """The section's points on the wall of hole ``region`` (the edges between its triangles and
-    the silicone's), chained in order counter-clockwise about the hole: a closed wall from any
-    point, one the half model's plane cuts from its end on x = 0 to its other end."""
+def _edge_owners(sec) -> dict[tuple[int, int], list[int]]:
+    """Each section edge (i, j), i < j, with the triangles it bounds."""
     owners: dict[tuple[int, int], list[int]] = {}
     for t, tri in enumerate(sec.triangles):
         for j in range(3):
             a, b = int(tri[j]), int(tri[(j + 1) % 3])
             owners.setdefault((min(a, b), max(a, b)), []).append(t)
+    return owners
+
+
+def _wall_loop(sec, region: str) -> np.ndarray:
+    """The section's points on the wall of hole ``region`` (the edges between its triangles and
+    the silicone's), chained in order counter-clockwise about the hole: a closed wall from any
+    point, one the half model's plane cuts from its end on x = 0 to its other end."""
+    owners = _edge_owners(sec)
     nxt = {}
     for (a, b), ts in owners.items():
         inside = [t for t in ts if sec.region[t] == region]
@@ -246,11 +252,11 @@ def _curve_nodes(problem, surface: str) -> tuple[np.ndarray, np.ndarray]:
     between the lumen's triangles and the silicone's) or "outer" (the edges of one triangle only,
     off the symmetry plane x = 0)."""
     sec = problem.prism.section
-    owners: dict[tuple[int, int], list[int]] = {}
-    for t, tri in enumerate(sec.triangles):
-        for j in range(3):
-            a, b = int(tri[j]), int(tri[(j + 1) % 3])
-            owners.setdefault((min(a, b), max(a, b)), []).append(t)
+    lumen = problem.design.lumen
+    if surface == "lumen" and getattr(lumen, "kind", "circle") != "circle":
+        # a shaped lumen need not be star-shaped about its centroid: its wall chained edge to edge
+        return sec.points[_wall_loop(sec, "lumen")], np.asarray(lumen.center, dtype=float)
+    owners = _edge_owners(sec)
     on_plane = np.abs(sec.points[:, 0]) < 1e-12
     if surface == "lumen":
         centre = np.asarray(problem.design.lumen.center, dtype=float)
