@@ -1068,3 +1068,20 @@ def test_a_shaped_lumen_wall_is_chained_edge_to_edge_for_its_contact(implemented
     owners = _edge_owners(sec)
     assert all((min(a, b), max(a, b)) in owners for a, b in zip(chain[:-1], chain[1:]))
     assert abs(pts[0][0]) < 1e-12 and abs(pts[-1][0]) < 1e-12 and len(set(chain)) == len(chain)
+
+
+def test_a_section_netgen_cannot_mesh_is_one_line(short_design, monkeypatch):
+    """netgen's own failure while meshing the section (its NgException) reaches the user as one
+    ModelError line naming the design, never as netgen's traceback."""
+    import netgen.occ
+
+    from softcath_ros.core.fe3d.mesh import MeshSettings as Settings, mesh_section
+
+    class Refuses:
+        def __init__(self, *args, **kwargs):
+            raise RuntimeError("Meshing failed!\n  surface 3: bad edge")
+
+    monkeypatch.setattr(netgen.occ, "OCCGeometry", Refuses)
+    with pytest.raises(ModelError, match=r"could not mesh implemented_5mm's section: Meshing failed! surface 3") as err:
+        mesh_section(short_design, Settings(), True)
+    assert "\n" not in str(err.value)

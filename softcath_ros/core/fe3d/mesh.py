@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..design import Design
+from ..errors import ModelError
 
 
 @dataclass(frozen=True)
@@ -242,8 +243,11 @@ def mesh_section(design: Design, settings: MeshSettings, half: bool) -> SectionM
     body.maxh = settings.section_h
     for e in body.edges:
         e.maxh = min(e.maxh, settings.wall_h) if hasattr(e, "maxh") else settings.wall_h
-    geo = OCCGeometry(Glue([body] + parts), dim=2)
-    ngmesh = geo.GenerateMesh(maxh=settings.section_h)
+    try:
+        geo = OCCGeometry(Glue([body] + parts), dim=2)
+        ngmesh = geo.GenerateMesh(maxh=settings.section_h)
+    except Exception as exc:   # netgen's NgException: one line, never its traceback
+        raise ModelError(f"fe3d: netgen could not mesh {design.name}'s section: {' '.join(str(exc).split())}") from None
     pts = np.array([[p[0], p[1]] for p in ngmesh.Points()])
     names = [ngmesh.GetMaterial(i + 1) for i in range(len(parts) + 1)]
     tris, region = [], []
