@@ -23,7 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from harness import save_figure, write_results  # noqa: E402
 from softcath_ros import topics  # noqa: E402
-from softcath_ros.graph import NodeGraph, wait_ready  # noqa: E402
+from softcath_ros.graph import NodeGraph, wait_output  # noqa: E402
 
 STOP_TARGET_S = 2.0
 
@@ -36,7 +36,7 @@ def one_run(protocol: str, delay: float, out_dir: Path, name: str) -> dict:
     with NodeGraph() as graph:
         rig = graph.start("sim_bench_node", {"legacy_topics": "false"})
         bench = graph.start("bench_node", {"protocol": protocol, "output_dir": out_dir, "name": name})
-        text = wait_ready(bench, timeout_s=120, mark="starting protocol")
+        text = wait_output(bench, timeout_s=120, mark="starting protocol")
         time.sleep(delay)
         rig.send_signal(signal.SIGKILL)
         t0 = time.monotonic()

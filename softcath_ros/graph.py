@@ -10,8 +10,11 @@ machine never see each other's topics:
 - ``NodeGraph`` starts node executables with parameters on the leased domain (loopback only,
   ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set otherwise), and stops them: SIGINT, then
   SIGKILL after a grace.
+- Readiness is said over ROS, never in log lines: the shared node runtime publishes, once a node
+  spins, its name and process id on the latched /softcath/ready (``topics.READY``); ``ReadyWatch``
+  listens there and ``wait_ready`` waits for given processes.
 
-No rclpy import at module level: only the optional probe needs it.
+No rclpy import at module level: only the probe and ``ReadyWatch`` need it.
 """
 from __future__ import annotations
 
@@ -29,7 +32,6 @@ from pathlib import Path
 from .core.errors import SoftcathError
 
 DOMAIN_RANGE = (100, 230)   # ROS_DOMAIN_IDs leased here; 0-99 stay free for users' own graphs
-READY_MARK = "ready: spinning"  # the shared node runtime logs this once a node spins (nodes/runtime.py)
 LOCK_DIR = Path(tempfile.gettempdir()) / "softcath_ros_domains"
 
 
@@ -141,10 +143,11 @@ def stop_process(proc: subprocess.Popen, grace_s: float = 10.0, sig=signal.SIGIN
     return proc.returncode
 
 
-def wait_ready(proc: subprocess.Popen, timeout_s: float = 60.0, mark: str = READY_MARK) -> str:
-    """Read ``proc``'s piped output until a line holds ``mark`` (by default: the node is up and
-    spinning); returns the text read so far (it is no longer in the pipe). SoftcathError, with
-    that text's tail, when the process ends first or ``timeout_s`` passes."""
+def wait_output(proc: subprocess.Popen, mark: str, timeout_s: float = 60.0) -> str:
+    """Read ``proc``'s piped output until a line holds ``mark`` (a step of its work, e.g. a bench's
+    "starting protocol"; readiness is ``wait_ready``'s); returns the text read so far (it is no
+    longer in the pipe). SoftcathError, with that text's tail, when the process ends first or
+    ``timeout_s`` passes."""
     import selectors
 
     fd = proc.stdout.fileno()
@@ -155,14 +158,97 @@ def wait_ready(proc: subprocess.Popen, timeout_s: float = 60.0, mark: str = READ
         while mark.encode() not in text:
             left = end - time.monotonic()
             if left <= 0 or not sel.select(timeout=left):
-                raise SoftcathError(f"not ready after {timeout_s:g} s: {text.decode(errors='replace')[-500:]}")
+                raise SoftcathError(f"no {mark!r} after {timeout_s:g} s: {text.decode(errors='replace')[-500:]}")
             chunk = os.read(fd, 65536)
             if not chunk:  # the process closed its output: it ended
                 proc.wait()
-                raise SoftcathError(f"exited with {proc.returncode} before it was ready: "
+                raise SoftcathError(f"exited with {proc.returncode} before {mark!r}: "
                                     f"{text.decode(errors='replace')[-500:]}")
             text += chunk
     return text.decode(errors="replace")
+
+
+class ReadyWatch:
+    """The nodes on ``domain`` that said they spin (``topics.READY``), by process id: a small rclpy
+    node of its own context. ``poll(timeout_s)`` takes what arrived; ``close()`` ends it."""
+
+    def __init__(self, domain: int):
+        import json
+
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
+        from std_msgs.msg import String
+
+        from . import topics
+
+        default_to_localhost_discovery()
+        self.ready: dict[int, dict] = {}
+        self.context = rclpy.Context()
+        # the caller's signal handling stays its own (characterise finalises the bench on SIGTERM)
+        rclpy.init(context=self.context, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("softcath_ready_watch", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+        def on_ready(msg):
+            try:
+                info = json.loads(msg.data)
+                self.ready[int(info["pid"])] = info
+            except (ValueError, KeyError, TypeError):
+                pass
+
+        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(String, topics.READY, on_ready, qos)
+
+    def poll(self, timeout_s: float) -> None:
+        self.executor.spin_once(timeout_sec=timeout_s)
+
+    def close(self) -> None:
+        import rclpy
+
+        if self.context is not None:
+            context, self.context = self.context, None
+            self.executor.shutdown(timeout_sec=1.0)
+            self.node.destroy_node()
+            rclpy.try_shutdown(context=context)
+
+
+def _tail(proc: subprocess.Popen) -> str:
+    """What an ended process wrote on its piped output (its last 500 characters)."""
+    if proc.stdout is None:
+        return ""
+    try:
+        return (proc.stdout.read() or "")[-500:]
+    except (OSError, ValueError):
+        return ""
+
+
+def wait_ready(procs, domain: int | None = None, timeout_s: float = 60.0, watch: ReadyWatch | None = None) -> None:
+    """Until every process of ``procs`` (one or a list) announced on ``domain`` that its node spins.
+    SoftcathError naming the first that ended before it (with its output's tail) or, after
+    ``timeout_s``, those still not ready. ``watch``: a ReadyWatch to reuse (else one for this call)."""
+    procs = list(procs) if isinstance(procs, (list, tuple)) else [procs]
+    own = watch is None
+    watch = ReadyWatch(domain) if own else watch
+    try:
+        end = time.monotonic() + timeout_s
+        while True:
+            waiting = [p for p in procs if p.pid not in watch.ready]
+            if not waiting:
+                return
+            for p in waiting:
+                if p.poll() is not None:
+                    raise SoftcathError(f"{Path(str(p.args[0])).name if p.args else 'node'} exited with "
+                                        f"{p.returncode} before it was ready: {_tail(p)}")
+            if time.monotonic() > end:
+                raise SoftcathError(f"not ready after {timeout_s:g} s: process(es) "
+                                    f"{', '.join(str(p.pid) for p in waiting)}")
+            watch.poll(0.1)
+    finally:
+        if own:
+            watch.close()
 
 
 class NodeGraph:
@@ -176,6 +262,14 @@ class NodeGraph:
         self.domain = domain if domain is not None else self.lease.domain
         self.env = graph_env(self.domain, env)
         self.processes: list[tuple[str, subprocess.Popen]] = []
+        self._watch: ReadyWatch | None = None
+
+    @property
+    def watch(self) -> ReadyWatch:
+        """The graph's ReadyWatch (made on first use, ended with the graph)."""
+        if self._watch is None:
+            self._watch = ReadyWatch(self.domain)
+        return self._watch
 
     def start(self, node: str, params: dict | None = None, extra_ros_args=(), stdout=subprocess.PIPE,
               stderr=subprocess.STDOUT, **popen) -> subprocess.Popen:
@@ -185,10 +279,9 @@ class NodeGraph:
         self.processes.append((node, proc))
         return proc
 
-    def wait_ready(self, *procs: subprocess.Popen, timeout_s: float = 60.0) -> list[str]:
-        """``wait_ready`` for each of ``procs`` (started with piped output) within ``timeout_s`` in all."""
-        end = time.monotonic() + timeout_s
-        return [wait_ready(p, max(0.0, end - time.monotonic())) for p in procs]
+    def wait_ready(self, *procs: subprocess.Popen, timeout_s: float = 60.0) -> None:
+        """``wait_ready`` for every one of ``procs`` within ``timeout_s`` in all."""
+        wait_ready(list(procs), timeout_s=timeout_s, watch=self.watch)
 
     def stop(self, grace_s: float = 10.0) -> dict[str, int]:
         """Stop every node still running (SIGINT, then kill after ``grace_s``); exit codes by node."""
@@ -202,6 +295,8 @@ class NodeGraph:
 
     def __exit__(self, *exc) -> None:
         try:
+            if self._watch is not None:
+                self._watch.close()
             self.stop()
             for _, proc in self.processes:
                 for stream in (proc.stdout, proc.stderr):
@@ -212,5 +307,5 @@ class NodeGraph:
                 self.lease.release()
 
 
-__all__ = ["DOMAIN_RANGE", "READY_MARK", "DomainLease", "NodeGraph", "graph_env", "lease_domain", "node_command",
-           "ros_args", "stop_process", "wait_ready"]
+__all__ = ["DOMAIN_RANGE", "DomainLease", "NodeGraph", "ReadyWatch", "graph_env", "lease_domain", "node_command",
+           "ros_args", "stop_process", "wait_output", "wait_ready"]

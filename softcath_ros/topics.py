@@ -26,6 +26,7 @@ BACKBONE_PATH = "/softcath/backbone_path"          # live 3D view: the backbone 
 RADIUS_L_OVER_THETA = "/softcath/radius_l_over_theta"  # predicted R_C = l / theta, m
 TIP_MEASURED = "/softcath/tip_measured"            # measured tip pose in softcath_base (a tracker)
 DIAGNOSTICS = "/diagnostics"
+READY = "/softcath/ready"  # each node once it spins: JSON {node, pid, executor} (transient local; graph.py waits)
 
 MESSAGE_TYPES = {
     PRESSURE_CMD: "std_msgs/msg/Float64MultiArray",
@@ -47,6 +48,7 @@ MESSAGE_TYPES = {
     BACKBONE_PATH: "nav_msgs/msg/Path",
     RADIUS_L_OVER_THETA: "std_msgs/msg/Float64",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
+    READY: "std_msgs/msg/String",
 }
 
 FLUID_PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"

@@ -332,8 +332,7 @@ def test_the_shipped_two_dof_pair_works_together():
 
     op.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, 50)
     try:
-        for proc in procs:
-            wait_ready(proc, timeout_s=120)
+        wait_ready(procs, domain, timeout_s=120)
         assert op.spin(60.0, until=lambda: len(tips) > 3 and op.bend.get_subscription_count() > 0), \
             "no tip_pose from model_node, or allocation_node does not hear bend_cmd"
         mark = len(op.pressures)
@@ -387,14 +386,14 @@ def test_a_command_backlog_does_not_hold_pressure_past_timeout_and_ramp():
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_clean_exit_on_signal(sig):
-    proc = start_node(EXE, private_domain())
+    domain = private_domain()
+    proc = start_node(EXE, domain)
     try:
-        out = wait_ready(proc, timeout_s=60.0)  # an event (the node spins), not a time
-        assert "publishing at" in out
+        wait_ready(proc, domain, timeout_s=60.0)  # an event (the node says it spins), not a time
         code = stop(proc, sig)
-        rest = proc.stdout.read()
-        assert code == 0, rest
-        assert "Traceback" not in rest
+        out = proc.stdout.read()
+        assert code == 0, out
+        assert "publishing at" in out and "Traceback" not in out
     finally:
         stop(proc, signal.SIGKILL)
 

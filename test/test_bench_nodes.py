@@ -14,7 +14,7 @@ from mcap.reader import make_reader
 from bench_procs import procs, start as _start, summary as _summary  # noqa: F401 (procs: fixture)
 from domains import private_env
 from softcath_ros import topics
-from softcath_ros.graph import wait_ready
+from softcath_ros.graph import wait_output
 from softcath_ros.graph import graph_env
 from softcath_ros.recording.reader import read_metadata
 
@@ -66,7 +66,7 @@ def test_sigint_finalises_the_recording(tmp_path, procs):
     path = tmp_path / "cut" / "cut_0.mcap"
     # An event, not a file size or a time: the protocol has started (after a start delay in which
     # the recorder already took the rig's readings), so the recording holds messages by then.
-    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
+    before = wait_output(bench, timeout_s=120, mark="starting protocol")
     bench.send_signal(signal.SIGINT)
     out = before + bench.communicate(timeout=60)[0]
     assert bench.returncode == 130 and _summary(out)["state"] == "interrupted"

@@ -17,7 +17,7 @@ import yaml
 from bench_procs import procs, start as _start, summary as _summary  # noqa: F401 (procs: fixture)
 from domains import private_env
 from softcath_ros import topics
-from softcath_ros.graph import wait_ready
+from softcath_ros.graph import wait_output
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -57,7 +57,7 @@ def test_rig_killed_at_a_random_step_stops_the_bench_and_keeps_every_completed_s
     rig = _start(procs, ["sim_bench_node"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
                            "-p", "name:=killed"], env)
-    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
+    before = wait_output(bench, timeout_s=120, mark="starting protocol")
     time.sleep(delay)
     rest, took = _kill_and_time(rig, bench)
     out = before + rest
@@ -95,7 +95,7 @@ def test_allocation_node_killed_during_a_direction_protocol_stops_and_vents(tmp_
     alloc = _start(procs, ["allocation_node", "--ros-args", "-p", "design:=three_channel_5mm"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={protocol}", "-p",
                            f"output_dir:={tmp_path}", "-p", "name:=dir"], env)
-    before = wait_ready(bench, timeout_s=120, mark="starting protocol")
+    before = wait_output(bench, timeout_s=120, mark="starting protocol")
     time.sleep(1.5)   # mid-staircase: the rig holds pressure
     rest, took = _kill_and_time(alloc, bench)
     out = before + rest
@@ -123,7 +123,7 @@ def test_a_signal_to_characterise_stops_every_child_and_finalises(tmp_path, proc
     from softcath_ros.recording.reader import read_metadata
 
     run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path)], private_env())
-    wait_ready(run, timeout_s=150, mark="step 8/28")
+    wait_output(run, timeout_s=150, mark="step 8/28")
     children = psutil.Process(run.pid).children(recursive=True)
     assert {c.name() for c in children} >= {"sim_bench_node", "model_node", "bench_node"}
     run.send_signal(sig)
@@ -257,7 +257,7 @@ def test_characterise_stops_the_bench_when_a_child_dies(tmp_path, procs):
 
     run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path)],
                  private_env())
-    wait_ready(run, timeout_s=150, mark="starting protocol")
+    wait_output(run, timeout_s=150, mark="starting protocol")
     kids = {c.name(): c for c in psutil.Process(run.pid).children(recursive=True)}
     kids["model_node"].kill()
     t0 = time.monotonic()
@@ -279,7 +279,7 @@ def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
     try:
         run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(disk)],
                      private_env())
-        wait_ready(run, timeout_s=150, mark="step 8/28")
+        wait_output(run, timeout_s=150, mark="step 8/28")
         with open(disk / "filler", "wb", buffering=0) as f:
             for block in (1 << 20, 1 << 12):
                 try:
@@ -324,10 +324,10 @@ def test_bench_killed_the_rig_vents_and_characterise_says_recover(tmp_path, proc
     rig = _start(procs, ["sim_bench_node"], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
                            "-p", "name:=b"], env)
-    wait_ready(bench, timeout_s=120, mark="starting protocol")
+    wait_output(bench, timeout_s=120, mark="starting protocol")
     killed = time.time()
     bench.kill()
-    out = wait_ready(rig, timeout_s=30, mark="venting")
+    out = wait_output(rig, timeout_s=30, mark="venting")
     # The rig vents because its commands stopped, and after they stopped: the line's own stamp (the rig's
     # clock, not when this test read it; how soon on a quiet machine: benchmarks, not here).
     [line] = [x for x in out.splitlines() if "venting" in x]
@@ -336,7 +336,7 @@ def test_bench_killed_the_rig_vents_and_characterise_says_recover(tmp_path, proc
 
     run = _start(procs, ["softcath", "characterise", "--protocol", str(_short_protocol(tmp_path, trials=3)),
                          "--output-dir", str(tmp_path / "c")], private_env())
-    wait_ready(run, timeout_s=150, mark="starting protocol")
+    wait_output(run, timeout_s=150, mark="starting protocol")
     [b] = [c for c in psutil.Process(run.pid).children(recursive=True) if c.name() == "bench_node"]
     b.kill()
     out = run.communicate(timeout=60)[0]

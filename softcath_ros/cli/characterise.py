@@ -19,7 +19,9 @@ allocation_node publishes /softcath/pressure_cmd). A per-channel protocol publis
 Faults (docs/rig.md "Exit codes"): bench_node's own failures pass through with its exit code and
 reason (3 no rig, 4 another commander, 5 rig lost mid-run, 6 disk full); after a failure mid-run
 the report is still written on the completed steps. A child that dies while the bench runs gets
-the bench stopped within 2 s (exit 5). SIGINT and SIGTERM stop bench_node first (it finalises the
+the bench stopped within 2 s (exit 5). What is waited for, when a child is stopped and the one
+retry of a hung bench_node are decided by bench/supervisor.py (a state machine on the clock);
+readiness is what each node says on /softcath/ready (graph.ReadyWatch), not its log. SIGINT and SIGTERM stop bench_node first (it finalises the
 recording), then every other child; exit 130 (SIGINT) or 143 (SIGTERM).
 """
 from __future__ import annotations
@@ -38,7 +40,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..core.errors import SoftcathError
-from ..graph import READY_MARK, NodeGraph, stop_process
+from ..graph import NodeGraph, stop_process
 from .common import bounded_float, check_rung_names
 from .report import add_overlay_arguments
 
@@ -178,26 +180,47 @@ class _Log:
                 self._fail(exc)
 
 
-def _wait_spinning(node: str, proc: subprocess.Popen, log: Path, timeout_s: float) -> bool:
-    """Whether ``node``'s log holds the runtime's ready mark within ``timeout_s``; SoftcathError (one
-    line) when the node ends before it."""
-    end = time.monotonic() + timeout_s
-    while True:
-        try:
-            if READY_MARK in log.read_text(errors="replace"):
-                return True
-        except OSError:
-            pass
-        if proc.poll() is not None:
-            raise SoftcathError(f"{node} ended (exit {proc.returncode}) before it was ready; its log: {log}")
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.05)
+class _BenchOutput:
+    """bench_node's piped output, read without blocking: lines to its log, the terminal and ``lines``."""
+
+    def __init__(self, proc: subprocess.Popen, log: _Log, say, lines: list[str]):
+        self.proc, self.log, self.say, self.lines = proc, log, say, lines
+        self.fd = proc.stdout.fileno()
+        self.partial = b""
+        self.closed = False
+
+    def read(self, timeout_s: float) -> None:
+        """What arrived within ``timeout_s`` (until the end once the process ended)."""
+        import select
+
+        while not self.closed:
+            if not select.select([self.fd], [], [], timeout_s)[0]:
+                return
+            chunk = os.read(self.fd, 65536)
+            if not chunk:
+                self.closed = True
+                chunk = b"\n" if self.partial else b""
+            *complete, self.partial = (self.partial + chunk).split(b"\n")
+            for raw in complete:
+                line = raw.decode(errors="replace")
+                self.log.write(line + "\n")
+                self.lines.append(line.rstrip())
+                if "[softcath_bench]" in line or line.startswith("recording:"):
+                    self.say("  " + line.rstrip().split("]: ")[-1])
+            if self.proc.poll() is None:
+                return   # a live process: what was there is read; the supervision goes on
+
+    def drain(self) -> None:
+        self.read(None)
 
 
 def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
-    """The ROS path shared by the rigs: helpers + bench_node on one domain, the bench's output
-    followed, children watched; the report at the end (also on the completed steps of a failed run)."""
+    """The ROS path shared by the rigs: helpers + bench_node on one domain, supervised by
+    bench.supervisor.GraphSupervisor (readiness said over ROS: graph.ReadyWatch); the report at the
+    end (also on the completed steps of a failed run)."""
+    from ..bench.supervisor import Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench, StopBench
+    from ..graph import ReadyWatch
+
     out_dir = Path(args.output_dir).resolve()
     name = f"bench_{protocol.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
     design_arg = design.source or design.name
@@ -215,84 +238,67 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
     say = (lambda *a: None) if args.json else (lambda *a: print(*a, flush=True))
     domain = _domain(private)
     lines: list[str] = []
-    died: list[str] = []
     stopped: list[int] = []
+    sup = GraphSupervisor([node for node, _ in helpers], args.timeout, HELPER_READY_S, BENCH_READY_S,
+                          CHILD_GRACE_S, RIG_CHILD_GRACE_S)
     with NodeGraph(domain=domain, probe_s=1.0 if domain is None else 0.0) as graph:
         if not private:  # a ROS rig may sit on another machine: an explicit discovery range wins
             graph.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-        bench = None
-        timed_out: list[bool] = []
-        started = []
+        bench = output = None
+        children: dict[str, subprocess.Popen] = {}
+        watch = ReadyWatch(graph.domain)
+        blog = _Log(logs / "bench_node.log", say)
         try:
-            logged = []
             for node, params in helpers:
                 log = _Log(logs / f"{node}.log", say)
-                started.append((node, graph.start(node, params, stdout=log.f or subprocess.DEVNULL)))
-                if log.f is not None:
-                    logged.append(started[-1])
+                children[node] = graph.start(node, params, stdout=log.f or subprocess.DEVNULL)
                 log.close()
                 say(f"[characterise] started {node} (log {logs / (node + '.log')})")
-            for node, proc in logged:   # (a helper without a log, on a full disk, is not waited for)
-                if not _wait_spinning(node, proc, logs / f"{node}.log", HELPER_READY_S):
-                    say(f"[characterise] {node} is not spinning after {HELPER_READY_S:g} s (its log: "
-                        f"{logs / (node + '.log')}); starting bench_node anyway: the recording may lack its output")
-            blog = _Log(logs / "bench_node.log", say)
-            try:
-                for attempt in (1, 2):
-                    bench = graph.start("bench_node", {"protocol": args.protocol, "design": design_arg,
-                                                       "model": args.model[0], "output_dir": out_dir, "name": name,
-                                                       "wait_timeout": args.wait_timeout})
-                    watchdog = threading.Timer(args.timeout,
-                                               lambda b=bench: (timed_out.append(True), stop_process(b, 15.0)))
-                    watchdog.daemon = True
-                    watchdog.start()
-                    # A bench_node whose DDS participant hangs at start-up (seen under load) says nothing
-                    # and has not made its recording's folder: stopped and started once more. (One that
-                    # made it is only slow, and is waited for.)
-                    spinning, stalled = threading.Event(), threading.Event()
-                    guard = threading.Timer(BENCH_READY_S, lambda b=bench: None if spinning.is_set() or b.poll()
-                                            is not None or (out_dir / name).exists()
-                                            else (stalled.set(), stop_process(b, 5.0)))
-                    guard.daemon = True
-                    if attempt == 1:
-                        guard.start()
-                    watcher = threading.Thread(target=_watch_children, args=(started, bench, died), daemon=True)
-                    watcher.start()
-                    say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
-                        f"ROS_DOMAIN_ID={graph.domain}")
-                    for line in bench.stdout:
-                        blog.write(line)
-                        lines.append(line.rstrip())
-                        if READY_MARK in line:
-                            spinning.set()
-                        if "[softcath_bench]" in line or line.startswith("recording:"):
-                            say("  " + line.rstrip().split("]: ")[-1])
-                    bench.wait()
-                    guard.cancel()
-                    watchdog.cancel()
-                    if not (stalled.is_set() and not spinning.is_set() and not timed_out and not died):
-                        break
-                    say(f"[characterise] bench_node was not spinning after {BENCH_READY_S:g} s (a DDS start-up "
-                        "hang); stopped and started again")
-                    lines.clear()
-            finally:
-                blog.close()
+            while sup.state is not GraphState.DONE:
+                if output is not None:
+                    output.read(0.05)
+                watch.poll(0.05)
+                ready = {n for n, p in children.items() if p.pid in watch.ready}
+                exited = {n: p.returncode for n, p in children.items() if p.poll() is not None}
+                if bench is not None and bench.poll() is not None:
+                    output.drain()
+                for cmd in sup.update(time.monotonic(), ready, exited, (out_dir / name).exists()):
+                    if isinstance(cmd, StartBench):
+                        lines.clear()
+                        bench = children["bench_node"] = graph.start(
+                            "bench_node", {"protocol": args.protocol, "design": design_arg, "model": args.model[0],
+                                           "output_dir": out_dir, "name": name, "wait_timeout": args.wait_timeout})
+                        output = _BenchOutput(bench, blog, say, lines)
+                        say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
+                            f"ROS_DOMAIN_ID={graph.domain}")
+                    elif isinstance(cmd, StopBench):
+                        bench.send_signal(signal.SIGINT)
+                    elif isinstance(cmd, KillBench):
+                        bench.kill()
+                    elif isinstance(cmd, Say):
+                        say(f"[characterise] {cmd.text}")
+                    elif isinstance(cmd, Fail):
+                        raise SoftcathError(f"{cmd.node} ended (exit {cmd.code}) before it was ready; its log: "
+                                            f"{logs / (cmd.node + '.log')}")
         except (Stopped, KeyboardInterrupt) as exc:
             stopped.append(exc.signum if isinstance(exc, Stopped) else int(signal.SIGINT))
             if threading.current_thread() is threading.main_thread():
                 signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
                 stop_process(bench, 15.0)
-                for line in bench.stdout:
-                    lines.append(line.rstrip())
+                output.drain()
+        finally:
+            blog.close()
+            watch.close()
         # leaving the graph stops every other child (SIGINT, then SIGKILL after a grace)
+    died = list(sup.died)
     summary = _summary(lines)
     if stopped:
         sig = signal.Signals(stopped[0]).name
         where = f"; recording {summary['recording']} (finalised, incomplete)" if summary else ""
         print(f"softcath characterise: stopped by {sig}: every child stopped{where}", file=sys.stderr)
         return 128 + stopped[0]
-    if timed_out:
+    if sup.timed_out:
         raise SoftcathError(f"characterisation took longer than {args.timeout:g} s; stopped "
                             f"(recording finalised; logs in {logs})")
     code = bench.returncode
@@ -329,23 +335,6 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
 def _summary(lines: list[str]) -> dict | None:
     found = [x for x in lines if x.startswith("summary: ")]
     return json.loads(found[-1][len("summary: "):]) if found else None
-
-
-def _watch_children(children, bench, died: list[str]) -> None:
-    """A helper that exits while bench_node runs: bench_node gets its grace (CHILD_GRACE_S) to
-    notice, then it is stopped; ``died`` says who and how."""
-    while bench.poll() is None:
-        for node, proc in children:
-            code = proc.poll()
-            if code is not None:
-                died.append(f"{node} exited ({code})")
-                deadline = time.monotonic() + CHILD_GRACE_S.get(node, RIG_CHILD_GRACE_S)
-                while bench.poll() is None and time.monotonic() < deadline:
-                    time.sleep(0.05)
-                if bench.poll() is None:
-                    stop_process(bench, 15.0)
-                return
-        time.sleep(0.1)
 
 
 def _done(args, summary: dict, design, t0: float, logs: Path, incomplete: bool = False) -> int:

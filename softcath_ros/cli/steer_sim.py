@@ -64,24 +64,6 @@ def _plot(series: dict, other, out: Path, title: str) -> str:
     return str(out)
 
 
-def _wait_logged(logs: dict, timeout_s: float) -> None:
-    """Until every node's log holds the ready line; SoftcathError naming a node that ended or stalled."""
-    from ..graph import READY_MARK
-
-    end = time.monotonic() + timeout_s
-    waiting = dict(logs)
-    while waiting:
-        for node, path in list(waiting.items()):
-            text = path.read_text(errors="replace")
-            if READY_MARK in text:
-                del waiting[node]
-            elif "cannot start" in text or "Traceback" in text:
-                raise SoftcathError(f"{node} did not start: {text.strip().splitlines()[-1]} (log {path})")
-        if time.monotonic() > end:
-            raise SoftcathError(f"{', '.join(waiting)} not ready after {timeout_s:g} s (logs {list(waiting.values())})")
-        time.sleep(0.1)
-
-
 def run(args) -> int:
     import numpy as np
 
@@ -117,12 +99,15 @@ def run(args) -> int:
     explicit = os.environ.get("ROS_DOMAIN_ID", "").strip()
     t0 = time.monotonic()
     with NodeGraph(domain=int(explicit) if explicit.isdigit() else None) as graph:
-        logs = {}
+        logs, procs = {}, []
         for node, params in (("sim_bench_node", rig_params), ("steer_node", steer_params)):
             logs[node] = out_dir / f"{name}_{node}.log"
             with open(logs[node], "w") as log:
-                graph.start(node, params, stdout=log)
-        _wait_logged(logs, 120.0)
+                procs.append(graph.start(node, params, stdout=log))
+        try:
+            graph.wait_ready(*procs, timeout_s=120.0)
+        except SoftcathError as exc:
+            raise SoftcathError(f"{exc} (logs {', '.join(str(p) for p in logs.values())})") from None
         say(f"[steer-sim] rig and controller up on ROS_DOMAIN_ID={graph.domain}; driving {args.trajectory} "
             f"for {args.duration:g} s ({mode})")
         driver = graph.start("steer_driver", driver_params)

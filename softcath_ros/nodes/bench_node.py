@@ -49,6 +49,8 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
 from ..bench.protocol import ProtocolRunner, design_steps, load_protocol
+from ..bench.bench_run import (EXIT_FIGHT, EXIT_RECORDING, Begin, BenchRun, Command, Markers,
+                               Say, Vent, VentDirectly)
 from ..bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
 from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
@@ -65,9 +67,8 @@ DEFAULT_TOPICS = topics.RECORDED
 # Exit codes (docs/rig.md): 0 done, 2 cannot start, 3 no rig or it failed the checks before the
 # first step, 4 another node commands the pressures, 5 the rig stopped answering mid-run,
 # 6 the recording failed (disk full), 130 interrupted (SIGINT/SIGTERM).
-EXIT_NO_RIG, EXIT_FIGHT, EXIT_RIG_LOST, EXIT_RECORDING, EXIT_INTERRUPTED = 3, 4, 5, 6, 130
-VENT_S = 0.5        # zero command this long at the end, so the last readings are recorded
-ABORT_VENT_S = 0.3  # after an abort: the rig is gone or failing; stop within 2 s of its death
+# (bench/bench_run.py decides them).
+EXIT_INTERRUPTED = 130
 
 
 def _stamp_s(header) -> float:
@@ -149,24 +150,16 @@ class BenchNode(Node):
         if self.by_direction:
             self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_allocator_command, 10)
         test_pressures, self.follow_bend = follow_test_command(self.steps, self.follow_pressure)
-        self.follow = FollowCheck(test_pressures, timeout=self.follow_timeout)
         self.pub_vent = None
-        self.completed_steps = 0
-        self.stop_reason = ""
         self.rig_info: dict | None = None
         self.create_subscription(String, topics.BENCH_RIG, self.on_rig,
                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.recorder = TopicRecorder(self, self.writer, list(dict.fromkeys(list(record_topics) + topics.rig_topics(n))),
                                       message_info=self.executor_name != "events")
-        self.state = "waiting"
+        self.run = BenchRun(self.runner, FollowCheck(test_pressures, timeout=self.follow_timeout), self.follow_bend,
+                            n, self.by_direction, self.wait_timeout, self.start_delay, self.lost_after)
         self.t0 = time.monotonic()
-        self.t_ready: float | None = None
-        self.t_last_tick = 0.0
-        self.vent_s = VENT_S
-        self.t_end: float | None = None
-        self.result = 0
-        self.error: str | None = None
         self.create_timer(1.0 / rate_hz, self.tick)
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"protocol {self.protocol.name}: {len(self.steps)} steps on design "
@@ -198,7 +191,6 @@ class BenchNode(Node):
         for m in (self.contract, self.legacy):
             m.seen(topics.PRESSURE_CMD, self.now())
 
-    @property
     def measured(self) -> np.ndarray | None:
         """The measured pressures (Pa per channel) if every channel's reading is fresh, else None:
         a stale reading is never used as a fresh one."""
@@ -228,11 +220,23 @@ class BenchNode(Node):
                 self.get_logger().info(f"step {ev['step'] + 1}/{len(self.steps)}: {ev['bench']} bench, "
                                        f"{ev['sample_name']}, {ev['drive']}, trial {ev['trial'] + 1}")
             if ev["event"] == "step_end":
-                self.completed_steps += 1
                 try:
                     self.writer.flush()
                 except RecordingError as exc:
                     self.recorder.error = str(exc)
+
+    # -------------------------------------------------------------- the run's view of the rig (RigView)
+    def problems(self) -> dict[str, str]:
+        out = self.rig_problems()
+        if out:
+            self.monitor = None   # chosen afresh when the rig is ready again
+        return out
+
+    def stale(self, lost_after: float) -> dict[str, str]:
+        return self.monitor.problems(self.now(), None if self.monitor is self.legacy else self.clock_s(), lost_after)
+
+    def recording_error(self) -> str | None:
+        return self.recorder.error
 
     def rig_problems(self) -> dict[str, str]:
         """What keeps the rig from being ready, by topic (empty: ready). Chooses the contract's
@@ -270,33 +274,23 @@ class BenchNode(Node):
                 for i in self.get_publishers_info_by_topic(topics.PRESSURE_CMD)
                 if i.node_name != allowed]
 
-    def fail(self, message: str, code: int) -> None:
-        """Stop before anything was commanded: no venting needed."""
-        self.get_logger().error(message)
-        self.error = message
-        self.stop_reason = message
-        self.result = code
-        self.state = "done"
-
-    def abort(self, message: str, code: int) -> None:
-        """Stop after commands were sent: the abort marker, then zero command for ABORT_VENT_S, then done."""
-        if self.error is not None:
-            return
-        self.get_logger().error(message)
-        self.error = message
-        self.stop_reason = message
-        self.result = code
-        step = self.runner.step
-        self.pub_step.publish(String(data=json.dumps({
-            "event": "protocol_abort", "t": self.now(), "reason": message, "completed_steps": self.completed_steps,
-            "step": step.index if step else None})))
-        if self.by_direction and self.pub_vent is None:
-            # allocation_node may be the one that died: vent the rig directly too.
-            self.pub_vent = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD,
-                                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        self.state = "finishing"
-        self.t_end = self.now()
-        self.vent_s = ABORT_VENT_S
+    def perform(self, actions) -> None:
+        """Carry out what the run decided (bench.bench_run)."""
+        for a in actions:
+            if isinstance(a, Command):
+                self.publish_command(a.pressures, a.bend)
+            elif isinstance(a, Vent):
+                self.vent()
+            elif isinstance(a, Markers):
+                self.publish_events(a.events)
+            elif isinstance(a, Say):
+                getattr(self.get_logger(), a.level)(a.text)
+            elif isinstance(a, VentDirectly):
+                # allocation_node may be the one that died: vent the rig directly too.
+                self.pub_vent = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD,
+                                                      QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+            elif isinstance(a, Begin):
+                self.begin(self.now())
 
     def publish_command(self, pressures, bend) -> None:
         if self.by_direction:
@@ -315,73 +309,15 @@ class BenchNode(Node):
             self.pub_vent.publish(Float64MultiArray(data=[0.0] * len(zeros)))
 
     def tick(self):
-        t = self.now()
-        # A tick long after the previous one: this process was not scheduled, and the readings that
-        # arrived meanwhile are still queued behind this timer. Judge freshness at the next tick.
-        starved, self.t_last_tick = t - self.t_last_tick > 0.25 * self.lost_after, t
-        if self.state == "waiting":
-            problems = self.rig_problems()
-            if not problems:
-                if self.t_ready is None:
-                    self.t_ready = t  # let late discovery (subscriptions, recorder) settle
-                elif t - self.t_ready >= self.start_delay:
-                    self.begin(t)
-            else:
-                self.t_ready, self.monitor = None, None
-                if t > self.wait_timeout:
-                    self.fail(f"no rig after {self.wait_timeout:g} s: " + "; ".join(
-                        f"{k}: {v}" for k, v in problems.items()) + " (start sim_bench_node or the rig's driver; "
-                        "docs/rig.md)", EXIT_NO_RIG)
-            return
-        if self.state in ("checking", "running"):
-            if self.recorder.error is not None:
-                return self.abort(f"recording failed: {self.recorder.error}; what was written is kept "
-                                  f"(softcath recover {self.writer.path})", EXIT_RECORDING)
-            stale = {} if starved else self.monitor.problems(
-                t, None if self.monitor is self.legacy else self.clock_s(), self.lost_after)
-            if stale:
-                what = "; ".join(f"{k}: {v}" for k, v in stale.items())
-                if self.state == "checking":
-                    return self.abort(f"rig not ready for the first step: {what}", EXIT_NO_RIG)
-                return self.abort(f"the rig stopped answering at step {self.runner.step.index + 1}/"
-                                  f"{len(self.steps)} ({what}): stopped and vented; {self.completed_steps} "
-                                  "steps completed", EXIT_RIG_LOST)
-        if self.state == "checking":
-            state = self.follow.update(t, self.measured)
-            if state == "passed":
-                self.get_logger().info(f"the pressure source followed the test command "
-                                       f"({self.follow.rise.max():.0f} Pa rise); starting protocol")
-                self.state = "running"
-                self.publish_events(self.runner.start(t))
-            elif state == "failed":
-                others = self.other_commanders()
-                if others:  # the likely reason the source did not follow
-                    return self.abort(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: "
-                                      f"{self.follow.message}", EXIT_FIGHT)
-                return self.abort(self.follow.message, EXIT_NO_RIG)
-            else:
-                on = self.follow.commanding
-                self.publish_command(self.follow.test_pressures if on else np.zeros(self.design.n_channels),
-                                     self.follow_bend if on and self.follow_bend else (0.0, 0.0))
-                return
-        if self.state == "running":
-            self.publish_events(self.runner.update(t, self.measured))
-            self.publish_command(self.runner.command, self.runner.bend_command)
-            if self.runner.done:
-                self.state = "finishing"
-                self.t_end = t
-        elif self.state == "finishing":
-            self.vent()
-            if t - self.t_end > self.vent_s:  # the last readings and markers reach the recorder
-                self.state = "done"
+        self.perform(self.run.tick(self.now(), self))
 
     def begin(self, t: float):
         others = self.other_commanders()
         if others:
-            return self.fail(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: " + (
+            return self.perform(self.run.fail(f"{', '.join(others)} also publish(es) /softcath/pressure_cmd: " + (
                 "a protocol by direction needs allocation_node as its only publisher" if self.by_direction
                 else "a per-channel protocol must be its only publisher (stop allocation_node, or run a "
-                "protocol by direction through it)"), EXIT_FIGHT)
+                "protocol by direction through it)"), EXIT_FIGHT))
         simulated = topics.SIM_BENCH_NODE in self.get_node_names() or bool(self.rig_info and self.rig_info.get("simulated"))
         self.simulated = simulated
         self.writer.custom_data["simulated"] = str(simulated).lower()
@@ -398,17 +334,16 @@ class BenchNode(Node):
             self.writer.add_attachment("design.yaml", "application/yaml",
                                        yaml.safe_dump(self.design.to_dict(), sort_keys=False).encode())
         except RecordingError as exc:
-            return self.fail(f"recording failed: {exc}", EXIT_RECORDING)
-        self.state = "checking"
-        self.follow.start(t)
+            return self.perform(self.run.fail(f"recording failed: {exc}", EXIT_RECORDING))
+        self.perform(self.run.begin(t))
         self.get_logger().info(f"rig found ({'simulated' if simulated else 'hardware'}); testing that the "
                                "pressure source follows a small command")
 
     def diagnostics(self):
-        others = self.other_commanders() if self.state in ("checking", "running") else []
+        others = self.other_commanders() if self.run.commanding else []
         if others:
-            self.abort(f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
-                       "stopped (the commands would fight)", EXIT_FIGHT)
+            self.perform(self.run.abort(self.now(), f"{', '.join(others)} started publishing /softcath/pressure_cmd during the protocol: "
+                       "stopped (the commands would fight)", EXIT_FIGHT))
         r = self.recorder
         level = DiagnosticStatus.OK if r.dropped == 0 and r.error is None else DiagnosticStatus.WARN
         step = self.runner.step
@@ -420,10 +355,11 @@ class BenchNode(Node):
     def finalise(self, interrupted: bool = False) -> dict:
         """Mark the recording complete or not (metadata record and rosbag2 custom_data), close it.
         A failing disk is said in one line; the chunks written so far stay recoverable."""
-        complete = self.state == "done" and self.error is None and self.runner.done and not interrupted
-        reason = "" if complete else (self.stop_reason or ("interrupted (SIGINT/SIGTERM)" if interrupted else
+        run = self.run
+        complete = run.done and run.error is None and self.runner.done and not interrupted
+        reason = "" if complete else (run.stop_reason or ("interrupted (SIGINT/SIGTERM)" if interrupted else
                                                            "stopped before the protocol ended"))
-        result = {"complete": str(complete).lower(), "completed_steps": str(self.completed_steps),
+        result = {"complete": str(complete).lower(), "completed_steps": str(run.completed_steps),
                   "n_steps": str(len(self.steps)), "reason": reason}
         self.writer.custom_data.update(complete=result["complete"], completed_steps=result["completed_steps"])
         try:
@@ -431,28 +367,32 @@ class BenchNode(Node):
             self.writer.close()
         except (RecordingError, OSError) as exc:
             msg = str(exc) if isinstance(exc, RecordingError) else f"closing {self.writer.path} failed: {exc}"
-            self.error = self.error or f"recording failed: {msg}"
-            self.result = self.result or EXIT_RECORDING
+            run.error = run.error or f"recording failed: {msg}"
+            run.result = run.result or EXIT_RECORDING
             self.writer.abandon()
         return {"recording": str(self.writer.path), "messages": self.writer.message_count,
                 "dropped": self.recorder.dropped,
                 "lost_in_middleware": self.recorder.lost if self.recorder.counts_middleware_loss else None,
                 "write_failures": self.recorder.write_failures,
                 "per_topic": {k: v.message_count for k, v in self.writer.topics.items()},
-                "not_seen": list(self.recorder.pending), "state": self.state, "error": self.error,
-                "complete": complete, "completed_steps": self.completed_steps, "n_steps": len(self.steps),
+                "not_seen": list(self.recorder.pending), "state": self.state, "error": run.error,
+                "complete": complete, "completed_steps": run.completed_steps, "n_steps": len(self.steps),
                 "unsettled_steps": [k for k, ok in enumerate(self.runner.settled_flags) if not ok]}
+
+    @property
+    def state(self) -> str:
+        return self.run.state.value
 
     # -------------------------------------------------------------- the shared runtime's hooks
     @property
     def finished(self) -> bool:
         """The protocol ended (done or failed): the runtime stops spinning."""
-        return self.state == "done"
+        return self.run.done
 
     def finish(self) -> int:
         """Finalise the recording (also when interrupted), print where it is; the exit code."""
         # A signal during the venting after an abort keeps the abort's reason and code.
-        interrupted = self.state != "done" and self.error is None
+        interrupted = not self.run.done and self.run.error is None
         summary = self.finalise(interrupted)
         if interrupted:
             summary["state"] = "interrupted"
@@ -460,7 +400,7 @@ class BenchNode(Node):
         print("summary: " + json.dumps(summary), flush=True)
         if summary["error"]:
             print(f"[ERROR] {summary['error']}", file=sys.stderr, flush=True)
-        return EXIT_INTERRUPTED if interrupted else self.result
+        return EXIT_INTERRUPTED if interrupted else self.run.result
 
 
 def main(args=None) -> int:

@@ -51,6 +51,21 @@ def _rcl_reason(exc: Exception) -> str:
     return text.split(", at /")[0]
 
 
+def announce_ready(node, executor_name: str) -> None:
+    """Say on the latched ``topics.READY`` that ``node`` spins: its name, process id and executor."""
+    import json
+
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    from .. import topics
+
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.ready_publisher = node.create_publisher(String, topics.READY, qos)
+    node.ready_publisher.publish(String(data=json.dumps(
+        {"node": node.get_fully_qualified_name(), "pid": os.getpid(), "executor": executor_name})))
+
+
 def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     """Create the node with ``factory()``, spin it on ``node.executor_name``; return the exit code.
 
@@ -58,14 +73,14 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     they are logged as one line and give exit code 2. A node that ends by itself has a
     ``finished`` property (spinning stops when it is true) and a ``finish()`` method, called on
     the way out whether it finished or was interrupted, that returns the exit code. Once the node
-    spins it logs ``graph.READY_MARK`` (what ``graph.wait_ready`` waits for).
+    spins it says so on the latched ``topics.READY`` (what ``graph.wait_ready`` waits for).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
     # rcl's own error type is exposed only through rclpy's implementation module (no public alias)
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-    from ..graph import READY_MARK, default_to_localhost_discovery
+    from ..graph import default_to_localhost_discovery
     from .parameters import refuse_unknown_parameters
 
     # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
@@ -116,7 +131,8 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
             problem = set_realtime_priority(priority)
             if problem:
                 node.get_logger().warning(problem + "; running with normal scheduling")
-        node.get_logger().info(f"{READY_MARK} on the {name} executor")
+        announce_ready(node, name)
+        node.get_logger().info(f"spinning on the {name} executor")
         ends = hasattr(type(node), "finished")
         spin(executor, name, (lambda: node.finished) if ends else None)
     except (KeyboardInterrupt, ExternalShutdownException):
