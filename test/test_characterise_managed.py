@@ -1,0 +1,79 @@
+"""characterise drives the rig's managed (lifecycle) nodes: configure, then activate, over the
+lifecycle_msgs services (bench/bringup.py decides); the node that fails a check is named in one line."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("serial")
+
+from hardware_emulators import SerialRegulatorEmulator  # noqa: E402
+from lifecycle_listener import LifecycleListener  # noqa: E402
+from softcath_ros import topics  # noqa: E402
+from softcath_ros.bench.bringup import AskState, Bringup, Transition  # noqa: E402
+from softcath_ros.cli.characterise import activate_managed  # noqa: E402
+from softcath_ros.graph import NodeGraph  # noqa: E402
+
+pytestmark = [pytest.mark.ros]
+NODE = "/" + topics.REGULATOR_NODE
+
+
+def test_bringup_configures_then_activates_and_names_the_node_that_fails():
+    b = Bringup(["/a", "/b"], timeout_s=30.0)
+    assert b.start(0.0) == [AskState("/a"), AskState("/b")]
+    assert b.on_state("/a", "unconfigured") == [Transition("/a", "configure")]
+    assert b.on_state("/b", "active") == [] and not b.done
+    assert b.on_transition("/a", "configure", True) == [AskState("/a")]
+    assert b.on_state("/a", "inactive") == [Transition("/a", "activate")]
+    assert b.on_transition("/a", "activate", True) == [AskState("/a")]
+    assert b.on_state("/a", "active") == [] and b.done and b.failure is None
+    bad = Bringup(["/reg"], timeout_s=30.0)
+    bad.start(0.0)
+    bad.on_transition("/reg", "configure", False, "configure failed: cannot open serial port /x")
+    assert bad.done and bad.failure == "/reg failed to configure: configure failed: cannot open serial port /x"
+    silent = Bringup(["/gone"], timeout_s=30.0)
+    silent.start(0.0)
+    silent.update(29.9)
+    assert not silent.done
+    silent.update(30.0)
+    assert silent.failure.startswith("/gone not active after 30 s")
+    final = Bringup(["/f"])
+    final.start(0.0)
+    final.on_state("/f", "finalized")
+    assert "cannot be activated" in final.failure
+
+
+def test_a_regulator_left_unconfigured_is_configured_and_activated():
+    emu = SerialRegulatorEmulator(1).start()
+    try:
+        with NodeGraph() as graph:
+            proc = graph.start("regulator_node", {"backend": "serial", "port": emu.port, "autostart": False})
+            graph.wait_ready(proc)
+            said = []
+            assert activate_managed(graph.watch, said.append) == [NODE]
+            assert said == [f"[characterise] configure {NODE}", f"[characterise] activate {NODE}"]
+            listener = LifecycleListener(graph.domain, topics.REGULATOR_NODE, {})
+            try:
+                assert listener.state() == "active"
+            finally:
+                listener.close()
+            said.clear()
+            assert activate_managed(graph.watch, said.append) == [NODE] and said == []   # active: nothing to do
+    finally:
+        emu.close()
+
+
+@pytest.mark.timeout(240)
+def test_characterise_rig_ros_names_the_managed_node_that_fails_its_check(tmp_path):
+    with NodeGraph() as graph:
+        proc = graph.start("regulator_node", {"backend": "serial", "port": "/nonexistent/tty", "autostart": False})
+        graph.wait_ready(proc)
+        run = subprocess.run([str(Path(sys.executable).parent / "softcath"), "characterise", "--rig", "ros",
+                              "--protocol", "quick", "--output-dir", str(tmp_path)], env=graph.env,
+                             capture_output=True, text=True, timeout=200)
+    assert run.returncode == 2, run.stdout + run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+    assert f"{NODE} failed to configure" in lines[0] and "cannot open serial port /nonexistent/tty" in lines[0]
