@@ -187,21 +187,20 @@ def test_flood_on_the_closed_form_answers_the_newest_and_counts_the_rest():
         n = 5000
         for i in range(n):
             pub.publish(Float64MultiArray(data=[5.0 * (i + 1)]))   # up to 25 kPa, within the limit
-        deadline = time.monotonic() + 10.0
-        last = None
-        while time.monotonic() < deadline:
-            time.sleep(0.2)
-            c = node.counters
-            if c.accepted + c.superseded == last:
-                break                                   # settled: nothing more arriving
-            last = c.accepted + c.superseded
-        c = node.counters
-        assert c.rejected == 0 and c.accepted + c.superseded <= n, vars(c)
-        curvature, stretch = node._fast([5.0 * n])
         from softcath_ros.core.kinematics import backbone_poses
 
+        curvature, stretch = node._fast([5.0 * n])
         positions, _ = backbone_poses(curvature, node.arc_length * stretch, node.n_points, node.cap)
-        assert tips and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9)
+
+        def answered_last():
+            return bool(tips) and tips[-1].pose.position.y == pytest.approx(positions[-1][1], rel=1e-9)
+
+        deadline = time.monotonic() + 60.0        # an event (the last command's pose), not a time window
+        while time.monotonic() < deadline and not answered_last():
+            time.sleep(0.05)
+        c = node.counters
+        assert c.rejected == 0 and c.accepted + c.superseded <= n, vars(c)
+        assert answered_last(), "the last answer must be for the last command"
     finally:
         stop.set()
         spinner.join(timeout=5.0)
