@@ -6,6 +6,8 @@
     .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.03 --name fe3d_contact_0.03
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --no-section --name fe3d_timing_20mm   # the timed case only
+    .venv/bin/python benchmarks/fe3d_sweep.py --design docs/examples/sectors.yaml --channel 0 --to 0.35 \
+        --name fe3d_sweep_sectors_ch0   # one channel of a multi-channel design: the half body on its mirror plane
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --order 0 --interior-order none \
         --contact-distance 0.01 --mesh-size 1.0 --layer-h scaled --name fe3d_p2p0   # the former default (fe3d-7)
 
@@ -37,7 +39,7 @@ from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
 from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
-from softcath_ros.core.errors import ModelError  # noqa: E402
+from softcath_ros.core.errors import DesignError, ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_CONTACT_INTORDER,  # noqa: E402
                                             DEFAULT_INTERIOR_ORDER, DEFAULT_LAYER_H, DEFAULT_MESH_SIZE, DEFAULT_PRESSURE_ORDER, Fe3dModel,
                                             mesh_settings)
@@ -83,6 +85,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-retry", action="store_true",
                     help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
+    ap.add_argument("--channel", type=int, default=0,
+                    help="the channel pressurised (a multi-channel design: the half body on its mirror plane when "
+                         "it has one)")
     ap.add_argument("--name", default="fe3d_sweep")
     ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
     args = ap.parse_args(argv)
@@ -92,6 +97,10 @@ def main(argv=None) -> int:
 
     design = load_design(args.design).with_length(args.length)
     checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * PA_PER_BAR
+    if not 0 <= args.channel < design.n_channels:
+        ap.error(f"--channel {args.channel}: {design.name} has channels 0..{design.n_channels - 1}")
+    commands = np.zeros((len(checkpoints), design.n_channels))
+    commands[:, args.channel] = checkpoints
     control = None
     if args.fixed_steps is not None:
         control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
@@ -114,7 +123,7 @@ def main(argv=None) -> int:
     if args.lumen_h is not None and not (math.isfinite(args.lumen_h) and args.lumen_h > 0):
         ap.error(f"--lumen-h {args.lumen_h}: must be a positive length (m)")
     try:   # the rung's own mesh; an explicit lumen edge holds as given (m), after the scaling
-        mesh = mesh_settings(args.mesh_size, layer_h)
+        mesh = mesh_settings(args.mesh_size, layer_h, design.outer_diameter)
     except ModelError as exc:
         ap.error(str(exc))
     if args.lumen_h is not None:
@@ -127,32 +136,37 @@ def main(argv=None) -> int:
         model = Fe3dModel(design, mesh=mesh, newton=newton, step_control=control, cache=False, progress=True,
                           tangent_predictor=args.fixed_steps is None, threads=args.threads,
                           pressure_order=args.order, interior_order=interior,
-                          contact_intorder=args.contact_intorder, **contact)
+                          contact_intorder=args.contact_intorder,
+                          **({"half": True} if design.n_channels > 1 else {}), **contact)
     except ModelError as exc:   # a bad option, as one line
         ap.error(str(exc))
     t0 = time.perf_counter()
-    ndof = model.problem.fes.ndof
+    problem = model.problem_for(commands[-1] / commands[-1].max())
+    ndof = problem.fes.ndof
     t_setup = time.perf_counter() - t0
-    state, ramp = model.sweep(checkpoints[:, None])
+    state, ramp = model.sweep(commands)
     total = time.perf_counter() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     # the section rung at the same pressures, as the same R_C = L / theta (its arc over the channelled
     # part, the tip cap straight: angle_per_length): the section-vs-3D comparison (after the fe3d timing
     # and memory were read)
-    if args.no_section:
-        section_rc = [None] * len(checkpoints)
-    else:
-        section_model = make_model("section", design)
-        section = section_model.evaluate(checkpoints[:, None])
-        section_rc = [1.0 / float(a) if ok and a > 0 else None
-                      for a, ok in zip(angle_per_length(section, section_model), section.converged)]
+    section_rc, section_refused = [None] * len(checkpoints), None
+    if not args.no_section:
+        try:
+            section_model = make_model("section", design)
+            section = section_model.evaluate(commands)
+            section_rc = [1.0 / float(a) if ok and a > 0 else None
+                          for a, ok in zip(angle_per_length(section, section_model), section.converged)]
+        except (ModelError, DesignError) as exc:   # a design the section rung does not take yet
+            section_refused = str(exc)
     gaps = {pt.load: pt.measured.get("lumen_min_gap_m") for pt in (ramp.points if ramp else [])}
     rows = []
     for i, p in enumerate(checkpoints):
         ok = bool(state.converged[i])
         diag = state.diagnostics
         rc = float(state.radius_l_over_theta[i]) if ok else None
-        volume, area = float(diag.channel_volume[i, 0]), float(diag.channel_area[i, 0])   # NaN at p = 0
+        volume, area = (float(diag.channel_volume[i, args.channel]),   # NaN at p = 0
+                        float(diag.channel_area[i, args.channel]))
         pub = PUBLISHED_40MM.get(float(p)) if abs(args.length - 0.040) < 1e-9 else None
         rows.append({
             "pressure_bar": float(p) / PA_PER_BAR, "converged": ok,
@@ -169,8 +183,10 @@ def main(argv=None) -> int:
             "newton_iterations": int(diag.newton_iterations[i]) if ok else None,
             "lumen_min_gap_um": (gaps[float(p)] * 1e6 if ok and gaps.get(float(p)) is not None else None),
             "time_s": float(diag.time_s[i]) if ok else None})
-    meta = {"design": design.name, "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
-            "mesh_size": args.mesh_size, "ndof": ndof, "half_model": model.half,
+    meta = {"design": design.name, "channel": args.channel, "section_refused": section_refused,
+            "command": " ".join(["benchmarks/fe3d_sweep.py", *(sys.argv[1:] if argv is None else argv)]),
+            "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
+            "mesh_size": args.mesh_size, "ndof": ndof, "half_model": problem.half,
             "step_control": "fixed" if args.fixed_steps else "adaptive",
             "step_settings": dataclasses.asdict(model.step_control), "threads": args.threads,
             "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
@@ -183,9 +199,9 @@ def main(argv=None) -> int:
             "min_gap_every_step_um": ([min(g for _, g in ramp.min_gap_m) * 1e6] if ramp and ramp.min_gap_m else None),
             "steps": ramp.steps if ramp else 0, "cuts": ramp.cuts if ramp else 0,
             "newton_iterations_total": ramp.iterations if ramp else 0,
-            "factorisations": model.problem.factorizations,
-            "pair_searches": model.problem.contact.searches if model.problem.contact else None,
-            "pair_searches_skipped": model.problem.contact.skipped if model.problem.contact else None,
+            "factorisations": problem.factorizations,
+            "pair_searches": problem.contact.searches if problem.contact else None,
+            "pair_searches_skipped": problem.contact.skipped if problem.contact else None,
             "note": "wall clock on a 2-core machine shared with other jobs (load average in meta)"}
     path = write_results(args.name, meta, rows)
     print(f"{args.name}: {total:.1f} s, peak {peak_mb:.0f} MB, {ndof} DOF, converged={meta['converged']} "
