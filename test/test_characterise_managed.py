@@ -13,7 +13,7 @@ from hardware_emulators import SerialRegulatorEmulator  # noqa: E402
 from lifecycle_listener import LifecycleListener  # noqa: E402
 from softcath_ros import topics  # noqa: E402
 from softcath_ros.bench.bringup import AskState, Bringup, Transition  # noqa: E402
-from softcath_ros.cli.characterise import activate_managed  # noqa: E402
+from softcath_ros.cli.managed import activate_managed  # noqa: E402
 from softcath_ros.graph import NodeGraph  # noqa: E402
 
 pytestmark = [pytest.mark.ros]

@@ -283,8 +283,13 @@ class BenchNode(Node):
                 self.vent()
             elif isinstance(a, Markers):
                 self.publish_events(a.events)
-            elif isinstance(a, Say):
-                getattr(self.get_logger(), a.level)(a.text)
+            elif isinstance(a, Say):   # (rclpy fixes a call site's severity: one call per level)
+                if a.level == "error":
+                    self.get_logger().error(a.text)
+                elif a.level == "warning":
+                    self.get_logger().warning(a.text)
+                else:
+                    self.get_logger().info(a.text)
             elif isinstance(a, VentDirectly):
                 # allocation_node may be the one that died: vent the rig directly too.
                 self.pub_vent = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD,
