@@ -77,3 +77,38 @@ def test_characterise_rig_ros_names_the_managed_node_that_fails_its_check(tmp_pa
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
     assert f"{NODE} failed to configure" in lines[0] and "cannot open serial port /nonexistent/tty" in lines[0]
+
+
+@pytest.mark.timeout(240)
+def test_bench_node_is_managed_configure_opens_activate_runs_deactivate_vents_and_stops(tmp_path):
+    """bench_node with autostart off: nothing recorded until configured; activate runs the protocol;
+    deactivate mid-run: the abort marker, zero command, the recording finalised incomplete (exit 130)."""
+    from lifecycle_msgs.msg import Transition as TransitionMsg
+
+    from bench_procs import summary
+    from softcath_ros.graph import wait_output
+    from softcath_ros.recording.reader import iter_messages, read_metadata
+
+    with NodeGraph() as graph:
+        rig = graph.start("sim_bench_node", {"legacy_topics": "false"})
+        bench = graph.start("bench_node", {"protocol": "quick", "output_dir": tmp_path, "name": "managed",
+                                           "autostart": False})
+        graph.wait_ready(rig, bench, timeout_s=120)
+        assert not (tmp_path / "managed").exists()
+        said = []
+        assert activate_managed(graph.watch, said.append) == ["/" + topics.BENCH_NODE]
+        before = wait_output(bench, "step 8/28", timeout_s=120)
+        listener = LifecycleListener(graph.domain, topics.BENCH_NODE, {})
+        try:
+            assert listener.transition(TransitionMsg.TRANSITION_DEACTIVATE)
+        finally:
+            listener.close()
+        out = before + bench.communicate(timeout=60)[0]
+    assert bench.returncode == 130, out
+    s = summary(out)
+    assert s["complete"] is False and s["error"].startswith("deactivated (lifecycle): stopped and vented"), s
+    path = tmp_path / "managed" / "managed_0.mcap"
+    assert read_metadata(path)["softcath_result"]["complete"] == "false"
+    marks = [m.message.data for m in iter_messages(path, topics=[topics.BENCH_STEP])]
+    assert '"protocol_abort"' in marks[-1]
+    assert list([m.message.data for m in iter_messages(path, topics=[topics.PRESSURE_CMD])][-1]) == [0.0]

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
@@ -75,25 +75,27 @@ def _stamp_s(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-class BenchNode(Node):
+class BenchNode(LifecycleNode):
     def __init__(self, **node_options):
         super().__init__(topics.BENCH_NODE, **node_options)
         p = partial(declare, self)
-        protocol_name = p("protocol", "default", "protocol file or shipped protocol name")
-        design_name = p("design", "", "design file or shipped design name (default: the protocol's)")
-        model_name = p("model", "surrogate", "model rung the allocator uses for a protocol by direction (as allocation_node)")
-        output_dir = p("output_dir", "runs", "folder the recording is written under")
-        run_name = p("name", "", "recording name (default: bench_<protocol>_<date>_<time>)")
-        record_topics = p("record_topics", list(DEFAULT_TOPICS), "topics recorded to MCAP")
-        rate_hz = p("rate_hz", 50.0, "protocol and command rate, Hz", minimum=1.0, maximum=1000.0)
-        flush_period = p("flush_period", 1.0, "seconds between recording flushes", minimum=0.01, maximum=60.0)
+        self.settings = dict(  # what configure uses
+            protocol_name=p("protocol", "default", "protocol file or shipped protocol name"),
+            design_name=p("design", "", "design file or shipped design name (default: the protocol's)"),
+            model_name=p("model", "surrogate", "model rung the allocator uses for a protocol by direction "
+                         "(as allocation_node)"),
+            output_dir=p("output_dir", "runs", "folder the recording is written under"),
+            run_name=p("name", "", "recording name (default: bench_<protocol>_<date>_<time>)"),
+            record_topics=p("record_topics", list(DEFAULT_TOPICS), "topics recorded to MCAP"),
+            rate_hz=p("rate_hz", 50.0, "protocol and command rate, Hz", minimum=1.0, maximum=1000.0),
+            flush_period=p("flush_period", 1.0, "seconds between recording flushes", minimum=0.01, maximum=60.0))
         self.wait_timeout = p("wait_timeout", 20.0, "seconds to wait for a rig before giving up",
                               minimum=0.1, maximum=3600.0)
         self.start_delay = p("start_delay", 1.0, "seconds between finding the rig and the first step",
                              minimum=0.0, maximum=60.0)
-        min_free_mb = p("min_free_mb", 64, "stop recording below this much free disk, MiB", minimum=0)
-        stale_after = p("stale_after", 0.5, "a rig reading older than this (s) is stale: never used, "
-                        "its rig topic is not ready", minimum=0.05, maximum=60.0)
+        self.settings["min_free_mb"] = p("min_free_mb", 64, "stop recording below this much free disk, MiB", minimum=0)
+        self.stale_after = stale_after = p("stale_after", 0.5, "a rig reading older than this (s) is stale: "
+                                           "never used, its rig topic is not ready", minimum=0.05, maximum=60.0)
         self.lost_after = p("lost_after", 1.0, "a rig topic stale this long (s) mid-run: the run stops "
                             "(at least stale_after)", minimum=0.05, maximum=60.0)
         if self.lost_after < stale_after:
@@ -104,7 +106,54 @@ class BenchNode(Node):
         self.follow_timeout = p("follow_timeout", 3.0, "s the pressure source gets to follow the test command",
                                 minimum=0.1, maximum=120.0)
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
+        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it: "
+                      "configure loads the protocol and opens the recording, activate runs, deactivate vents and stops)")
         refuse_unknown_parameters(self)    # before a recording is opened on a typo's default
+        self.run: BenchRun | None = None
+        self.timer = None
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.configure_error = ""
+        self._autostart = autostart
+        if autostart:
+            self.trigger_configure()
+            if self.run is None:
+                raise SoftcathError(self.configure_error)
+            self.trigger_activate()
+
+    # -------------------------------------------------------------- lifecycle
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        """Load the protocol and design, open the recording, subscribe to the rig's topics."""
+        try:
+            self.configure_run(**self.settings)
+        except (SoftcathError, ValueError) as exc:
+            self.configure_error = str(exc)
+            if not self._autostart:   # (at start-up the one line is the exit's)
+                self.get_logger().error(f"configure: {exc}")
+                publish_statuses(self, self.pub_diag, diagnostic_status(
+                    DiagnosticStatus.ERROR, topics.BENCH_NODE, f"configure failed: {exc}", []))
+            return TransitionCallbackReturn.FAILURE
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        """Run: wait for the rig, test the pressure source, the protocol's steps."""
+        self.t0 = time.monotonic()
+        self.timer = self.create_timer(1.0 / self.settings["rate_hz"], self.tick)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        """Stop: after a command, the abort marker and zero command (the tick vents until done); before
+        one, done at once. The recording is finalised on the way out."""
+        if not self.run.done:
+            message = "deactivated (lifecycle): stopped" + (" and vented" if self.run.commanding else "")
+            if self.run.commanding:
+                self.perform(self.run.abort(self.now(), message, EXIT_INTERRUPTED))
+            else:
+                self.perform(self.run.fail(message, EXIT_INTERRUPTED))
+        return super().on_deactivate(state)
+
+    def configure_run(self, protocol_name, design_name, model_name, output_dir, run_name, record_topics, rate_hz,
+                      flush_period, min_free_mb) -> None:
+        stale_after = self.stale_after
         self.protocol = load_protocol(protocol_name)
         design_name = design_name or self.protocol.design
         if not design_name:
@@ -127,7 +176,6 @@ class BenchNode(Node):
         else:
             self.pub_cmd = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, reliable)
         self.pub_step = self.create_publisher(String, topics.BENCH_STEP, reliable)
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         # The rig's topics (docs/rig.md), and the deprecated unstamped ones for one release.
         n = self.design.n_channels
         extra = [topics.PRESSURE_CMD] if self.by_direction else []  # allocation_node keeps publishing
@@ -160,7 +208,6 @@ class BenchNode(Node):
         self.run = BenchRun(self.runner, FollowCheck(test_pressures, timeout=self.follow_timeout), self.follow_bend,
                             n, self.by_direction, self.wait_timeout, self.start_delay, self.lost_after)
         self.t0 = time.monotonic()
-        self.create_timer(1.0 / rate_hz, self.tick)
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"protocol {self.protocol.name}: {len(self.steps)} steps on design "
                                f"{self.design.name}; recording to {self.writer.path}")
@@ -392,10 +439,12 @@ class BenchNode(Node):
     @property
     def finished(self) -> bool:
         """The protocol ended (done or failed): the runtime stops spinning."""
-        return self.run.done
+        return self.run is not None and self.run.done
 
     def finish(self) -> int:
         """Finalise the recording (also when interrupted), print where it is; the exit code."""
+        if self.run is None:   # never configured: no recording
+            return 0
         # A signal during the venting after an abort keeps the abort's reason and code.
         interrupted = not self.run.done and self.run.error is None
         summary = self.finalise(interrupted)
