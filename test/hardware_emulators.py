@@ -12,7 +12,6 @@ import asyncio
 import multiprocessing
 import os
 import socket
-import threading
 import time
 
 MODES = ("ok", "dead", "nan", "range", "flood", "garbage")
@@ -34,7 +33,8 @@ class PtyDevice:
         self._lines: list[str] = []  # every line the host sent
         self._context = multiprocessing.get_context("fork")
         self._mode = self._context.Value("i", 0)          # index into MODES, shared with the process
-        self._heard = self._context.Queue()               # lines the process heard
+        # lines the process heard (a pipe: a line is readable here once the process has sent it)
+        self._heard_in, self._heard = self._context.Pipe(duplex=False)
         self._stop = self._context.Event()
         self._process = None
         self._in_process = False
@@ -50,11 +50,9 @@ class PtyDevice:
     @property
     def lines(self) -> list[str]:
         """Every line the host sent so far."""
-        while True:
-            try:
-                self._lines.append(self._heard.get_nowait())
-            except Exception:     # queue.Empty
-                return self._lines
+        while self._heard_in.poll():
+            self._lines.append(self._heard_in.recv())
+        return self._lines
 
     def say(self, text: str) -> None:
         """Queue ``text`` and write what the pty takes now (``flush`` writes the rest later); a host
@@ -100,7 +98,7 @@ class PtyDevice:
         self._in_process = True
         while not self._stop.is_set():
             for line in self.heard():
-                self._heard.put(line)
+                self._heard.send(line)
                 self.on_line(line)
             if self.mode != "dead":
                 try:
@@ -176,56 +174,74 @@ def free_port() -> int:
 
 
 class ModbusRegulatorEmulator:
-    """A valve terminal on Modbus TCP: holding registers 0.. are the setpoints (counts), input
-    registers 100.. the readings, which follow the setpoints (``mode`` 'range': 65535 counts,
-    a reading beyond any sensor). ``stop()`` kills it (connections refused from then on)."""
+    """A valve terminal on Modbus TCP, in its own (spawned: the test process runs DDS threads)
+    process: holding registers 0.. are the setpoints (counts), input registers 100.. the readings,
+    which follow the setpoints (``mode`` 'range': 65535 counts, a reading beyond any sensor).
+    ``stop()`` kills it (connections refused from then on)."""
 
     def __init__(self, n_channels: int = 1, reading_base: int = 100, unit: int = 1, port: int | None = None):
-        from pymodbus.server import ModbusTcpServer
-        from pymodbus.simulator import DataType, SimData, SimDevice
-
-        self.n, self.base, self.mode = n_channels, reading_base, "ok"
-        self.writes: list[tuple[int, int]] = []      # (register, counts) the host wrote
+        self.n, self.base, self.unit = n_channels, reading_base, unit
         self.port = port or free_port()
-        device = SimDevice(id=unit, simdata=[SimData(0, count=reading_base + n_channels, values=0,
-                                                     datatype=DataType.REGISTERS)], action=self._action)
-        self.loop = asyncio.new_event_loop()
-        self.server = None
-        self._make = lambda: ModbusTcpServer(device, address=("127.0.0.1", self.port))
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-        self._thread.start()
+        context = multiprocessing.get_context("spawn")
+        self._mode = context.Value("i", 0)
+        self._writes_in, writes = context.Pipe(duplex=False)   # (sent before the device answers)
+        self._writes_seen: list[tuple[int, int]] = []
+        self._process = context.Process(target=_serve_modbus, daemon=True,
+                                        args=(n_channels, reading_base, unit, self.port, self._mode, writes))
+        self._process.start()
         self._wait_listening()
 
-    async def _action(self, function_code, start_address, address, count, registers, set_values):
-        if set_values is not None:
-            self.writes += [(address + i, int(v)) for i, v in enumerate(set_values)]
-            return None
-        for c in range(self.n):
-            registers[self.base + c - start_address] = 65535 if self.mode == "range" else registers[c - start_address]
-        return None
+    @property
+    def mode(self) -> str:
+        return MODES[self._mode.value]
 
-    def _serve(self):
-        async def serve():
-            self.server = self._make()          # (pymodbus builds its transport on the running loop)
-            await self.server.serve_forever()
+    @mode.setter
+    def mode(self, value: str) -> None:
+        self._mode.value = MODES.index(value)
 
-        asyncio.set_event_loop(self.loop)
-        try:
-            self.loop.run_until_complete(serve())
-        except Exception:
-            pass
+    @property
+    def writes(self) -> list[tuple[int, int]]:
+        """(register, counts) the host wrote, in order."""
+        while self._writes_in.poll():
+            self._writes_seen.append(self._writes_in.recv())
+        return self._writes_seen
 
-    def _wait_listening(self, timeout: float = 20.0):
+    def _wait_listening(self, timeout: float = 60.0):
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
                 socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
                 return
             except OSError:
+                if not self._process.is_alive():
+                    break
                 time.sleep(0.02)
-        raise RuntimeError("the Modbus emulator did not start listening")
+        raise RuntimeError(f"the Modbus emulator did not start listening (exit code {self._process.exitcode})")
 
     def stop(self):
-        if self.loop.is_running() and self.server is not None:
-            asyncio.run_coroutine_threadsafe(self.server.shutdown(), self.loop).result(timeout=10)
-        self._thread.join(timeout=10)
+        """The device dies (power off): its process is killed."""
+        if self._process.is_alive():
+            self._process.kill()
+        self._process.join(timeout=10)
+
+
+def _serve_modbus(n, base, unit, port, mode, writes):
+    from pymodbus.server import ModbusTcpServer
+    from pymodbus.simulator import DataType, SimData, SimDevice
+
+    async def action(function_code, start_address, address, count, registers, set_values):
+        if set_values is not None:
+            for i, v in enumerate(set_values):
+                writes.send((address + i, int(v)))
+            return None
+        for c in range(n):
+            registers[base + c - start_address] = 65535 if MODES[mode.value] == "range" else registers[c - start_address]
+        return None
+
+    device = SimDevice(id=unit, simdata=[SimData(0, count=base + n, values=0, datatype=DataType.REGISTERS)],
+                       action=action)
+
+    async def serve():   # (pymodbus builds its transport on the running loop)
+        await ModbusTcpServer(device, address=("127.0.0.1", port)).serve_forever()
+
+    asyncio.run(serve())

@@ -46,6 +46,7 @@ def command(listener, pascal, seconds, until=None):
     return False
 
 
+@pytest.mark.timeout(300)
 def test_regulator_node_on_a_serial_device_clamps_streams_vents_and_errs_when_it_dies():
     emu = SerialRegulatorEmulator(1).start()
     try:
@@ -83,29 +84,31 @@ def test_regulator_node_on_a_serial_device_clamps_streams_vents_and_errs_when_it
         emu.close()
 
 
-def test_regulator_node_vents_on_sigint_and_sigterm():
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        emu = SerialRegulatorEmulator(1).start()
-        try:
-            with NodeGraph() as graph:
-                proc = graph.start("regulator_node", {"backend": "serial", "port": emu.port, "command_timeout": 60.0})
-                graph.wait_ready(proc)
-                listener = regulator_listener(graph)
-                try:
-                    assert command(listener, 30000.0, 60.0, until=lambda: "SET 0 30000" in emu.lines)
-                finally:
-                    listener.close()
-                n = len(emu.lines)
-                proc.send_signal(sig)
-                assert proc.wait(timeout=30) == 0
-                end = time.monotonic() + 10
-                while "VENT" not in emu.lines[n:] and time.monotonic() < end:
-                    time.sleep(0.05)
-                assert "VENT" in emu.lines[n:], (sig, emu.lines[n:])
-        finally:
-            emu.close()
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_regulator_node_vents_on_sigint_and_sigterm(sig):
+    emu = SerialRegulatorEmulator(1).start()
+    try:
+        with NodeGraph() as graph:
+            proc = graph.start("regulator_node", {"backend": "serial", "port": emu.port, "command_timeout": 60.0})
+            graph.wait_ready(proc)
+            listener = regulator_listener(graph)
+            try:
+                assert command(listener, 30000.0, 60.0, until=lambda: "SET 0 30000" in emu.lines)
+            finally:
+                listener.close()
+            n = len(emu.lines)
+            proc.send_signal(sig)
+            assert proc.wait(timeout=30) == 0
+            end = time.monotonic() + 10
+            while "VENT" not in emu.lines[n:] and time.monotonic() < end:
+                time.sleep(0.05)
+            assert "VENT" in emu.lines[n:], (sig, emu.lines[n:])
+    finally:
+        emu.close()
 
 
+@pytest.mark.timeout(300)
 def test_regulator_node_lifecycle_on_a_modbus_device():
     port = free_port()
     with NodeGraph() as graph:
@@ -140,6 +143,7 @@ def test_regulator_node_lifecycle_on_a_modbus_device():
         assert graph.stop()["regulator_node"] == 0
 
 
+@pytest.mark.timeout(300)
 def test_scale_node_publishes_the_force_and_tares():
     emu = SerialScaleEmulator(load=0.3).start()
     try:

@@ -49,6 +49,7 @@ def run_line(argv, devices: dict, topic: str, msg_type, node_name: str, cwd=ROOT
         assert graph.stop()[argv[0]] == 0
 
 
+@pytest.mark.timeout(600)
 def test_the_regulator_lines_run_as_written():
     serial = SerialRegulatorEmulator(1).start()
     modbus = ModbusRegulatorEmulator(1)
@@ -66,6 +67,7 @@ def test_the_regulator_lines_run_as_written():
         modbus.stop()
 
 
+@pytest.mark.timeout(300)
 def test_the_scale_line_runs_as_written():
     scale = SerialScaleEmulator(load=0.1).start()
     try:
@@ -76,6 +78,7 @@ def test_the_scale_line_runs_as_written():
         scale.close()
 
 
+@pytest.mark.timeout(300)
 def test_the_camera_lines_run_as_written(tmp_path, monkeypatch):
     pytest.importorskip("cv2", reason="the vision extra")
     from softcath_ros.bench.tracker_render import write_demo_frames
