@@ -9,7 +9,7 @@ process's start to the first /softcath/tip_pose received is recorded, with where
 table came from.
 
     .venv/bin/python benchmarks/first_pose.py [--repeats 3] [--designs implemented_5mm,three_channel_5mm]
-    .venv/bin/python benchmarks/first_pose.py --node steer_node --designs three_channel_5mm
+    .venv/bin/python benchmarks/first_pose.py --node steer_node --designs three_channel_5mm [--realtime 50]
 
 ``--node steer_node`` (issue 34 target: <= 3 s, the surrogate on its shipped table): the client
 publishes a reachable tip target every 10 ms and the time to the first non-zero
@@ -111,7 +111,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--designs", default="implemented_5mm,three_channel_5mm")
     ap.add_argument("--node", choices=("model_node", "steer_node"), default="model_node")
+    ap.add_argument("--realtime", type=int, default=0, help="SCHED_FIFO priority for this script and the node it "
+                    "starts (inherited), 0 = normal: on a shared machine, the start-up without others' load")
     args = ap.parse_args()
+    if args.realtime:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.realtime))
     from softcath_ros.core.design import load_design
 
     rows = []
@@ -127,6 +131,7 @@ def main() -> None:
         print(f"{name}: median {np.median(t):.2f} s, max {max(t):.2f} s (target 3 s)")
     stem = "first_command_steer" if args.node == "steer_node" else "first_pose"
     write_results(stem, {"target_s": 3.0, "node": args.node, "command": " ".join(["python"] + sys.argv),
+                         "realtime_priority": args.realtime,
                          "note": "fresh cache per run; shared 2-core machine"}, rows)
     plot(rows, args.node, stem)
 
