@@ -17,7 +17,19 @@ import time
 MODES = ("ok", "dead", "nan", "range", "flood", "garbage")
 
 
-class PtyDevice:
+class SharedMode:
+    """``mode`` (one of MODES) in shared memory (``self._mode``), so the device's process sees it."""
+
+    @property
+    def mode(self) -> str:
+        return MODES[self._mode.value]
+
+    @mode.setter
+    def mode(self, value: str) -> None:
+        self._mode.value = MODES.index(value)
+
+
+class PtyDevice(SharedMode):
     """The device end of a pseudo-terminal; ``port`` is what the host opens."""
 
     def __init__(self):
@@ -38,14 +50,6 @@ class PtyDevice:
         self._stop = self._context.Event()
         self._process = None
         self._in_process = False
-
-    @property
-    def mode(self) -> str:
-        return MODES[self._mode.value]
-
-    @mode.setter
-    def mode(self, value: str) -> None:
-        self._mode.value = MODES.index(value)
 
     @property
     def lines(self) -> list[str]:
@@ -173,7 +177,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class ModbusRegulatorEmulator:
+class ModbusRegulatorEmulator(SharedMode):
     """A valve terminal on Modbus TCP, in its own (spawned: the test process runs DDS threads)
     process: holding registers 0.. are the setpoints (counts), input registers 100.. the readings,
     which follow the setpoints (``mode`` 'range': 65535 counts, a reading beyond any sensor).
@@ -190,14 +194,6 @@ class ModbusRegulatorEmulator:
                                         args=(n_channels, reading_base, unit, self.port, self._mode, writes))
         self._process.start()
         self._wait_listening()
-
-    @property
-    def mode(self) -> str:
-        return MODES[self._mode.value]
-
-    @mode.setter
-    def mode(self, value: str) -> None:
-        self._mode.value = MODES.index(value)
 
     @property
     def writes(self) -> list[tuple[int, int]]:
