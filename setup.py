@@ -50,6 +50,8 @@ setup(
         # Hole outlines drawn in CAD (`shape: file`): DXF layers and SVG elements.
         "ezdxf>=1.1",
         "svgelements>=1.9",
+        # The section rung's mesher (Shewchuk's Triangle: constrained Delaunay, numpy only).
+        "triangle>=20230923",
     ],
     extras_require={
         "ros": [

@@ -7,6 +7,7 @@ import pytest
 
 from softcath_ros.core.design import Device, load_design
 from softcath_ros.core.models.section import SectionModel
+from softcath_ros.core.section_fe.terms.contact import WallContact
 from softcath_ros.core.section_fe.terms.device import DeviceBending
 from softcath_ros.core.section_fe.terms.fibre import Fibre
 from softcath_ros.core.section_fe.terms.hoop import HoopRings
@@ -29,7 +30,8 @@ def problem_and_state():
 def test_every_kind_of_term_is_listed(problem_and_state):
     problem, _, _ = problem_and_state
     kinds = {type(t) for t in problem.terms}
-    assert kinds == {SiliconeBody, LumenFill, Fibre, HoopRings, ChannelPressure, DeviceBending}
+    # the filled lumen has no wall contact; the empty channel has
+    assert kinds == {SiliconeBody, LumenFill, Fibre, HoopRings, ChannelPressure, DeviceBending, WallContact}
 
 
 def _scatter(problem, term, c):

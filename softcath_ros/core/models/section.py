@@ -3,7 +3,7 @@
 The body is treated as infinitely long: every cross-section deforms the same way in its
 plane, and out of plane the body bends uniformly with curvature k and stretches by lambda
 (kinematics and potential: ``section_fe/problem.py``). Solved by Newton on a P2/P0 mixed
-mesh (``section_fe/mesh.py``, own mesher) with a pressure ramp (``core/continuation.py``).
+mesh (``section_fe/mesh.py``, Triangle) with a pressure ramp (``core/continuation.py``).
 
 What it captures that the closed form does not: the channel walls bulge and the channel
 area grows with pressure, the silicone is hyperelastic, the fibre and rings act at their
@@ -31,7 +31,7 @@ from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTS
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
-from ..section_fe.mesh import Circle, mesh_section
+from ..section_fe.mesh import mesh_section
 from ..section_fe.problem import SectionProblem
 from ..section_fe.solver import LinearSolver, PathStep, leave_saddle, newton, unstable_directions
 from ..options import Option
@@ -60,8 +60,8 @@ class SectionSettings:
     lumen_fill: float | None = None     # fill the empty lumen with a soft compressible solid whose shear
                                         # modulus is this fraction of the silicone's (a self-contact proxy);
                                         # None: empty lumen (with wall contact, below)
-    contact_distance: float | None = 0.01  # self-contact of the empty lumen's wall: barrier distance as a
-                                           # fraction of the lumen's diameter (section_fe/terms/contact.py);
+    contact_distance: float | None = 0.01  # self-contact of every empty hole's wall: barrier distance as a
+                                           # fraction of the hole's diameter (section_fe/terms/contact.py);
                                            # None: no contact, the ramp stops when the walls touch
 
     def key(self) -> dict:
@@ -113,7 +113,7 @@ def _ray_order(pressures: np.ndarray) -> list[int]:
 
 class SectionModel(BendModel):
     name = "section"
-    solver_version = "section-6"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states)
+    solver_version = "section-7"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states; 7: Triangle mesher)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),
@@ -132,7 +132,7 @@ class SectionModel(BendModel):
             "local_radius": "a command this close (Pa) to a solved one starts from it",
             "pressure_load": "'follower' (deformed walls and end caps) or 'end_cap' (the closed form's load)",
             "lumen_fill": "fill the lumen with a soft solid of this fraction of the silicone's shear modulus",
-            "contact_distance": "lumen wall self-contact: barrier distance, fraction of the lumen diameter "
+            "contact_distance": "hole wall self-contact: barrier distance, fraction of the hole's diameter "
                                 "(None: no contact)"}))
 
     def __init__(self, design: Design, cache: bool | str | Path = False, progress: bool = False,
@@ -150,11 +150,8 @@ class SectionModel(BendModel):
         if fill is not None:
             if design.lumen is None:
                 raise ModelError(f"model 'section': lumen_fill = {fill!r} but design '{design.name}' has no lumen")
-        holes = [Circle(c.center, c.radius) for c in design.channels]
-        if design.lumen is not None:
-            holes.append(Circle(design.lumen.center, design.lumen.radius))
-        self.mesh = mesh_section(Circle((0.0, 0.0), design.outer_radius), holes, h,
-                                 filled=() if fill is None else (len(holes) - 1,))
+        section = design.section
+        self.mesh = mesh_section(section, h, filled=() if fill is None else (len(section.holes) - 1,))
         if self.settings.pressure_load not in ("follower", "end_cap"):
             raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
                              "'follower' or 'end_cap'")

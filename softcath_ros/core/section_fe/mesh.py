@@ -1,16 +1,30 @@
-"""Quadratic (P2) triangle mesh of the actuator cross-section: a disk with circular holes.
+"""Quadratic (P2) triangle mesh of the actuator cross-section: the body outline minus its holes.
 
-A small self-contained mesher (numpy + scipy's Delaunay), so the section rung needs no
-meshing library: nodes on every circle at spacing ``h``, a hexagonal lattice inside,
-a few rounds of Laplacian smoothing, Delaunay, and the triangles whose centroid lies
-in a hole or outside the disk dropped. Midside nodes of edges on a circle are put on
-the circle (isoparametric geometry), so holes are round to O(h^3).
+The mesher is Shewchuk's Triangle (the ``triangle`` package on PyPI), kept rather than our own:
+a constrained Delaunay mesher with a minimum-angle guarantee, a few hundred kB of compiled C with
+numpy as its only dependency and wheels for every platform, so the section rung needs neither
+gmsh (its wheels carry a GUI toolkit's shared libraries) nor netgen (the ``fe`` extra); meshpy
+wraps the same Triangle together with TetGen, which this rung does not use. Triangle keeps every
+wall segment given to it as an edge of the mesh (switch ``YY``: no points added on walls), so
+wall nodes are ours and sit on the true outline. (Triangle is free for research and non-commercial
+use; a commercial product needs its author's permission.)
 
-Holes listed in ``filled`` are meshed too, as a second region (``regions`` 1, the silicone
-0) that conforms to the hole's circle: its wall nodes are shared by both regions.
+Input: the design's ``geometry.Section`` (the body circle, holes as exact outlines of lines and
+arcs, roles, the fibre). Walls are discretised with a spacing graded by the wall thickness (the
+distance to the nearest other outline, below), the interior is a hexagonal lattice completed
+by Triangle's quality refinement. Midside nodes of wall edges are put on their line or arc
+(isoparametric geometry), so a round wall is round to O(h^3).
 
-The P1 triangulation is checked: each region's area must equal the area of its boundary
-polygons exactly, which holds only if every boundary chord is an edge of the mesh.
+Symmetry: the mirror lines and n-fold rotation that map the section onto itself (holes onto
+holes of the same role, the fibre onto itself) come from ``geometry.symmetry``; a fundamental
+wedge is meshed and its images fill the section, so the mesh has the design's symmetry exactly
+(to round-off) and a symmetric design answers symmetrically. The wedge, the lattice and the
+circles' first points are placed by the geometry (a mirror line, the holes' first moment of
+area), so the same design turned about the axis gets the turned mesh.
+
+Holes listed in ``filled`` are meshed too, as a second region (``regions`` 1, the silicone 0)
+sharing the hole's wall nodes. Each wall is returned as a closed chain of quadratic edges,
+counter-clockwise, tagged by the outline it lies on (``outer_edges``, ``hole_edges[i]``).
 """
 from __future__ import annotations
 
@@ -18,27 +32,147 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import shapely
 
 from ..errors import ModelError
 
+# Sizes are proportional to h (so a finer h refines every part alike): a wall thinner than
+# WALL_REFERENCE (outer radii) gets a spacing smaller than h in proportion (not below
+# MIN_SIZE_RATIO h); a round wall turns at most ARC_STEP h / R radians per edge (22.5 deg at the
+# default D/20), and never more than MAX_ARC_STEP (16 edges round a circle); the interior is a
+# hexagonal lattice of spacing h (points LATTICE_CLEARANCE h from walls and symmetry lines)
+# completed by Triangle's quality refinement
+# (angles >= MIN_ANGLE, areas <= AREA_BOUND h^2); along a symmetry line the spacing grows from
+# the walls at GRADING per unit length.
+WALL_REFERENCE = 0.3          # outer radii: 0.75 mm on a 5 mm body
+MIN_SIZE_RATIO = 0.25
+ARC_STEP = math.radians(22.5) * 10
+MAX_ARC_STEP = math.radians(22.5)
+LATTICE_CLEARANCE = 0.7
+MIN_ANGLE = 30.0
+AREA_BOUND = math.sqrt(3) / 2
+GRADING = 0.4
+POLYGON_TOLERANCE = 1e-5     # x R: chords of the polygons that classify points (not the walls)
+AREA_TOLERANCE = 1e-3        # relative: the mesh's area against the outlines' exact one
+
+
+# ---------------------------------------------------------------------------- outlines
 
 @dataclass(frozen=True)
-class Circle:
+class _Arc:
+    """A circular arc: centre, radius, start angle and signed sweep (rad, > 0 counter-clockwise)."""
     center: tuple[float, float]
     radius: float
+    start: float
+    sweep: float
 
+    @property
+    def length(self) -> float:
+        return self.radius * abs(self.sweep)
+
+    def point(self, t) -> np.ndarray:
+        a = self.start + self.sweep * np.asarray(t, float)
+        return np.stack([self.center[0] + self.radius * np.cos(a), self.center[1] + self.radius * np.sin(a)], -1)
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        v = p - np.asarray(self.center)
+        return np.asarray(self.center) + self.radius * v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+    def sub(self, t0: float, t1: float) -> "_Arc":
+        return _Arc(self.center, self.radius, self.start + self.sweep * t0, self.sweep * (t1 - t0))
+
+    def scaled(self, f: float) -> "_Arc":
+        return _Arc((self.center[0] * f, self.center[1] * f), self.radius * f, self.start, self.sweep)
+
+    def ray_hits(self, e: np.ndarray) -> list[float]:
+        """Parameters t in (0, 1) where the ray {r e, r > 0} crosses the arc."""
+        c = np.asarray(self.center)
+        ec, cc = float(e @ c), float(c @ c)
+        disc = ec * ec - cc + self.radius ** 2
+        if disc <= 0:
+            return []
+        out = []
+        for r in (ec - math.sqrt(disc), ec + math.sqrt(disc)):
+            if r < -1e-12:          # the origin is on the ray (a wall through the axis is cut there)
+                continue
+            q = r * e - c
+            a = (math.atan2(q[1], q[0]) - self.start) * np.sign(self.sweep) % (2 * math.pi)
+            t = a / abs(self.sweep)
+            if 1e-9 < t < 1 - 1e-9:
+                out.append(t)
+        return out
+
+
+
+@dataclass(frozen=True)
+class _Line:
+    """A straight segment from a to b."""
+    a: tuple[float, float]
+    b: tuple[float, float]
+
+    @property
+    def length(self) -> float:
+        return math.dist(self.a, self.b)
+
+    def point(self, t) -> np.ndarray:
+        t = np.asarray(t, float)[..., None]
+        return (1 - t) * np.asarray(self.a) + t * np.asarray(self.b)
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        a, d = np.asarray(self.a), np.asarray(self.b) - np.asarray(self.a)
+        return a + (((p - a) @ d) / (d @ d))[..., None] * d
+
+    def sub(self, t0: float, t1: float) -> "_Line":
+        return _Line(tuple(self.point(t0).tolist()), tuple(self.point(t1).tolist()))
+
+    def scaled(self, f: float) -> "_Line":
+        return _Line((self.a[0] * f, self.a[1] * f), (self.b[0] * f, self.b[1] * f))
+
+    def ray_hits(self, e: np.ndarray) -> list[float]:
+        a, d = np.asarray(self.a), np.asarray(self.b) - np.asarray(self.a)
+        den = d[0] * e[1] - d[1] * e[0]
+        if abs(den) < 1e-15 * max(1.0, float(d @ d)):
+            return []
+        t = (a[1] * e[0] - a[0] * e[1]) / den
+        r = float((a + t * d) @ e)
+        return [float(t)] if 1e-9 < t < 1 - 1e-9 and r > -1e-12 else []
+
+
+
+_Piece = _Arc | _Line
+
+
+def _pieces(outline, scale: float, start: float) -> list[_Piece]:
+    """The outline's exact edges (``geometry.Outline.edges``) as pieces, lengths times ``scale``;
+    a circle as one arc from the direction ``start`` (degrees: it turns with the design)."""
+    from ..geometry import Line
+
+    if outline.is_circle:
+        e = outline.edges()[0]
+        return [_Arc(tuple(e.center), e.radius, math.radians(start), 2 * math.pi).scaled(scale)]
+    out: list[_Piece] = []
+    for e in outline.edges():
+        if isinstance(e, Line):
+            out.append(_Line(tuple(e.start), tuple(e.end)).scaled(scale))
+        else:
+            out.append(_Arc(tuple(e.center), e.radius, e.start_angle, e.sweep).scaled(scale))
+    return out
+
+
+# ---------------------------------------------------------------------------- the mesh
 
 @dataclass
 class SectionMesh:
     nodes: np.ndarray            # (n, 2) m, reference positions (corner and midside nodes)
     triangles: np.ndarray        # (e, 6) node ids: 3 corners counter-clockwise, then midsides 01, 12, 20
-    outer_edges: np.ndarray      # (b, 3) quadratic edges on the outer circle: (start, mid, end)
+    outer_edges: np.ndarray      # (b, 3) quadratic edges of the outer wall: (start, mid, end), counter-clockwise
     hole_edges: list[np.ndarray] = field(default_factory=list)  # per hole, (b, 3) counter-clockwise about the hole
     h: float = 0.0
     symmetric: bool = False      # exactly mirror-symmetric about x = 0
-    rotations: int = 1           # 3: also exactly invariant under turns by 120 degrees about the origin
+    rotations: int = 1           # n: also invariant under turns by 360/n degrees about the origin
     regions: np.ndarray | None = None  # (e,) 0 silicone, 1 a filled hole's interior; None: all silicone
     filled: tuple[int, ...] = ()       # indices (into the holes) of the holes meshed as the fill region
+    mirror_lines: tuple[float, ...] = ()   # degrees from +x of the mirror lines of the mesh
 
     @property
     def silicone(self) -> np.ndarray:
@@ -49,372 +183,391 @@ class SectionMesh:
     def n_nodes(self) -> int:
         return len(self.nodes)
 
+    def area(self, region: int | None = 0) -> float:
+        """Area of the curved (P2) elements of a region (0 silicone, 1 fill, None all)."""
+        from .quadrature import TRIANGLE_POINTS, TRIANGLE_WEIGHTS
+        from .shape import p2_triangle
 
-def _circle_points(c: Circle, h: float, min_points: int = 16, count: int | None = None) -> np.ndarray:
-    """Counter-clockwise points on the circle, spacing about ``h``, or exactly ``count`` of them."""
-    n = count if count is not None else max(min_points, int(math.ceil(2 * math.pi * c.radius / h)))
-    t = 2 * math.pi * np.arange(n) / n
-    return np.column_stack([c.center[0] + c.radius * np.cos(t), c.center[1] + c.radius * np.sin(t)])
-
-
-def _signed_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
-    """Distance to the boundary, positive inside the silicone."""
-    d = outer.radius - np.hypot(p[:, 0] - outer.center[0], p[:, 1] - outer.center[1])
-    for c in holes:
-        d = np.minimum(d, np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) - c.radius)
-    return d
-
-
-def _region(p: np.ndarray, outer: Circle, holes: list[Circle], filled: tuple[int, ...]) -> np.ndarray:
-    """Per point: 0 in the silicone, 1 inside a filled hole, -1 outside the meshed domain."""
-    out = np.where(_signed_distance(p, outer, holes) > 0, 0, -1)
-    for i in filled:
-        c = holes[i]
-        out[np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) < c.radius] = 1
-    return out
-
-
-def _wall_distance(p: np.ndarray, outer: Circle, holes: list[Circle]) -> np.ndarray:
-    """Unsigned distance to the nearest circle (outer boundary or a hole's wall)."""
-    d = np.abs(outer.radius - np.hypot(p[:, 0] - outer.center[0], p[:, 1] - outer.center[1]))
-    for c in holes:
-        d = np.minimum(d, np.abs(np.hypot(p[:, 0] - c.center[0], p[:, 1] - c.center[1]) - c.radius))
-    return d
-
-
-def _mirror_partner(c: Circle, holes: list[Circle], tol: float) -> int | None:
-    """Index of the hole that is ``c`` mirrored in x = 0 (itself if centred on the axis)."""
-    for i, o in enumerate(holes):
-        if (abs(o.center[0] + c.center[0]) < tol and abs(o.center[1] - c.center[1]) < tol
-                and abs(o.radius - c.radius) < tol):
-            return i
-    return None
-
-
-def _axis_circle_points(c: Circle, h: float) -> np.ndarray:
-    """Counter-clockwise points on a circle centred on x = 0, exactly mirror-symmetric."""
-    n = 4 * max(4, int(math.ceil(2 * math.pi * c.radius / h / 4)))
-    # exactly n (a multiple of 4): recomputing n from the spacing can round up to n + 1
-    pts = _circle_points(Circle((0.0, c.center[1]), c.radius), h, count=n)
-    k = np.arange(n // 4 + 1, 3 * n // 4)
-    pts[k, 0] = -pts[n // 2 - k, 0]
-    pts[k, 1] = pts[n // 2 - k, 1]
-    pts[[n // 4, 3 * n // 4], 0] = 0.0
-    return pts
+        _, dN = p2_triangle(TRIANGLE_POINTS[:, 0], TRIANGLE_POINTS[:, 1])
+        sel = np.ones(len(self.triangles), bool) if region is None else (
+            self.silicone if region == 0 else ~self.silicone)
+        xe = self.nodes[self.triangles[sel]]                       # (e, 6, 2)
+        J = np.einsum("qak,eai->eqik", dN, xe)
+        return float(np.sum(np.linalg.det(J) @ TRIANGLE_WEIGHTS))
 
 
 def _rotation(degrees: float) -> np.ndarray:
+    c, s = _exact_cos_sin(degrees)
+    return np.array([[c, -s], [s, c]])
+
+
+def _exact_cos_sin(degrees: float) -> tuple[float, float]:
+    """cos and sin, exact at multiples of 90 degrees (a ray on an axis has an exact zero)."""
+    k = degrees / 90.0
+    if abs(k - round(k)) < 1e-12:
+        return [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][int(round(k)) % 4]
     t = math.radians(degrees)
-    return np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+    return math.cos(t), math.sin(t)
 
 
-_MIRROR = np.diag([-1.0, 1.0])
-# the maps of the mirror-symmetric mesh (about x = 0) and of the 3-fold one (D3: turns by 120
-# degrees and the mirror), identity first
-MIRROR_GROUP = [np.eye(2), _MIRROR]
-THREE_FOLD_GROUP = [_rotation(a) @ m for m in (np.eye(2), _MIRROR) for a in (0.0, 120.0, 240.0)]
+def _mirror(degrees: float) -> np.ndarray:
+    """Reflection in the line through the origin at ``degrees`` from +x."""
+    c, s = _exact_cos_sin(2 * degrees)
+    return np.array([[c, s], [s, -c]])
 
 
-def _in_domain(p: np.ndarray, group: list[np.ndarray]) -> np.ndarray:
-    """Points in the group's fundamental domain: x > 0 (mirror), or angles in [90, 150) degrees (D3)."""
-    if len(group) == 2:
-        return p[:, 0] > 0
-    # closed (a triangle symmetric about a mirror line has its centroid on it): images are deduplicated
-    a = np.degrees(np.arctan2(p[:, 1], p[:, 0])) % 360.0
-    return (a >= 90.0 - 1e-9) & (a <= 150.0 + 1e-9)
+# ---------------------------------------------------------------------------- the mesher
 
+def mesh_section(section, h: float, filled: tuple[int, ...] = (), symmetry=None) -> SectionMesh:
+    """P2 mesh of the silicone of ``section`` (``geometry.Section``) with target edge length ``h``
+    (m) away from thin walls; the holes whose indices are in ``filled`` are meshed as well, as
+    region 1 (``SectionMesh.regions``). ``symmetry``: a ``geometry.Symmetry`` to mesh with (None:
+    ``geometry.symmetry(section)``; ``geometry.Symmetry((), 1, ...)`` for none)."""
+    from .. import geometry
 
-def _is_image(c: Circle, holes: list[Circle], m: np.ndarray, tol: float) -> int | None:
-    """Index of the hole that is ``c`` mapped by ``m`` (an orthogonal map about the origin)."""
-    q = m @ np.asarray(c.center)
-    for i, o in enumerate(holes):
-        if np.hypot(*(np.asarray(o.center) - q)) < tol and abs(o.radius - c.radius) < tol:
-            return i
-    return None
-
-
-def _three_fold(outer: Circle, holes: list[Circle], tol: float) -> bool:
-    """The geometry is invariant under D3 about the origin, and every hole is centred there or on
-    a mirror line of D3 (so its points can be made symmetric): the 3-fold mesher applies."""
-    if np.hypot(*outer.center) > tol or not holes:
-        return False
-    for c in holes:
-        if any(_is_image(c, holes, m, tol) is None for m in THREE_FOLD_GROUP):
-            return False
-        on_axis = [abs((_rotation(-a) @ np.asarray(c.center))[0]) < tol for a in (0.0, 120.0, 240.0)]
-        if not any(on_axis):
-            return False
-    return True
-
-
-def _d3_circle_points(c: Circle, h: float) -> np.ndarray:
-    """Counter-clockwise points on a circle centred on the origin, invariant under D3: a multiple
-    of 6, starting at 90 degrees (on every mirror line)."""
-    n = 6 * max(3, int(math.ceil(2 * math.pi * c.radius / h / 6)))
-    t = math.pi / 2 + 2 * math.pi * np.arange(n) / n
-    return np.column_stack([c.radius * np.cos(t), c.radius * np.sin(t)])
-
-
-def _three_fold_boundary(outer: Circle, holes: list[Circle], h: float, tol: float) -> list[np.ndarray]:
-    """Circle points of the outer boundary and the holes, invariant under D3 as a set: a hole on
-    the y axis mirror-symmetric, its images the turned copies of its points."""
-    boundary = [_d3_circle_points(outer, h)]
-    for c in holes:
-        if np.hypot(*c.center) < tol:
-            boundary.append(_d3_circle_points(Circle((0.0, 0.0), c.radius), h))
-            continue
-        for a in (0.0, 120.0, 240.0):
-            base = _rotation(-a) @ np.asarray(c.center)
-            if abs(base[0]) < tol:       # c is the hole on the y axis at base, turned by a
-                q = _axis_circle_points(Circle((0.0, float(base[1])), c.radius), h)
-                boundary.append(q @ _rotation(a).T)
-                break
-    return boundary
-
-
-def _ray_points(outer: Circle, holes: list[Circle], h: float, degrees: float) -> list[tuple]:
-    """Points at spacing about h on the ray from the origin at ``degrees``, inside the silicone
-    (the ends of each stretch are the circle points where the ray crosses a circle)."""
-    e = np.array([math.cos(math.radians(degrees)), math.sin(math.radians(degrees))])
-    cuts = [0.0]
-    for c in [outer] + list(holes):
-        ec, cc = float(e @ np.asarray(c.center)), float(np.dot(c.center, c.center))
-        disc = ec * ec - cc + c.radius ** 2
-        if disc > 0:
-            cuts += [r for r in (ec - math.sqrt(disc), ec + math.sqrt(disc)) if 0 < r <= outer.radius]
-    cuts = sorted(set(cuts))
-    out = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        if _region(((a + b) / 2 * e)[None], outer, holes, ())[0] != 0:
-            continue
-        m = max(1, int(round((b - a) / h)))
-        out += [tuple((a + (b - a) * t / m) * e) for t in range(1, m)]
-    return out
-
-
-def _group_maps(points: np.ndarray, group: list[np.ndarray], tol: float) -> list[np.ndarray]:
-    """For each map g of the group, the index of g(p) for every point p (the set must be invariant)."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(points)
-    maps = []
-    for m in group:
-        d, idx = tree.query(points @ m.T)
-        if np.max(d) > tol:
-            raise ModelError("section mesher: the symmetric point set is not symmetric (internal error)")
-        maps.append(idx)
-    return maps
-
-
-def _unique(points: np.ndarray, tol: float) -> np.ndarray:
-    from scipy.spatial import cKDTree
-
-    drop = {j for i, j in cKDTree(points).query_pairs(tol)}
-    return points[[i for i in range(len(points)) if i not in drop]]
-
-
-def mesh_section(outer: Circle, holes: list[Circle], h: float, smoothing_rounds: int = 8,
-                 filled: tuple[int, ...] = ()) -> SectionMesh:
-    """P2 mesh of ``outer`` minus ``holes`` with target edge length ``h`` (m); the holes whose
-    indices are in ``filled`` are meshed as well, as region 1 (``SectionMesh.regions``).
-
-    A geometry symmetric about x = 0 gets an exactly mirror-symmetric mesh, so a symmetric
-    design under symmetric load gives an exactly symmetric answer (no sideways bending)."""
-    if h <= 0 or h > outer.radius:
-        raise ModelError(f"section mesh size h = {h} m must lie in (0, outer radius {outer.radius} m]")
+    R = section.outer_radius
+    if not (h > 0) or h > R:
+        raise ModelError(f"section mesh size h = {h} m must lie in (0, outer radius {R} m]")
     filled = tuple(sorted(set(int(i) for i in filled)))
-    if any(not 0 <= i < len(holes) for i in filled):
-        raise ModelError(f"section mesher: filled holes {filled} must index the {len(holes)} holes")
-    tol = 1e-9 * outer.radius
-    partners = [_mirror_partner(c, holes, tol) for c in holes]
-    symmetric = abs(outer.center[0]) < tol and all(p is not None for p in partners)
-    three_fold = not filled and _three_fold(outer, holes, tol)
-    group = THREE_FOLD_GROUP if three_fold else MIRROR_GROUP if symmetric else None
-    if three_fold:
-        # the circles' points and points on the mirror lines (the rays at 90 and 150 degrees and
-        # their images), then the lattice, all invariant under D3
-        boundary = _three_fold_boundary(outer, holes, h, tol)
-        rays = np.array(_ray_points(outer, holes, h, 90.0) + _ray_points(outer, holes, h, 150.0)).reshape(-1, 2)
-        rays = _unique(np.concatenate([rays @ m.T for m in group]), tol)
-        boundary_pts = boundary + [rays]
-    elif symmetric:
-        boundary = [_axis_circle_points(outer, h)]
-        for i, c in enumerate(holes):
-            j = partners[i]
-            if j == i:
-                boundary.append(_axis_circle_points(c, h))
-            elif c.center[0] > 0:
-                boundary.append(_circle_points(c, h))
-            else:  # the mirror image of the partner's points, reversed to stay counter-clockwise
-                q = _circle_points(holes[j], h)
-                q[:, 0] = -q[:, 0]
-                boundary.append(np.concatenate([q[:1], q[:0:-1]]))
-        # points on the symmetry axis inside the silicone and the filled holes (the ends of
-        # each stretch are circle points)
-        cuts = sorted([(c.center[1] - c.radius, c.center[1] + c.radius) for c in holes if abs(c.center[0]) < tol])
-        edges = [outer.center[1] - outer.radius] + [v for cut in cuts for v in cut] + [outer.center[1] + outer.radius]
-        stretches = list(zip(edges[0::2], edges[1::2]))
-        stretches += [(holes[i].center[1] - holes[i].radius, holes[i].center[1] + holes[i].radius)
-                      for i in filled if abs(holes[i].center[0]) < tol]
-        axis = []
-        for a, b in stretches:
-            m = max(1, int(round((b - a) / h)))
-            axis += [(0.0, a + (b - a) * t / m) for t in range(1, m)]
-        boundary_pts = boundary + [np.array(axis).reshape(-1, 2)]
-    else:
-        boundary = [_circle_points(outer, h)] + [_circle_points(c, h) for c in holes]
-        boundary_pts = boundary
-    # fixed while smoothing: the circle points (and the mirror mesh's axis points); the 3-fold
-    # mesh's mirror-line points move, kept on their lines by the symmetrisation
-    n_boundary = sum(len(b) for b in (boundary if three_fold else boundary_pts))
-    # Hexagonal lattice, kept away from the boundary so boundary chords stay Delaunay edges
-    # (with a row through the centre for the 3-fold mesh: the lattice is then invariant under D3).
-    dy = h * math.sqrt(3) / 2
-    ys = np.arange(-outer.radius, outer.radius + dy, dy)
-    if three_fold:
-        ys = dy * np.arange(-int(outer.radius / dy) - 1, int(outer.radius / dy) + 2)
-    pts = []
-    for j, y in enumerate(ys):
-        odd = (j % 2) if not three_fold else int(round(y / dy)) % 2
-        half = np.arange(0.0, outer.radius + h, h) + (0.5 * h if odd else 0.0)
-        xs = np.concatenate([-half[::-1], half[1:] if half[0] == 0 else half])
-        pts.append(np.column_stack([xs + outer.center[0], np.full_like(xs, y + outer.center[1])]))
-    interior = np.concatenate(pts)
-    def lattice_keep(p):
-        return (_region(p, outer, holes, filled) >= 0) & (_wall_distance(p, outer, holes) > 0.7 * h)
-
-    keep = lattice_keep(interior)
-    if three_fold:
-        # decided for a point and its images together, and away from the mirror lines (their
-        # points are placed on them)
-        for m in group:
-            q = interior @ m.T
-            keep &= lattice_keep(q) & (np.abs(q[:, 0]) > 0.7 * h)
-    elif symmetric:
-        # decided for a point and its mirror image together: round-off in a centre given as
-        # 1e-19 instead of 0 must not keep one and drop the other
-        keep &= lattice_keep(interior * np.array([-1.0, 1.0])) & (np.abs(interior[:, 0]) > 0.7 * h)
-    interior = interior[keep]
-    if three_fold:      # the lattice's images of a kept point, exactly (not up to round-off)
-        base = interior[_in_domain(interior, group) | (np.hypot(*interior.T) < tol)]
-        interior = _unique(np.concatenate([base @ m.T for m in group]), tol)
-    points = np.concatenate(boundary_pts + [interior])
-    maps = _group_maps(points, group, tol) if group is not None else None
-
-    region0 = _region(points, outer, holes, filled)
-    for _ in range(smoothing_rounds + 1):
-        tri = _triangulate(points, outer, holes, maps, group, filled)
-        if _ == smoothing_rounds:
-            break
-        # Laplacian smoothing of interior nodes (boundary fixed), kept inside the domain.
-        acc = np.zeros_like(points)
-        cnt = np.zeros(len(points))
-        for a, b in ((0, 1), (1, 2), (2, 0)):
-            np.add.at(acc, tri[:, a], points[tri[:, b]])
-            np.add.at(acc, tri[:, b], points[tri[:, a]])
-            np.add.at(cnt, tri[:, a], 1)
-            np.add.at(cnt, tri[:, b], 1)
-        new = points.copy()
-        movable = np.arange(len(points)) >= n_boundary
-        movable &= cnt > 0
-        new[movable] = acc[movable] / cnt[movable, None]
-        if maps is not None:  # keep the points exactly symmetric: the mean over the group
-            new = sum(new[idx] @ m for idx, m in zip(maps, group)) / len(group)
-        # a node stays in its own region (silicone or fill), away from every wall
-        ok = (_region(new, outer, holes, filled) == region0) & (_wall_distance(new, outer, holes) > 0.5 * h)
-        if maps is not None:
-            for idx in maps:
-                ok &= ok[idx]
-        points = np.where((movable & ok)[:, None], new, points)
-    regions = _region(points[tri].mean(axis=1), outer, holes, filled)
-    _check_conforming(points, tri, boundary, regions, filled)
-    mesh = _to_p2(points, tri, boundary, [outer] + list(holes), h)
-    mesh.symmetric = symmetric
-    mesh.rotations = 3 if three_fold else 1
+    if any(not 0 <= i < len(section.holes) for i in filled):
+        raise ModelError(f"section mesher: filled holes {filled} must index the {len(section.holes)} holes")
+    sym = geometry.symmetry(section) if symmetry is None else symmetry
+    outlines = [section.outer] + [hole.outline for hole in section.holes]
+    # mesh in units of R (Triangle's switches take plain decimals)
+    start, width = _wedge(section, sym)
+    mirror = start if sym.mirrors else None
+    wedge = None if start is None else (start, start + width)
+    # without symmetry the interior lattice and the circles' first points are placed by the holes'
+    # first moment of area (they turn with the design)
+    free = math.degrees(math.atan2(*_first_moment(section)[::-1])) if start is None else start
+    loops = [_pieces(o, 1.0 / R, free) for o in outlines]
+    polys = [shapely.transform(o.polygon(POLYGON_TOLERANCE * R), lambda c: c / R) for o in outlines]
+    group = _group(sym.rotation_order, mirror)
+    mesh = _replicate(_mesh_wedge(loops, polys, h / R, wedge, filled, free), group, outlines, R)
+    mesh.nodes *= R
+    mesh.h = h
+    mesh.rotations = sym.rotation_order
+    if mirror is not None:
+        n = sym.rotation_order
+        mesh.mirror_lines = tuple(sorted(round((mirror + 180.0 * k / n) % 180.0, 7) for k in range(n)))
+        mesh.symmetric = 90.0 in mesh.mirror_lines
     if filled:
-        mesh.regions = regions
         mesh.filled = filled
+    else:
+        mesh.regions = None
+    _check_area(mesh, section, filled)
     return mesh
 
 
-def _triangulate(points: np.ndarray, outer: Circle, holes: list[Circle], maps=None, group=None,
-                 filled: tuple[int, ...] = ()) -> np.ndarray:
-    from scipy.spatial import Delaunay   # here, not at import: nodes that only read a table skip scipy.spatial
-
-    tri = Delaunay(points).simplices
-    centroids = points[tri].mean(axis=1)
-    tri = tri[_region(centroids, outer, holes, filled) >= 0]
-    if maps is not None:
-        # the fundamental domain's triangles and their images (Delaunay may pick either diagonal of
-        # the lattice's cocircular quadrilaterals, so the full triangulation need not be symmetric)
-        base = tri[_in_domain(points[tri].mean(axis=1), group)]
-        tri = np.concatenate([idx[base] for idx in maps])
-        if len(group) > 2:
-            tri = tri[np.unique(np.sort(tri, axis=1), axis=0, return_index=True)[1]]
-    # Counter-clockwise corners.
-    p = points[tri]
-    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
-    tri[area2 < 0] = tri[area2 < 0][:, [0, 2, 1]]
-    return tri
+def _first_moment(section) -> np.ndarray:
+    return sum((hole.area * hole.centroid for hole in section.holes), np.zeros(2))
 
 
-def _polygon_area(p: np.ndarray) -> float:
-    x, y = p[:, 0], p[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+def _moment_direction(section, d: float) -> float:
+    """The holes' first moment of area along the direction ``d`` (degrees)."""
+    e = np.array(_exact_cos_sin(d))
+    return float(sum(hole.area * (hole.centroid @ e) for hole in section.holes))
 
 
-def _check_conforming(points, tri, boundary, regions, filled) -> None:
-    p = points[tri]
-    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
-    holes = [_polygon_area(b) for b in boundary[1:]]   # boundary: outer, holes in order (+ axis points)
+def _wedge(section, sym) -> tuple[float | None, float | None]:
+    """(start of the fundamental wedge in degrees, its width; (None, None): the whole section).
+    The start is a ray of a mirror line (or any ray for rotations alone) picked by the geometry
+    (the largest first moment of the holes' area along it), so it turns with the design."""
+    n = sym.rotation_order
+    if sym.mirrors:
+        # to a millionth of a degree: a line found at 89.999999999 deg (centres written to 10 digits)
+        # is the y axis, whose points then have x = 0 exactly (the symmetric gauge pins them)
+        rays = sorted({round(math.degrees(m.angle) % 180.0 + k, 6) % 360.0 for m in sym.mirrors for k in (0.0, 180.0)})
+        width = 180.0 / n
+    elif n > 1:
+        rays = sorted({round(math.degrees(math.atan2(c[1], c[0])), 6) % 360.0
+                       for c in (hole.centroid for hole in section.holes) if np.hypot(*c) > 1e-9 * section.outer_radius}
+                      or {90.0})
+        width = 360.0 / n
+    else:
+        return None, None
+    moments = [_moment_direction(section, r) for r in rays]
+    tie = 1e-9 * section.outer_radius * sum(hole.area for hole in section.holes)
+    return next(r for r, m in zip(rays, moments) if m >= max(moments) - tie), width
+
+
+def _group(n: int, mirror: float | None) -> list[np.ndarray]:
+    """The symmetry group's maps, identity first: turns by 360/n degrees, and with a mirror
+    line (degrees) the mirrors too."""
+    turns = [_rotation(360.0 * k / n) for k in range(n)]
+    return turns if mirror is None else turns + [t @ _mirror(mirror) for t in turns]
+
+
+@dataclass
+class _Wedge:
+    nodes: np.ndarray            # P2 nodes
+    triangles: np.ndarray        # (e, 6)
+    regions: np.ndarray          # (e,) 0 silicone, 1 fill
+    walls: np.ndarray            # (b, 3) quadratic wall edges (start, mid, end)
+
+
+def _mesh_wedge(loops: list[list[_Piece]], polys, h: float, wedge, filled, lattice_angle: float) -> _Wedge:
+    """Mesh of the fundamental wedge (all the section if None), in units of R: walls are the
+    pieces of ``loops`` (outer first) inside the wedge; ``polys`` their polygons (classification)."""
+    import triangle
+
+    rings = [p.exterior for p in polys]
+    others = [shapely.union_all([rings[j] for j in range(len(loops)) if j != k]) if len(loops) > 1 else None
+              for k in range(len(loops))]
+    rays = [] if wedge is None else [np.array(_exact_cos_sin(a)) for a in wedge]
+
+    def wall_size(p: np.ndarray, k: int) -> np.ndarray:
+        """Spacing on outline k at points p: a fraction of the distance to the other outlines."""
+        d = np.full(len(p), np.inf) if others[k] is None else shapely.distance(shapely.points(p), others[k])
+        return h * np.clip(d / WALL_REFERENCE, MIN_SIZE_RATIO, 1.0)
+
+    # pieces of every outline, split where a wedge ray crosses them, those inside the wedge kept
+    pieces: list[tuple[int, Piece]] = []
+    for k, o in enumerate(loops):
+        for q in o:
+            ts = sorted({0.0, 1.0, *(t for e in rays for t in q.ray_hits(e))})
+            for t0, t1 in zip(ts[:-1], ts[1:]):
+                sub = q.sub(t0, t1)
+                if wedge is None or _in_wedge(sub.point(0.5)[None], wedge)[0]:
+                    pieces.append((k, sub))
+    verts: list[np.ndarray] = []
+    segs: list[tuple[int, int, int]] = []        # (piece index, or -1 on a ray; start; end)
+
+    def add_chain(pts: np.ndarray, tag: int):
+        n0 = sum(len(v) for v in verts)
+        verts.append(pts)
+        segs.extend((tag, n0 + i, n0 + i + 1) for i in range(len(pts) - 1))
+
+    t = np.linspace(0.0, 1.0, 65)
+    for i, (k, q) in enumerate(pieces):
+        density = q.length / wall_size(q.point(t), k)
+        if isinstance(q, _Arc):    # round walls: at most ARC_STEP h radians per edge
+            density = np.maximum(density, abs(q.sweep) / min(ARC_STEP * h, MAX_ARC_STEP))
+        add_chain(q.point(_graded(t, density)), i)
+    # the rays' stretches in the meshed region (silicone, filled holes), cut where walls end on them
+    meshed = shapely.difference(polys[0], shapely.union_all(
+        [polys[1 + i] for i in range(len(loops) - 1) if i not in filled] or [shapely.Polygon()]))
+    for e in rays:
+        cuts = {0.0: None}
+        for k, q in pieces:
+            for end in (q.point(0.0), q.point(1.0)):
+                if abs(_cross(end, e)) < 1e-9 and end @ e > 1e-9:
+                    cuts[float(end @ e)] = k
+        radii = sorted(cuts)
+        for a, b in zip(radii[:-1], radii[1:]):
+            if b - a < 1e-9 or not meshed.contains(shapely.Point(*((a + b) / 2 * e))):
+                continue
+            r = a + (b - a) * t
+            size = np.full_like(r, h)
+            for end, k in ((a, cuts[a]), (b, cuts[b])):
+                if k is not None:
+                    size = np.minimum(size, wall_size((end * e)[None], k)[0] + GRADING * np.abs(r - end))
+            add_chain((a + (b - a) * _graded(t, (b - a) / size))[:, None] * e[None], -1)
+    V, S = _merge_points(np.concatenate(verts), np.array(segs), rays, 1e-9)
+    V = np.concatenate([V, _lattice(meshed, rings, h, wedge, lattice_angle)])
+    tri = triangle.triangulate({"vertices": V, "segments": S[:, 1:]},
+                               f"pq{MIN_ANGLE:.1f}a{AREA_BOUND * h * h:.10f}YYQ")
+    P, T = tri["vertices"], tri["triangles"]
+    if len(P) < len(V) or np.max(np.abs(P[:len(V)] - V)) > 0:
+        raise ModelError("section mesher: Triangle moved a wall point (internal error)")
+    # regions by the triangles' centroids (no triangle crosses a wall: walls are mesh edges)
+    c = P[T].mean(axis=1)
+    region = np.where(shapely.contains_xy(polys[0], c[:, 0], c[:, 1]), 0, -1)
+    for i in range(len(loops) - 1):
+        region[shapely.contains_xy(polys[1 + i], c[:, 0], c[:, 1])] = 1 if i in filled else -1
+    T, region = T[region >= 0], region[region >= 0]
+    # only the points of kept triangles (Triangle's quality refinement also fills the holes)
+    used = np.unique(T)
+    if not np.isin(np.arange(len(V)), used).all():
+        wall_ids = S[S[:, 0] >= 0][:, 1:]
+        if not np.isin(wall_ids, used).all():
+            raise ModelError("section mesher: a wall point is in no element (internal error)")
+    new = np.full(len(P), -1)
+    new[used] = np.arange(len(used))
+    P, T = P[used], new[T]
+    S = np.column_stack([S[:, 0], new[S[:, 1]], new[S[:, 2]]])
+    p = P[T]
+    area2 = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+             - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    T[area2 < 0] = T[area2 < 0][:, [0, 2, 1]]            # counter-clockwise corners
+    # P2: one midside node per edge; on a wall, on its piece
+    edges = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    uniq, inverse = np.unique(np.sort(edges, axis=1), axis=0, return_inverse=True)
+    mids = 0.5 * (P[uniq[:, 0]] + P[uniq[:, 1]])
+    n1 = len(P)
+    code = uniq[:, 0] * (n1 + 1) + uniq[:, 1]
+    wall = S[S[:, 0] >= 0]
+    ws = np.sort(wall[:, 1:], axis=1)
+    wcode = ws[:, 0] * (n1 + 1) + ws[:, 1]
+    pos = np.minimum(np.searchsorted(code, wcode), len(code) - 1)
+    if np.any(code[pos] != wcode):
+        raise ModelError("section mesher: a wall segment is not an edge of the mesh (internal error)")
+    for i in np.unique(wall[:, 0]):
+        sel = wall[:, 0] == i
+        mids[pos[sel]] = pieces[i][1].project(mids[pos[sel]])
+    nodes = np.concatenate([P, mids])
+    triangles = np.concatenate([T, n1 + inverse.ravel().reshape(3, -1).T], axis=1)
+    return _Wedge(nodes, triangles, region, np.column_stack([wall[:, 1], n1 + pos, wall[:, 2]]))
+
+
+def _lattice(meshed, rings, h: float, wedge, a0: float) -> np.ndarray:
+    """A hexagonal lattice of spacing h inside the meshed region, LATTICE_CLEARANCE h away from
+    the walls and the wedge's rays, with a row along the direction ``a0`` (degrees: the wedge's
+    first ray, so it is symmetric about the rays of a wedge between mirror lines)."""
+    m = int(math.ceil(1.0 / h)) + 2
+    j, i = np.meshgrid(np.arange(-m, m + 1), np.arange(-m, m + 1), indexing="ij")
+    p = np.column_stack([(i + 0.5 * j).ravel() * h, (j * math.sqrt(3) / 2).ravel() * h])
+    c, s = _exact_cos_sin(a0)
+    p = p @ np.array([[c, -s], [s, c]]).T
+    if wedge is not None:
+        p = p[_in_wedge(p, wedge)]
+        for a in wedge:
+            e = np.array(_exact_cos_sin(a))
+            p = p[np.abs(p[:, 0] * e[1] - p[:, 1] * e[0]) > LATTICE_CLEARANCE * h]
+    p = p[shapely.contains_xy(meshed, p[:, 0], p[:, 1])]
+    d = shapely.distance(shapely.points(p), shapely.union_all(rings))
+    return p[d > LATTICE_CLEARANCE * h]
+
+
+def _cross(p, e) -> float:
+    return float(p[0] * e[1] - p[1] * e[0])
+
+
+def _graded(t: np.ndarray, density: np.ndarray) -> np.ndarray:
+    """Parameters of points along [0, 1] spaced by a size field: ``density`` = length / size at
+    the samples ``t``; at least one interval."""
+    w = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(t))])
+    n = max(1, int(round(w[-1])))
+    return np.interp(np.linspace(0.0, w[-1], n + 1), w, t)
+
+
+def _in_wedge(p: np.ndarray, wedge) -> np.ndarray:
+    """Points strictly inside the wedge between the rays at angles wedge[0] and wedge[1]."""
+    a = (np.degrees(np.arctan2(p[:, 1], p[:, 0])) - wedge[0]) % 360.0
+    return (a > 1e-9) & (a < (wedge[1] - wedge[0]) - 1e-9)
+
+
+def _merge_points(V: np.ndarray, S: np.ndarray, rays, tol: float):
+    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse import coo_matrix
+    from scipy.spatial import cKDTree
+
+    pairs = np.array(sorted(cKDTree(V).query_pairs(tol)), dtype=np.int64).reshape(-1, 2)
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(V), len(V)))
+    _, label = connected_components(g, directed=False)
+    # a point on a ray is put exactly on it (a ray on an axis then has exact zeros)
+    for e in rays:
+        on = np.abs(V[:, 0] * e[1] - V[:, 1] * e[0]) < tol
+        V[on] = (V[on] @ e)[:, None] * e[None]
+    first = {}
+    keep = []
+    for i, lab in enumerate(label):
+        if lab not in first:
+            first[lab] = len(keep)
+            keep.append(i)
+    new = np.array([first[lab] for lab in label])
+    S = S.copy()
+    S[:, 1], S[:, 2] = new[S[:, 1]], new[S[:, 2]]
+    S = S[S[:, 1] != S[:, 2]]
+    return V[keep], S
+
+
+def _replicate(w: _Wedge, group: list[np.ndarray], outlines, R: float) -> SectionMesh:
+    """The wedge's images under the group, coincident nodes merged, walls chained per outline."""
+    from scipy.spatial import cKDTree
+
+    nn = len(w.nodes)
+    nodes = np.concatenate([w.nodes @ m.T for m in group])
+    tris, walls = [], []
+    for k, m in enumerate(group):
+        t = w.triangles + k * nn
+        if np.linalg.det(m) < 0:
+            t = t[:, [0, 2, 1, 5, 4, 3]]
+        tris.append(t)
+        walls.append(w.walls + k * nn)
+    tri = np.concatenate(tris)
+    wall = np.concatenate(walls)
+    regions = np.tile(w.regions, len(group))
+    # merge: the first copy of a node (the identity's) wins
+    pairs = np.array(sorted(cKDTree(nodes).query_pairs(1e-9)), dtype=np.int64).reshape(-1, 2)
+    rep = np.arange(len(nodes))
+    for a, b in pairs:                                   # a < b
+        ra = rep[a]
+        while rep[ra] != ra:
+            ra = rep[ra]
+        rb = rep[b]
+        while rep[rb] != rb:
+            rb = rep[rb]
+        if ra != rb:
+            rep[max(ra, rb)] = min(ra, rb)
+    for i in range(len(rep)):
+        r = i
+        while rep[r] != r:
+            r = rep[r]
+        rep[i] = r
+    used = np.unique(rep)
+    new = np.full(len(nodes), -1)
+    new[used] = np.arange(len(used))
+    idx = new[rep]
+    nodes, tri, wall = nodes[used], idx[tri], idx[wall]
+    # drop duplicated triangles (a wedge of the whole section maps onto itself: none expected)
+    tri_key = np.sort(tri[:, :3], axis=1)
+    _, first = np.unique(tri_key, axis=0, return_index=True)
+    first = np.sort(first)
+    tri, regions = tri[first], regions[first]
+    _, wfirst = np.unique(np.sort(wall[:, [0, 2]], axis=1), axis=0, return_index=True)
+    wall = wall[np.sort(wfirst)]
+    chains = _chain_walls(wall, nodes)
+    # each chain is the wall of the outline it lies on
+    owner = []
+    for ch in chains:
+        p = nodes[ch[len(ch) // 2, 0]]
+        owner.append(int(np.argmin([o.distance_to_point(p * R) for o in outlines])))
+    if sorted(owner) != list(range(len(outlines))):
+        raise ModelError(f"section mesher: found walls of outlines {sorted(owner)} instead of one each "
+                         f"(0..{len(outlines) - 1}); try another mesh size")
+    by_owner = dict(zip(owner, chains))
+    return SectionMesh(nodes=nodes, triangles=tri, outer_edges=by_owner[0],
+                       hole_edges=[by_owner[i] for i in range(1, len(outlines))], regions=regions)
+
+
+def _chain_walls(wall: np.ndarray, nodes: np.ndarray) -> list[np.ndarray]:
+    """Closed chains of the quadratic wall edges, each counter-clockwise."""
+    nxt: dict[int, list[int]] = {}
+    for i, (a, _, b) in enumerate(wall):
+        nxt.setdefault(int(a), []).append(i)
+        nxt.setdefault(int(b), []).append(i)
+    if any(len(v) != 2 for v in nxt.values()):
+        raise ModelError("section mesher: a wall is not a closed chain (outlines touch?)")
+    done = np.zeros(len(wall), bool)
+    chains = []
+    for s in range(len(wall)):
+        if done[s]:
+            continue
+        chain = []
+        i, start = s, int(wall[s, 0])
+        a = start
+        while True:
+            done[i] = True
+            e = wall[i] if wall[i, 0] == a else wall[i, ::-1]
+            chain.append(e)
+            a = int(e[2])
+            if a == start:
+                break
+            i = next(j for j in nxt[a] if not done[j])
+        ch = np.array(chain)
+        p = nodes[ch[:, :2].ravel()]
+        signed = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+        chains.append(ch if signed > 0 else ch[::-1, ::-1])
+    return chains
+
+
+def _check_area(mesh: SectionMesh, section, filled) -> None:
+    """The curved mesh's area equals the outlines' exact area (a lost or doubled element, or a
+    wall off its outline, shows here)."""
     for name, got, expected in (
-            ("silicone", area[regions == 0].sum(), _polygon_area(boundary[0]) - sum(holes)),
-            ("fill", area[regions == 1].sum(), sum(holes[i] for i in filled))):
-        if abs(got - expected) > 1e-9 * max(expected, _polygon_area(boundary[0])):
-            raise ModelError(f"section mesher produced a non-conforming mesh ({name} area {got:.6e} vs "
-                             f"{expected:.6e} m^2); try another mesh size")
-
-
-def _to_p2(points, tri, boundary, circles, h) -> SectionMesh:
-    # Unique edges -> midside nodes.
-    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(edges, axis=1)
-    uniq, inverse = np.unique(key, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    n_p1 = len(points)
-    mids = 0.5 * (points[uniq[:, 0]] + points[uniq[:, 1]])
-    # Boundary nodes: the first len(boundary[0]) belong to circle 0, and so on.
-    offsets = np.cumsum([0] + [len(b) for b in boundary])
-    owner = np.full(n_p1, -1)
-    for i in range(len(boundary)):
-        owner[offsets[i]:offsets[i + 1]] = i
-    on_circle = (owner[uniq[:, 0]] >= 0) & (owner[uniq[:, 0]] == owner[uniq[:, 1]])
-    # An edge joining two nodes of one circle is a boundary chord only if they are neighbours on it.
-    for i, c in enumerate(circles):
-        sel = on_circle & (owner[uniq[:, 0]] == i)
-        n_i = offsets[i + 1] - offsets[i]
-        a, b = uniq[sel, 0] - offsets[i], uniq[sel, 1] - offsets[i]
-        neighbours = (np.abs(a - b) == 1) | (np.abs(a - b) == n_i - 1)
-        idx = np.flatnonzero(sel)
-        on_circle[idx[~neighbours]] = False
-        idx = idx[neighbours]
-        v = mids[idx] - np.asarray(c.center)
-        mids[idx] = np.asarray(c.center) + c.radius * v / np.linalg.norm(v, axis=1)[:, None]
-    nodes = np.concatenate([points, mids])
-    mid_ids = n_p1 + inverse.reshape(3, -1).T  # (e, 3) for edges 01, 12, 20
-    triangles = np.concatenate([tri, mid_ids], axis=1)
-
-    def circle_edges(i: int, ccw_about_center: bool) -> np.ndarray:
-        n_i = offsets[i + 1] - offsets[i]
-        start = offsets[i] + np.arange(n_i)
-        end = offsets[i] + (np.arange(n_i) + 1) % n_i
-        k = np.sort(np.column_stack([start, end]), axis=1)
-        pos = np.searchsorted(uniq[:, 0] * (n_p1 + 1) + uniq[:, 1], k[:, 0] * (n_p1 + 1) + k[:, 1])
-        mid = n_p1 + pos
-        e = np.column_stack([start, mid, end])  # boundary points are generated counter-clockwise
-        return e if ccw_about_center else e[:, ::-1]
-
-    outer_edges = circle_edges(0, True)
-    hole_edges = [circle_edges(i, True) for i in range(1, len(circles))]
-    return SectionMesh(nodes=nodes, triangles=triangles, outer_edges=outer_edges, hole_edges=hole_edges, h=h)
+            ("silicone", mesh.area(0), section.silicone_area),
+            ("fill", mesh.area(1) if filled else 0.0, sum(section.holes[i].area for i in filled))):
+        if abs(got - expected) > AREA_TOLERANCE * expected:
+            raise ModelError(f"section mesher: {name} area {got:.6e} m^2 differs from the outlines' "
+                             f"{expected:.6e} m^2; try another mesh size")

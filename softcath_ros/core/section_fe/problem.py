@@ -17,7 +17,7 @@ Potential per unit reference length (all terms SI, J/m), one module per term in 
        + oint 1/2 k_h (ds/dS - 1)^2 dS               hoop.py: hoop rings on the outer boundary
        - sum_i p_i V_i                               pressure_volume.py: channel volumes
        + 1/2 EI_dev |k|^2                            device.py: device in the lumen
-       + kappa sum l_i b(gap_ij^2)                    contact.py: self-contact of the lumen wall
+       + kappa sum l_i b(gap_ij^2)                    contact.py: self-contact of each empty hole's wall
 
 Internally everything is non-dimensional: lengths in units of the outer radius R,
 energy densities in units of the silicone's c1 (so curvature k R, energy Pi / (c1 R^2)).
@@ -55,8 +55,9 @@ class SectionProblem:
                  contact_distance: float | None = None):
         """``lumen_fill``: the fill's shear modulus as a fraction of the silicone's (2 c1); the
         mesh must then have a fill region (``mesh_section(..., filled=...)``), and vice versa.
-        ``contact_distance``: self-contact of the (empty) lumen wall with this barrier distance,
-        as a fraction of the lumen's diameter (``terms/contact.py``); None: no contact.
+        ``contact_distance``: self-contact of every empty hole's wall (channels and lumen) with this
+        barrier distance, as a fraction of the hole's diameter (of the circle of its area if not
+        round; ``terms/contact.py``); None: no contact.
         ``end_cap_only``: the pressure acts only through the end caps (the closed form's load)."""
         self.design = design
         self.end_cap_only = end_cap_only
@@ -115,19 +116,23 @@ class SectionProblem:
         self.terms += self.channels
         self.contact: list[tuple[int, WallContact]] = []   # (hole index, its wall contact)
         self.device = None                                  # the lumen wall's contact with the device
-        if contact_distance is not None and design.lumen is not None:
-            i = design.n_channels
-            if not self.filled_holes[i]:
-                wall = WallContact(X, mesh.hole_edges[i], contact_distance * 2 * design.lumen.radius / R, self.n_u)
-                self.contact.append((i, wall))
-                self.terms.append(wall)
-                if self.device_node is not None:
-                    if design.device.diameter >= 2 * design.lumen.radius:
-                        raise ModelError(f"design '{design.name}': the device ({design.device.diameter} m) does "
-                                         f"not fit in the lumen ({2 * design.lumen.radius} m)")
-                    self.device = DeviceContact(X, mesh.hole_edges[i], 0.5 * design.device.diameter / R,
-                                                wall.d_hat, self.device_node, self.n_u)
-                    self.terms.append(self.device)
+        holes = design.section.holes
+        for i in range(len(holes) if contact_distance is not None else 0):
+            if self.filled_holes[i]:
+                continue
+            # a hole's size: the diameter of the circle of its area (its diameter if round)
+            size = 2.0 * np.sqrt(holes[i].area / np.pi)
+            wall = WallContact(X, mesh.hole_edges[i], contact_distance * size / R, self.n_u)
+            self.contact.append((i, wall))
+            self.terms.append(wall)
+            if self.device_node is not None and holes[i].role == "lumen":
+                room = design.section.largest_inscribed_diameter(holes[i])
+                if design.device.diameter >= room:
+                    raise ModelError(f"design '{design.name}': the device ({design.device.diameter} m) does "
+                                     f"not fit in the lumen (largest circle in it {room:.6g} m)")
+                self.device = DeviceContact(X, mesh.hole_edges[i], 0.5 * design.device.diameter / R,
+                                            wall.d_hat, self.device_node, self.n_u)
+                self.terms.append(self.device)
         if design.device is not None:
             self.terms.append(DeviceBending(design.device.bending_stiffness / (c_ref * R**4), self.i_glob))
 
@@ -329,7 +334,8 @@ class SectionProblem:
 
     def hole_gaps(self, x) -> np.ndarray:
         """Per hole (channels, then lumen): the smallest distance between its deformed wall points
-        that are at least a quarter of the perimeter apart, relative to the hole's diameter.
+        that are at least a quarter of the perimeter apart along it, relative to the hole's size
+        (twice its wall's mean distance from its centroid: the diameter of a circle).
 
         Near zero the opposite walls touch; the model has no self-contact, so it must stop there."""
         u = x[:self.n_u].reshape(-1, 2)
@@ -338,9 +344,13 @@ class SectionProblem:
             ids = edges[:, :2].ravel()                     # corner and midside nodes, in order
             pts = self.X[ids] + u[ids]
             m = len(ids)
+            # separation along the reference wall (its spacing is graded): a quarter of the perimeter
+            step = np.linalg.norm(np.diff(self.X[ids], axis=0, append=self.X[ids[:1]]), axis=1)
+            s = np.concatenate([[0.0], np.cumsum(step)])
+            perimeter, s = s[-1], s[:-1]
             i, j = np.triu_indices(m, k=1)
-            sep = np.minimum(j - i, m - (j - i))
-            far = sep >= m // 4
+            sep = np.minimum(s[j] - s[i], perimeter - (s[j] - s[i]))
+            far = sep >= 0.25 * perimeter * (1 - 1e-9)
             d = np.linalg.norm(pts[i[far]] - pts[j[far]], axis=1)
             ref = np.linalg.norm(self.X[ids] - self.X[ids].mean(0), axis=1).mean() * 2
             out.append(d.min() / ref)
