@@ -32,7 +32,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import shapely
 
 from ..errors import ModelError
 
@@ -223,6 +222,8 @@ def mesh_section(section, h: float, filled: tuple[int, ...] = (), symmetry=None)
     (m) away from thin walls; the holes whose indices are in ``filled`` are meshed as well, as
     region 1 (``SectionMesh.regions``). ``symmetry``: a ``geometry.Symmetry`` to mesh with (None:
     ``geometry.symmetry(section)``; ``geometry.Symmetry((), 1, ...)`` for none)."""
+    import shapely   # here, not at import: nodes that only read a table skip it
+
     from .. import geometry
 
     R = section.outer_radius
@@ -309,6 +310,7 @@ class _Wedge:
 def _mesh_wedge(loops: list[list[_Piece]], polys, h: float, wedge, filled, lattice_angle: float) -> _Wedge:
     """Mesh of the fundamental wedge (all the section if None), in units of R: walls are the
     pieces of ``loops`` (outer first) inside the wedge; ``polys`` their polygons (classification)."""
+    import shapely
     import triangle
 
     rings = [p.exterior for p in polys]
@@ -414,6 +416,8 @@ def _lattice(meshed, rings, h: float, wedge, a0: float) -> np.ndarray:
     """A hexagonal lattice of spacing h inside the meshed region, LATTICE_CLEARANCE h away from
     the walls and the wedge's rays, with a row along the direction ``a0`` (degrees: the wedge's
     first ray, so it is symmetric about the rays of a wedge between mirror lines)."""
+    import shapely
+
     m = int(math.ceil(1.0 / h)) + 2
     j, i = np.meshgrid(np.arange(-m, m + 1), np.arange(-m, m + 1), indexing="ij")
     p = np.column_stack([(i + 0.5 * j).ravel() * h, (j * math.sqrt(3) / 2).ravel() * h])
