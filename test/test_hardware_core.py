@@ -293,3 +293,24 @@ def test_the_scale_refuses_to_configure_on_lies():
     scale = Scale(dev, clock, check_timeout=1.0)
     assert not scale.configure(clock.sleep) and "no valid force reading within 1 s" in scale.reason
     assert dev.log[-1] == ("close",)
+
+
+# -- the sim backend ------------------------------------------------------------------------------------------
+def test_the_sim_backend_is_the_simulated_rigs_regulator_and_gauge():
+    from softcath_ros.bench.hardware.devices import SimRegulator
+    from softcath_ros.bench.sim_rig import RigParams
+
+    clock = FakeClock()
+    device = SimRegulator("implemented_5mm", clock, seed=3)
+    reg = Regulator(device, 1, MAX, clock)
+    assert reg.configure(clock.sleep) and device.name == "simulated"
+    reg.activate()
+    got = []
+    for _ in range(50):                                       # 1 s at 50 Hz, commands at 10 Hz
+        reg.command([1e9], clock())                           # clamped to max_pressure
+        got += run(clock, reg, 0.1)
+    tau, bound = RigParams().regulator_time_constant, RigParams().gauge_error + 5 * RigParams().gauge_noise
+    assert 1.0 > 10 * tau and abs(got[-1].value - MAX) < bound           # settled at max_pressure, within the gauge
+    assert abs(got[0].value) < bound                                      # read before the first setpoint went out
+    assert abs(got[1].value - MAX * (1 - math.exp(-0.02 / tau))) < bound  # then one 20 ms step of the first-order lag
+

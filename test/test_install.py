@@ -125,7 +125,8 @@ def test_colcon_style_install(tmp_path):
     site = next(prefix.glob("lib/python3*/site-packages"))
     share = prefix / "share" / "softcath_ros"
     assert (share / "package.xml").is_file() and (share / "LICENSE").read_text() == (REPO / "LICENSE").read_text()
-    params = {"model_node", "allocation_node", "bench_node", "sim_bench_node", "steer_node", "two_dof_pair"}
+    params = {"model_node", "allocation_node", "bench_node", "sim_bench_node", "steer_node", "two_dof_pair",
+              "regulator_node", "scale_node"}
     assert {p.stem for p in (share / "config").glob("*.yaml")} == params | {"ladder_envelope"}  # `--params-file`
     assert (share / "config" / "designs" / "implemented_5mm.yaml").is_file()
     assert (prefix / "share/ament_index/resource_index/packages/softcath_ros").is_file()

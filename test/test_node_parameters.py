@@ -155,7 +155,8 @@ def test_bad_params_files_are_one_line_before_rcl_reads_them(tmp_path, case):
     assert len(lines) == 1 and words in lines[0] and str(path) in lines[0], proc.stderr
 
 
-@pytest.mark.parametrize("node", ["allocation_node", "sim_bench_node", "bench_node", "tracker_node"])
+@pytest.mark.parametrize("node", ["allocation_node", "sim_bench_node", "bench_node", "tracker_node", "regulator_node",
+                                  "scale_node"])
 def test_every_node_checks_its_params_file(tmp_path, node):
     path = tmp_path / "params.yaml"
     path.write_text("some_node:\n  rate_hz: 5\n")
