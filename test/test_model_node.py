@@ -363,3 +363,37 @@ def test_answer_load_reports_a_rung_too_slow_for_its_commands():
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_readme_nodes_over_topics_run_as_written():
+    """README's "Nodes over topics": model_node started as written, then the pressure_sweep line as
+    written answers every command of its sweep (the tool waits until the node answers its first
+    command, so none is lost to DDS matching) and prints R_C = l / theta for each."""
+    import shlex
+
+    readme = (REPO / "README.md").read_text().splitlines()
+    node_line = next(line for line in readme if line.startswith(".venv/bin/model_node --ros-args -p design:="))
+    sweep_line = next(line for line in readme if line.startswith(".venv/bin/python -m softcath_ros.tools.pressure_sweep"))
+    bindir = Path(sys.executable).parent
+
+    def argv(line):
+        words = shlex.split(line, comments=True)
+        return [str(bindir / words[0].removeprefix(".venv/bin/")), *words[1:]]
+
+    domain = private_domain()
+    node = subprocess.Popen(argv(node_line), env=graph_env(domain), cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        sweep = subprocess.run(argv(sweep_line), env=graph_env(domain), cwd=REPO, capture_output=True, text=True,
+                               timeout=110)
+        assert sweep.returncode == 0, sweep.stderr[-2000:]
+        rows = [line for line in sweep.stdout.splitlines()[1:] if line.strip()]
+        assert len(rows) >= 2 and not [r for r in rows if "no pose" in r], sweep.stdout
+        assert float(rows[-1].split()[0]) == pytest.approx(0.25)       # the last command, bar
+        assert 0 < float(rows[-1].split()[1]) < 100.0                   # R_C [mm] of a bent body
+    finally:
+        node.send_signal(signal.SIGINT)
+        try:
+            node.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            node.kill()

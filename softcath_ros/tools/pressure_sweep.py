@@ -85,12 +85,23 @@ class SweepClient:
             self._executor.spin_once(timeout_sec=0.02)
         return True
 
-    def wait_for_model_node(self, timeout_s: float = 20.0) -> None:
+    def wait_for_model_node(self, timeout_s: float = 20.0, probe=None) -> None:
+        """Wait until a model node is matched both ways. With ``probe`` (a command, Pa), also until it
+        answers that command: DDS reports a match before the first message is sure to arrive, so the
+        probe is re-sent every 0.5 s until an answer comes (the sweep's first command is a good probe:
+        the node answers its repeat from its last answer)."""
+        end = time.monotonic() + timeout_s
         ok = self.spin_until(lambda: (self._pub.get_subscription_count() > 0 and self._tip_sub.get_publisher_count() > 0
                                        and self._bb_sub.get_publisher_count() > 0), timeout_s)
+        while ok and probe is not None:
+            if self.send(probe, timeout_s=min(0.5, max(end - time.monotonic(), 0.0))) is not None:
+                break
+            ok = time.monotonic() < end
         if not ok:
-            raise TimeoutError(f"no model_node on /softcath/pressure_cmd after {timeout_s:g} s")
-        self.spin_until(lambda: False, 0.3)  # let the match settle in both directions
+            raise TimeoutError(f"no model_node on /softcath/pressure_cmd after {timeout_s:g} s" if probe is None else
+                               f"model_node did not answer the first command within {timeout_s:g} s "
+                               "(refused? its /diagnostics say why)")
+        self.spin_until(lambda: False, 0.3)  # a late answer to a repeated probe is taken here, not by the sweep
 
     @property
     def n_received(self) -> int:
@@ -192,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--plot", type=Path, default=None, help="PNG of the backbones")
     ap.add_argument("--json", type=Path, default=None, help="write the sweep points as JSON here")
     ap.add_argument("--timeout", type=positive_float, default=5.0, help="s to wait for each answer")
+    ap.add_argument("--wait", type=positive_float, default=30.0, help="s to wait for model_node to answer (default 30)")
     return ap
 
 
@@ -223,7 +235,7 @@ def main(argv=None) -> int:
     client = None
     try:
         client = SweepClient(timeout_s=args.timeout)
-        client.wait_for_model_node()
+        client.wait_for_model_node(args.wait, probe=commands[0])
         points = client.run(commands)
     except TimeoutError as exc:
         print(f"pressure_sweep: {exc}", file=sys.stderr)
