@@ -3,6 +3,7 @@ readings published as the rig contract says, every setpoint clamped, vent on com
 SIGINT and when the device dies (ERROR on /diagnostics), the lifecycle transitions, tare, and bad
 inputs in one line. Margins are generous: what must happen within 0.5 s is checked on the pure
 core with a fake clock (test_hardware_core.py); here only that it happens."""
+import json
 import signal
 import subprocess
 import sys
@@ -19,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from sensor_msgs.msg import FluidPressure  # noqa: E402
-from std_msgs.msg import Empty, Float64MultiArray  # noqa: E402
+from std_msgs.msg import Empty, Float64MultiArray, String  # noqa: E402
 
 from hardware_emulators import ModbusRegulatorEmulator, SerialRegulatorEmulator, SerialScaleEmulator, free_port  # noqa: E402
 from lifecycle_listener import LifecycleListener  # noqa: E402
@@ -117,7 +118,7 @@ def test_regulator_node_lifecycle_on_a_modbus_device():
                                               "setpoint_pa_per_count": 10.0, "reading_pa_per_count": 10.0,
                                               "autostart": False})
         graph.wait_ready(proc)
-        listener = regulator_listener(graph)
+        listener = LifecycleListener(graph.domain, topics.REGULATOR_NODE, {CH0: FluidPressure, topics.BENCH_RIG: String})
         emu = None
         try:
             assert listener.state() == "unconfigured"
@@ -127,6 +128,9 @@ def test_regulator_node_lifecycle_on_a_modbus_device():
             emu = ModbusRegulatorEmulator(1, port=port)
             assert listener.transition(Transition.TRANSITION_CONFIGURE)
             assert listener.state() == "inactive"
+            assert listener.spin(30.0, until=lambda: listener.got[topics.BENCH_RIG])    # what the recording will say
+            rig = json.loads(listener.got[topics.BENCH_RIG][-1].data)
+            assert rig["simulated"] is False and rig["backend"] == "modbus" and rig["device"] == f"modbus:127.0.0.1:{port}/1"
             assert not command(listener, 20000.0, 1.0, until=lambda: listener.got[CH0])   # configured: no stream
             assert listener.transition(Transition.TRANSITION_ACTIVATE)
             assert command(listener, 20000.0, 60.0, until=lambda: listener.got[CH0]

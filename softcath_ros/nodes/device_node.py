@@ -61,7 +61,7 @@ class DeviceNode(LifecycleNode):
             self.diagnostics()
             return TransitionCallbackReturn.FAILURE
         self.core, self.configure_failed, self.last_reason = core, False, ""
-        self.pubs = self.make_publishers()
+        self.pubs = self.make_publishers()   # (self.core is set)
         self._autostart = False
         self.get_logger().info(f"configured: {core.device.name}")
         return TransitionCallbackReturn.SUCCESS

@@ -13,19 +13,23 @@ bench/hardware/protocol.py), ``modbus`` (Modbus TCP, the register map in the par
   when it was read from the device;
 - vents on command timeout, on deactivate, cleanup, SIGINT/SIGTERM, and when the device gives no
   valid reading for ``silence_timeout`` (0.4 s): ERROR on /diagnostics at once, latched until
-  deactivated.
+  deactivated;
+- once configured, /softcath/bench/rig (std_msgs/String, transient local): JSON naming the backend
+  and device, ``simulated`` true for the sim backend (bench_node records it).
 
 ``autostart`` (default true) configures and activates at start-up (a configure fault then ends
 the node with exit code 2); with false a lifecycle manager drives it.
 """
 from __future__ import annotations
 
+import json
 import sys
 import time
 from functools import partial
 
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from .. import topics
 from ..bench.hardware.devices import ModbusRegulator, RegisterMap, SerialLines, SimRegulator
@@ -91,6 +95,8 @@ class RegulatorNode(DeviceNode):
         refuse_unknown_parameters(self)
         self.ignored = 0            # commands while not active
         self._command_sub = self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 100)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_rig = self.create_publisher(String, topics.BENCH_RIG, latched)
         self.start(autostart)
 
     def _device(self):
@@ -110,6 +116,11 @@ class RegulatorNode(DeviceNode):
                          check_timeout=self.check_timeout, max_rate=self.max_rate)
 
     def make_publishers(self) -> list:
+        # the recording says what the pressures came from (bench_node keeps it; `simulated` for the sim backend)
+        self.pub_rig.publish(String(data=json.dumps({
+            "simulated": self.backend == "sim", "node": self.get_name(), "backend": self.backend,
+            "device": self.core.device.name, "design": self.design_name, "max_pressure": self.max_pressure,
+            "rate_hz": self.rate_hz})))
         return [self.create_lifecycle_publisher(FluidPressure, topics.pressure_measured_topic(c), 10)
                 for c in range(self.n)]
 
