@@ -6,6 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from domains import tied
+
 VENV_BIN = Path(sys.executable).parent
 
 
@@ -22,7 +24,7 @@ def procs():
 
 def start(procs, args, env, **kw):
     """Console script ``args[0]`` with arguments, output piped (text), registered in ``procs``."""
-    p = subprocess.Popen([str(VENV_BIN / args[0]), *args[1:]], env=env, stdout=subprocess.PIPE,
+    p = subprocess.Popen(tied([str(VENV_BIN / args[0]), *args[1:]]), env=env, stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, **kw)
     procs.append(p)
     return p

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from domains import private_domain, private_env
+from domains import private_domain, private_env, tied
 from softcath_ros import topics
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import backbone_poses
@@ -45,7 +45,7 @@ class Running:
             ros_args = ("-p", "model:=closed_form", *ros_args)
         self.domain = private_domain()
         env = {**graph_env(self.domain), **(env_extra or {})}
-        self.proc = subprocess.Popen([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args],
+        self.proc = subprocess.Popen(tied([sys.executable, "-m", "softcath_ros.nodes.model_node", "--ros-args", *ros_args]),
                                      env=env, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         from diagnostic_msgs.msg import DiagnosticArray
 
