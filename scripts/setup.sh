@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Creates .venv (Python 3.11) and installs softcath_ros with the given extras, e.g. "ros,test".
+# Creates .venv (Python 3.11) and installs softcath_ros with the given extras, e.g. "ros,test";
+# a lab PC with hardware: "ros,vision,hardware" (docs/lab.md).
 # Re-running is cheap: the install is skipped while setup.py and the extras are unchanged.
 set -euo pipefail
 cd "$(dirname "$0")/.."
