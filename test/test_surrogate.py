@@ -13,7 +13,7 @@ import pytest
 
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
-from softcath_ros.core.models.surrogate import _direction_error_deg, _rc_error
+from softcath_ros.core.models.surrogate_build import direction_error_deg, rc_error
 
 RC_TOL = 0.005   # issue 6: within 0.5% of the source in R_C
 
@@ -39,7 +39,7 @@ def test_one_channel_within_half_percent_of_section(one_channel):
     ref = np.vstack([src.evaluate(q).curvature for q in p])
     got = m.evaluate(p)
     assert got.converged.all()
-    assert (_rc_error(got.curvature, ref) < RC_TOL).all()
+    assert (rc_error(got.curvature, ref) < RC_TOL).all()
 
 
 def test_one_channel_refuses_outside_its_range(one_channel):
@@ -102,7 +102,7 @@ def test_three_channel_from_section_measures_its_error_and_refuses_common_pressu
     ref = np.vstack([make_model("section", d, **src_opts).evaluate(q).curvature for q in p])
     got = m.evaluate(p)
     assert got.converged.all()
-    assert (_rc_error(got.curvature, ref) < max(2 * bound["rc_rel_max"], RC_TOL)).all()
+    assert (rc_error(got.curvature, ref) < max(2 * bound["rc_rel_max"], RC_TOL)).all()
     cm = m.error_bound["common_mode"]
     assert cm["rc_rel_max_checked"] > m.settings.common_tolerance   # the section's common pressure is not pure stretch
     st = m.evaluate(np.array([0.1e5, 0.2e5, 0.05e5]))
@@ -173,7 +173,7 @@ def test_shipped_tables_are_current_for_every_shipped_design():
         except Exception as exc:   # the message says why (stale: which version)
             pytest.fail(f"{exc}: run `softcath surrogate build --shipped`")
         assert m.origin == "shipped" and not m.built_now and m.table_path.parent.name == "surrogate_tables"
-        assert m.meta["source_version"] == m._cache_parts()[2]
+        assert m.meta["source_version"] == m.cache_parts()[2]
 
 
 def test_a_table_of_a_per_section_source_serves_every_length(tmp_path):
@@ -183,7 +183,7 @@ def test_a_table_of_a_per_section_source_serves_every_length(tmp_path):
     short = d.with_length(0.02)
     m = make_model("surrogate", short, build=False, cache=False)
     assert m.origin == "shipped" and not m.built_now
-    assert m._design_hash() == d.per_section_hash() != short.content_hash()
+    assert m.design_hash() == d.per_section_hash() != short.content_hash()
     longer = make_model("surrogate", d, build=False, cache=False)
     np.testing.assert_array_equal(m.evaluate([30000.0]).curvature, longer.evaluate([30000.0]).curvature)
     # another section (a thicker wall) is another table
@@ -251,8 +251,8 @@ def test_shipped_three_channel_table_against_the_section_rung():
     ref = np.vstack([make_model("section", d).evaluate(q).curvature for q in p])
     got = m.evaluate(p)
     assert got.converged.all()
-    assert (_rc_error(got.curvature, ref) <= bound["rc_rel_max"]).all()
-    assert (_direction_error_deg(got.curvature, ref) <= bound["direction_deg_max"]).all()
+    assert (rc_error(got.curvature, ref) <= bound["rc_rel_max"]).all()
+    assert (direction_error_deg(got.curvature, ref) <= bound["direction_deg_max"]).all()
 
 
 def test_all_three_channels_pressurised_answered_within_the_measured_error_or_refused():
@@ -270,13 +270,13 @@ def test_all_three_channels_pressurised_answered_within_the_measured_error_or_re
     assert not st.converged and np.isnan(st.curvature).all() and "common to all three channels" in st.message
     ref = make_model("section", d).evaluate(far)
     m._max_common = np.inf     # what answering it would have given
-    assert _rc_error(m.evaluate(far).curvature, ref.curvature)[0] > tol
+    assert rc_error(m.evaluate(far).curvature, ref.curvature)[0] > tol
     m._max_common = limit
     if limit > 0:
         near = np.array([[0.10e5, 0.18e5, 0.0]]) + 0.9 * limit
         got = m.evaluate(near)
         assert got.converged.all()
-        assert _rc_error(got.curvature, make_model("section", d).evaluate(near).curvature)[0] <= tol
+        assert rc_error(got.curvature, make_model("section", d).evaluate(near).curvature)[0] <= tol
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")

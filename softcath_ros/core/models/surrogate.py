@@ -34,16 +34,16 @@ written by ``softcath surrogate build --shipped``), the cache (core/cache.py, ki
 or a file given as ``table=``; each is used only if its key (a hash of the design's content, the
 source rung, its options and solver version, the table settings and SURROGATE_VERSION) is the
 model's. A missing or stale table is built (with a log line saying why) into the cache.
+
+Modules: ``surrogate_settings`` (the table's settings), ``surrogate_tabulate`` (building a table),
+``surrogate_build`` (the source's rays in parallel), ``surrogate_store`` (where tables are kept);
+this one is the rung: it finds or builds its table and reads commands out of it.
 """
 from __future__ import annotations
 
-import json
 import logging
-import math
-import time
 from bisect import bisect_right
-from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path
+from dataclasses import replace
 
 import numpy as np
 
@@ -51,62 +51,15 @@ from ..cache import CacheStore, store_for
 from ..design import Design
 from ..errors import ModelError
 from ..options import Option
-from .base import BendModel, BendState, RungInfo, options_of
-from .surrogate_build import direction_error_deg, rc_error
 from ..units import PA_PER_BAR
+from .base import BendModel, BendState, RungInfo, options_of
+from .surrogate_settings import ROTATION_COS, ROTATION_SIN, SURROGATE_VERSION, SurrogateSettings, symmetric_three
+from .surrogate_store import SurrogateTableStore
 
-# Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-4"
-_KIND = "surrogate"   # the cache kind of the tables
-_ROT = np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0])
-_COS, _SIN = np.cos(_ROT), np.sin(_ROT)
 _log = logging.getLogger("softcath_ros.surrogate")
 
 
-@dataclass(frozen=True)
-class SurrogateSettings:
-    source: str = "section"             # the rung the table is built from
-    source_options: dict = field(default_factory=dict)  # its options (mesh_size, ...): part of the key
-    pressure_step: float = 2000.0       # Pa between table points along a ray (3 channels: in a + b)
-    initial_rays: int = 5               # 3 channels: rays over half a pair (t in [0, 1/2]) before refinement
-    max_rays: int = 13                  # 3 channels: most rays over half a pair
-    ray_tolerance: float = 0.005        # split between rays where the table misses the middle ray by more
-                                        # than this in R_C (relative) ...
-    ray_direction_tolerance: float = 0.2    # ... or by more than this in direction (degrees)
-    held_out_rays: int = 3              # 3 channels: rays used only to measure the error, one per pair
-                                        # in turn (1 channel: always one)
-    fine_points: int = 321              # 3 channels: resampled points per axis (bilinear read-out)
-    common_rays: int = 3                # rays with all three pressures > 0 that measure the common-mode error
-    common_tolerance: float = 0.01      # such commands are answered while within this in R_C (relative) ...
-    common_direction_tolerance: float = 0.5   # ... and this in direction (degrees), refused beyond
-    pairs: str = "auto"                 # 3 channels: "auto" uses the section's 3-fold symmetry when it
-                                        # has it, "rotated" requires it, "each" solves every pair
-
-
-def _symmetric_three(design: Design, tol: float = 1e-7) -> bool:
-    """True when the section maps onto itself under a 120 degree rotation (channel i -> i + 1);
-    with circular holes it then is also mirror symmetric between any two channels."""
-    if design.n_channels != 3:
-        return False
-    c, s = _COS[1], _SIN[1]
-    chans = design.channels
-    for i in range(3):
-        x, y = chans[i].center
-        nx, ny = chans[(i + 1) % 3].center
-        if abs(c * x - s * y - nx) > tol or abs(s * x + c * y - ny) > tol:
-            return False
-        if abs(chans[i].radius - chans[(i + 1) % 3].radius) > tol:
-            return False
-    for part in (design.lumen, design.limiting_fibre):
-        if part is not None and max(abs(v) for v in part.center) > tol:
-            return False
-    return True
-
-
-_rc_error, _direction_error_deg = rc_error, direction_error_deg   # (tests and benchmarks import these names)
-
-
-class SurrogateModel(BendModel):
+class SurrogateModel(SurrogateTableStore, BendModel):
     name = "surrogate"
     solver_version = SURROGATE_VERSION
     info = RungInfo(
@@ -167,7 +120,7 @@ class SurrogateModel(BendModel):
             raise ModelError(f"model 'surrogate': pairs '{self.settings.pairs}' must be 'auto', 'each' or 'rotated'")
         if not self.settings.pressure_step > 0:
             raise ModelError(f"model 'surrogate': pressure_step {self.settings.pressure_step!r} must be > 0 Pa")
-        symmetric = _symmetric_three(design)
+        symmetric = symmetric_three(design)
         if design.n_channels == 1:
             self.kind = "one_channel"
         elif design.n_channels == 3 and (self.settings.pairs != "rotated" or symmetric):
@@ -183,7 +136,7 @@ class SurrogateModel(BendModel):
         self.workers = default_workers() if workers is None else max(1, int(workers))
         self.progress = progress
         self.store = store_for(cache)
-        self.key = CacheStore.key(self.solver_version, self._cache_parts())
+        self.key = CacheStore.key(self.solver_version, self.cache_parts())
         self.origin = ""          # where the table came from: "file", "shipped", "cache" or "built"
         self.table_path: Path | None = None
         self.stale_reason = "forced rebuild" if rebuild else "none shipped, none in the cache"
@@ -205,7 +158,9 @@ class SurrogateModel(BendModel):
             _log.warning("surrogate: no current table for design '%s' from '%s' (%s); building one%s",
                          design.name, self.settings.source, self.stale_reason,
                          f" into {self.path}" if self.store is not None else " (no cache)")
-            self.table, self.meta = self._build()
+            from .surrogate_tabulate import build_table
+
+            self.table, self.meta = build_table(self)
             self.origin = "built"
             if self.store is not None:
                 self.table_path = self._save()
@@ -213,38 +168,6 @@ class SurrogateModel(BendModel):
             self.table, self.meta = loaded
         self._prepare()
 
-    # ------------------------------------------------------------------ identity
-    def _cache_parts(self) -> list:
-        """The design, the table settings and the source rung's declared version (a changed
-        solver rebuilds the table)."""
-        from . import rung_class
-
-        try:
-            source_version = rung_class(self.settings.source).solver_version
-        except ModelError:
-            source_version = None   # an unknown source: refused when the table is built
-        return [self._design_hash(), asdict(self.settings), source_version]
-
-    def _design_hash(self) -> str:
-        """The design's hash a table is keyed on: without the length when the source answers per
-        section (a table serves every length), with it when the source solves a whole body."""
-        return self.design.content_hash() if self.info.depends_on_length else self.design.per_section_hash()
-
-    def _cache_name(self) -> str:
-        return f"{self.design.name}_{self.settings.source}"
-
-    @property
-    def path(self) -> Path | None:
-        """The table's file in the cache (None without a cache)."""
-        if self.store is None:
-            return None
-        return self.store.path(_KIND, self.solver_version, self._cache_parts(), self._cache_name(), "npz")
-
-    def shipped_path(self) -> Path:
-        """Where the package keeps (or would keep) this design's table."""
-        from ...resources import shipped_dir
-
-        return shipped_dir("surrogate_table") / f"{self._cache_name()}.npz"
 
     @property
     def error_bound(self) -> dict:
@@ -257,302 +180,13 @@ class SurrogateModel(BendModel):
         command in a cell where the source converged)."""
         return 0.0, float(self.meta["max_pressure"])
 
-    # ------------------------------------------------------------------ building
-    def _source_options(self) -> dict:
-        opts = dict(self.settings.source_options)
-        if self.settings.source in ("section", "fe3d"):
-            opts.setdefault("progress", False)
-            opts.setdefault("cache", self.store if self.store is not None else False)
-        return opts
 
-    def _build(self) -> tuple[dict, dict]:
-        from tqdm import tqdm
-
-        from .surrogate_build import RayPool
-
-        t0 = time.perf_counter()
-        with tqdm(total=0, desc=f"surrogate {self.design.name}: {self.settings.source} rays", unit="ray",
-                  disable=not self.progress) as bar:
-            pool = RayPool(self.design, self.settings.source, self._source_options(), self.workers, bar)
-            try:
-                table, meta = self._build_one(pool) if self.kind == "one_channel" else self._build_three(pool)
-            except BaseException:
-                pool.close(cancel=True)
-                raise
-            pool.close()
-        meta.update({"version": SURROGATE_VERSION, "key": self.key, "design": self.design.name,
-                     "design_hash": self._design_hash(), "kind": self.kind, "rotated": self.rotated,
-                     "settings": asdict(self.settings), "source_version": self._cache_parts()[2],
-                     "build_seconds": time.perf_counter() - t0, "workers": self.workers})
-        return table, meta
-
-    def _build_one(self, pool) -> tuple[dict, dict]:
-        s = self.settings
-        pmax = self.design.max_pressure
-        grid = np.linspace(0.0, pmax, max(int(math.ceil(pmax / s.pressure_step)), 4) + 1)
-        mids = 0.5 * (grid[1:] + grid[:-1])     # held out: where interpolation error is largest
-        pool.submit("table", grid[:, None])
-        pool.submit("held", mids[:, None])
-        res = dict(pool.results())
-        r = res["table"]
-        n_ok = r["n_ok"]
-        if n_ok < 4:
-            raise ModelError(f"model 'surrogate': source '{s.source}' converged at only {n_ok} of the table's "
-                             f"pressures from 0 ({r['message']}); too few for a table")
-        p, y = grid[:n_ok], r["values"][:n_ok]
-        last = r["last"]
-        if last is not None and last["pressure"][0] > p[-1] + 1.0:
-            p = np.append(p, last["pressure"][0])
-            y = np.vstack([y, [*last["curvature"], last["axial_stretch"]]])
-        self.table, self.meta = {"p": p, "y": y}, {"max_pressure": float(p[-1])}
+    # ------------------------------------------------------------------ read-out
+    def use_table(self, table: dict, meta: dict) -> None:
+        """Answer from ``table`` (while building: the table so far, to measure its error)."""
+        self.table, self.meta = table, meta
         self._prepare()
-        h = res["held"]
-        n_h = h["n_ok"]
-        held = mids[:n_h][mids[:n_h] <= p[-1]]
-        mine = self.evaluate(held[:, None])
-        bound = self._errors(mine, h["values"][:len(held)], held[:, None])
-        meta = {"max_pressure": float(p[-1]), "source_failure": r["message"],
-                "source_evaluations": int(len(grid) + len(mids)), "source_rays": 2,
-                "error_bound": {"one_channel": bound}}
-        return self.table, meta
 
-    def _build_three(self, pool) -> tuple[dict, dict]:
-        from .surrogate_build import PairRays, mirrored, pair_commands, pair_surface, reflection
-
-        s, d = self.settings, self.design
-        pmax = d.max_pressure
-        n_step = max(int(math.ceil(pmax / s.pressure_step)), 4)
-        sums = np.linspace(0.0, 2.0 * pmax, 2 * n_step + 1)      # a + b along a pair's ray
-        mags = np.linspace(0.0, pmax, n_step + 1)                # the largest channel pressure
-        pairs = (0,) if self.rotated else (0, 1, 2)
-        half = 0.5 if self.rotated else 1.0
-        refl = reflection(d) if self.rotated else None
-        rays = {r: PairRays(sums) for r in pairs}
-        rng = np.random.default_rng(0)
-        n0 = s.initial_rays if self.rotated else 2 * s.initial_rays - 1
-        rounds = {0: [(r, float(t)) for r in pairs for t in np.linspace(0.0, half, n0)]}
-        for r, t in rounds[0]:
-            pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax))
-        # held out: every pair, t off the table's rays, sums between the table's
-        held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
-        for i, (r, t) in enumerate(held):
-            pool.submit(("held", i), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
-        pool.submit(("common",), np.repeat(mags[:, None], 3, 1))
-        # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
-        # (a vented channel that has not yet reached zero is the usual case)
-        checks = []
-        for i in range(s.common_rays):
-            w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
-            checks.append(np.roll(w, i % 3))
-            pool.submit(("check", i), mags[:, None] * checks[-1][None, :])
-
-        def surface(r):
-            arrays = rays[r].arrays()
-            return pair_surface(*(mirrored(*arrays, refl) if self.rotated else arrays), sums)
-
-        results, waiting, refine_log = {}, {0: len(rounds[0])}, []
-        for tag, res in pool.results():
-            if tag[0] != "ray":
-                results[tag] = res
-                continue
-            _, k, r, t = tag
-            results[tag] = res
-            waiting[k] -= 1
-            if waiting[k]:
-                continue
-            # round k is complete: judge its middle rays against the table without them, then add them
-            split = []
-            if k > 0:
-                surf = {r: surface(r) for r in pairs}
-                for r, t, lo, hi in rounds[k]:
-                    got = results[("ray", k, r, t)]
-                    n = got["n_ok"]
-                    ev, reachable = surf[r]
-                    m = sums[1:n]
-                    inside = reachable(np.full(len(m), t), m)
-                    if inside.any():
-                        want = ev(np.full(int(inside.sum()), t), m[inside])
-                        miss_rc = float(np.nanmax(rc_error(want[:, :2], got["values"][1:n][inside, :2])))
-                        miss_dir = float(np.nanmax(direction_error_deg(want[:, :2], got["values"][1:n][inside, :2])))
-                    else:
-                        miss_rc = miss_dir = float("inf")
-                    refine_log.append({"pair": r, "t": t, "rc_miss": miss_rc, "direction_miss_deg": miss_dir})
-                    if miss_rc > s.ray_tolerance or miss_dir > s.ray_direction_tolerance:
-                        split += [(r, 0.5 * (lo + t), lo, t), (r, 0.5 * (t + hi), t, hi)]
-            for item in rounds[k]:
-                r, t = item[0], item[1]
-                rays[r].add(t, results.pop(("ray", k, r, t)))
-            if k == 0:
-                split = []
-                for r in pairs:
-                    ts = sorted(rays[r].t)
-                    split += [(r, 0.5 * (a + b), a, b) for a, b in zip(ts[:-1], ts[1:])]
-            room = {r: s.max_rays - len(rays[r].t) for r in pairs}
-            nxt = []
-            for item in split:
-                if room[item[0]] > 0 and item[3] - item[2] > 1.0 / 256:
-                    room[item[0]] -= 1
-                    nxt.append(item)
-            if nxt:
-                rounds[k + 1], waiting[k + 1] = nxt, len(nxt)
-                for r, t, _, _ in nxt:
-                    pool.submit(("ray", k + 1, r, t), pair_commands(3, r, t, sums, pmax))
-        # the table
-        arrs = [rays[r].arrays() for r in pairs]
-        cm = results[("common",)]
-        n_cm = cm["n_ok"]
-        table = {"sums": sums, "ray_pair": np.concatenate([np.full(len(a[0]), r) for r, a in zip(pairs, arrs)]),
-                 "ray_t": np.concatenate([a[0] for a in arrs]), "ray_values": np.concatenate([a[1] for a in arrs]),
-                 "ray_reach": np.concatenate([a[2] for a in arrs]), "ray_complete": np.concatenate([a[3] for a in arrs]),
-                 "common_p": mags[:n_cm], "common_stretch": cm["values"][:n_cm, 2]}
-        max_common = float(mags[n_cm - 1]) if n_cm else 0.0
-        self.table = table
-        self.meta = {"max_pressure": float(pmax), "rotated": self.rotated, "max_common_pressure": max_common}
-        self._prepare()
-        # held-out error
-        cmds, vals = [], []
-        for i, (r, t) in enumerate(held):
-            h = results[("held", i)]
-            c = pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax)[:h["n_ok"]]
-            cmds.append(c[1:] if len(c) and not c[0].any() else c)
-            vals.append(h["values"][:h["n_ok"]][len(c) - len(cmds[-1]):])
-        cmds, vals = np.vstack(cmds), np.vstack(vals)
-        inside = cmds.max(1) <= pmax                     # the rays were solved one step beyond max_pressure
-        cmds, vals = cmds[inside], vals[inside]
-        bound = self._errors(self.evaluate(cmds), vals, cmds)
-        # commands with all three > 0: the common-mode error against the common pressure
-        cc, cv = [], []
-        for i, w in enumerate(checks):
-            h = results[("check", i)]
-            cc.append(mags[1:h["n_ok"], None] * w[None, :])
-            cv.append(h["values"][1:h["n_ok"]])
-        cc, cv = np.vstack(cc), np.vstack(cv)
-        mine = self.evaluate(cc)
-        use = mine.converged
-        rc = rc_error(mine.curvature[use], cv[use, :2])
-        dr = direction_error_deg(mine.curvature[use], cv[use, :2])
-        common = cc[use].min(1)
-        bad = (rc > s.common_tolerance) | (dr > s.common_direction_tolerance)
-        # answered up to the largest checked common pressure below the first one off by too much
-        # (every checked one when none was: then up to the equal-pressure table's end)
-        answered = common < common[bad].min() if bad.any() else np.ones(len(common), dtype=bool)
-        if bad.any():
-            limit = float(common[answered].max()) if answered.any() else 0.0
-        else:
-            limit = max_common
-        cbound = self._errors(mine, cv, cc, within=np.flatnonzero(use)[answered])
-        cbound.update({"checked_points": int(use.sum()), "rc_rel_max_checked": float(rc.max()) if rc.size else None,
-                       "direction_deg_max_checked": float(dr.max()) if dr.size else None,
-                       "max_common_pressure_pa": limit, "tolerance_rc_rel": s.common_tolerance,
-                       "tolerance_direction_deg": s.common_direction_tolerance})
-        failures = [res["message"] for tag, res in sorted(results.items(), key=lambda x: str(x[0]))
-                    if tag[0] in ("ray", "common") and res["message"]]
-        failures += [m for r in pairs for m in rays[r].messages]
-        reach_bar = {f"{r}:{t:.4f}": None if c else float(sums[n - 1] / PA_PER_BAR) if n else 0.0
-                     for r, a in zip(pairs, arrs) for t, n, c in zip(a[0], a[2], a[3])}
-        n_rays = sum(len(a[0]) for a in arrs)
-        meta = {"max_pressure": float(pmax), "rotated": self.rotated, "max_common_pressure": limit,
-                "max_common_table_pressure": max_common,
-                "source_failure": "; ".join(dict.fromkeys(failures[:3])),
-                "source_rays": int(n_rays + len(held) + 1 + len(checks)), "table_rays": int(n_rays),
-                "source_evaluations": int(sum(len(pair_commands(3, r, t, sums, pmax))
-                                              for r, a in zip(pairs, arrs) for t in a[0])
-                                          + len(cmds) + len(mags) * (1 + len(checks))),
-                "ray_reach_sum_bar": reach_bar, "refinement": refine_log,
-                "error_bound": {"pair": bound, "common_mode": cbound},
-                "common_checks_direction": [w.round(4).tolist() for w in checks],
-                "common_curvature_max_per_m": float(np.nanmax(np.abs(cm["values"][:n_cm, :2]))) if n_cm else 0.0}
-        return table, meta
-
-    @staticmethod
-    def _errors(mine: BendState, ref: np.ndarray, pressures: np.ndarray, within=None) -> dict:
-        """R_C, direction and stretch errors of ``mine`` against the source's values ``ref`` (N, 3)
-        where both answered (and, if given, only at the indices ``within``)."""
-        use = mine.converged & np.isfinite(ref).all(1)
-        if within is not None:
-            keep = np.zeros(len(use), dtype=bool)
-            keep[within] = True
-            use &= keep
-        out = {"points": int(use.sum()), "refused": int((~mine.converged & np.isfinite(ref).all(1)).sum())}
-        if not use.any():
-            return out
-        rc = rc_error(mine.curvature[use], ref[use, :2])
-        worst = int(np.argmax(rc))
-        out.update({"rc_rel_max": float(rc.max()), "rc_rel_median": float(np.median(rc)),
-                    "direction_deg_max": float(direction_error_deg(mine.curvature[use], ref[use, :2]).max()),
-                    "stretch_abs_max": float(np.abs(mine.axial_stretch[use] - ref[use, 2]).max()),
-                    "worst_at_bar": (pressures[use][worst] / PA_PER_BAR).round(4).tolist()})
-        return out
-
-    # ------------------------------------------------------------------ storage
-    def _arrays(self) -> dict:
-        return {"meta": np.array(json.dumps(self.meta)), **self.table}
-
-    def _save(self) -> Path:
-        return self.store.save_arrays(_KIND, self.solver_version, self._cache_parts(), self._arrays(),
-                                      self._cache_name())
-
-    def write(self, path: str | Path) -> Path:
-        """The table as a file (``softcath surrogate build --out``; the shipped tables)."""
-        from ..cache import _atomic_write
-
-        path = Path(path)
-        _atomic_write(path, lambda f: np.savez_compressed(f, **self._arrays()))
-        return path
-
-    @staticmethod
-    def _split(arrays: dict):
-        meta = json.loads(str(arrays.pop("meta")))
-        return arrays, meta
-
-    def _load(self):
-        table = self.store.load_arrays(_KIND, self.solver_version, self._cache_parts(), self._cache_name(),
-                                       require=("meta",))
-        if table is None:
-            return None
-        table, meta = self._split(table)
-        return (table, meta) if meta.get("key") == self.key else None
-
-    def _load_file(self, path: Path, required: bool = False):
-        """The table in ``path`` if it is this model's (same key); else None, or with ``required`` a
-        one-line error saying why it does not fit."""
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                table, meta = self._split({k: z[k] for k in z.files})
-        except Exception as exc:
-            if required:
-                raise ModelError(f"model 'surrogate': table {path} cannot be read ({type(exc).__name__})") from None
-            return None
-        if meta.get("key") == self.key:
-            return table, meta
-        self.stale_reason = self._stale_reason(meta)
-        if required:
-            raise ModelError(f"model 'surrogate': table {path} is not current for design '{self.design.name}' "
-                             f"({self.stale_reason}); rebuild it: softcath surrogate build {self.design.name}")
-        return None
-
-    def _stale_reason(self, meta: dict) -> str:
-        if meta.get("design_hash") != self._design_hash():
-            return f"built for another design content (hash {meta.get('design_hash')})"
-        if meta.get("version") != SURROGATE_VERSION:
-            return f"built by {meta.get('version')}, this is {SURROGATE_VERSION}"
-        now = self._cache_parts()[2]
-        if meta.get("source_version", now) != now:
-            return f"built from {meta.get('source_version')}, the source rung is now {now}"
-        return "built with other table settings"
-
-    def _load_shipped(self):
-        path = self.shipped_path()
-        if not path.is_file():
-            return None
-        loaded = self._load_file(path)
-        if loaded is not None:
-            self.origin, self.table_path = "shipped", path
-        else:
-            self.stale_reason = f"the shipped table {path.name} is stale: {self.stale_reason}"
-        return loaded
-
-    # ------------------------------------------------------------------ evaluation
     def _prepare(self) -> None:
         t = self.table
         self._pmax = float(self.meta["max_pressure"])
@@ -580,7 +214,7 @@ class SurrogateModel(BendModel):
             self._max_common = float(self.meta.get("max_common_table_pressure", self.meta["max_common_pressure"])
                                      if self.answer_common else self.meta["max_common_pressure"])
             self._stretch0 = float(np.interp(0.0, self._cp, self._cs)) if len(self._cp) else 1.0
-            self._rot = [(float(c), float(s)) for c, s in zip(_COS, _SIN)]
+            self._rot = [(float(c), float(s)) for c, s in zip(ROTATION_COS, ROTATION_SIN)]
 
     def _fine_tables(self) -> tuple[np.ndarray, np.ndarray]:
         """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), and
@@ -675,7 +309,7 @@ class SurrogateModel(BendModel):
         pair = np.zeros_like(r) if self._rotated else r
         kl = self._bilinear(pair, a, b)
         if self._rotated:
-            c, s = _COS[r], _SIN[r]
+            c, s = ROTATION_COS[r], ROTATION_SIN[r]
             k = np.column_stack([c * kl[:, 0] - s * kl[:, 1], s * kl[:, 0] + c * kl[:, 1]])
         else:
             k = kl[:, :2]

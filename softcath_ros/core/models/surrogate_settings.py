@@ -1,0 +1,59 @@
+"""The surrogate's table settings (part of a table's key, see ``surrogate.py``) and the test for
+a 3-fold symmetric section, whose pair 0-1 half-rays then serve every pair."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..design import Design
+
+# Bump when the table layout or the way it is built changes.
+SURROGATE_VERSION = "surrogate-4"
+ROTATION_COS = np.cos(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))   # channel r's pair turned by r * 120 deg
+ROTATION_SIN = np.sin(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))
+
+
+@dataclass(frozen=True)
+class SurrogateSettings:
+    source: str = "section"             # the rung the table is built from
+    source_options: dict = field(default_factory=dict)  # its options (mesh_size, ...): part of the key
+    pressure_step: float = 2000.0       # Pa between table points along a ray (3 channels: in a + b)
+    initial_rays: int = 5               # 3 channels: rays over half a pair (t in [0, 1/2]) before refinement
+    max_rays: int = 13                  # 3 channels: most rays over half a pair
+    ray_tolerance: float = 0.005        # split between rays where the table misses the middle ray by more
+                                        # than this in R_C (relative) ...
+    ray_direction_tolerance: float = 0.2    # ... or by more than this in direction (degrees)
+    held_out_rays: int = 3              # 3 channels: rays used only to measure the error, one per pair
+                                        # in turn (1 channel: always one)
+    fine_points: int = 321              # 3 channels: resampled points per axis (bilinear read-out)
+    common_rays: int = 3                # rays with all three pressures > 0 that measure the common-mode error
+    common_tolerance: float = 0.01      # such commands are answered while within this in R_C (relative) ...
+    common_direction_tolerance: float = 0.5   # ... and this in direction (degrees), refused beyond
+    pairs: str = "auto"                 # 3 channels: "auto" uses the section's 3-fold symmetry when it
+                                        # has it, "rotated" requires it, "each" solves every pair
+
+
+def symmetric_three(design: Design, tol: float = 1e-7) -> bool:
+    """True when the section maps onto itself under a 120 degree rotation (channel i -> i + 1);
+    with circular holes it then is also mirror symmetric between any two channels."""
+    if design.n_channels != 3:
+        return False
+    c, s = ROTATION_COS[1], ROTATION_SIN[1]
+    chans = design.channels
+    for i in range(3):
+        x, y = chans[i].center
+        nx, ny = chans[(i + 1) % 3].center
+        if abs(c * x - s * y - nx) > tol or abs(s * x + c * y - ny) > tol:
+            return False
+        if abs(chans[i].radius - chans[(i + 1) % 3].radius) > tol:
+            return False
+    for part in (design.lumen, design.limiting_fibre):
+        if part is not None and max(abs(v) for v in part.center) > tol:
+            return False
+    return True
+
+
+
+__all__ = ["SURROGATE_VERSION", "SurrogateSettings", "symmetric_three"]

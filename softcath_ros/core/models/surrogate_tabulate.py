@@ -1,0 +1,273 @@
+"""How a surrogate table is built: the source rung sampled along rays of commands (solved in
+parallel by ``surrogate_build.RayPool``), refined where the response bends, and the table's error
+measured against the source at held-out commands (see ``surrogate.py`` for what is tabulated)."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from ..errors import ModelError
+from ..units import PA_PER_BAR
+from .base import BendState
+from .surrogate_build import direction_error_deg, rc_error
+from .surrogate_settings import SURROGATE_VERSION
+
+
+def source_options(model) -> dict:
+    """The source rung's options for the build: no bars of its own, the model's cache."""
+    opts = dict(model.settings.source_options)
+    if model.settings.source in ("section", "fe3d"):
+        opts.setdefault("progress", False)
+        opts.setdefault("cache", model.store if model.store is not None else False)
+    return opts
+
+
+def build_table(model) -> tuple[dict, dict]:
+    """The table and its metadata for ``model`` (a SurrogateModel), its source's rays solved in parallel."""
+    from tqdm import tqdm
+
+    from .surrogate_build import RayPool
+
+    t0 = time.perf_counter()
+    with tqdm(total=0, desc=f"surrogate {model.design.name}: {model.settings.source} rays", unit="ray",
+              disable=not model.progress) as bar:
+        pool = RayPool(model.design, model.settings.source, source_options(model), model.workers, bar)
+        try:
+            table, meta = _one_channel(model, pool) if model.kind == "one_channel" else _three_channel(model, pool)
+        except BaseException:
+            pool.close(cancel=True)
+            raise
+        pool.close()
+    meta.update({"version": SURROGATE_VERSION, "key": model.key, "design": model.design.name,
+                 "design_hash": model.design_hash(), "kind": model.kind, "rotated": model.rotated,
+                 "settings": asdict(model.settings), "source_version": model.cache_parts()[2],
+                 "build_seconds": time.perf_counter() - t0, "workers": model.workers})
+
+
+def _one_channel(model, pool) -> tuple[dict, dict]:
+    s = model.settings
+    pmax = model.design.max_pressure
+    grid = np.linspace(0.0, pmax, max(int(math.ceil(pmax / s.pressure_step)), 4) + 1)
+    mids = 0.5 * (grid[1:] + grid[:-1])     # held out: where interpolation error is largest
+    pool.submit("table", grid[:, None])
+    pool.submit("held", mids[:, None])
+    res = dict(pool.results())
+    r = res["table"]
+    n_ok = r["n_ok"]
+    if n_ok < 4:
+        raise ModelError(f"model 'surrogate': source '{s.source}' converged at only {n_ok} of the table's "
+                         f"pressures from 0 ({r['message']}); too few for a table")
+    p, y = grid[:n_ok], r["values"][:n_ok]
+    last = r["last"]
+    if last is not None and last["pressure"][0] > p[-1] + 1.0:
+        p = np.append(p, last["pressure"][0])
+        y = np.vstack([y, [*last["curvature"], last["axial_stretch"]]])
+    model.use_table({"p": p, "y": y}, {"max_pressure": float(p[-1])})
+    h = res["held"]
+    n_h = h["n_ok"]
+    held = mids[:n_h][mids[:n_h] <= p[-1]]
+    mine = model.evaluate(held[:, None])
+    bound = table_errors(mine, h["values"][:len(held)], held[:, None])
+    meta = {"max_pressure": float(p[-1]), "source_failure": r["message"],
+            "source_evaluations": int(len(grid) + len(mids)), "source_rays": 2,
+            "error_bound": {"one_channel": bound}}
+    return model.table, meta
+
+
+def _three_channel(model, pool) -> tuple[dict, dict]:
+    from .surrogate_build import PairRays, mirrored, pair_commands, pair_surface, reflection
+
+    s, d = model.settings, model.design
+    pmax = d.max_pressure
+    n_step = max(int(math.ceil(pmax / s.pressure_step)), 4)
+    sums = np.linspace(0.0, 2.0 * pmax, 2 * n_step + 1)      # a + b along a pair's ray
+    mags = np.linspace(0.0, pmax, n_step + 1)                # the largest channel pressure
+    pairs = (0,) if model.rotated else (0, 1, 2)
+    half = 0.5 if model.rotated else 1.0
+    refl = reflection(d) if model.rotated else None
+    rays = {r: PairRays(sums) for r in pairs}
+    rng = np.random.default_rng(0)
+    n0 = s.initial_rays if model.rotated else 2 * s.initial_rays - 1
+    rounds = {0: [(r, float(t)) for r in pairs for t in np.linspace(0.0, half, n0)]}
+    for r, t in rounds[0]:
+        pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax))
+    # held out: every pair, t off the table's rays, sums between the table's
+    held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
+    for i, (r, t) in enumerate(held):
+        pool.submit(("held", i), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
+    pool.submit(("common",), np.repeat(mags[:, None], 3, 1))
+    # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
+    # (a vented channel that has not yet reached zero is the usual case)
+    checks = []
+    for i in range(s.common_rays):
+        w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
+        checks.append(np.roll(w, i % 3))
+        pool.submit(("check", i), mags[:, None] * checks[-1][None, :])
+
+    def surface(r):
+        arrays = rays[r].arrays()
+        return pair_surface(*(mirrored(*arrays, refl) if model.rotated else arrays), sums)
+
+    results: dict = {}
+    refine_log = _refine_rays(pool, s, rays, rounds, results, sums, pmax, surface)
+    # the table
+    arrs = [rays[r].arrays() for r in pairs]
+    cm = results[("common",)]
+    n_cm = cm["n_ok"]
+    table = {"sums": sums, "ray_pair": np.concatenate([np.full(len(a[0]), r) for r, a in zip(pairs, arrs)]),
+             "ray_t": np.concatenate([a[0] for a in arrs]), "ray_values": np.concatenate([a[1] for a in arrs]),
+             "ray_reach": np.concatenate([a[2] for a in arrs]), "ray_complete": np.concatenate([a[3] for a in arrs]),
+             "common_p": mags[:n_cm], "common_stretch": cm["values"][:n_cm, 2]}
+    max_common = float(mags[n_cm - 1]) if n_cm else 0.0
+    model.use_table(table, {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": max_common})
+    bound, n_held = _held_out_bound(model, results, held, sums, pmax)
+    limit, cbound = _common_mode_bound(model, results, checks, mags, max_common)
+    failures = [res["message"] for tag, res in sorted(results.items(), key=lambda x: str(x[0]))
+                if tag[0] in ("ray", "common") and res["message"]]
+    failures += [m for r in pairs for m in rays[r].messages]
+    reach_bar = {f"{r}:{t:.4f}": None if c else float(sums[n - 1] / PA_PER_BAR) if n else 0.0
+                 for r, a in zip(pairs, arrs) for t, n, c in zip(a[0], a[2], a[3])}
+    n_rays = sum(len(a[0]) for a in arrs)
+    meta = {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": limit,
+            "max_common_table_pressure": max_common,
+            "source_failure": "; ".join(dict.fromkeys(failures[:3])),
+            "source_rays": int(n_rays + len(held) + 1 + len(checks)), "table_rays": int(n_rays),
+            "source_evaluations": int(sum(len(pair_commands(3, r, t, sums, pmax))
+                                          for r, a in zip(pairs, arrs) for t in a[0])
+                                      + n_held + len(mags) * (1 + len(checks))),
+            "ray_reach_sum_bar": reach_bar, "refinement": refine_log,
+            "error_bound": {"pair": bound, "common_mode": cbound},
+            "common_checks_direction": [w.round(4).tolist() for w in checks],
+            "common_curvature_max_per_m": float(np.nanmax(np.abs(cm["values"][:n_cm, :2]))) if n_cm else 0.0}
+    return table, meta
+
+
+def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, surface) -> list:
+    """Collect the pool's results into ``results`` and ``rays``; each time a round of rays is
+    complete, add rays between neighbours where the table misses a middle ray (up to
+    ``max_rays``). Returns the refinement log (each judged ray's misses)."""
+    from .surrogate_build import pair_commands
+
+    pairs = tuple(rays)
+    waiting, refine_log = {0: len(rounds[0])}, []
+    for tag, res in pool.results():
+        if tag[0] != "ray":
+            results[tag] = res
+            continue
+        _, k, r, t = tag
+        results[tag] = res
+        waiting[k] -= 1
+        if waiting[k]:
+            continue
+        # round k is complete: judge its middle rays against the table without them, then add them
+        split = []
+        if k > 0:
+            surf = {r: surface(r) for r in pairs}
+            for r, t, lo, hi in rounds[k]:
+                got = results[("ray", k, r, t)]
+                n = got["n_ok"]
+                ev, reachable = surf[r]
+                m = sums[1:n]
+                inside = reachable(np.full(len(m), t), m)
+                if inside.any():
+                    want = ev(np.full(int(inside.sum()), t), m[inside])
+                    miss_rc = float(np.nanmax(rc_error(want[:, :2], got["values"][1:n][inside, :2])))
+                    miss_dir = float(np.nanmax(direction_error_deg(want[:, :2], got["values"][1:n][inside, :2])))
+                else:
+                    miss_rc = miss_dir = float("inf")
+                refine_log.append({"pair": r, "t": t, "rc_miss": miss_rc, "direction_miss_deg": miss_dir})
+                if miss_rc > s.ray_tolerance or miss_dir > s.ray_direction_tolerance:
+                    split += [(r, 0.5 * (lo + t), lo, t), (r, 0.5 * (t + hi), t, hi)]
+        for item in rounds[k]:
+            r, t = item[0], item[1]
+            rays[r].add(t, results.pop(("ray", k, r, t)))
+        if k == 0:
+            split = []
+            for r in pairs:
+                ts = sorted(rays[r].t)
+                split += [(r, 0.5 * (a + b), a, b) for a, b in zip(ts[:-1], ts[1:])]
+        room = {r: s.max_rays - len(rays[r].t) for r in pairs}
+        nxt = []
+        for item in split:
+            if room[item[0]] > 0 and item[3] - item[2] > 1.0 / 256:
+                room[item[0]] -= 1
+                nxt.append(item)
+        if nxt:
+            rounds[k + 1], waiting[k + 1] = nxt, len(nxt)
+            for r, t, _, _ in nxt:
+                pool.submit(("ray", k + 1, r, t), pair_commands(3, r, t, sums, pmax))
+    return refine_log
+
+
+def _held_out_bound(model, results: dict, held: list, sums, pmax: float) -> tuple[dict, int]:
+    """The table's error at the held-out pair rays (sums between the table's), and how many
+    commands that measured."""
+    from .surrogate_build import pair_commands
+
+    cmds, vals = [], []
+    for i, (r, t) in enumerate(held):
+        h = results[("held", i)]
+        c = pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax)[:h["n_ok"]]
+        cmds.append(c[1:] if len(c) and not c[0].any() else c)
+        vals.append(h["values"][:h["n_ok"]][len(c) - len(cmds[-1]):])
+    cmds, vals = np.vstack(cmds), np.vstack(vals)
+    inside = cmds.max(1) <= pmax                     # the rays were solved one step beyond max_pressure
+    cmds, vals = cmds[inside], vals[inside]
+    return table_errors(model.evaluate(cmds), vals, cmds), len(cmds)
+
+
+def _common_mode_bound(model, results: dict, checks: list, mags, max_common: float) -> tuple[float, dict]:
+    """Commands with all three channels > 0: the error of treating the common part as pure
+    stretch, and the common pressure up to which it stayed within the tolerances (Pa)."""
+    s = model.settings
+    cc, cv = [], []
+    for i, w in enumerate(checks):
+        h = results[("check", i)]
+        cc.append(mags[1:h["n_ok"], None] * w[None, :])
+        cv.append(h["values"][1:h["n_ok"]])
+    cc, cv = np.vstack(cc), np.vstack(cv)
+    mine = model.evaluate(cc)
+    use = mine.converged
+    rc = rc_error(mine.curvature[use], cv[use, :2])
+    dr = direction_error_deg(mine.curvature[use], cv[use, :2])
+    common = cc[use].min(1)
+    bad = (rc > s.common_tolerance) | (dr > s.common_direction_tolerance)
+    # answered up to the largest checked common pressure below the first one off by too much
+    # (every checked one when none was: then up to the equal-pressure table's end)
+    answered = common < common[bad].min() if bad.any() else np.ones(len(common), dtype=bool)
+    if bad.any():
+        limit = float(common[answered].max()) if answered.any() else 0.0
+    else:
+        limit = max_common
+    cbound = table_errors(mine, cv, cc, within=np.flatnonzero(use)[answered])
+    cbound.update({"checked_points": int(use.sum()), "rc_rel_max_checked": float(rc.max()) if rc.size else None,
+                   "direction_deg_max_checked": float(dr.max()) if dr.size else None,
+                   "max_common_pressure_pa": limit, "tolerance_rc_rel": s.common_tolerance,
+                   "tolerance_direction_deg": s.common_direction_tolerance})
+    return limit, cbound
+
+
+def table_errors(mine: BendState, ref: np.ndarray, pressures: np.ndarray, within=None) -> dict:
+    """R_C, direction and stretch errors of ``mine`` against the source's values ``ref`` (N, 3)
+    where both answered (and, if given, only at the indices ``within``)."""
+    use = mine.converged & np.isfinite(ref).all(1)
+    if within is not None:
+        keep = np.zeros(len(use), dtype=bool)
+        keep[within] = True
+        use &= keep
+    out = {"points": int(use.sum()), "refused": int((~mine.converged & np.isfinite(ref).all(1)).sum())}
+    if not use.any():
+        return out
+    rc = rc_error(mine.curvature[use], ref[use, :2])
+    worst = int(np.argmax(rc))
+    out.update({"rc_rel_max": float(rc.max()), "rc_rel_median": float(np.median(rc)),
+                "direction_deg_max": float(direction_error_deg(mine.curvature[use], ref[use, :2]).max()),
+                "stretch_abs_max": float(np.abs(mine.axial_stretch[use] - ref[use, 2]).max()),
+                "worst_at_bar": (pressures[use][worst] / PA_PER_BAR).round(4).tolist()})
+    return out
+
+
+__all__ = ["build_table", "source_options", "table_errors"]
