@@ -34,7 +34,7 @@ def one_run(protocol: str, delay: float, out_dir: Path, name: str) -> dict:
     from softcath_ros.recording.reader import iter_messages, read_metadata
 
     with NodeGraph() as graph:
-        rig = graph.start("sim_bench_node", {"legacy_topics": "false"})
+        rig = graph.start("sim_bench_node")
         bench = graph.start("bench_node", {"protocol": protocol, "output_dir": out_dir, "name": name})
         text = wait_output(bench, timeout_s=120, mark="starting protocol")
         time.sleep(delay)

@@ -48,7 +48,7 @@ def test_quick_protocol_records_a_simulated_run(tmp_path, procs):
     assert names == {"protocol.yaml", "design.yaml"}
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
     assert counts[topics.BENCH_STEP] == 2 + 28 * (3 + 2)  # start/end + per step: start, settled, end, samples
-    assert counts[topics.PRESSURE_MEASURED] > 200 and counts[topics.PRESSURE_CMD] > 100
+    assert counts[topics.pressure_measured_topic(0)] > 200 and counts[topics.PRESSURE_CMD] > 100
     for c in summary.channels.values():
         assert c.message_encoding == "cdr" and yaml.safe_load(c.metadata["offered_qos_profiles"])
     from softcath_ros.bench.report import write_report

@@ -36,12 +36,11 @@ def _finite(values) -> bool:
 
 def test_hostile_flood_on_every_input_topic(tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped, Vector3Stamped
+    from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped, Vector3Stamped, WrenchStamped
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from std_msgs.msg import Float64MultiArray
-
-    from std_msgs.msg import Float64, String
+    from sensor_msgs.msg import FluidPressure
+    from std_msgs.msg import Float64MultiArray, String
 
     from softcath_ros.nodes.allocation_node import AllocationNode
     from softcath_ros.nodes.model_node import ModelNode
@@ -60,9 +59,10 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
     probe = rclpy.create_node("hostile_probe", context=context)
     outputs = {"tip": [], "backbone": [], "pressure": [], "diagnostics": [], "measured": [], "angle": [],
                "force": []}
-    probe.create_subscription(Float64MultiArray, topics.PRESSURE_MEASURED, outputs["measured"].append, 1000)
-    probe.create_subscription(Float64, topics.BENCH_ANGLE, outputs["angle"].append, 1000)
-    probe.create_subscription(Float64, topics.BENCH_FORCE, outputs["force"].append, 1000)
+    for c in range(len(rig.pub_pc)):   # the rig contract's stamped readings (docs/rig.md)
+        probe.create_subscription(FluidPressure, topics.pressure_measured_topic(c), outputs["measured"].append, 1000)
+    probe.create_subscription(Vector3Stamped, topics.BENCH_BEND_ANGLE, outputs["angle"].append, 1000)
+    probe.create_subscription(WrenchStamped, topics.BENCH_WRENCH, outputs["force"].append, 1000)
     pub_s = probe.create_publisher(String, topics.BENCH_STEP, 100)
     probe.create_subscription(PoseStamped, topics.TIP_POSE, outputs["tip"].append, 1000)
     probe.create_subscription(PoseArray, topics.BACKBONE, outputs["backbone"].append, 1000)
@@ -139,8 +139,8 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
         assert outputs["measured"] and outputs["angle"] and outputs["force"]
         rig_limit = rig.rig.max_pressure
         for m in outputs["measured"]:
-            assert _finite(m.data) and all(-1e4 <= v <= rig_limit + 1e4 for v in m.data)   # + gauge error
-        assert _finite([m.data for m in outputs["angle"]] + [m.data for m in outputs["force"]])
+            assert _finite([m.fluid_pressure]) and -1e4 <= m.fluid_pressure <= rig_limit + 1e4   # + gauge error
+        assert _finite([m.vector.x for m in outputs["angle"]] + [m.wrench.force.z for m in outputs["force"]])
         assert len(outputs["diagnostics"]) >= 2
         for msg in outputs["diagnostics"]:
             for s in msg.status:

@@ -194,7 +194,7 @@ def test_a_protocol_on_the_angle_bench_alone_needs_no_scale(tmp_path, procs):
     """A rig without a scale (its wrench topic remapped away, no deprecated topics) runs a protocol
     on the angle bench only; a protocol on both benches still names the missing scale."""
     env = private_env()
-    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false",
+    _start(procs, ["sim_bench_node", "--ros-args",
                    "-r", f"{topics.BENCH_WRENCH}:=/hidden{topics.BENCH_WRENCH}"], env)
     angle_only = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}",
                                 "-p", f"output_dir:={tmp_path}", "-p", "name:=angle_only"], env)
@@ -234,7 +234,7 @@ def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs
     env = private_env()
     design = "implemented_5mm" if drive == "channels" else "three_channel_5mm"
     protocol = _short_protocol(tmp_path) if drive == "channels" else _short_direction_protocol(tmp_path)
-    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=false", "-p", f"design:={design}"], env)
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", f"design:={design}"], env)
     run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(protocol),
                          "--output-dir", str(tmp_path), "--json"], env)
     out = run.communicate(timeout=200)[0]

@@ -119,8 +119,7 @@ def _raise_stopped(signum, frame):
 
 
 def _run_sim(args, protocol, design) -> int:
-    return run_graph(args, protocol, design, rig_nodes=[("sim_bench_node", {"model": args.sim_model,
-                                                                              "legacy_topics": "false"})],
+    return run_graph(args, protocol, design, rig_nodes=[("sim_bench_node", {"model": args.sim_model})],
                      private=True)
 
 

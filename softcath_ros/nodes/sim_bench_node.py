@@ -7,8 +7,8 @@ markers from bench_node: which bench and sample are mounted).
 Publishes at ``rate_hz``, every reading stamped with the time it was taken:
 /softcath/pressure_measured/ch<i> (sensor_msgs/FluidPressure, gauge Pa, variance = gauge noise^2),
 /softcath/bench/bend_angle (geometry_msgs/Vector3Stamped, vector.x in rad), /softcath/bench/wrench
-(geometry_msgs/WrenchStamped, force.z in N, frame softcath_scale); with ``legacy_topics`` (for one
-release) also the deprecated unstamped /softcath/pressure_measured, /softcath/bench/angle and
+(geometry_msgs/WrenchStamped, force.z in N, frame softcath_scale); with ``legacy_topics`` (off by
+default; for one release) also the deprecated unstamped /softcath/pressure_measured, /softcath/bench/angle and
 /softcath/bench/force; /diagnostics; and once (transient local) /softcath/bench/rig: JSON saying
 this rig is simulated, with its parameters.
 """
@@ -62,7 +62,7 @@ class SimBenchNode(Node):
         rate_hz = p("rate_hz", 100.0, "publishing rate of the readings, Hz", minimum=1.0, maximum=10000.0)
         self.command_timeout = p("command_timeout", 0.5, "no pressure command for this long (s): vent "
                                  "(the rig contract's watchdog)", minimum=0.01, maximum=60.0)
-        legacy = p("legacy_topics", True, "also publish the deprecated unstamped reading topics (one release)")
+        legacy = p("legacy_topics", False, "also publish the deprecated unstamped reading topics (one release)")
         values = {}
         # every run its own noise unless a seed is given (-1: drawn, and published with the parameters)
         for name, default in {**asdict(RigParams()), "seed": FRESH_SEED}.items():
@@ -111,7 +111,7 @@ class SimBenchNode(Node):
         if self.legacy is not None:
             self.get_logger().warning(
                 f"also publishing the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)} "
-                "(removed in the next release; set legacy_topics:=false to stop): read the stamped "
+                "(removed in the next release; legacy_topics is off by default): read the stamped "
                 "topics of docs/rig.md instead")
 
     def _start_tracker(self, p) -> None:
