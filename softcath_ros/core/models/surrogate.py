@@ -44,6 +44,7 @@ from __future__ import annotations
 import logging
 from bisect import bisect_right
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 

@@ -45,6 +45,7 @@ def build_table(model) -> tuple[dict, dict]:
                  "design_hash": model.design_hash(), "kind": model.kind, "rotated": model.rotated,
                  "settings": asdict(model.settings), "source_version": model.cache_parts()[2],
                  "build_seconds": time.perf_counter() - t0, "workers": model.workers})
+    return table, meta
 
 
 def _one_channel(model, pool) -> tuple[dict, dict]:
