@@ -56,6 +56,8 @@ def test_hostile_flood_on_every_input_topic(tmp_path):
     publish = alloc.pub.publish
     alloc.pub.publish = lambda msg: (from_allocator.append(list(msg.data)), publish(msg))
     rig = SimBenchNode(context=context)
+    # the deprecated unstamped readings are off by default (legacy_topics)
+    assert all(rig.count_publishers(t) == 0 for t in topics.DEPRECATED_RIG_TOPICS)
     probe = rclpy.create_node("hostile_probe", context=context)
     outputs = {"tip": [], "backbone": [], "pressure": [], "diagnostics": [], "measured": [], "angle": [],
                "force": []}

@@ -295,14 +295,15 @@ def test_characterise_on_a_full_disk_says_disk_full(tmp_path, procs):
 
 
 def test_a_rig_on_the_deprecated_unstamped_topics_still_works(tmp_path, procs):
-    """sim_bench_node with its stamped topics remapped away: bench_node falls back to the old
-    topics with a warning; the analysis reads them from the recording."""
+    """sim_bench_node with the old topics turned on (off by default) and its stamped topics remapped
+    away: bench_node falls back to the old topics with a warning; the analysis reads them from the
+    recording."""
     from softcath_ros.bench.analysis import rows_from_recording
     from softcath_ros.recording.reader import read_metadata
 
     env = private_env()
     hide = [x for t in topics.rig_topics(1) for x in ("-r", f"{t}:=/hidden{t}")]
-    _start(procs, ["sim_bench_node", "--ros-args", *hide], env)
+    _start(procs, ["sim_bench_node", "--ros-args", "-p", "legacy_topics:=true", *hide], env)
     bench = _start(procs, ["bench_node", "--ros-args", "-p", f"protocol:={_short_protocol(tmp_path)}", "-p",
                            f"output_dir:={tmp_path}", "-p", "name:=old"], env)
     out = bench.communicate(timeout=120)[0]
