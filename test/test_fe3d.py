@@ -987,11 +987,14 @@ def test_sector_channels_are_meshed_from_their_outlines_and_bend_the_body_away(s
     channel volumes."""
     from softcath_ros.core.fe3d.measure import channel_area
     from softcath_ros.core.fe3d.mesh import can_use_half_model, mirror_plane
+    from softcath_ros.core.geometry import symmetry
 
     d = sector_design
     assert not can_use_half_model(d)   # channels 1 and 2 lie off x = 0
     assert mirror_plane(d, (1.0, 0.0, 0.0)) == pytest.approx(math.pi / 2)
     assert mirror_plane(d, (1.0, 1.0, 0.0)) is not None and mirror_plane(d, (1.0, 0.5, 0.0)) is None
+    found = symmetry(d.section)   # the geometry layer's mirrors: every plane fe3d turns to is one
+    assert all(found.has_mirror(mirror_plane(d, p)) for p in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (0, 1, 1)))
     model = Fe3dModel(d, mesh=COARSE, cache=False, threads=1, half=True, contact_distance=None,
                       step_control=default_step_control(step=3000.0))
     problem = model.problem_for(np.array([1.0, 0.0, 0.0]))

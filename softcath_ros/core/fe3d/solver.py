@@ -179,7 +179,7 @@ class Fe3dProblem:
             self.shift = ng.Parameter(0.0)
             self.shift_origin = ng.GridFunction(fes)
             g = ng.Grad(u) - ng.Grad(self.shift_origin.components[0])
-            a += ng.Variation((0.5 * self.shift * ng.InnerProduct(g, g)).Compile() * ng.dx)
+            self.a += ng.Variation((0.5 * self.shift * ng.InnerProduct(g, g)).Compile() * ng.dx)
         self.sigma = 0.0             # the last shifted step's shift, Pa (0: plain Newton)
         self.shifted_total = 0
 
