@@ -213,14 +213,8 @@ class _BenchOutput:
         self.read(None)
 
 
-def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
-    """The ROS path shared by the rigs: helpers + bench_node on one domain, supervised by
-    bench.supervisor.GraphSupervisor (readiness said over ROS: graph.ReadyWatch); the report at the
-    end (also on the completed steps of a failed run)."""
-    from ..bench.supervisor import Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench, StopBench
-    from ..graph import ReadyWatch
-    from .managed import activate_managed
-
+def _plan(args, protocol, design, rig_nodes):
+    """Where the run goes (output folder, recording name, logs folder) and the helpers it starts."""
     out_dir = Path(args.output_dir).resolve()
     name = f"bench_{protocol.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
     design_arg = design.source or design.name
@@ -234,6 +228,18 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
         logs.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise SoftcathError(f"cannot create {logs}: {exc.strerror or exc}") from None
+    return out_dir, name, design_arg, helpers, logs
+
+
+def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
+    """The ROS path shared by the rigs: helpers + bench_node on one domain, supervised by
+    bench.supervisor.GraphSupervisor (readiness said over ROS: graph.ReadyWatch); the report at the
+    end (also on the completed steps of a failed run)."""
+    from ..bench.supervisor import Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench, StopBench
+    from ..graph import ReadyWatch
+    from .managed import activate_managed
+
+    out_dir, name, design_arg, helpers, logs = _plan(args, protocol, design, rig_nodes)
     t0 = time.monotonic()
     say = (lambda *a: None) if args.json else (lambda *a: print(*a, flush=True))
     domain = _domain(private)
@@ -303,7 +309,13 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
     if sup.timed_out:
         raise SoftcathError(f"characterisation took longer than {args.timeout:g} s; stopped "
                             f"(recording finalised; logs in {logs})")
-    code = bench.returncode
+    return _outcome(args, design, bench.returncode, summary, died, lines, t0, logs, out_dir / name, say)
+
+
+def _outcome(args, design, code: int, summary: dict | None, died: list[str], lines: list[str], t0: float,
+             logs: Path, run_dir: Path, say) -> int:
+    """The report and exit code from how bench_node ended (its summary line, its exit code) and the
+    children that died; a failed run still reports its completed steps."""
     if code == 0 and summary and not died:
         try:
             return _done(args, summary, design, t0, logs)
@@ -314,7 +326,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
             raise
     if code < 0 and not summary:  # bench_node itself killed: the rig vents by itself (docs/rig.md)
         died.append(f"bench_node killed by {signal.Signals(-code).name}")
-        bags = sorted((out_dir / name).glob("*.mcap"))
+        bags = sorted(run_dir.glob("*.mcap"))
         reason = "the recording was not finalised" + (f": softcath recover {bags[0]}" if bags else "")
     elif summary and summary.get("error"):
         reason = summary["error"]

@@ -26,6 +26,11 @@ exit 6. If the rig is sim_bench_node (its node is in the graph or it announced i
 /softcath/bench/rig), the recording is marked simulated. At the end it prints
 ``recording: PATH`` and a one-line summary.
 
+The run's logic (waiting, follow test, steps, venting, aborts) is bench/bench_run.py's state machine;
+this node adapts it (its observations in, its actions out). A managed (lifecycle) node: configure
+loads the protocol and opens the recording, activate runs, deactivate stops (abort marker, zero
+command, exit 130); ``autostart`` (default true) does configure and activate at start-up.
+
 The node spins on the EventsExecutor and writes in a background thread by default
 (``executor`` parameter; see nodes/recorder.py and benchmarks/recorder_throughput.py).
 """
