@@ -105,6 +105,15 @@ def test_arrows_point_down():
     assert not {m for m in graph["softcath_ros.core"] if m.startswith("softcath_ros")}
 
 
+def test_the_physics_below_the_rungs_imports_no_rung():
+    """The rod's law and the section problem (core/rod, core/section_fe) are what rungs are made of:
+    they import no rung (the moment-curvature law is a function of the section problem)."""
+    graph = _graph()
+    up = {m: {i for i in imports if i.startswith("softcath_ros.core.models")} for m, imports in graph.items()
+          if m.startswith(("softcath_ros.core.rod", "softcath_ros.core.section_fe"))}
+    assert not {m: i for m, i in up.items() if i}
+
+
 def test_model_auto_works_in_a_fresh_interpreter():
     """make_model("auto") needs no earlier import of core/model_selection."""
     import subprocess

@@ -197,14 +197,3 @@ class BendModel:
         other = type(self)(self.design.with_length(length), **self.made_with)
         other.made_with = dict(self.made_with)
         return other
-
-
-def lumen_fill_fraction(value, rung: str) -> float | None:
-    """A rung's ``lumen_fill`` option checked: None (empty lumen) or the fill's shear modulus as a
-    fraction in (0, 1) of the silicone's. ``rung`` prefixes the error ("model 'section'", "fe3d")."""
-    if value is None:
-        return None
-    if isinstance(value, bool) or not 0.0 < float(value) < 1.0:
-        raise ModelError(f"{rung}: lumen_fill = {value!r} must be a fraction of the silicone's shear modulus "
-                         "in (0, 1), or None for an empty lumen")
-    return float(value)

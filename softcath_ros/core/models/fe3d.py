@@ -26,7 +26,8 @@ from ..design import Design
 from ..errors import ModelError
 from ..fe3d.contact import INTORDER
 from ..options import Option
-from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose, lumen_fill_fraction
+from ..section_fe.settings import lumen_fill_fraction
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, TipPose
 
 # The default element and mesh: the combination measured converged to 0.35 bar at 20 mm (docs/models/fe3d.md:
 # the in-plane mesh within 0.32 % of a finer one, the prism height within 0.34 % of its limit).

@@ -17,10 +17,8 @@ state's pressure and curvature.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 from collections import OrderedDict
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,49 +29,11 @@ from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTS
 from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
-from ..section_fe.mesh import mesh_section
-from ..section_fe.problem import SectionProblem
+from ..section_fe.settings import SectionSettings, discretise
 from ..section_fe.solver import LinearSolver, PathStep, leave_saddle, newton, unstable_directions
 from ..options import Option
-from .base import BendModel, BendState, RungInfo, SolverDiagnostics, lumen_fill_fraction, options_of
+from .base import BendModel, BendState, RungInfo, SolverDiagnostics, options_of
 from ..units import PA_PER_BAR
-
-
-@dataclass(frozen=True)
-class SectionSettings:
-    """Discretisation and solver settings (all of them go into the cache key)."""
-
-    mesh_size: float | None = None      # m; None: outer diameter / 20
-    tol: float = 1e-6                   # Newton step tolerance (non-dimensional: u / R, lambda, k R);
-                                        # the error left after that step is of the order of its square
-    max_newton: int = 10
-    initial_step: float = 2000.0        # Pa
-    max_step: float = 4000.0            # Pa
-    min_step: float = 50.0              # Pa: smallest step (sharp turns of the path need it)
-    adaptive: bool = True               # False: fixed steps of initial_step, no cutting
-    hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
-    min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
-    contact_resolution: float = 250.0   # Pa: how finely that pressure is located
-    local_radius: float = 5000.0        # Pa: a command this close to a solved one starts from it
-    pressure_load: str = "follower"     # "follower": on the deformed channel walls and the end caps;
-                                        # "end_cap": only the end caps' axial force (the closed form's load)
-    lumen_fill: float | None = None     # fill the empty lumen with a soft compressible solid whose shear
-                                        # modulus is this fraction of the silicone's (a self-contact proxy);
-                                        # None: empty lumen (with wall contact, below)
-    contact_distance: float | None = 0.01  # self-contact of every empty hole's wall: barrier distance as a
-                                           # fraction of the hole's diameter (section_fe/terms/contact.py);
-                                           # None: no contact, the ramp stops when the walls touch
-
-    def key(self) -> dict:
-        """The settings as they enter cache keys; an unset lumen_fill is left out, so results of
-        the empty-lumen rung keep the keys they had before the option existed."""
-        out = asdict(self)
-        if out["lumen_fill"] is None:
-            del out["lumen_fill"]
-        return out
-
-    def resolved_mesh_size(self, design: Design) -> float:
-        return self.mesh_size if self.mesh_size is not None else design.outer_diameter / 20.0
 
 
 # a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
@@ -145,23 +105,8 @@ class SectionModel(BendModel):
             self.settings = SectionSettings(**settings)
         except TypeError as exc:
             raise ModelError(f"model 'section': {exc}; settings: {list(SectionSettings.__annotations__)}") from None
-        h = self.settings.resolved_mesh_size(design)
-        fill = lumen_fill_fraction(self.settings.lumen_fill, "model 'section'")
-        if fill is not None:
-            if design.lumen is None:
-                raise ModelError(f"model 'section': lumen_fill = {fill!r} but design '{design.name}' has no lumen")
-        section = design.section
-        self.mesh = mesh_section(section, h, filled=() if fill is None else (len(section.holes) - 1,))
-        if self.settings.pressure_load not in ("follower", "end_cap"):
-            raise ModelError(f"model 'section': pressure_load '{self.settings.pressure_load}' must be "
-                             "'follower' or 'end_cap'")
-        # the mesh itself in the cache key: a mesher change that keeps the node count must not
-        # find the old mesh's answers
-        self.mesh_hash = hashlib.sha256(np.ascontiguousarray(self.mesh.nodes).tobytes()
-                                        + np.ascontiguousarray(self.mesh.triangles).tobytes()).hexdigest()[:16]
-        self.problem = SectionProblem(design, self.mesh, hoop_tension_only=self.settings.hoop_tension_only,
-                                      end_cap_only=self.settings.pressure_load == "end_cap",
-                                      lumen_fill=fill, contact_distance=self.settings.contact_distance)
+        section = discretise(design, self.settings)
+        self.mesh, self.mesh_hash, self.problem = section.mesh, section.mesh_hash, section.problem
         self.linear = LinearSolver()
         mat = design.material
         self._material_limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)   # (I1b, uniaxial stretch) or None
@@ -594,47 +539,6 @@ class SectionModel(BendModel):
     def _outputs(self, x):
         lam, kr = self.problem.frame_state(x)
         return kr / self.design.outer_radius, lam, self.problem.channel_areas(x) * self.design.outer_radius ** 2
-
-    # ------------------------------------------------------------------ moment-curvature law
-    def bending_direction(self, pressure_direction) -> np.ndarray:
-        """Unit vector the section bends towards when its channels are pressurised in proportion to
-        ``pressure_direction``: away from their pressure-weighted centre."""
-        w = np.asarray(pressure_direction, dtype=float)
-        c = sum(wi * np.asarray(ch.center) for wi, ch in zip(w, self.design.channels))
-        if np.hypot(*c) == 0:
-            raise ModelError("model 'section': these channels pressurised together do not bend the section "
-                             "(their pressure-weighted centre is on the axis); give a bending direction")
-        return -c / np.hypot(*c)
-
-    def moment_curvature(self, pressures, curvatures, direction=None, pressure_direction=None,
-                         progress: bool = False):
-        """The moment (N m) the section carries when held at a curvature (``section_fe/moment.py``).
-
-        ``curvatures`` (1/m, ascending, containing 0) are rotation rates per unit reference length
-        (kappa = |k| lambda, so kappa l is the tip angle) along the unit ``direction`` (default: the
-        bending direction of ``pressure_direction``); ``pressures`` (Pa, ascending from 0) are
-        magnitudes along ``pressure_direction`` (default: all channels equally; one channel: [1]).
-        Returns a ``MomentTable``: NaN where the held section could not be solved (``messages``
-        say where and why). The free state of the rung is where the moment is zero."""
-        from tqdm import tqdm
-
-        from ..section_fe.moment import HeldSection, moment_table
-
-        pdir = np.ones(self.n_channels) if pressure_direction is None else np.asarray(pressure_direction, float)
-        if pdir.shape != (self.n_channels,) or np.any(pdir < 0) or not np.any(pdir > 0):
-            raise ModelError(f"model 'section': pressure_direction {pressure_direction!r} must be "
-                             f"{self.n_channels} non-negative weight(s), not all zero")
-        e = self.bending_direction(pdir) if direction is None else direction
-        s = self.settings
-        held = HeldSection(self.problem, e, tol=s.tol, max_newton=max(s.max_newton, 12),
-                           min_hole_gap=s.min_hole_gap)
-        control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
-                              adaptive=s.adaptive, domain_step=s.contact_resolution)
-        bar = tqdm(total=len(pressures), desc="section M(kappa, p)", unit="p", disable=not progress)
-        try:
-            return moment_table(held, curvatures, pressures, pdir, control, on_point=bar.update)
-        finally:
-            bar.close()
 
     # ------------------------------------------------------------------ disk cache
     def _load_cached(self, pressures) -> BendState | None:

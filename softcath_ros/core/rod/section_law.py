@@ -1,4 +1,4 @@
-"""The section rung's moment-curvature table, computed once per design and grid and cached.
+"""The section's moment-curvature table (section_fe/moment.py), computed once per design and grid, cached.
 
 The table depends on the cross-section only: the length and the device in the lumen (whose
 stiffness the rod adds) are not part of the key.
@@ -12,7 +12,9 @@ import numpy as np
 
 from ..cache import store_for
 from ..design import Design
-from ..section_fe.moment import MomentTable
+from ..errors import ModelError
+from ..section_fe.moment import MomentTable, moment_curvature
+from ..section_fe.settings import SectionSettings, discretise
 from .law import TabulatedLaw
 
 LAW_VERSION = "section-moment-2"   # bump when the table's computation changes (2: lumen contact)
@@ -45,23 +47,25 @@ def section_law(design: Design, grid: LawGrid = LawGrid(), cache=True, progress:
     ``section_settings`` are ``SectionSettings`` fields, e.g. ``contact_distance`` (the lumen wall's
     self-contact, on by default) or ``lumen_fill=0.02`` (the former soft-solid proxy): a body bent
     back against its pressure (a blocked tip) closes the lumen from 0.225 bar (docs/models/rod.md)."""
-    from ..models.section import SectionModel
-
     body = replace(design, device=None, length=1.0)
-    model = SectionModel(body, **section_settings)
+    try:
+        settings = SectionSettings(**section_settings)
+    except TypeError as exc:
+        raise ModelError(f"model 'section': {exc}; settings: {list(SectionSettings.__annotations__)}") from None
+    section = discretise(body, settings)
     store = store_for(cache)
-    parts = [body.content_hash(), model.settings.key(), asdict(grid), model.mesh.n_nodes]
+    parts = [body.content_hash(), settings.key(), asdict(grid), section.mesh.n_nodes]
     z = store.load_arrays(_KIND, LAW_VERSION, parts, design.name, require=_TABLE_ARRAYS) if store else None
     table = _from_arrays(z) if z is not None else None
     if table is None:
-        table = model.moment_curvature(grid.pressures(), grid.curvatures(), progress=progress)
+        table = moment_curvature(section.problem, settings, grid.pressures(), grid.curvatures(), progress=progress)
         if store is not None:
             store.save_arrays(_KIND, LAW_VERSION, parts, _to_arrays(table), design.name)
-    mesh = f"section D/{design.outer_diameter / model.mesh.h:.0f}"
-    if model.settings.lumen_fill is not None:
-        mesh += f", lumen fill {model.settings.lumen_fill:g}"
-    elif model.problem.contact:
-        mesh += f", lumen contact {model.settings.contact_distance:g}"
+    mesh = f"section D/{design.outer_diameter / section.mesh.h:.0f}"
+    if settings.lumen_fill is not None:
+        mesh += f", lumen fill {settings.lumen_fill:g}"
+    elif section.problem.contact:
+        mesh += f", lumen contact {settings.contact_distance:g}"
     return TabulatedLaw(table, source=f"rod law from {mesh}")
 
 

@@ -22,8 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..continuation import Correction, StepControl, ramp
+from ..design import Design
+from ..errors import ModelError
 from ..units import describe_pressure
 from .problem import SectionProblem
+from .settings import SectionSettings
 from .solver import LinearSolver, newton
 
 
@@ -185,3 +188,43 @@ def moment_table(held: HeldSection, curvatures, pressures, pressure_direction, c
             on_point()
     return MomentTable(curvatures=ks, pressures=ps, moment=moment, stretch=stretch, messages=messages,
                        direction=held.e.copy(), pressure_direction=pdir.copy())
+
+
+def bending_direction(design: Design, pressure_direction) -> np.ndarray:
+    """Unit vector the section bends towards when its channels are pressurised in proportion to
+    ``pressure_direction``: away from their pressure-weighted centre."""
+    w = np.asarray(pressure_direction, dtype=float)
+    c = sum(wi * np.asarray(ch.center) for wi, ch in zip(w, design.channels))
+    if np.hypot(*c) == 0:
+        raise ModelError("model 'section': these channels pressurised together do not bend the section "
+                         "(their pressure-weighted centre is on the axis); give a bending direction")
+    return -c / np.hypot(*c)
+
+
+def moment_curvature(problem: SectionProblem, settings: SectionSettings, pressures, curvatures, direction=None,
+                     pressure_direction=None, progress: bool = False) -> MomentTable:
+    """The moment (N m) the section carries when held at a curvature.
+
+    ``curvatures`` (1/m, ascending, containing 0) are rotation rates per unit reference length
+    (kappa = |k| lambda, so kappa l is the tip angle) along the unit ``direction`` (default: the
+    bending direction of ``pressure_direction``); ``pressures`` (Pa, ascending from 0) are
+    magnitudes along ``pressure_direction`` (default: all channels equally; one channel: [1]).
+    Returns a ``MomentTable``: NaN where the held section could not be solved (``messages``
+    say where and why). The free state of the section rung is where the moment is zero."""
+    from tqdm import tqdm
+
+    n = problem.design.n_channels
+    pdir = np.ones(n) if pressure_direction is None else np.asarray(pressure_direction, float)
+    if pdir.shape != (n,) or np.any(pdir < 0) or not np.any(pdir > 0):
+        raise ModelError(f"model 'section': pressure_direction {pressure_direction!r} must be "
+                         f"{n} non-negative weight(s), not all zero")
+    e = bending_direction(problem.design, pdir) if direction is None else direction
+    s = settings
+    held = HeldSection(problem, e, tol=s.tol, max_newton=max(s.max_newton, 12), min_hole_gap=s.min_hole_gap)
+    control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
+                          adaptive=s.adaptive, domain_step=s.contact_resolution)
+    bar = tqdm(total=len(pressures), desc="section M(kappa, p)", unit="p", disable=not progress)
+    try:
+        return moment_table(held, curvatures, pressures, pdir, control, on_point=bar.update)
+    finally:
+        bar.close()
