@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from softcath_ros.core.ladder import write_envelope
+from softcath_ros.core.ladder_envelope import write_envelope
 from softcath_ros.resources import envelope_path
 
 RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "ladder_chart.json"

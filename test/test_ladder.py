@@ -6,6 +6,7 @@ import dataclasses
 import pytest
 
 from softcath_ros.core import ladder
+from softcath_ros.core.ladder_envelope import envelope_document
 from softcath_ros.core.continuation import (LIMIT_POINT, NUMERICAL_FAILURE, OUTSIDE_MODEL, STOP_REASONS, stop_tag,
                                             tagged_stop)
 from softcath_ros.core.errors import ModelError
@@ -93,7 +94,7 @@ def test_no_reference_is_refused(monkeypatch):
 
 
 def test_envelope_from_the_rows_drives_selection(rows):
-    doc = ladder.envelope_document(rows, "now")
+    doc = envelope_document(rows, "now")
     sur = doc["rungs"]["surrogate"]["designs"]["implemented_5mm"]
     assert sur["valid_pressure_pa"] == [0.0, 40000.0] and sur["accurate_to_pa"]["0.1"] == 40000.0
     assert sur["reference_by_pressure_pa"][0] == [10000.0, "fe3d mesh 1.4, 1.2 mm layers"]

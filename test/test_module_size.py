@@ -18,7 +18,6 @@ OVERSIZED_MODULES = {
     "core/design.py": 481,
     "core/fe3d/mesh.py": 506,
     "core/fe3d/solver.py": 820,
-    "core/ladder.py": 451,
     "core/models/section.py": 567,
     "core/rod/statics.py": 455,
     "core/section_fe/mesh.py": 577,

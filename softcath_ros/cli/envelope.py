@@ -38,7 +38,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..core.ladder import CASES, SETTINGS, report, run_case, write_envelope
+    from ..core.ladder import CASES, SETTINGS, run_case
+    from ..core.ladder_envelope import report, write_envelope
 
     known_cases = {c.name: c for c in CASES}
     unknown = [c for c in (args.cases or []) if c not in known_cases]
