@@ -27,7 +27,6 @@ OVERSIZED_MODULES = {
 LONG_FUNCTIONS = {
     "bench/importer.py:read_rows": 87,
     "bench/protocol.py:protocol_from_dict": 104,
-    "bench/report.py:markdown": 88,
     "bench/tracker.py:_walk": 111,
     "cli/steer_sim.py:run": 86,
     "core/design.py:design_from_dict": 87,

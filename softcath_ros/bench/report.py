@@ -83,6 +83,23 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
     for k, v in info.items():
         lines.append(f"- **{k}**: {v}")
     lines.append("")
+    lines += _step_tables(stats, labels, overlay_note)
+    if hyst:
+        lines += _hysteresis_section(hyst)
+    if tips or tips_skipped:
+        from .tip_compare import markdown_section
+        lines += markdown_section(tips, tips_skipped, tips_model)
+    if calibration:
+        lines += _calibration_section(calibration, rig)
+    if plots:
+        lines += ["## Plots", ""] + ([overlay_note, ""] if overlay_note else []) \
+            + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
+    return "\n".join(lines)
+
+
+def _step_tables(stats: list[StepStats], labels: list[str], overlay_note: str) -> list[str]:
+    """Per bench, a table of its steps with each overlaid rung's answer."""
+    lines = []
     noted = False
     for bench in ("angle", "force"):
         rows = [s for s in stats if s.bench == bench]
@@ -115,53 +132,57 @@ def markdown(title: str, info: dict[str, str], stats: list[StepStats], hyst: lis
                 cells += [_model_cell(s.model[lb], "force", 1e3, 2) for lb in labels]
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
-    if hyst:
-        thresholds = sorted({round(h.threshold, 2) for h in hyst})
-        lines += ["## Hysteresis: unloading minus loading at equal measured pressure", "",
-                  "Each unloading step against the loading curve at the unloading step's measured pressure (the "
-                  "regulator's lag makes equal commanded levels differ in pressure): a quadratic through the three "
-                  "nearest loading steps. t = difference / its standard error, which holds the steps' reading noise, "
-                  "the noise of their mean measured pressures times the curve's slope, and the interpolation error "
-                  "(Welch); significant where |t| exceeds the Bonferroni threshold of its curve "
-                  f"(1% family-wise; here {min(thresholds):g} to {max(thresholds):g}).", "",
-                  "| bench | drive | level | p measured [bar] | quantity | loading | unloading | difference | t "
-                  "| significant |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
-        for h in hyst:
-            unit, sc = ("1/m", 1.0) if h.quantity == "curvature" else ("mN", 1e3)
-            lv = f"{h.level / PA_PER_BAR:.3f} bar" if h.drive.startswith("channel") else f"{h.level:g}"
-            lines.append(f"| {h.bench} | {h.drive} | {lv} | {h.pressure / PA_PER_BAR:.3f} | {h.quantity} [{unit}] | "
-                         f"{h.loading * sc:.3f} | {h.unloading * sc:.3f} | {h.difference * sc:+.3f} | "
-                         f"{h.t_statistic:+.2f} | {'yes' if h.significant else 'no'} |")
-        n_sig = sum(h.significant for h in hyst)
-        lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
-                  + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
-    if tips or tips_skipped:
-        from .tip_compare import markdown_section
-        lines += markdown_section(tips, tips_skipped, tips_model)
-    if calibration:
-        c = calibration.to_dict()
-        lines += ["## Calibration", "",
-                  f"Rung `{c['rung']}` fitted to `{c['recording']}` (sha256 {c['recording_sha256'][:12]}..., "
-                  f"{c['date']}; 95% confidence from the Jacobian), applied to every overlaid rung "
-                  "(bands: 95% from its covariance):", "",
-                  f"- pressure shift: {c['pressure_shift']:.4f} ± {c['ci95']['pressure_shift']:.4f} "
-                  "(model evaluated at (1 − shift) × p)",
-                  f"- material scale: {c['material_scale']:.4f} ± {c['ci95']['material_scale']:.4f} "
-                  "(all Yeoh coefficients × scale)",
-                  f"- parameter correlation: {calibration.correlation:.3f}",
-                  f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
-                  f"({c['n_residuals']} readings)", ""]
-        from .calibration import MISFIT
+    return lines
 
-        lines += calibration_caveats(c["message"], rig)
-        solver = "; ".join(part for part in c["message"].split("; ") if part and not part.startswith(MISFIT))
-        if solver:
-            lines += [f"Solver: {solver}", ""]
-    if plots:
-        lines += ["## Plots", ""] + ([overlay_note, ""] if overlay_note else []) \
-            + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
-    return "\n".join(lines)
+
+def _hysteresis_section(hyst: list[Hysteresis]) -> list[str]:
+    """Unloading against loading per level, with its significance."""
+    thresholds = sorted({round(h.threshold, 2) for h in hyst})
+    lines = []
+    lines += ["## Hysteresis: unloading minus loading at equal measured pressure", "",
+              "Each unloading step against the loading curve at the unloading step's measured pressure (the "
+              "regulator's lag makes equal commanded levels differ in pressure): a quadratic through the three "
+              "nearest loading steps. t = difference / its standard error, which holds the steps' reading noise, "
+              "the noise of their mean measured pressures times the curve's slope, and the interpolation error "
+              "(Welch); significant where |t| exceeds the Bonferroni threshold of its curve "
+              f"(1% family-wise; here {min(thresholds):g} to {max(thresholds):g}).", "",
+              "| bench | drive | level | p measured [bar] | quantity | loading | unloading | difference | t "
+              "| significant |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    for h in hyst:
+        unit, sc = ("1/m", 1.0) if h.quantity == "curvature" else ("mN", 1e3)
+        lv = f"{h.level / PA_PER_BAR:.3f} bar" if h.drive.startswith("channel") else f"{h.level:g}"
+        lines.append(f"| {h.bench} | {h.drive} | {lv} | {h.pressure / PA_PER_BAR:.3f} | {h.quantity} [{unit}] | "
+                     f"{h.loading * sc:.3f} | {h.unloading * sc:.3f} | {h.difference * sc:+.3f} | "
+                     f"{h.t_statistic:+.2f} | {'yes' if h.significant else 'no'} |")
+    n_sig = sum(h.significant for h in hyst)
+    lines += ["", f"{n_sig} of {len(hyst)} levels show a significant loading/unloading difference"
+              + (": hysteresis." if n_sig else ": no hysteresis beyond the scatter."), ""]
+    return lines
+
+
+def _calibration_section(calibration, rig: dict | None) -> list[str]:
+    """The fitted calibration, its confidence and caveats."""
+    c = calibration.to_dict()
+    lines = []
+    lines += ["## Calibration", "",
+              f"Rung `{c['rung']}` fitted to `{c['recording']}` (sha256 {c['recording_sha256'][:12]}..., "
+              f"{c['date']}; 95% confidence from the Jacobian), applied to every overlaid rung "
+              "(bands: 95% from its covariance):", "",
+              f"- pressure shift: {c['pressure_shift']:.4f} ± {c['ci95']['pressure_shift']:.4f} "
+              "(model evaluated at (1 − shift) × p)",
+              f"- material scale: {c['material_scale']:.4f} ± {c['ci95']['material_scale']:.4f} "
+              "(all Yeoh coefficients × scale)",
+              f"- parameter correlation: {calibration.correlation:.3f}",
+              f"- normalised residual rms: before {c['rms_before']:.3g}, after {c['rms_after']:.3g} "
+              f"({c['n_residuals']} readings)", ""]
+    from .calibration import MISFIT
+
+    lines += calibration_caveats(c["message"], rig)
+    solver = "; ".join(part for part in c["message"].split("; ") if part and not part.startswith(MISFIT))
+    if solver:
+        lines += [f"Solver: {solver}", ""]
+    return lines
 
 
 def plot(stats: list[StepStats], out_dir: Path, stem: str) -> list[str]:
