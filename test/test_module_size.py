@@ -39,7 +39,6 @@ LONG_FUNCTIONS = {
     "core/studies/runner.py:run_cases": 91,
     "nodes/model_node.py:__init__": 107,
     "nodes/runtime.py:run_node": 92,
-    "recording/recover.py:recover": 87,
 }
 
 

@@ -116,15 +116,8 @@ def recover(source, output=None) -> RecoveryReport:
     """Write the recoverable content of ``source`` to ``output`` (default: in place, the damaged
     original kept where ``damaged_copy_path`` says). Returns what was kept."""
     src = Path(source)
-    if not src.is_file():
-        raise SoftcathError(f"{src}: no such file")
     in_place = output is None
-    dst = src.with_suffix(".recovering.mcap") if in_place else Path(output)
-    if not in_place:
-        if not dst.parent.is_dir():
-            raise SoftcathError(f"--output {dst}: folder {dst.parent} does not exist")
-        if dst.exists() and dst.resolve() == src.resolve():
-            raise SoftcathError(f"--output {dst}: is the damaged file itself; leave --output out to recover in place")
+    dst = _target(src, output)
     report = RecoveryReport(source=str(src), output=str(src if in_place else dst))
     schemas: dict[int, int] = {}       # old id -> new id
     channels: dict[int, int] = {}
@@ -189,13 +182,33 @@ def recover(source, output=None) -> RecoveryReport:
     report.per_topic = {t.name: t.message_count for t in topics.values()}
     report.last_log_time_ns = t_max
     if in_place:
-        backup = damaged_copy_path(src)
-        backup.parent.mkdir(exist_ok=True)
-        if backup.exists():   # an earlier recovery's damaged copy: keep both
-            backup = backup.with_name(f"{backup.name}.{time.strftime('%Y%m%d_%H%M%S')}")
-        shutil.move(src, backup)
-        os.replace(dst, src)
-        report.damaged_original = str(backup)
-        if in_bag_folder(src):
-            (src.parent / "metadata.yaml").write_text(bm.metadata_yaml(node))
+        report.damaged_original = str(_replace_damaged(src, dst, node))
     return report
+
+
+def _target(src: Path, output) -> Path:
+    """Where the recovered file is written: beside ``src`` when in place (``output`` None)."""
+    if not src.is_file():
+        raise SoftcathError(f"{src}: no such file")
+    if output is None:
+        return src.with_suffix(".recovering.mcap")
+    dst = Path(output)
+    if not dst.parent.is_dir():
+        raise SoftcathError(f"--output {dst}: folder {dst.parent} does not exist")
+    if dst.exists() and dst.resolve() == src.resolve():
+        raise SoftcathError(f"--output {dst}: is the damaged file itself; leave --output out to recover in place")
+    return dst
+
+
+def _replace_damaged(src: Path, dst: Path, node) -> Path:
+    """The recovered ``dst`` takes the place of ``src``, whose damaged copy is kept (returned); a bag
+    folder's metadata.yaml is rewritten from ``node``."""
+    backup = damaged_copy_path(src)
+    backup.parent.mkdir(exist_ok=True)
+    if backup.exists():   # an earlier recovery's damaged copy: keep both
+        backup = backup.with_name(f"{backup.name}.{time.strftime('%Y%m%d_%H%M%S')}")
+    shutil.move(src, backup)
+    os.replace(dst, src)
+    if in_bag_folder(src):
+        (src.parent / "metadata.yaml").write_text(bm.metadata_yaml(node))
+    return backup
