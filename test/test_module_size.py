@@ -28,7 +28,6 @@ LONG_FUNCTIONS = {
     "bench/importer.py:read_rows": 87,
     "bench/protocol.py:protocol_from_dict": 104,
     "bench/tracker.py:_walk": 111,
-    "cli/steer_sim.py:run": 86,
     "core/design.py:design_from_dict": 87,
     "core/fe3d/ramp.py:run_ramp": 115,
     "core/models/section.py:_solve_path": 198,

@@ -140,13 +140,18 @@ def run(args) -> int:
                                                              if k in ("tip_error_rms_m", "steady_state_error_m",
                                                                       "settling_time_s")}},
               "elapsed_s": time.monotonic() - t0}
-    if args.json:
+    _print_result(result, args.json)
+    return 0
+
+
+def _print_result(result: dict, as_json: bool) -> None:
+    """The run's result as JSON, or in three lines."""
+    if as_json:
         json.dump(result, sys.stdout, indent=2)
         print()
     else:
         settle = result["settling_time_s"]
-        print(f"[steer-sim] {mode}: tip error RMS {result['tip_error_rms_mm']:.3f} mm, steady state "
+        print(f"[steer-sim] {result['mode']}: tip error RMS {result['tip_error_rms_mm']:.3f} mm, steady state "
               f"{result['steady_state_error_mm']:.3f} mm" + ("" if settle is None else f", settling {settle:.2f} s"))
         print(f"recording: {result['recording']}")
-        print(f"plot:      {plot}")
-    return 0
+        print(f"plot:      {result['plot']}")
