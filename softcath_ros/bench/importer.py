@@ -54,6 +54,46 @@ def _unit_column(header: list[str], stem: str, units: dict, path, required: bool
     return found[0] if found else None
 
 
+def _bench_reading(path, line_no: int, row: dict, unit: str, value: float) -> dict:
+    """Which bench a reading is from (its unit) and the reading in SI, checked."""
+    rec = {}
+    if unit in ANGLE_UNITS:
+        rec["bench"] = "angle"
+        rec["angle_rad"] = value * ANGLE_UNITS[unit]
+        if not 0.0 <= rec["angle_rad"] <= 2 * math.pi * (1 + 1e-12):
+            raise _cell_error(path, line_no, "reading", f"angle {value:g} {unit} is outside 0-360 degrees")
+    elif unit in FORCE_UNITS:
+        rec["bench"] = "force"
+        if value < 0:
+            raise _cell_error(path, line_no, "reading", f"scale reading {value:g} {row['unit']} is negative "
+                              "(the tare is the reading at 0 bar: give what the scale shows)")
+        rec["force_n"] = grams_to_newton(value) if unit == "g" else value * FORCE_UNITS[unit]
+    else:
+        raise _cell_error(path, line_no, "unit", f"'{row['unit']}': expected deg, rad (angle) or g, mN, N (force)")
+    return rec
+
+
+def _trial_phase_channel(path, line_no: int, row: dict) -> dict:
+    """A reading's trial (0-based), phase and channel, checked."""
+    rec = {}
+    try:
+        trial = int(row["trial"])
+    except ValueError:
+        trial = 0
+    if trial < 1:
+        raise _cell_error(path, line_no, "trial", f"'{row['trial']}' is not a trial number 1, 2, ...")
+    rec["trial"] = trial - 1
+    phase = row["phase"].lower()
+    if phase not in ("loading", "unloading"):
+        raise _cell_error(path, line_no, "phase", f"'{row['phase']}': expected loading or unloading")
+    rec["phase"] = phase
+    channel = row.get("channel", "") or "0"
+    if not channel.isdigit():
+        raise _cell_error(path, line_no, "channel", f"'{channel}' is not a channel index 0, 1, ...")
+    rec["channel"] = int(channel)
+    return rec
+
+
 def read_rows(path, max_pressure: float) -> list[dict]:
     """The CSV's readings, checked; each a dict (bench, sample, length_m, channel, trial (0-based),
     phase, pressure_pa, measured_pa, angle_rad or force_n, row)."""
@@ -108,34 +148,8 @@ def read_rows(path, max_pressure: float) -> list[dict]:
         unit = row["unit"].lower()
         value = number("reading")
         rec = {"row": line_no, "pressure_pa": pressure, "measured_pa": measured, "length_m": length}
-        if unit in ANGLE_UNITS:
-            rec["bench"] = "angle"
-            rec["angle_rad"] = value * ANGLE_UNITS[unit]
-            if not 0.0 <= rec["angle_rad"] <= 2 * math.pi * (1 + 1e-12):
-                raise _cell_error(path, line_no, "reading", f"angle {value:g} {unit} is outside 0-360 degrees")
-        elif unit in FORCE_UNITS:
-            rec["bench"] = "force"
-            if value < 0:
-                raise _cell_error(path, line_no, "reading", f"scale reading {value:g} {row['unit']} is negative "
-                                  "(the tare is the reading at 0 bar: give what the scale shows)")
-            rec["force_n"] = grams_to_newton(value) if unit == "g" else value * FORCE_UNITS[unit]
-        else:
-            raise _cell_error(path, line_no, "unit", f"'{row['unit']}': expected deg, rad (angle) or g, mN, N (force)")
-        try:
-            trial = int(row["trial"])
-        except ValueError:
-            trial = 0
-        if trial < 1:
-            raise _cell_error(path, line_no, "trial", f"'{row['trial']}' is not a trial number 1, 2, ...")
-        rec["trial"] = trial - 1
-        phase = row["phase"].lower()
-        if phase not in ("loading", "unloading"):
-            raise _cell_error(path, line_no, "phase", f"'{row['phase']}': expected loading or unloading")
-        rec["phase"] = phase
-        channel = row.get("channel", "") or "0"
-        if not channel.isdigit():
-            raise _cell_error(path, line_no, "channel", f"'{channel}' is not a channel index 0, 1, ...")
-        rec["channel"] = int(channel)
+        rec.update(_bench_reading(path, line_no, row, unit, value))
+        rec.update(_trial_phase_channel(path, line_no, row))
         rec["sample"] = row.get("sample") or f"{rec['bench']}_{length * 1e3:g}mm"
         out.append(rec)
     if not out:
