@@ -25,7 +25,6 @@ OVERSIZED_MODULES = {
 }
 # To split or to give a reason: "path:function" -> the most lines it may have until then.
 LONG_FUNCTIONS = {
-    "bench/protocol.py:protocol_from_dict": 104,
     "bench/tracker.py:_walk": 111,
     "core/design.py:design_from_dict": 87,
     "core/fe3d/ramp.py:run_ramp": 115,

@@ -163,6 +163,37 @@ _KEYS = {"name", "description", "design", "drive", "channels", "directions_deg",
          "dwell", "settle", "samples_per_step", "sample_period", "benches"}
 
 
+def _benches(data: dict) -> list[BenchSpec]:
+    """The protocol's ``benches``: each a kind with its samples (name, length), checked."""
+    benches_raw = data.get("benches")
+    if not isinstance(benches_raw, list) or not benches_raw or len(benches_raw) > MAX_LIST:
+        raise ProtocolError("benches", benches_raw, f"must be a non-empty list of at most {MAX_LIST} {{kind, samples}}")
+    benches = []
+    for i, b in enumerate(benches_raw):
+        where = f"benches[{i}]"
+        if not isinstance(b, dict) or b.get("kind") not in BENCHES:
+            raise ProtocolError(f"{where}.kind", b.get("kind") if isinstance(b, dict) else b,
+                                f"must be one of {BENCHES}")
+        for k in b:
+            if k not in ("kind", "samples"):
+                raise ProtocolError(f"{where}.{k}", b[k], "unknown key; allowed: ['kind', 'samples']")
+        samples = b.get("samples")
+        if not isinstance(samples, list) or not samples or len(samples) > MAX_LIST:
+            raise ProtocolError(f"{where}.samples", samples,
+                                f"must be a non-empty list of at most {MAX_LIST} {{name, length}}")
+        specs = []
+        for j, s in enumerate(samples):
+            at = f"{where}.samples[{j}]"
+            if not isinstance(s, dict) or set(s) - {"name", "length"}:
+                raise ProtocolError(at, s, "must be a mapping {name, length}")
+            sample_name = s.get("name", f"sample{j}")
+            if not isinstance(sample_name, str) or not sample_name:
+                raise ProtocolError(f"{at}.name", sample_name, "must be a non-empty string")
+            specs.append(BenchSample(sample_name, _num(s, "length", positive=True, maximum=10.0, where=f"{at}.")))
+        benches.append(BenchSpec(b["kind"], tuple(specs)))
+    return benches
+
+
 def protocol_from_dict(data) -> Protocol:
     """Validate a protocol mapping: every field's type and range (``ProtocolError`` names field,
     value and reason) and the size of the run (at most ``MAX_STEPS`` steps)."""
@@ -223,32 +254,7 @@ def protocol_from_dict(data) -> Protocol:
         raise ProtocolError("staircase.down", down, "must be true or false")
 
     settle = _mapping(data, "settle", {"tolerance", "max_offset", "hold", "timeout"})
-    benches_raw = data.get("benches")
-    if not isinstance(benches_raw, list) or not benches_raw or len(benches_raw) > MAX_LIST:
-        raise ProtocolError("benches", benches_raw, f"must be a non-empty list of at most {MAX_LIST} {{kind, samples}}")
-    benches = []
-    for i, b in enumerate(benches_raw):
-        where = f"benches[{i}]"
-        if not isinstance(b, dict) or b.get("kind") not in BENCHES:
-            raise ProtocolError(f"{where}.kind", b.get("kind") if isinstance(b, dict) else b,
-                                f"must be one of {BENCHES}")
-        for k in b:
-            if k not in ("kind", "samples"):
-                raise ProtocolError(f"{where}.{k}", b[k], "unknown key; allowed: ['kind', 'samples']")
-        samples = b.get("samples")
-        if not isinstance(samples, list) or not samples or len(samples) > MAX_LIST:
-            raise ProtocolError(f"{where}.samples", samples,
-                                f"must be a non-empty list of at most {MAX_LIST} {{name, length}}")
-        specs = []
-        for j, s in enumerate(samples):
-            at = f"{where}.samples[{j}]"
-            if not isinstance(s, dict) or set(s) - {"name", "length"}:
-                raise ProtocolError(at, s, "must be a mapping {name, length}")
-            sample_name = s.get("name", f"sample{j}")
-            if not isinstance(sample_name, str) or not sample_name:
-                raise ProtocolError(f"{at}.name", sample_name, "must be a non-empty string")
-            specs.append(BenchSample(sample_name, _num(s, "length", positive=True, maximum=10.0, where=f"{at}.")))
-        benches.append(BenchSpec(b["kind"], tuple(specs)))
+    benches = _benches(data)
     trials = _int(data, "trials", 1, 1, MAX_TRIALS)
     n_samples = _int(data, "samples_per_step", 3, 1, MAX_SAMPLES_PER_STEP)
     n_drives = len(channels) if drive == "channels" else len(directions)
