@@ -33,7 +33,6 @@ LONG_FUNCTIONS = {
     "core/section_fe/problem.py:__init__": 109,
     "core/section_fe/solver.py:newton": 89,
     "core/studies/optimise.py:run": 137,
-    "core/studies/runner.py:run_cases": 91,
     "nodes/model_node.py:__init__": 107,
     "nodes/runtime.py:run_node": 92,
 }

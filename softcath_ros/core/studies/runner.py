@@ -107,12 +107,7 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
 
     def finish(key: str, result: dict | None, error: BaseException | None) -> None:
         if error is not None:
-            spec = specs[todo[key][0]]
-            result = {"results": [{"pressures_pa": list(p), "converged": False, "curvature_per_m": None,
-                                   "radius_of_curvature_m": None, "axial_stretch": None,
-                                   "max_principal_stretch": None,
-                                   "message": f"case failed: {type(error).__name__}: {error}"}
-                                  for p in spec.pressures], "solve_time_s": None}
+            result = _failed_case(specs[todo[key][0]], error)
             stats.errors += 1
         else:
             stats.solved += 1
@@ -136,22 +131,7 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
                     result, error = None, exc
                 finish(key, result, error)
         else:
-            futures: dict = {}
-            finished: set = set()
-            try:
-                for key, idx in todo.items():
-                    futures[executor.submit(solve_case, specs[idx[0]])] = key
-                for fut in as_completed(futures):
-                    exc = fut.exception()
-                    finish(futures[fut], None if exc else fut.result(), exc)
-                    finished.add(fut)
-            except KeyboardInterrupt:
-                for fut in futures:
-                    fut.cancel()
-                for fut in futures:   # keep what finished before the interrupt was seen
-                    if fut not in finished and fut.done() and not fut.cancelled() and fut.exception() is None:
-                        finish(futures[fut], fut.result(), None)
-                raise
+            _solve_in_pool(executor, specs, todo, finish)
     except KeyboardInterrupt:
         msg = (f"interrupted: {stats.solved} case(s) solved and cached in this run, {len(todo) - stats.solved} "
                "still to solve; run the same command again to resume")
@@ -166,3 +146,33 @@ def run_cases(specs: list[CaseSpec], executor: Executor | None = None, workers: 
         if own is not None:
             own.shutdown(wait=True)
     return out
+
+
+def _failed_case(spec: CaseSpec, error: BaseException) -> dict:
+    """What a case that raised in its worker records: every command not converged, saying why."""
+    return {"results": [{"pressures_pa": list(p), "converged": False, "curvature_per_m": None,
+                         "radius_of_curvature_m": None, "axial_stretch": None,
+                         "max_principal_stretch": None,
+                         "message": f"case failed: {type(error).__name__}: {error}"}
+                        for p in spec.pressures], "solve_time_s": None}
+
+
+def _solve_in_pool(executor: Executor, specs: list[CaseSpec], todo: dict[str, list[int]], finish) -> None:
+    """Each case of ``todo`` solved on ``executor``, handed to ``finish`` as it completes; on an
+    interrupt the rest is cancelled and what had finished is still handed over."""
+    futures: dict = {}
+    finished: set = set()
+    try:
+        for key, idx in todo.items():
+            futures[executor.submit(solve_case, specs[idx[0]])] = key
+        for fut in as_completed(futures):
+            exc = fut.exception()
+            finish(futures[fut], None if exc else fut.result(), exc)
+            finished.add(fut)
+    except KeyboardInterrupt:
+        for fut in futures:
+            fut.cancel()
+        for fut in futures:   # keep what finished before the interrupt was seen
+            if fut not in finished and fut.done() and not fut.cancelled() and fut.exception() is None:
+                finish(futures[fut], fut.result(), None)
+        raise
