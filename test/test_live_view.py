@@ -5,6 +5,7 @@ import time
 
 import numpy as np
 import pytest
+from shapely.geometry import Point, Polygon
 
 from softcath_ros import topics
 from softcath_ros.core.body_mesh import HIGH_RGBA, LOW_RGBA, SILICONE_RGBA, BodyMesh
@@ -14,13 +15,15 @@ from softcath_ros.core.kinematics import backbone_bend_angle, backbone_poses, ra
 rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
 
 
-@pytest.mark.parametrize("design_name", ["implemented_5mm", "three_channel_5mm"])
+@pytest.mark.parametrize("design_name", ["implemented_5mm", "three_channel_5mm", "three_sector_5mm"])
 def test_body_mesh_is_a_tube_of_the_outer_diameter_coloured_by_channel_pressure(design_name):
     design = load_design(design_name)
     mesh = BodyMesh(design, 9, sides=16)
     k = np.array([40.0, -15.0])
     pos, quat = backbone_poses(k, design.length, 9)
-    v = mesh.vertices(pos, quat).reshape(9, 16, 3)
+    n_rings = 1 + design.n_channels + (design.lumen is not None)
+    every = mesh.vertices(pos, quat).reshape(9, n_rings, 16, 3)
+    v = every[:, 0]
     # every ring at the outer radius from its backbone point, in the plane normal to the tangent
     np.testing.assert_allclose(np.linalg.norm(v - pos[:, None], axis=-1), design.outer_radius, rtol=1e-12)
     tangent = np.gradient(pos, axis=0)   # finite differences: independent of the quaternion rotation
@@ -30,17 +33,29 @@ def test_body_mesh_is_a_tube_of_the_outer_diameter_coloured_by_channel_pressure(
     n = design.n_channels
     pressures = np.linspace(design.max_pressure, 0.0, n)
     points, colours = mesh.triangle_list(pos, quat, pressures)
-    assert points.shape == (8 * 16 * 2 * 3, 3) and colours.shape == (len(points), 4)
-    # each channel's vertices face its centre, with its pressure's colour; the rest is silicone
-    ring = mesh.vertices(pos, quat)[:16] - pos[0]
-    for c, hole in enumerate(design.channels):
+    assert points.shape == (8 * n_rings * 16 * 2 * 3, 3) and colours.shape == (len(points), 4)
+    # the holes are drawn as their real outlines: at the base (no rotation) every hole ring's vertex
+    # lies on its outline, channels in command order, then the lumen
+    holes = list(design.section.channels) + ([design.section.lumen] if design.lumen is not None else [])
+    for hole, ring in zip(holes, every[0, 1:]):
+        assert max(hole.polygon.exterior.distance(Point(*p[:2])) for p in ring - pos[0]) < 2e-6
+        assert Polygon((ring - pos[0])[:, :2]).area == pytest.approx(hole.area, rel=0.15)   # 16 chords
+    # each channel's outer vertices lie over it (within the angle its outline spans, seen from the
+    # axis), with its pressure's colour; the rest is silicone
+    ring = every[0, 0] - pos[0]
+    for c, hole in enumerate(design.section.channels):
         facing = ring[mesh.owner == c][:, :2]
-        centre = np.array(hole.center) / np.linalg.norm(hole.center)
-        assert (facing @ centre / design.outer_radius).min() > math.cos(math.radians(61))
+        assert len(facing)
+        centre = hole.centroid / np.linalg.norm(hole.centroid)
+        pts = np.asarray(hole.polygon.exterior.coords)
+        half = np.arccos(np.clip(pts @ centre / np.linalg.norm(pts, axis=1), -1, 1)).max()
+        spacing = 2 * math.pi / 16
+        assert np.arccos(np.clip(facing @ centre / design.outer_radius, -1, 1)).max() <= max(half, spacing / 2) + 1e-9
         f = pressures[c] / design.max_pressure
         want = (1 - f) * LOW_RGBA + f * HIGH_RGBA
         got = colours[mesh._vertex_owner == c]
         np.testing.assert_allclose(got, np.broadcast_to(want, got.shape))
+        assert len(got) > 8 * 16 * 2 * 3   # its own wall inside, and its part of the outer surface
     assert (mesh.owner == -1).any()
     np.testing.assert_allclose(colours[mesh._vertex_owner == -1][0], SILICONE_RGBA)
     # over the limit is shown as the limit, never beyond
@@ -142,7 +157,7 @@ def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     assert stamps == sorted(set(stamps)), "every view shows a newer pose than the one before"
     m = got["marker"][-1]
     assert m.header.frame_id == topics.FRAME_ID and m.type == Marker.TRIANGLE_LIST
-    assert len(m.points) == 7 * 12 * 2 * 3 and len(m.colors) == len(m.points)
+    assert len(m.points) == 7 * 3 * 12 * 2 * 3 and len(m.colors) == len(m.points)   # outer, channel, lumen
     path = got["path"][-1]
     np.testing.assert_allclose([[p.pose.position.x, p.pose.position.y, p.pose.position.z] for p in path.poses],
                                last, atol=1e-15)

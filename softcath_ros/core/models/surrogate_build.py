@@ -115,11 +115,13 @@ class RayPool:
 
 
 def reflection(design: Design) -> np.ndarray:
-    """2 x 2 reflection across the line through the axis midway between channels 0 and 1 (it maps
-    channel 0 onto channel 1 in a 3-fold symmetric section): curvature of (b, a, 0) = R k(a, b, 0)."""
-    c0, c1 = (np.asarray(design.channels[i].center, dtype=float) for i in (0, 1))
-    u = c0 / np.linalg.norm(c0) + c1 / np.linalg.norm(c1)
-    al = math.atan2(u[1], u[0])
+    """2 x 2 reflection across the section's mirror line that swaps channels 0 and 1 (found from
+    the outlines, models/surrogate ``pair_mirror_angle``): curvature of (b, a, 0) = R k(a, b, 0)."""
+    from .surrogate_settings import pair_mirror_angle
+
+    al = pair_mirror_angle(design)
+    if al is None:
+        raise ValueError(f"design '{design.name}' has no mirror swapping channels 0 and 1 in a 3-fold section")
     return np.array([[math.cos(2 * al), math.sin(2 * al)], [math.sin(2 * al), -math.cos(2 * al)]])
 
 

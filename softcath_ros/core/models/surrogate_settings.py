@@ -35,25 +35,25 @@ class SurrogateSettings:
                                         # has it, "rotated" requires it, "each" solves every pair
 
 
-def symmetric_three(design: Design, tol: float = 1e-7) -> bool:
-    """True when the section maps onto itself under a 120 degree rotation (channel i -> i + 1);
-    with circular holes it then is also mirror symmetric between any two channels."""
+def pair_mirror_angle(design: Design) -> float | None:
+    """The mirror line (rad from +x) that swaps channels 0 and 1 when the section, as found from its
+    outlines (core/geometry ``symmetry``, never from the channel count), maps onto itself turned by
+    120 degrees with channel i -> i + 1; None otherwise. Then one half of pair 0-1 gives the other
+    half and the two other pairs."""
     if design.n_channels != 3:
-        return False
-    c, s = ROTATION_COS[1], ROTATION_SIN[1]
-    chans = design.channels
-    for i in range(3):
-        x, y = chans[i].center
-        nx, ny = chans[(i + 1) % 3].center
-        if abs(c * x - s * y - nx) > tol or abs(s * x + c * y - ny) > tol:
-            return False
-        if abs(chans[i].radius - chans[(i + 1) % 3].radius) > tol:
-            return False
-    for part in (design.lumen, design.limiting_fibre):
-        if part is not None and max(abs(v) for v in part.center) > tol:
-            return False
-    return True
+        return None
+    from ..geometry import symmetry
+
+    sym = symmetry(design.section)
+    if sym.rotation_order != 3 or tuple(sym.rotation_permutation[:3]) != (1, 2, 0):
+        return None
+    mirror = next((m for m in sym.mirrors if m.permutation[:2] == (1, 0)), None)
+    return None if mirror is None else mirror.angle
 
 
+def symmetric_three(design: Design) -> bool:
+    """A 3-channel section that turns channel i onto i + 1 and mirrors channel 0 onto 1."""
+    return pair_mirror_angle(design) is not None
 
-__all__ = ["SURROGATE_VERSION", "SurrogateSettings", "symmetric_three"]
+
+__all__ = ["SURROGATE_VERSION", "SurrogateSettings", "pair_mirror_angle", "symmetric_three"]
