@@ -1,27 +1,32 @@
-"""Optimise: maximise bending at the study pressure over channel size and position.
+"""Optimise: maximise bending at the study pressure over the channels' shapes.
 
-1-DOF (one channel): the implemented stacking along y (bottom wall with the fibre / lumen /
-middle wall / channel / outer wall), the lumen diameter fixed (it carries the device), the three
-wall thicknesses free; the channel fills the rest. Multi-channel (2-DOF): N equal channels at
-360/N degrees around the central lumen, N in COUNTS; the outer and lumen walls free, the
-channel fills the rest; the wall between channels is checked by the design validation.
+The channels are fans (annular sectors about the body axis, core/geometry ``sector``) with filleted
+corners: the shape that fills the room a round hole cannot (docs/actuator.md "Optimised designs").
+The lumen keeps its diameter (it carries the device, the camera lead).
 
-Constraints: every wall at least the design's own ``min_wall_thickness``; the rung converges at
-the study pressure (no closed lumen or touching walls); the largest principal stretch in the
-silicone at that pressure (section rung) at most ``max_stretch``: the strain margin that keeps
-the thin walls from being driven towards rupture. Default 2.0 (100% strain), a stated choice
-well below Ecoflex 00-30's elongation at break, chosen for repeated cycling; the implemented
-design reaches 1.47 at 0.15 bar.
+1-DOF: one fan facing the baseline's channel, the lumen below it at the bottom wall (the design's
+minimum, holding the fibre in its middle as the implemented design). Variables: outer wall, the
+fan's depth (outer minus inner radius: a D-shape when its inner arc nears the axis), span, fillet.
+Multi-channel (2-DOF): N equal fans at 360/N degrees round the central lumen, N in COUNTS. Variables:
+outer wall, lumen wall (the fans' radii), the wall between neighbouring fans (their span), fillet.
 
-Search: a coarse grid of wall thicknesses solved in parallel (cached), then scipy's COBYLA from
-the best feasible grid point (wall thicknesses in mm, derivative free: remeshing makes R_C
-slightly noisy in the geometry). The best feasible design seen is the optimum; it is written as
-a design file with R_C-vs-pressure curves against the baseline (and the implemented design).
+Constraints: every wall at least the design's own ``min_wall_thickness``, measured as the true minimum
+distance between the outlines by the design validation (a variant that breaks it is infeasible); the
+rung converges at the study pressure; the largest principal stretch in the silicone at that pressure
+(section rung) at most ``max_stretch``: the strain margin that keeps the thin walls from being driven
+towards rupture. Default 2.0 (100% strain), a stated choice well below Ecoflex 00-30's elongation at
+break, chosen for repeated cycling; the implemented design reaches 1.43 at 0.14 bar.
+
+Search: a coarse grid solved in parallel (cached), then scipy's COBYLA from the best feasible grid
+point (variables in mm and degrees, derivative free: remeshing makes R_C slightly noisy in the
+geometry). The best feasible design seen is the optimum; it is written as a design file with
+R_C-vs-pressure curves against the baseline (and the implemented design).
 """
 from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import yaml
@@ -33,58 +38,106 @@ from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .runner import run_cases
-from .variation import apply_stacked, area_ratio, make_variant, min_wall_of, stacked_layout, tidy
+from .variation import area_ratio, make_variant, min_wall_of, tidy
 
-COUNTS = (3, 4)
+# 3 is the fewest fans that steer in every direction, and what the allocation and the surrogate's
+# pair tables serve; 4 or more on request (--counts)
+COUNTS = (3,)
 DEFAULT_MAX_STRETCH = 2.0
-GRID_STEPS_MM = (0.0, 0.1, 0.2, 0.3)       # added to the minimum wall, scaled with D / 5 mm
 CURVE_BAR = tuple(round(0.025 * i, 3) for i in range(1, 11))   # 0.025 .. 0.25 bar
-MAX_ITER = 40
+MAX_ITER = 30
 
 
-def layout_1dof(base: Design, walls: tuple[float, float, float]):
-    t_o, t_m, t_b = walls
+@dataclass(frozen=True)
+class Variable:
+    """One shape variable: name, unit (mm scaled with D / 5 mm, or deg), bounds, its coarse grid."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    grid: tuple[float, ...]
+
+
+def fan(inner: float, outer: float, direction: float, span: float, fillet: float) -> dict:
+    return {"shape": "sector", "inner_radius": tidy(inner), "outer_radius": tidy(outer),
+            "direction": round(direction % 360.0, 9), "span": round(span, 9), "fillet": tidy(fillet)}
+
+
+def family_variables(base: Design, count: int) -> tuple[Variable, ...]:
+    """The shape variables of a family (lengths in mm at the baseline's size)."""
+    scale = base.outer_diameter / 5e-3
+    w = base.min_wall_thickness * 1e3
+    if count == 1:
+        return (Variable("outer wall", "mm", w, w + 0.5 * scale, (w, w + 0.1 * scale)),
+                Variable("depth", "mm", 0.5 * scale, 2.0 * scale, (1.5 * scale, 1.7 * scale)),
+                Variable("span", "deg", 90.0, 220.0, (170.0, 190.0)),
+                Variable("fillet", "mm", 0.05 * scale, 0.6 * scale, (0.2 * scale, 0.35 * scale)))
+    return (Variable("outer wall", "mm", w, w + 0.5 * scale, (w, w + 0.1 * scale)),
+            Variable("lumen wall", "mm", w, w + 0.5 * scale, (w,)),
+            Variable("between wall", "mm", w, w + 0.5 * scale, (w + 0.05 * scale, w + 0.15 * scale)),
+            Variable("fillet", "mm", 0.05 * scale, 0.4 * scale, (0.1 * scale, 0.2 * scale)))
+
+
+def layout_fan(base: Design, x: tuple[float, ...]):
+    """1-DOF: one fan facing the baseline's channel (outer wall, depth, span, fillet in mm / deg)."""
+    t_o, depth, span, fillet = x[0] * 1e-3, x[1] * 1e-3, x[2], x[3] * 1e-3
+    big_r, r_l, t_b = base.outer_radius, base.lumen.radius, base.min_wall_thickness
+    c = base.channels[0].center
+    facing = math.degrees(math.atan2(c[1], c[0])) if math.hypot(*c) > 0 else 90.0
+    u = np.array([math.cos(math.radians(facing)), math.sin(math.radians(facing))])
 
     def edit(d):
-        apply_stacked(d, stacked_layout(base.outer_diameter, base.lumen.diameter, t_o, t_m, t_b))
+        outer = big_r - t_o
+        if outer - depth <= 0:
+            raise DesignError("channels[0].inner_radius", tidy(outer - depth), "the fan's depth reaches the body axis")
+        d["channels"] = [fan(outer - depth, outer, facing, span, fillet)]
+        lumen_at = -(big_r - t_b - r_l) * u
+        d["lumen"] = {"diameter": base.lumen.diameter, "center": [tidy(v) for v in lumen_at]}
+        if d.get("limiting_fibre") is not None:
+            d["limiting_fibre"]["center"] = [tidy(v) for v in -(big_r - 0.5 * t_b) * u]
     return edit
 
 
-def layout_ring(base: Design, count: int, walls: tuple[float, float]):
-    t_o, t_l = walls
+def layout_ring(base: Design, count: int, x: tuple[float, ...]):
+    """N fans round the central lumen (outer wall, lumen wall, wall between fans, fillet in mm)."""
+    t_o, t_l, t_g, fillet = (v * 1e-3 for v in x)
     big_r, r_l = base.outer_radius, base.lumen.radius
-    r_c = 0.5 * (big_r - r_l - t_o - t_l)
-    rho = r_l + t_l + r_c
-    first = math.atan2(base.channels[0].center[1], base.channels[0].center[0]) if base.n_channels > 1 else math.pi / 2
+    c = base.channels[0].center
+    first = math.degrees(math.atan2(c[1], c[0])) if base.n_channels > 1 and math.hypot(*c) > 0 else 90.0
 
     def edit(d):
-        if r_c <= 0:
-            raise DesignError("channels", None, "no room for the channels between the lumen and outer walls")
-        d["channels"] = [{"diameter": tidy(2 * r_c), "center": [tidy(rho * math.cos(first + 2 * math.pi * i / count)),
-                                                                tidy(rho * math.sin(first + 2 * math.pi * i / count))]}
-                         for i in range(count)]
+        inner, outer = r_l + t_l, big_r - t_o
+        if outer <= inner or t_g >= inner:
+            raise DesignError("channels", None, "no room for the fans between the lumen and outer walls")
+        # straight radial edges: the wall between neighbours is thinnest at the inner arc, inner * sin(gap)
+        span = 360.0 / count - math.degrees(math.asin(t_g / inner))
+        if span <= 0:
+            raise DesignError("channels[0].span", round(span, 6), "the walls between the fans leave no span")
+        d["channels"] = [fan(inner, outer, first + 360.0 * i / count, span, fillet) for i in range(count)]
         d["lumen"] = {"diameter": base.lumen.diameter, "center": [0.0, 0.0]}
     return edit
 
 
 class Search:
-    """Evaluations of one layout family (memoised by wall thicknesses), feasibility and history."""
+    """Evaluations of one layout family (memoised by its variables), feasibility and history."""
 
-    def __init__(self, base: Design, ctx: StudyContext, count: int, max_stretch: float):
+    def __init__(self, base: Design, ctx: StudyContext, count: int, max_stretch: float, max_iter: int = MAX_ITER):
         self.base, self.ctx, self.count, self.max_stretch = base, ctx, count, max_stretch
-        self.w = base.min_wall_thickness
+        self.variables = family_variables(base, count)
+        self.max_iter = max_iter
         self.history: dict[tuple, dict] = {}
 
-    def variant(self, walls):
-        edit = layout_1dof(self.base, walls) if self.count == 1 else layout_ring(self.base, self.count, walls)
-        return make_variant(self.base, self.label(walls), "walls", walls, edit)
+    def variant(self, x):
+        edit = layout_fan(self.base, x) if self.count == 1 else layout_ring(self.base, self.count, x)
+        return make_variant(self.base, self.label(x), "shape", x, edit)
 
-    def label(self, walls) -> str:
-        names = ("outer", "middle", "bottom") if self.count == 1 else ("outer", "lumen")
-        return ", ".join(f"{n} {t * 1e3:.3f}" for n, t in zip(names, walls)) + " mm"
+    def label(self, x) -> str:
+        return ", ".join(f"{v.name} {t:.3f} {v.unit}" if v.unit == "mm" else f"{v.name} {t:.1f} {v.unit}"
+                         for v, t in zip(self.variables, x))
 
     def evaluate(self, many: list[tuple], stage: str, parallel: bool) -> list[dict]:
-        keys = [tuple(round(t, 9) for t in walls) for walls in many]
+        keys = [tuple(round(float(t), 6) for t in x) for x in many]
         new = [k for k in dict.fromkeys(keys) if k not in self.history]
         variants = [self.variant(k) for k in new]
         feasible = [v for v in variants if v.feasible]
@@ -97,7 +150,7 @@ class Search:
         it = iter(results)
         for k, v in zip(new, variants):
             row = {"count": self.count, "stage": stage, "label": v.label,
-                   **{f"wall_{i}_mm": t * 1e3 for i, t in enumerate(k)}}
+                   **{f"x_{i}": t for i, t in enumerate(k)}}
             if not v.feasible:
                 row.update(feasible=False, radius_of_curvature_mm=None, max_principal_stretch=None,
                            status=f"infeasible: {v.reason}", design=None)
@@ -109,7 +162,7 @@ class Search:
                           else f"max stretch {st:.3f} > {self.max_stretch}")
                 row.update(feasible=ok, radius_of_curvature_mm=None if rc is None else rc * 1e3,
                            max_principal_stretch=st, status=status, design=v.design,
-                           channel_diameter_mm=v.design.channels[0].diameter * 1e3,
+                           channel_area_mm2=v.design.channels[0].area * 1e6,
                            area_ratio=area_ratio(v.design), thinnest_wall_mm=min_wall_of(v.design) * 1e3)
             self.history[k] = row
         return [self.history[k] for k in keys]
@@ -119,37 +172,39 @@ class Search:
         return min(ok, key=lambda r: r["radius_of_curvature_mm"]) if ok else None
 
     def run(self) -> dict | None:
-        scale = self.base.outer_diameter / 5e-3
-        n = 3 if self.count == 1 else 2
-        grid = [tuple(self.w + s * 1e-3 * scale for s in steps) for steps in itertools.product(GRID_STEPS_MM, repeat=n)]
+        grid = list(itertools.product(*(v.grid for v in self.variables)))
         self.evaluate(grid, "grid", parallel=True)
         start = self.best()
-        if start is None:
-            return None
+        if start is None or self.max_iter <= 0:
+            return start
         from scipy.optimize import minimize
 
-        w_mm = self.w * 1e3
+        lo = np.array([v.lower for v in self.variables])
+        hi = np.array([v.upper for v in self.variables])
+        # COBYLA steps in units of each variable's range / 10: degrees and millimetres alike
+        span = (hi - lo) / 10.0
 
-        def solve(x_mm):
-            return self.evaluate([tuple(np.asarray(x_mm) * 1e-3)], "cobyla", parallel=False)[0]
+        def solve(u):
+            return self.evaluate([tuple(lo + np.asarray(u) * span)], "cobyla", parallel=False)[0]
 
-        def objective(x_mm):   # curvature in 1/mm, negated; 0 (straight) where nothing converged
-            r = solve(x_mm)
+        def objective(u):   # curvature in 1/mm, negated; 0 (straight) where nothing converged or feasible
+            r = solve(u)
             rc = r["radius_of_curvature_mm"]
-            return -1.0 / rc if rc else 0.0
+            return -1.0 / rc if rc and r["status"] != "infeasible" else 0.0
 
-        def stretch_margin(x_mm):
-            if min(x_mm) < w_mm - 1e-9:
+        def stretch_margin(u):
+            if np.any(np.asarray(u) < -1e-9) or np.any(np.asarray(u) > 10.0 + 1e-9):
                 return -1.0
-            r = solve(x_mm)
+            r = solve(u)
             st = r["max_principal_stretch"]
-            return self.max_stretch - st if st is not None and r["status"] != "infeasible" else -1.0
+            return self.max_stretch - st if st is not None else -1.0
 
-        x0 = np.array([start[f"wall_{i}_mm"] for i in range(n)])
-        cons = [{"type": "ineq", "fun": lambda x, i=i: x[i] - w_mm} for i in range(n)]
+        u0 = (np.array([start[f"x_{i}"] for i in range(len(self.variables))]) - lo) / span
+        cons = [{"type": "ineq", "fun": lambda u, i=i: u[i]} for i in range(len(lo))]
+        cons += [{"type": "ineq", "fun": lambda u, i=i: 10.0 - u[i]} for i in range(len(lo))]
         cons.append({"type": "ineq", "fun": stretch_margin})
-        minimize(objective, x0, method="COBYLA", constraints=cons,
-                 options={"rhobeg": 0.05 * scale, "tol": 0.002 * scale, "maxiter": MAX_ITER})
+        minimize(objective, u0, method="COBYLA", constraints=cons,
+                 options={"rhobeg": 0.5, "tol": 0.02, "maxiter": self.max_iter})
         return self.best()
 
 
@@ -162,16 +217,17 @@ def design_file_text(design: Design, description: str) -> str:
 
 # options run() takes beyond the design and the context (softcath study validates flags against them)
 OPTIONS = (Option("max_stretch", "float", "largest principal stretch allowed in the silicone"),
-           Option("counts", "object", "channel counts to optimise over"))
+           Option("counts", "object", "channel counts to optimise over"),
+           Option("max_iter", "int", "COBYLA steps after the grid (0: the grid's best)"))
 
 
 def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRETCH,
-        counts: tuple[int, ...] = COUNTS) -> StudyResult:
+        counts: tuple[int, ...] = COUNTS, max_iter: int = MAX_ITER) -> StudyResult:
     if design.lumen is None:
         raise DesignError("lumen", None, "the optimiser keeps the lumen (it carries the device); this design has none")
     kind = "1dof" if design.n_channels == 1 else "2dof"
-    searches = [Search(design, ctx, 1, max_stretch)] if kind == "1dof" else [Search(design, ctx, n, max_stretch)
-                                                                            for n in counts]
+    searches = [Search(design, ctx, 1, max_stretch, max_iter)] if kind == "1dof" else \
+        [Search(design, ctx, n, max_stretch, max_iter) for n in counts]
     bests = [(s, s.run()) for s in searches]
     found = [(s, b) for s, b in bests if b is not None]
     stem = f"optimised_{kind}_{design.outer_diameter * 1e3:g}mm"
@@ -180,7 +236,7 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
     # the baseline at the same pressure, as a table row
     base_case = ctx.solve([ctx.spec(design)], "optimise baseline")[0]["results"][0]
     rows = [{"design": design.name, "count": design.n_channels, "label": "baseline",
-             "channel_diameter_mm": design.channels[0].diameter * 1e3, "area_ratio": area_ratio(design),
+             "channel_area_mm2": design.channels[0].area * 1e6, "area_ratio": area_ratio(design),
              "thinnest_wall_mm": min_wall_of(design) * 1e3,
              "radius_of_curvature_mm": None if base_case["radius_of_curvature_m"] is None
              else base_case["radius_of_curvature_m"] * 1e3,
@@ -188,7 +244,7 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
              "status": "ok" if base_case["converged"] else f"did not converge: {base_case['message']}"}]
     for s, b in bests:
         rows.append({"design": f"{stem} candidate", "count": s.count, "label": b["label"] if b else "-",
-                     "channel_diameter_mm": b and b["channel_diameter_mm"], "area_ratio": b and b["area_ratio"],
+                     "channel_area_mm2": b and b["channel_area_mm2"], "area_ratio": b and b["area_ratio"],
                      "thinnest_wall_mm": b and b["thinnest_wall_mm"],
                      "radius_of_curvature_mm": b and b["radius_of_curvature_mm"],
                      "max_principal_stretch": b and b["max_principal_stretch"],
@@ -205,20 +261,19 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
                         f"(softcath study optimise, rung {ctx.rung})")
         base_rc = rows[0]["radius_of_curvature_mm"]
         findings.append(
-            f"optimum ({s_opt.count} channel(s)): {optimum['label']}, channel {optimum['channel_diameter_mm']:.3f} mm, "
+            f"optimum ({s_opt.count} fan(s)): {optimum['label']}, channel {optimum['channel_area_mm2']:.3f} mm^2, "
             f"area ratio {optimum['area_ratio']:.3f} (baseline {rows[0]['area_ratio']:.3f}); R_C at {p_bar:g} bar "
             f"{optimum['radius_of_curvature_mm']:.2f} mm vs baseline "
             + (f"{base_rc:.2f} mm ({base_rc / optimum['radius_of_curvature_mm']:.2f}x the curvature)" if base_rc else
                "(baseline did not converge)")
             + f"; max principal stretch {optimum['max_principal_stretch']:.2f} (limit {max_stretch:g})")
-        walls_at_min = all(abs(optimum[f"wall_{i}_mm"] - design.min_wall_thickness * 1e3) < 0.02
-                           for i in range(1 if s_opt.count > 1 else 3))
+        walls_at_min = abs(optimum["thinnest_wall_mm"] - design.min_wall_thickness * 1e3) < 0.02
         findings.append(
             ("published: the optimised 1-DOF design has one channel of maximal area with walls at a fabricable minimum"
              if s_opt.count == 1 else "published: the 2-DOF design has three channels at 120 degrees, each as large "
              "as the minimum walls allow") + " -> "
-            + ("the optimum sits on the minimum walls (the area ratio is maximal): holds" if walls_at_min else
-               "the optimum keeps some walls above the minimum (the strain or convergence limit binds)"))
+            + ("the optimum's thinnest wall sits on the minimum: holds" if walls_at_min else
+               "the optimum keeps every wall above the minimum (the strain or convergence limit binds)"))
         if base_rc and abs(base_rc / optimum["radius_of_curvature_mm"] - 1) < 0.005:
             findings.append(f"{design.name} is already this family's optimum: the design file written repeats its "
                             "geometry under the new name")
@@ -259,7 +314,7 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
 
     def plot(path: str) -> None:
         plt = pyplot()
-        from matplotlib.patches import Circle
+        from matplotlib.patches import Circle, Polygon
 
         fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
         for i, d in enumerate(curve_designs):
@@ -286,16 +341,16 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
         ax = axes[2]
         for d, style in zip(curve_designs[:2], ("--", "-")):
             ax.add_patch(Circle((0, 0), d.outer_radius * 1e3, fill=False, ls=style))
-            for h in list(d.channels) + ([d.lumen] if d.lumen else []):
-                ax.add_patch(Circle(np.array(h.center) * 1e3, h.radius * 1e3, fill=False, ls=style,
-                                    color="C0" if h in d.channels else "C1"))
+            for h in d.section.holes:   # the real outlines
+                ax.add_patch(Polygon(np.asarray(h.polygon.exterior.coords) * 1e3, closed=True, fill=False, ls=style,
+                                     color="C0" if h.role == "channel" else "C1"))
         ax.set_xlim(-3, 3)
         ax.set_ylim(-3, 3)
         ax.set_aspect("equal")
         ax.set_title("sections: baseline dashed, optimum solid (mm)", fontsize=9)
         save(fig, path, f"optimise {kind} from {where(design, ctx)}")
 
-    cols = [("design", "design"), ("count", "channels"), ("label", "walls"), ("channel_diameter_mm", "channel [mm]"),
+    cols = [("design", "design"), ("count", "channels"), ("label", "shape"), ("channel_area_mm2", "channel [mm^2]"),
             ("area_ratio", "area ratio"), ("thinnest_wall_mm", "thinnest wall [mm]"),
             ("radius_of_curvature_mm", f"R_C at {p_bar:g} bar [mm]"), ("max_principal_stretch", "max stretch"),
             ("status", "status")]

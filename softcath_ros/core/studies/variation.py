@@ -54,13 +54,9 @@ def make_variant(base: Design, label: str, parameter: str, value, edit, *, basel
 
 
 def min_wall_of(design: Design) -> float:
-    """The thinnest silicone wall of a design (m): holes to the outer surface and to each other."""
-    holes = list(design.channels) + ([design.lumen] if design.lumen is not None else [])
-    walls = [design.outer_radius - math.hypot(*h.center) - h.radius for h in holes]
-    for i, a in enumerate(holes):
-        for b in holes[i + 1:]:
-            walls.append(math.dist(a.center, b.center) - a.radius - b.radius)
-    return min(walls)
+    """The thinnest silicone wall of a design (m): the true minimum distance between its real
+    outlines, holes to the outer surface and to each other (core/geometry)."""
+    return design.section.thinnest_wall().thickness
 
 
 def stacked_layout(outer_diameter: float, lumen_diameter: float, outer_wall: float, middle_wall: float,
@@ -114,5 +110,6 @@ def scale_design_dict(data: dict, s: float) -> None:
 
 
 def area_ratio(design: Design) -> float:
-    """Total pressurised channel area over the body's cross-section area (docs/actuator.md's key parameter)."""
-    return sum(c.area for c in design.channels) / (math.pi * design.outer_radius ** 2)
+    """Total pressurised channel area over the body's cross-section area (docs/actuator.md's key
+    parameter), from the real outlines' exact areas (core/geometry)."""
+    return design.section.area_ratio
