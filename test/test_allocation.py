@@ -448,3 +448,34 @@ def test_a_bend_that_would_reach_the_shaft_saturates_where_the_body_clears_it(th
     assert beyond.saturated and "clears the body" in beyond.message
     assert math.hypot(*beyond.achieved_curvature) == pytest.approx(math.hypot(*far.achieved_curvature), rel=1e-5)
     assert far.pressures.max() <= allocator.max_pressure
+
+
+def test_each_channels_direction_and_reach_come_from_its_own_answer_not_its_centre():
+    """A sector design with one channel redrawn as an L-shaped polygon: the section is no longer
+    symmetric, the neutral axis moves, and each channel bends the body away from it, not away from
+    the body axis through its centroid. The allocator's directions and reaches are the rung's own
+    answers for each channel alone (issue 36)."""
+    import math
+
+    from softcath_ros.core.design import design_from_dict
+
+    d = load_design("three_sector_5mm").to_dict()
+    d["name"] = "three_sector_one_l_shape"
+    d["channels"][1] = {"shape": "polygon", "points": [[x * 1e-3, y * 1e-3] for x, y in [
+        [-1.75, -0.35], [-1.3, -0.35], [-1.3, -0.95], [-0.95, -0.95], [-0.95, -1.35], [-1.45, -1.05]]]}
+    design = design_from_dict(d)
+    model = make_model("closed_form", design)
+    alloc = Allocator(model)
+    alone = model.evaluate(np.eye(3) * alloc.max_pressure)
+    k = np.asarray(alone.curvature) - np.asarray(model.evaluate(np.zeros(3)).curvature)
+    np.testing.assert_allclose(alloc.channel_directions, np.arctan2(k[:, 1], k[:, 0]) % (2 * math.pi), atol=1e-12)
+    np.testing.assert_allclose(alloc.channel_max_curvature, np.hypot(k[:, 0], k[:, 1]), rtol=1e-12)
+    # the answers differ from "away from the centroid" by more than the 0.5 degree accuracy target
+    centre = np.array([math.atan2(-c.center[1], -c.center[0]) for c in design.channels])
+    off = np.degrees(np.abs((alloc.channel_directions - centre + math.pi) % (2 * math.pi) - math.pi))
+    assert off.max() > 2.0
+    # and a request along channel 0's own direction is met by channel 0 alone
+    u = np.array([math.cos(alloc.channel_directions[0]), math.sin(alloc.channel_directions[0])])
+    r = alloc.allocate(0.5 * alloc.channel_max_curvature[0] * u)
+    assert r.pressures[0] > 0 and max(r.pressures[1:]) <= 1e-6 * alloc.max_pressure
+    np.testing.assert_allclose(r.achieved_curvature, r.requested_curvature, rtol=1e-6, atol=1e-9)

@@ -244,3 +244,20 @@ def test_malformed_cad_files_are_one_line_refusals(design_dict, tmp_path, cut, j
         design_from_dict(with_channel(design_dict, {"shape": "file", "path": str(path), **key}))
     except DesignError as exc:
         assert "\n" not in str(exc) and exc.field.startswith("channels[0]")
+
+
+def test_the_shipped_sector_design_passes_its_check_with_its_fabrication_minimum(capsys):
+    """three_sector_5mm: three fans round the 1.5 mm lumen, every wall >= 0.5 mm (its stated
+    min_wall_thickness), 3-fold with three mirror lines, the channels' area from the real outlines."""
+    import json
+
+    from softcath_ros.cli import main
+
+    assert main(["design", "check", "three_sector_5mm", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    design = load_design("three_sector_5mm")
+    assert design.min_wall_thickness == pytest.approx(0.5e-3) and design.lumen.diameter == pytest.approx(1.5e-3)
+    assert {c.kind for c in design.channels} == {"sector"}
+    assert 0.5e-3 - 1e-9 <= doc["thinnest_wall"]["thickness_m"] <= 0.51e-3   # on the minimum, not above it
+    assert doc["symmetry"]["rotation_order"] == 3
+    assert design.section.area_ratio > 0.30   # three_channel_5mm's circles: 0.036

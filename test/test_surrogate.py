@@ -302,3 +302,23 @@ time.sleep(60)
     if alive:
         os.kill(worker, 9)
     assert not alive
+
+
+def test_the_pair_tables_symmetry_is_found_from_the_outlines_never_from_the_channel_count():
+    """3 channels alone do not make a 3-fold section: the rotated pair tables are used only where
+    the section's outlines turn channel i onto i + 1 and a mirror swaps channels 0 and 1."""
+    import math
+
+    from softcath_ros.core.design import design_from_dict
+    from softcath_ros.core.models.surrogate import pair_mirror_angle
+
+    fans = load_design("three_sector_5mm")
+    angle = pair_mirror_angle(fans)   # fans at 90, 210, 330 deg: the line at 150 deg swaps 0 and 1
+    assert angle is not None and math.degrees(angle) == pytest.approx(150.0, abs=1e-6)
+    assert pair_mirror_angle(load_design("three_channel_5mm")) is not None
+    d = fans.to_dict()
+    d["name"], d["channels"][1]["span"] = "one_narrower_fan", 90.0   # 3 channels, no 3-fold turn
+    assert pair_mirror_angle(design_from_dict(d)) is None
+    d = fans.to_dict()
+    d["name"], d["channels"] = "fans_clockwise", [d["channels"][i] for i in (0, 2, 1)]   # turn maps 0 -> 2
+    assert pair_mirror_angle(design_from_dict(d)) is None
