@@ -73,10 +73,11 @@ def family_variables(base: Design, count: int) -> tuple[Variable, ...]:
                 Variable("depth", "mm", 0.5 * scale, 2.0 * scale, (1.5 * scale, 1.7 * scale)),
                 Variable("span", "deg", 90.0, 220.0, (170.0, 190.0)),
                 Variable("fillet", "mm", 0.05 * scale, 0.6 * scale, (0.2 * scale, 0.35 * scale)))
-    return (Variable("outer wall", "mm", w, w + 0.5 * scale, (w, w + 0.1 * scale)),
-            Variable("lumen wall", "mm", w, w + 0.5 * scale, (w,)),
-            Variable("between wall", "mm", w, w + 0.5 * scale, (w + 0.05 * scale, w + 0.15 * scale)),
-            Variable("fillet", "mm", 0.05 * scale, 0.4 * scale, (0.1 * scale, 0.2 * scale)))
+    # fans on the minimum walls stretch their silicone past 2 at 0.14 bar: the grid reaches thicker walls
+    return (Variable("outer wall", "mm", w, w + 0.8 * scale, (w, w + 0.2 * scale)),
+            Variable("lumen wall", "mm", w, w + 0.8 * scale, (w + 0.1 * scale, w + 0.3 * scale)),
+            Variable("between wall", "mm", w, w + 0.8 * scale, (w + 0.1 * scale, w + 0.3 * scale)),
+            Variable("fillet", "mm", 0.05 * scale, 0.4 * scale, (0.2 * scale,)))
 
 
 def layout_fan(base: Design, x: tuple[float, ...]):
