@@ -224,3 +224,30 @@ def test_cli_study_rejects_bad_input(capsys):
     assert "--pressure" in capsys.readouterr().err
     assert main(["study", "sensitivity", "--design", "implemented_5mm", "--max-stretch", "2"]) == 2
     assert "no such option" in capsys.readouterr().err
+
+
+def test_optimise_shapes_fans_keeping_the_lumen_and_the_minimum_walls():
+    """The optimiser's variables are shapes (fans: span, radii, depth, fillet, walls); every grid
+    point is a valid design with the lumen kept at 1.5 mm and every wall at least the minimum, or
+    is refused as infeasible by the design validation (never loaded half-valid)."""
+    import itertools
+
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.studies.optimise import Search
+
+    for name, count in (("implemented_5mm", 1), ("three_sector_5mm", 3)):
+        base = load_design(name)
+        search = Search(base, StudyContext(rung="closed_form"), count, 2.0)
+        names = [v.name for v in search.variables]
+        assert ("span" in names and "depth" in names) if count == 1 else "between wall" in names
+        assert "fillet" in names
+        variants = [search.variant(x) for x in itertools.product(*(v.grid for v in search.variables))]
+        assert all(v.feasible or ("\n" not in v.reason and "channels" in v.reason) for v in variants)
+        assert sum(v.feasible for v in variants) >= len(variants) // 2
+        for d in (v.design for v in variants if v.feasible):
+            assert d.n_channels == count and {c.kind for c in d.channels} == {"sector"}
+            assert d.lumen.diameter == base.lumen.diameter
+            assert min_wall_of(d) >= base.min_wall_thickness - 1e-9
+    # a fan reaching the axis is refused in one line, not built
+    bad = Search(load_design("implemented_5mm"), StudyContext(rung="closed_form"), 1, 2.0).variant((0.5, 2.5, 180.0, 0.2))
+    assert not bad.feasible and "\n" not in bad.reason
