@@ -6,7 +6,7 @@ batches nor a shipped table are used) and timed from the constructor's call to i
 table's measured error against the section rung (its held-out commands) is recorded with it.
 
     .venv/bin/python benchmarks/surrogate_build.py [--designs implemented_5mm,three_channel_5mm]
-        [--name surrogate_build] [--label after]
+        [--name surrogate_build] [--label after] [--ship]
 
 Writes benchmarks/results/<name>.{json,csv,png}; with an existing <name>.json the rows of other
 labels (e.g. "before", measured at the commit before the ray builder) are kept beside the new ones.
@@ -40,6 +40,7 @@ def main() -> None:
     ap.add_argument("--designs", default="implemented_5mm,three_channel_5mm")
     ap.add_argument("--name", default="surrogate_build")
     ap.add_argument("--label", default="after", help="what this run measures (kept apart from other labels)")
+    ap.add_argument("--ship", action="store_true", help="also write each built table to the package's shipped table")
     args = ap.parse_args()
     old = RESULTS / f"{args.name}.json"
     rows = [r for r in json.loads(old.read_text())["results"] if r["label"] != args.label] if old.is_file() else []
@@ -53,6 +54,8 @@ def main() -> None:
             model = make_model("surrogate", design, cache=cache, progress=True, shipped=False)
             took = time.perf_counter() - t0
             cpu = _cpu_seconds() - cpu0
+            if args.ship:
+                model.write(model.shipped_path())
         bound = model.error_bound
         row = {"label": args.label, "design": name, "channels": design.n_channels, "build_s": took,
                "cpu_s": cpu,   # this process and its finished workers: what a quiet machine would need in all

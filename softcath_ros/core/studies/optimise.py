@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import yaml
@@ -254,7 +254,7 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
     optimum = None
     if found:
         s_opt, optimum = min(found, key=lambda sb: sb[1]["radius_of_curvature_mm"])
-        opt_design = optimum["design"].__class__(**{**optimum["design"].__dict__, "name": stem})
+        opt_design = replace(optimum["design"], name=stem)
         rows[1 + bests.index((s_opt, optimum))]["design"] = stem
         extra[f"{stem}.yaml"] = design_file_text(
             opt_design, f"maximum bending at {p_bar:g} bar from {design.name}: {s_opt.count} channel(s), walls >= "
