@@ -9,8 +9,9 @@ implemented_5mm's |k| (1/|k| is the centreline radius); R_C = l / theta is recor
 
     .venv/bin/python benchmarks/design_ratios.py [--pressure 14000] [--designs a,b,...]
 
-Writes benchmarks/results/design_ratios.{json,csv}; test/test_design_ratios.py asserts the ratios
-these rows show on the shipped surrogate tables.
+The fan design is benchmarks/designs/three_sector_5mm.yaml.
+
+Writes benchmarks/results/design_ratios.{json,csv}.
 """
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ from harness import write_results  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.studies.cases import CaseSpec, solve_case  # noqa: E402
 
-DESIGNS = "implemented_5mm,optimised_1dof_5mm,optimised_2dof_5mm,three_sector_5mm,three_channel_5mm"
+SECTOR = str(Path(__file__).resolve().parent / "designs" / "three_sector_5mm.yaml")
+DESIGNS = f"implemented_5mm,optimised_1dof_5mm,optimised_2dof_5mm,{SECTOR},three_channel_5mm"
 PUBLISHED = {"optimised_1dof_5mm": 2.66, "optimised_2dof_5mm": 1.58, "three_sector_5mm": 1.58}
 
 
@@ -41,8 +43,9 @@ def main() -> None:
     ap.add_argument("--designs", default=DESIGNS)
     args = ap.parse_args()
     rows, reference = [], None
-    for name in args.designs.split(","):
-        design = load_design(name)
+    for given in args.designs.split(","):
+        design = load_design(given)
+        name = design.name
         cmds = commands(design.n_channels, args.pressure)
         t0 = time.perf_counter()
         # one ramp per command (a pair is not reached through channel 0 alone)

@@ -22,6 +22,7 @@ from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel, BendState
 from softcath_ros.core.yaml_io import load_yaml
 from softcath_ros.resources import find
+from sector_designs import THREE_SECTOR_5MM
 
 
 DIRECTION_TOL_DEG = 0.5
@@ -459,7 +460,7 @@ def test_each_channels_direction_and_reach_come_from_its_own_answer_not_its_cent
 
     from softcath_ros.core.design import design_from_dict
 
-    d = load_design("three_sector_5mm").to_dict()
+    d = load_design(THREE_SECTOR_5MM).to_dict()
     d["name"] = "three_sector_one_l_shape"
     d["channels"][1] = {"shape": "polygon", "points": [[x * 1e-3, y * 1e-3] for x, y in [
         [-1.75, -0.35], [-1.3, -0.35], [-1.3, -0.95], [-0.95, -0.95], [-0.95, -1.35], [-1.45, -1.05]]]}

@@ -15,6 +15,7 @@ import pytest
 from softcath_ros.cli import main
 from softcath_ros.core.design import design_from_dict, load_design
 from softcath_ros.core.errors import DesignError
+from sector_designs import THREE_SECTOR_5MM
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "docs" / "examples"
@@ -253,9 +254,9 @@ def test_the_shipped_sector_design_passes_its_check_with_its_fabrication_minimum
 
     from softcath_ros.cli import main
 
-    assert main(["design", "check", "three_sector_5mm", "--json"]) == 0
+    assert main(["design", "check", THREE_SECTOR_5MM, "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    design = load_design("three_sector_5mm")
+    design = load_design(THREE_SECTOR_5MM)
     assert design.min_wall_thickness == pytest.approx(0.5e-3) and design.lumen.diameter == pytest.approx(1.5e-3)
     assert {c.kind for c in design.channels} == {"sector"}
     assert 0.5e-3 - 1e-9 <= doc["thinnest_wall"]["thickness_m"] <= 0.51e-3   # on the minimum, not above it

@@ -11,11 +11,12 @@ from softcath_ros import topics
 from softcath_ros.core.body_mesh import HIGH_RGBA, LOW_RGBA, SILICONE_RGBA, BodyMesh
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import backbone_bend_angle, backbone_poses, radius_l_over_theta
+from sector_designs import THREE_SECTOR_5MM
 
 rclpy = pytest.importorskip("rclpy", reason="the ROS extra is part of the test set-up (scripts/test.sh)")
 
 
-@pytest.mark.parametrize("design_name", ["implemented_5mm", "three_channel_5mm", "three_sector_5mm"])
+@pytest.mark.parametrize("design_name", ["implemented_5mm", "three_channel_5mm", THREE_SECTOR_5MM])
 def test_body_mesh_is_a_tube_of_the_outer_diameter_coloured_by_channel_pressure(design_name):
     design = load_design(design_name)
     mesh = BodyMesh(design, 9, sides=16)

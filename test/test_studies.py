@@ -15,6 +15,7 @@ from softcath_ros.core.studies.context import StudyContext
 from softcath_ros.core.studies.runner import CaseCache, RunStats, run_cases
 from softcath_ros.core.studies.variation import (area_ratio, make_variant, min_wall_of, scale_design_dict,
                                                  stacked_layout)
+from sector_designs import THREE_SECTOR_5MM
 
 COARSE = {"mesh_size": 5e-3 / 12}
 
@@ -235,7 +236,7 @@ def test_optimise_shapes_fans_keeping_the_lumen_and_the_minimum_walls():
     from softcath_ros.core.design import load_design
     from softcath_ros.core.studies.optimise import Search
 
-    for name, count in (("implemented_5mm", 1), ("three_sector_5mm", 3)):
+    for name, count in (("implemented_5mm", 1), (THREE_SECTOR_5MM, 3)):
         base = load_design(name)
         search = Search(base, StudyContext(rung="closed_form"), count, 2.0)
         names = [v.name for v in search.variables]

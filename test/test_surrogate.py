@@ -14,6 +14,7 @@ import pytest
 from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.surrogate_build import direction_error_deg, rc_error
+from sector_designs import THREE_SECTOR_5MM
 
 RC_TOL = 0.005   # issue 6: within 0.5% of the source in R_C
 
@@ -310,9 +311,9 @@ def test_the_pair_tables_symmetry_is_found_from_the_outlines_never_from_the_chan
     import math
 
     from softcath_ros.core.design import design_from_dict
-    from softcath_ros.core.models.surrogate import pair_mirror_angle
+    from softcath_ros.core.models.surrogate_settings import pair_mirror_angle
 
-    fans = load_design("three_sector_5mm")
+    fans = load_design(THREE_SECTOR_5MM)
     angle = pair_mirror_angle(fans)   # fans at 90, 210, 330 deg: the line at 150 deg swaps 0 and 1
     assert angle is not None and math.degrees(angle) == pytest.approx(150.0, abs=1e-6)
     assert pair_mirror_angle(load_design("three_channel_5mm")) is not None
