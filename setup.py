@@ -67,7 +67,7 @@ setup(
             # managed (lifecycle) hardware nodes: tracker_node (rclpy.lifecycle needs its messages)
             "ros-lifecycle-msgs>=2.0",
         ],
-        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "psutil>=5.9", "mcap-ros2-support>=0.6",
+        "test": ["pytest>=7.4", "pytest-timeout>=2.2", "pytest-xdist>=3.5", "psutil>=5.9", "mcap-ros2-support>=0.6",
                  "hypothesis>=6.80",
                  # test_install.py builds a wheel offline (no build isolation): bdist_wheel
                  "wheel>=0.40",

@@ -119,14 +119,13 @@ def test_tracker_loss_falls_back_and_watchdog_vents():
 def test_steer_node_defaults_to_the_surrogate_on_its_shipped_table(monkeypatch):
     """In-process: with its defaults steer_node's feed-forward is the surrogate, read from the table
     shipped for the design (none is built at start-up; the 0.3 bar limit is the allocator's)."""
-    from softcath_ros.core.models.surrogate import SurrogateModel
     from softcath_ros.core.steering import STEERING_MAX_PRESSURE
     from softcath_ros.nodes.steer_node import SteerNode
 
-    def no_build(self):
+    def no_build(model):
         raise AssertionError("steer_node built a surrogate table at start-up")
 
-    monkeypatch.setattr(SurrogateModel, "_build", no_build)
+    monkeypatch.setattr("softcath_ros.core.models.surrogate_tabulate.build_table", no_build)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=private_domain())
     try:

@@ -229,14 +229,13 @@ def test_steering_reads_the_shipped_surrogate_table_and_builds_none(monkeypatch)
     """The controller's and the rig's surrogate are the shipped table of the design as shipped: no
     table is built at start-up (a steering limit of 0.3 bar is the allocator's, not a new design)."""
     from softcath_ros.bench.steering_sim import SteeringScenario, build
-    from softcath_ros.core.models.surrogate import SurrogateModel
     from softcath_ros.core.steering import steering_allocator
 
-    def no_build(self):
-        raise AssertionError(f"a surrogate table was built for {self.design.name} "
-                             f"(max_pressure {self.design.max_pressure:g} Pa)")
+    def no_build(model):
+        raise AssertionError(f"a surrogate table was built for {model.design.name} "
+                             f"(max_pressure {model.design.max_pressure:g} Pa)")
 
-    monkeypatch.setattr(SurrogateModel, "_build", no_build)
+    monkeypatch.setattr("softcath_ros.core.models.surrogate_tabulate.build_table", no_build)
     alloc = steering_allocator("surrogate", load_design("three_channel_5mm"))
     assert alloc.model.origin == "shipped" and alloc.max_pressure == STEERING_MAX_PRESSURE
     assert np.all(alloc.allocate([0.0, -200.0]).pressures <= STEERING_MAX_PRESSURE)

@@ -8,7 +8,7 @@ import time
 
 from ..core.errors import SoftcathError
 
-MANAGED_DISCOVERY_S = 1.5   # the rig's lifecycle services are looked for this long once the helpers spin
+MANAGED_DISCOVERY_S = 5.0   # the rig's lifecycle services are looked for this long (a loaded machine takes seconds)
 MANAGED_TIMEOUT_S = 60.0    # each managed node configured and active by then (configure opens a device)
 
 
