@@ -233,9 +233,11 @@ def test_idle_background_writer_sleeps_until_a_message_or_a_flush_is_due(tmp_pat
     (never polls), and a message wakes it at once."""
     import time
 
-    wakes = []
-    monkeypatch.setattr(BagWriter, "flush_if_due", lambda self: wakes.append(time.monotonic()))
+    wakes, mine = [], []
+    # counted for this writer only: another test's writer thread may still run in this process
+    monkeypatch.setattr(BagWriter, "flush_if_due", lambda self: wakes.append(time.monotonic()) if self in mine else None)
     w = BagWriter(tmp_path / "idle", flush_period_s=60.0, fsync=False, background=True)
+    mine.append(w)
     w.add_topic("/x", F64)
     time.sleep(0.3)
     assert wakes == []          # a 2 ms poll would have woken ~150 times
