@@ -38,7 +38,8 @@ def main() -> int:
 
     import cv2
 
-    from softcath_ros.bench.tracker import Scene, Tracker
+    from softcath_ros.bench.tracker import Tracker
+    from softcath_ros.bench.tracker_scene import Scene
     from softcath_ros.bench.tracker_render import SceneLook, render
     from softcath_ros.core.design import load_design
 

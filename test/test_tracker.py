@@ -13,7 +13,8 @@ import pytest
 
 cv2 = pytest.importorskip("cv2", reason="the tracker needs the vision extra (opencv-python-headless)")
 
-from softcath_ros.bench.tracker import Scene, Tracker, parse_hsv_range, parse_point  # noqa: E402
+from softcath_ros.bench.tracker import Tracker  # noqa: E402
+from softcath_ros.bench.tracker_scene import Scene, parse_hsv_range, parse_point  # noqa: E402
 from softcath_ros.bench.tracker_render import SceneLook, render, write_demo_frames  # noqa: E402
 from softcath_ros.cli import main  # noqa: E402
 from softcath_ros.core.design import load_design  # noqa: E402

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.kinematics import backbone_poses
-from .tracker import ARUCO_DICTIONARY, cv2_module
+from .tracker_scene import ARUCO_DICTIONARY
+from .vision import cv2_module
 
 SUPERSAMPLE = 4   # the body's edges are anti-aliased by drawing at this multiple and averaging
 

@@ -49,7 +49,7 @@ def register(sub) -> None:
 
 def build_scene(args, first_frame):
     """The Scene from the arguments and (for markers) the first frame; one-line errors."""
-    from ..bench.tracker import scene_from_settings
+    from ..bench.tracker_scene import scene_from_settings
 
     return scene_from_settings(first_frame, mm_per_px=args.mm_per_px, aruco_mm=args.aruco_mm, base_px=args.base_px,
                                toward_px=args.toward_px, clamp_marker=args.clamp_marker,
@@ -59,7 +59,8 @@ def build_scene(args, first_frame):
 
 def run(args) -> int:
     from ..bench.frames import FrameSource
-    from ..bench.tracker import Tracker, cv2_module, draw_overlay
+    from ..bench.tracker import Tracker, draw_overlay
+    from ..bench.vision import cv2_module
 
     source = FrameSource(args.input)
     try:

@@ -89,7 +89,8 @@ class TrackerNode(LifecycleNode):
     # -- lifecycle ----------------------------------------------------------------------------------
     def on_configure(self, state) -> TransitionCallbackReturn:
         from ..bench.frames import FrameSource
-        from ..bench.tracker import Tracker, scene_from_settings
+        from ..bench.tracker import Tracker
+        from ..bench.tracker_scene import scene_from_settings
 
         try:
             source = FrameSource(self.input)
