@@ -11,7 +11,7 @@ takes, so its overhead is visible apart from the rung's own cost), and any furth
 rungs named with --model (they take the Newton path with their real cost).
 
     .venv/bin/python benchmarks/allocation_speed.py [--design three_channel_5mm] [--calls 20000]
-        [--model section --rung-calls 8 --rung-max-pressure 30000]   (the committed results)
+        [--model section --rung-calls 8 --rung-max-pressure 0.3bar]   (the committed results)
 
 Writes benchmarks/results/allocation_speed.{json,csv,png}.
 """
@@ -27,7 +27,7 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.models import make_model
 from softcath_ros.core.models.base import BendModel
 
-from harness import RESULTS, save_figure, time_each, write_results  # noqa: E402  (benchmarks/ is the script's directory)
+from harness import RESULTS, pressure_option, save_figure, time_each, write_results  # noqa: E402  (benchmarks/ is the script's directory)
 
 TARGET_US = 100.0
 
@@ -63,8 +63,8 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=20000, help="calls per fast case (slower cases use fewer)")
     ap.add_argument("--model", nargs="*", default=[], help="further rungs to time on the Newton path")
     ap.add_argument("--rung-calls", type=int, default=10, help="calls per further rung")
-    ap.add_argument("--rung-max-pressure", type=float, default=None,
-                    help="Pa: allocator limit for the further rungs (inside their convergence range)")
+    ap.add_argument("--rung-max-pressure", type=pressure_option("--rung-max-pressure"), default=None,
+                    help="with its unit: allocator limit for the further rungs (inside their convergence range)")
     args = ap.parse_args()
 
     design = load_design(args.design)

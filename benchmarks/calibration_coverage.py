@@ -7,7 +7,7 @@ run is calibrated (bench/calibration.py) and its intervals checked against the t
 ``--hysteresis`` (Pa) gives the rig a play the model does not have: the model misfits the readings
 beyond their noise, and the intervals must say so (widened by the levels' lack of fit).
 
-    .venv/bin/python benchmarks/calibration_coverage.py [--seeds 24] [--protocol quick] [--hysteresis 3000]
+    .venv/bin/python benchmarks/calibration_coverage.py [--seeds 24] [--protocol quick] [--hysteresis 0.03bar]
 
 Writes benchmarks/results/calibration_coverage.{json,csv} (with --hysteresis:
 calibration_coverage_misfit.*).
@@ -18,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from harness import write_results
+from harness import pressure_option, write_results
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from bench_sim_helpers import run_offline  # noqa: E402  (the offline runner the tests use)
@@ -38,7 +38,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=24)
     ap.add_argument("--protocol", default="quick")
-    ap.add_argument("--hysteresis", type=float, default=0.0, help="the rig's play, Pa (a misfit the model lacks)")
+    ap.add_argument("--hysteresis", type=pressure_option("--hysteresis"), default=0.0,
+                    help="the rig's play, with its unit (a misfit the model lacks)")
     args = ap.parse_args()
     design = load_design("implemented_5mm")
     truth = make_model("closed_form", scaled_design(design, TRUE_SCALE))

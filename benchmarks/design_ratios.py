@@ -7,7 +7,7 @@ Each design is solved on the section rung (one ramp from 0 to the pressure): cha
 for a multi-channel design, channels 0 and 1 at the same pressure. The ratio is |k| over
 implemented_5mm's |k| (1/|k| is the centreline radius); R_C = l / theta is recorded beside it.
 
-    .venv/bin/python benchmarks/design_ratios.py [--pressure 14000] [--designs a,b,...]
+    .venv/bin/python benchmarks/design_ratios.py [--pressure 0.14bar] [--designs a,b,...]
 
 The fan design is benchmarks/designs/three_sector_5mm.yaml.
 
@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import write_results  # noqa: E402
+from harness import pressure_option, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.studies.cases import CaseSpec, solve_case  # noqa: E402
@@ -39,7 +39,7 @@ def commands(n: int, p: float) -> list[tuple[str, tuple]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--pressure", type=float, default=14000.0, help="Pa (default 0.14 bar)")
+    ap.add_argument("--pressure", type=pressure_option("--pressure"), default=14000.0, help="with its unit (default 0.14bar)")
     ap.add_argument("--designs", default=DESIGNS)
     args = ap.parse_args()
     rows, reference = [], None

@@ -5,7 +5,7 @@ section (mirrored half model) at the layer nearest the element the failure messa
 beside the undeformed one, coloured by det F. Answers "is it the lumen collapsing?" with a
 picture rather than a guess.
 
-    .venv/bin/python benchmarks/fe3d_failure_picture.py [--length 0.02] [--to 0.35] [--mesh-size 1.0]
+    .venv/bin/python benchmarks/fe3d_failure_picture.py [--length 0.02] [--to 0.35bar] [--mesh-size 1.0]
                                                        [--lumen-fill 0.01] [--name fe3d_failure_20mm]
 
 Writes benchmarks/results/<name>.{png,json,csv}.
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import save_figure, write_results  # noqa: E402
+from harness import pressure_option, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import best_fit_rotation  # noqa: E402
@@ -32,7 +32,7 @@ from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--length", type=float, default=0.020, help="m")
-    ap.add_argument("--to", type=float, default=0.35, help="bar")
+    ap.add_argument("--to", type=pressure_option("--to"), default=0.35 * PA_PER_BAR, help="top pressure with its unit (default 0.35bar)")
     ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE, help="scale of the base mesh in the section (the rung's default)")
     ap.add_argument("--lumen-fill", type=float, default=None)
     ap.add_argument("--threads", type=int, default=2)
@@ -43,12 +43,12 @@ def main(argv=None) -> int:
     model = Fe3dModel(design, mesh_size=args.mesh_size, cache=False, progress=True, threads=args.threads,
                       lumen_fill=args.lumen_fill)
     t0 = time.perf_counter()
-    state, ramp = model.sweep(np.array([[args.to * PA_PER_BAR]]))
+    state, ramp = model.sweep(np.array([[args.to]]))
     elapsed = time.perf_counter() - t0
     problem = model.problem   # holds the last converged state (a failed step restores it)
     last = ramp.points[-1].load if ramp.points else 0.0
     match = re.search(r"last converged p = ([0-9.]+) bar", ramp.message or "")
-    reached = float(match.group(1)) if match else args.to
+    reached = float(match.group(1)) if match else args.to / PA_PER_BAR
     where = re.search(r"z = ([0-9.]+) mm", ramp.message or "")
     z_fail = float(where.group(1)) * 1e-3 if where else 0.5 * args.length
     z_levels = problem.prism.z_levels
@@ -81,12 +81,12 @@ def main(argv=None) -> int:
     rows = [{"x_mm": float(p[0] * 1e3), "y_mm": float(p[1] * 1e3), "ux_mm": float(d[0] * 1e3),
              "uy_mm": float(d[1] * 1e3), "uz_mm": float(d[2] * 1e3), "det_F": float(j)}
             for p, d, j in zip(sec.points, u, jac)]
-    meta = {"length_m": args.length, "target_bar": args.to, "reached_bar": reached, "last_checkpoint_pa": last,
+    meta = {"length_m": args.length, "target_bar": args.to / PA_PER_BAR, "reached_bar": reached, "last_checkpoint_pa": last,
             "lumen_fill": args.lumen_fill, "mesh_size": args.mesh_size, "layer_h": model.mesh_settings.layer_h,
             "pressure_order": model.pressure_order, "interior_order": model.interior_order, "section_z_m": z,
             "message": ramp.message, "wall_s": elapsed, "ndof": problem.fes.ndof}
     write_results(args.name, meta, rows)
-    print(ramp.message or f"reached {args.to} bar")
+    print(ramp.message or f"reached {args.to / PA_PER_BAR} bar")
     print(draw(args.name, sec, local, jac, z, reached, ramp.message))
     return 0
 

@@ -7,7 +7,7 @@ compares, at the same axial resolution, membrane (layers of ``--layer``) and rin
 per band, gaps split to ``--layer``):
 
     .venv/bin/python benchmarks/fe3d_rings.py                       # 8 mm, coarse section
-    .venv/bin/python benchmarks/fe3d_rings.py --length 0.016 --to 0.20 --name fe3d_rings_16mm
+    .venv/bin/python benchmarks/fe3d_rings.py --length 0.016 --to 0.20bar --name fe3d_rings_16mm
 
 Writes benchmarks/results/<name>.{json,csv,png}; results are cached (the project cache, kind fe3d).
 """
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import save_figure, write_results  # noqa: E402
+from harness import pressure_option, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
@@ -33,8 +33,8 @@ from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--length", type=float, default=0.008, help="m")
-    ap.add_argument("--to", type=float, default=0.15, help="bar")
-    ap.add_argument("--step", type=float, default=0.05, help="bar between reported pressures")
+    ap.add_argument("--to", type=pressure_option("--to"), default=0.15 * PA_PER_BAR, help="top pressure with its unit (default 0.15bar)")
+    ap.add_argument("--step", type=pressure_option("--step"), default=0.05 * PA_PER_BAR, help="between reported pressures, with its unit (default 0.05bar)")
     ap.add_argument("--mesh-size", type=float, default=1.4, help="scale of the default section mesh")
     ap.add_argument("--layer", type=float, default=0.4e-3, help="largest layer height, m")
     ap.add_argument("--threads", type=int, default=2)
@@ -42,7 +42,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     design = load_design("implemented_5mm").with_length(args.length)
-    pressures = np.round(np.arange(args.step, args.to + 1e-9, args.step), 6)
+    pressures = np.round(np.arange(args.step, args.to + 1e-4, args.step) / PA_PER_BAR, 6)   # bar
     mesh = dataclasses.replace(MeshSettings().scaled(args.mesh_size), layer_h=args.layer)
     out = {}
     for model_name in ("membrane", "rings"):

@@ -1,27 +1,27 @@
 """fe3d: the condensed tangent's smallest eigenvalues along a pressure ramp (core/fe3d/stability.py),
 to tell a bifurcation or limit point (lam -> 0 at the stop) from a numerical failure (lam clearly > 0).
 
-    .venv/bin/python benchmarks/fe3d_stability.py --length 0.02 --order 1 --from 0.15 --name fe3d_stability_20mm_p1
-    .venv/bin/python benchmarks/fe3d_stability.py --length 0.02 --order 0 --from 0.15 --name fe3d_stability_20mm_p0
+    .venv/bin/python benchmarks/fe3d_stability.py --length 0.02 --order 1 --from 0.15bar --name fe3d_stability_20mm_p1
+    .venv/bin/python benchmarks/fe3d_stability.py --length 0.02 --order 0 --from 0.15bar --name fe3d_stability_20mm_p0
     .venv/bin/python benchmarks/fe3d_stability.py --resume fe3d_stability_20mm_p1 --amplitude 1e-2 --name ...
 
 Per accepted step: R_C = L/theta, the lumen wall's smallest hoop stretch and det F, the outer
 surface's smallest principal surface stretch (where, the other one there), its smallest hoop and
 axial stretches and det F (core/fe3d/measure.py surface_stretch), the smallest gap, wall time; from
-``--from`` bar also the k eigenvalues nearest zero over 2 c1, where the first mode is largest
+``--from`` on also the k eigenvalues nearest zero over 2 c1, where the first mode is largest
 (element, nearest surface), its share within 0.5 mm of the lumen wall, its load share (~1 limit
 point, ~0 bifurcation), its extent (the elements holding 90 % of its M: count, reference r, angle
 and z ranges) and the outer surface's smallest principal stretch within that angular range.
 Writes benchmarks/results/<name>.{json,csv,png} (eigenvalue vs pressure) and keeps the last two
 accepted states and the first mode in $SOFTCATH_CACHE/<name>.npz. ``--k 0``: no eigenvalues (the
-wall's stretches along the ramp only). ``--census``: from ``--from`` bar also the contact pairs of a
+wall's stretches along the ramp only). ``--census``: from ``--from`` on also the contact pairs of a
 fresh search at every accepted step (LumenContact.pair_census: the wall area of the pairs in the
 barrier's range and of those whose partner lies more than 2 d_hat behind the primary, through the
 silicone, ignored by the energy; where they are and their mean gap), the diagnosis of the pairs'
 stall in docs/models/fe3d.md ("Where it fails"):
 
     .venv/bin/python benchmarks/fe3d_stability.py --length 0.01 --mesh-size coarse --contact-distance 0.02 \
-        --order 0 --k 0 --census --from 0.20 --to 0.30 --name fe3d_contact_pairs_10mm
+        --order 0 --k 0 --census --from 0.20bar --to 0.30bar --name fe3d_contact_pairs_10mm
 
 ``--resume NAME``: continue NAME's ramp from its last converged state plus ``--amplitude`` x the
 lumen wall's thickness (0.6 mm) times its first mode scaled to a largest displacement of 1
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import fe3d_solver_log, save_figure, write_results  # noqa: E402
+from harness import fe3d_solver_log, pressure_option, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure, outer_surface_stretch  # noqa: E402
@@ -70,10 +70,13 @@ def main(argv=None) -> int:
     ap.add_argument("--lumen-h", type=float, default=None, help="edge length on the lumen wall, m, after --mesh-size "
                     "(default: the mesh's wall_h)")
     ap.add_argument("--contact-distance", type=float, default=0.01, help="d_hat / lumen diameter")
-    ap.add_argument("--from", dest="start", type=float, default=0.15, help="bar: eigenvalues from here on")
-    ap.add_argument("--to", type=float, default=0.35, help="bar")
-    ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
-    ap.add_argument("--initial-step", type=float, default=None, help="bar (default: the ramp's, 0.01)")
+    ap.add_argument("--from", dest="start", type=pressure_option("--from"), default=0.15 * PA_PER_BAR,
+                    help="eigenvalues from this pressure on, with its unit (default 0.15bar)")
+    ap.add_argument("--to", type=pressure_option("--to"), default=0.35 * PA_PER_BAR, help="with its unit (default 0.35bar)")
+    ap.add_argument("--step", type=pressure_option("--step"), default=0.025 * PA_PER_BAR,
+                    help="checkpoint spacing, with its unit (default 0.025bar)")
+    ap.add_argument("--initial-step", type=pressure_option("--initial-step"), default=None,
+                    help="with its unit (default: the ramp's, 0.01bar)")
     ap.add_argument("--k", type=int, default=3, help="eigenvalues per state (0: none)")
     ap.add_argument("--census", action="store_true", help="the contact pairs' census from --from on (see above)")
     ap.add_argument("--resume", default=None, help="continue this run's last converged state (see above)")
@@ -152,13 +155,13 @@ def main(argv=None) -> int:
                "outer_min_hoop_stretch": o["min_hoop_stretch"], "outer_axial_stretch_there": o["axial_stretch_there"],
                "outer_min_axial_stretch": float(o["axial_stretch"].min()), "outer_min_det_f": o["min_det_f"]}
         state = pb.get_state()
-        if args.census and pb.contact is not None and load >= args.start * PA_PER_BAR - 1e-6:
+        if args.census and pb.contact is not None and load >= args.start - 1e-6:
             for kind, v in pb.contact.pair_census().items():
                 row[f"{kind}_area_mm2"] = v["area_m2"] * 1e6
                 for k in ("x", "y", "z", "gap"):   # absent when no pair of the kind
                     if k in v:
                         row[f"{kind}_{k}_{'um' if k == 'gap' else 'mm'}"] = v[k] * (1e6 if k == "gap" else 1e3)
-        if args.k > 0 and load >= args.start * PA_PER_BAR - 1e-6:
+        if args.k > 0 and load >= args.start - 1e-6:
             ts = time.perf_counter()
             s = pb.stability(args.k)
             pb.set_state(state)
@@ -191,9 +194,9 @@ def main(argv=None) -> int:
         def set_postfix_str(self, s):
             record()
 
-    cps = np.round(np.arange(args.step, args.to + 1e-9, args.step), 6) * PA_PER_BAR
+    cps = np.round(np.arange(args.step, args.to + 1e-4, args.step) / PA_PER_BAR, 6) * PA_PER_BAR
     control = default_step_control() if args.initial_step is None else \
-        default_step_control(step=args.initial_step * PA_PER_BAR)
+        default_step_control(step=args.initial_step)
     r = run_ramp(pb, [1.0], cps, control, progress=Progress(), start=start)
     meta.update(converged=r.converged, message=r.message, stop_reason=r.stop_reason, steps=r.steps,
                 cuts=r.cuts, newton_iterations=r.iterations, total_s=time.perf_counter() - t0,

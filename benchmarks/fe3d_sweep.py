@@ -1,14 +1,14 @@
 """fe3d benchmark and validation runs: pressure sweeps through the 3D rung, timed, with peak memory.
 
     .venv/bin/python benchmarks/fe3d_sweep.py                      # 0 -> 0.20 bar, 40 mm, the rung's defaults
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --name fe3d_20mm
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --name fe3d_20mm
     .venv/bin/python benchmarks/fe3d_sweep.py --mesh-size 1.2 --name fe3d_mesh_1.2   # finer in the section
-    .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01 --name fe3d_fixed_steps
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --contact-distance 0.03 --name fe3d_contact_0.03
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --no-section --name fe3d_timing_20mm   # the timed case only
-    .venv/bin/python benchmarks/fe3d_sweep.py --design docs/examples/sectors.yaml --channel 0 --to 0.35 \
+    .venv/bin/python benchmarks/fe3d_sweep.py --fixed-steps 0.01bar --name fe3d_fixed_steps
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --contact-distance 0.03 --name fe3d_contact_0.03
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --no-section --name fe3d_timing_20mm   # the timed case only
+    .venv/bin/python benchmarks/fe3d_sweep.py --design docs/examples/sectors.yaml --channel 0 --to 0.35bar \
         --name fe3d_sweep_sectors_ch0   # one channel of a multi-channel design: the half body on its mirror plane
-    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35 --order 0 --interior-order none \
+    .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --order 0 --interior-order none \
         --contact-distance 0.01 --mesh-size 1.0 --layer-h scaled --name fe3d_p2p0   # the former default (fe3d-7)
 
 Flags left out take the rung's defaults (core/models/fe3d.py: mesh 1.4, 1.2 mm layers, P2 + bubbles / P1,
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import fe3d_solver_log, save_figure, write_results  # noqa: E402
+from harness import fe3d_solver_log, pressure_option, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
@@ -53,12 +53,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--design", default="implemented_5mm")
     ap.add_argument("--length", type=float, default=0.040, help="m")
-    ap.add_argument("--to", type=float, default=0.20, help="bar")
-    ap.add_argument("--step", type=float, default=0.025, help="checkpoint spacing, bar")
+    ap.add_argument("--to", type=pressure_option("--to"), default=0.20 * PA_PER_BAR, help="with its unit (default 0.20bar)")
+    ap.add_argument("--step", type=pressure_option("--step"), default=0.025 * PA_PER_BAR,
+                    help="checkpoint spacing, with its unit (default 0.025bar)")
     ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE,
                     help=f"scale of the base mesh in the section (smaller = finer; default {DEFAULT_MESH_SIZE})")
-    ap.add_argument("--fixed-steps", type=float, default=None,
-                    help="step control off: plain load steps of this size (bar), no cutting, no predictor")
+    ap.add_argument("--fixed-steps", type=pressure_option("--fixed-steps"), default=None,
+                    help="step control off: plain load steps of this size (with its unit), no cutting, no predictor")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--contact-distance", default=None,
                     help="lumen contact's barrier distance as a fraction of the lumen diameter "
@@ -80,8 +81,8 @@ def main(argv=None) -> int:
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
     ap.add_argument("--stall", type=int, default=None,
                     help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
-    ap.add_argument("--max-step", type=float, default=None,
-                    help="StepControl.max_step, bar (the adaptive ramp's largest step; default 0.025 bar)")
+    ap.add_argument("--max-step", type=pressure_option("--max-step"), default=None,
+                    help="StepControl.max_step, with its unit (the adaptive ramp's largest step; default 0.025bar)")
     ap.add_argument("--no-retry", action="store_true",
                     help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
@@ -96,20 +97,20 @@ def main(argv=None) -> int:
         return 0
 
     design = load_design(args.design).with_length(args.length)
-    checkpoints = np.round(np.arange(0.0, args.to + 1e-9, args.step), 6) * PA_PER_BAR
+    checkpoints = np.round(np.arange(0.0, args.to + 1e-4, args.step) / PA_PER_BAR, 6) * PA_PER_BAR
     if not 0 <= args.channel < design.n_channels:
         ap.error(f"--channel {args.channel}: {design.name} has channels 0..{design.n_channels - 1}")
     commands = np.zeros((len(checkpoints), design.n_channels))
     commands[:, args.channel] = checkpoints
     control = None
     if args.fixed_steps is not None:
-        control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps * PA_PER_BAR)
+        control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps)
     if args.no_retry:
         control = dataclasses.replace(control or default_step_control(), retry_from_last=False)
     if args.max_step is not None:
         if not 0 < args.max_step <= args.to:
-            ap.error(f"--max-step {args.max_step:g} bar: must be positive and at most --to ({args.to:g} bar)")
-        control = dataclasses.replace(control or default_step_control(), max_step=args.max_step * PA_PER_BAR)
+            ap.error(f"--max-step {args.max_step / PA_PER_BAR:g} bar: must be positive and at most --to ({args.to / PA_PER_BAR:g} bar)")
+        control = dataclasses.replace(control or default_step_control(), max_step=args.max_step)
     if args.stall is not None and args.stall < 1:
         ap.error(f"--stall {args.stall}: must be at least 1 iteration")
     contact = {} if args.contact_distance is None else {

@@ -2,12 +2,12 @@
 with a profile of where the time goes, on the full body or on the half body about the direction's
 mirror plane (``half=True``: core/fe3d/mesh.py ``mirror_plane``).
 
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --full --name fe3d_3ch_profile_full
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --full --mirror-mesh --name fe3d_3ch_full_mirror
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1 --name fe3d_3ch_profile_half
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --name fe3d_three_channel_default    # the timed sweep
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --direction pair --name fe3d_three_channel_pair
-    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35 --max-step 0.05 --name fe3d_three_channel_step0.05
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1bar --full --name fe3d_3ch_profile_full
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1bar --full --mirror-mesh --name fe3d_3ch_full_mirror
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.1bar --name fe3d_3ch_profile_half
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35bar --name fe3d_three_channel_default    # the timed sweep
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35bar --direction pair --name fe3d_three_channel_pair
+    .venv/bin/python benchmarks/fe3d_three_channel.py --to 0.35bar --max-step 0.05bar --name fe3d_three_channel_step0.05
     .venv/bin/python benchmarks/fe3d_three_channel.py --compare fe3d_3ch_profile_full fe3d_3ch_profile_half
 
 Writes benchmarks/results/<name>.{json,csv,png}: per checkpoint R_C = L / theta, bending angle and
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import RESULTS, save_figure, write_results  # noqa: E402
+from harness import RESULTS, pressure_option, save_figure, write_results  # noqa: E402
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
@@ -99,12 +99,12 @@ def profile_targets(problem):
 def run(args) -> int:
     design = load_design("three_channel_5mm").with_length(args.length)
     direction = DIRECTIONS[args.direction]
-    checkpoints = np.round(np.arange(args.step, args.to + 1e-9, args.step), 6) * PA_PER_BAR
+    checkpoints = np.round(np.arange(args.step, args.to + 1e-4, args.step) / PA_PER_BAR, 6) * PA_PER_BAR
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
     control = default_step_control()
     if args.max_step is not None:
-        control = dataclasses.replace(control, max_step=args.max_step * PA_PER_BAR)
+        control = dataclasses.replace(control, max_step=args.max_step)
     model = Fe3dVariantModel(design, mesh_size=args.mesh_size, half=not args.full, cache=False, progress=True,
                       threads=args.threads, mirror_mesh=args.full and args.mirror_mesh, step_control=control,
                       **contact)
@@ -204,11 +204,13 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--direction", choices=sorted(DIRECTIONS), default="one")
     ap.add_argument("--length", type=float, default=0.040, help="m")
-    ap.add_argument("--to", type=float, default=0.35, help="bar")
-    ap.add_argument("--step", type=float, default=0.05, help="checkpoint spacing, bar")
+    ap.add_argument("--to", type=pressure_option("--to"), default=0.35 * PA_PER_BAR, help="with its unit (default 0.35bar)")
+    ap.add_argument("--step", type=pressure_option("--step"), default=0.05 * PA_PER_BAR,
+                    help="checkpoint spacing, with its unit (default 0.05bar)")
     ap.add_argument("--mesh-size", type=float, default=DEFAULT_MESH_SIZE, help="scale of the base mesh in the section (the rung's default)")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--max-step", type=float, default=None, help="largest load step, bar (default: the rung's)")
+    ap.add_argument("--max-step", type=pressure_option("--max-step"), default=None,
+                    help="largest load step, with its unit (default: the rung's)")
     ap.add_argument("--full", action="store_true", help="the full body (default: the half body when the "
                                                          "direction lies on a mirror plane)")
     ap.add_argument("--mirror-mesh", action="store_true", help="with --full: the full body meshed as the half "

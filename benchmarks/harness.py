@@ -8,6 +8,7 @@ are started on a private DDS domain by softcath_ros.graph.
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import os
@@ -17,10 +18,23 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from softcath_ros.core.errors import SoftcathError
+from softcath_ros.core.units import parse_pressure
 from softcath_ros.provenance import machine_meta
 
 RESULTS = Path(__file__).resolve().parent / "results"
 LOAD_AT_START = os.getloadavg()   # when the benchmark script imported the harness
+
+
+def pressure_option(option: str) -> Callable[[str], float]:
+    """An argparse ``type`` for a pressure option: Pa from text with its unit (``0.35bar``,
+    ``35kPa``), by the tools' one rule (core/units.py); a bare non-zero number is refused."""
+    def parse(text: str) -> float:
+        try:
+            return parse_pressure(text, option)
+        except SoftcathError as exc:
+            raise argparse.ArgumentTypeError(str(exc).replace(" (or give --unit Pa|kPa|bar)", "")) from None
+    return parse
 
 
 def time_loops(fn: Callable[[], object], repeats: int, calls: int) -> list[float]:

@@ -39,6 +39,9 @@ import numpy as np
 
 from softcath_ros import topics
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from harness import pressure_option  # noqa: E402
+
 RESIDUES = 997
 
 
@@ -93,8 +96,8 @@ def main() -> int:
     ap.add_argument("--realtime-priority", type=int, default=0,
                     help="SCHED_FIFO priority for the probe's threads (0: normal), as for the node")
     ap.add_argument("--discovery-timeout", type=float, default=20.0)
-    ap.add_argument("--top-pressure", type=float, default=0.0,
-                    help="Pa: drive channel 0 over 0.9 x this (default 0: the rung's own valid range)")
+    ap.add_argument("--top-pressure", type=pressure_option("--top-pressure"), default=0.0,
+                    help="with its unit: drive channel 0 over 0.9 x this (default 0: the rung's own valid range)")
     args = ap.parse_args()
     # The sender thread must get the GIL within ~0.1 ms of its deadline, not after the
     # default 5 ms switch interval while the receiving thread runs callbacks.

@@ -23,7 +23,7 @@ timed and reported, not charged to the node's start-up in every run.
     .venv/bin/python benchmarks/node_latency.py --configs default,single --repeats 1 --duration 3
     .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default,rt --repeats 3
     .venv/bin/python benchmarks/node_latency.py --configs default,view_off,rt --name node_latency_view
-    .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default --top-pressure 23333 \
+    .venv/bin/python benchmarks/node_latency.py --model surrogate --configs default --top-pressure 0.23333bar \
         --name node_latency_surrogate_every_command     # 0-0.21 bar: every command answered (issue 34)
 
 Writes benchmarks/results/<name>.{csv,json,png} through harness.write_results (name:
@@ -46,7 +46,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-from harness import save_figure, write_results  # noqa: E402
+from harness import pressure_option, save_figure, write_results  # noqa: E402
 from softcath_ros.graph import graph_env, lease_domain  # noqa: E402
 
 # name -> (what it changes, model_node parameters). "default" is the node's default configuration.
@@ -90,7 +90,7 @@ def run_once(name: str, params: dict, args, domain: int, workdir: Path) -> dict:
                  "--qos-depth", str(params.get("qos_depth", 1000)),
                  "--reliability", params.get("reliability", "reliable"),
                  "--realtime-priority", str(params.get("realtime_priority", 0)),
-                 "--top-pressure", str(args.top_pressure)]
+                 "--top-pressure", f"{args.top_pressure!r}Pa"]
         subprocess.run(probe, env=env, check=True, timeout=args.duration + args.warmup + 60)
     finally:
         if node.poll() is None:
@@ -211,8 +211,8 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=1000.0)
     ap.add_argument("--model", default="closed_form", help="model_node's rung (parameter 'model'), e.g. surrogate")
     ap.add_argument("--design", default="implemented_5mm", help="model_node's design (parameter 'design')")
-    ap.add_argument("--top-pressure", type=float, default=0.0,
-                    help="Pa: the probe drives channel 0 over 0.9 x this (default: the rung's valid range)")
+    ap.add_argument("--top-pressure", type=pressure_option("--top-pressure"), default=0.0,
+                    help="with its unit: the probe drives channel 0 over 0.9 x this (default: the rung's valid range)")
     ap.add_argument("--name", default=None, help="results stem under benchmarks/results/ "
                     "(default node_latency, or node_latency_<model> for another rung)")
     args = ap.parse_args()

@@ -80,3 +80,20 @@ def test_section_vs_fe3d_reads_sweep_and_stability_results(harness, tmp_path, mo
         assert r["section_vs_fe3d"] == pytest.approx(r["section_rc_mm"] / r["fe3d_rc_mm"] - 1.0)
     (tmp_path / "c.json").write_text("{}")
     assert section_vs_fe3d.main(["--fe3d", "c"]) == 2
+
+
+def test_benchmark_pressures_carry_their_unit(harness):
+    """The tools' one pressure rule holds in the benchmark scripts too: a suffix gives the unit, a
+    bare non-zero number is refused naming the option (not read as bar or Pa silently)."""
+    import argparse
+    import re
+
+    parse = harness.pressure_option("--to")
+    assert parse("0.35bar") == 35000.0 and parse("15kPa") == 15000.0 and parse("0") == 0.0
+    with pytest.raises(argparse.ArgumentTypeError, match=r"--to 0\.35: which unit\? write 0\.35bar"):
+        parse("0.35")
+    option = re.compile(r'add_argument\("--(?:to|from|step|pressure|top-pressure|max-step|fixed-steps|initial-step|'
+                        r'hysteresis|rung-max-pressure)"[^)]*type=float[^)]*\)')
+    bare = [f"{p.name}: {m.group(0)}" for p in BENCHMARKS.glob("*.py") for m in option.finditer(p.read_text())
+            if "degree" not in m.group(0)]   # (a --step in degrees is no pressure)
+    assert not bare, f"pressure options read as bare floats: {bare}"
