@@ -21,7 +21,8 @@ import numpy as np
 
 from ..core.prediction import arc_and_cap
 from ..core.rod.law import LinearLaw
-from ..core.rod.statics import PlanarLoads, PlaneContact, solve_rod
+from ..core.rod.loads import PlanarLoads, PlaneContact
+from ..core.rod.statics import solve_rod
 from ..core.section_properties import transformed_section
 
 N_SEGMENTS = 40

@@ -25,7 +25,7 @@ import yaml
 
 from ..core.errors import SoftcathError, shown
 from ..core.checks import NAME_RULE, finite_number, is_file_name
-from ..core.design import PLAUSIBLE_PRESSURE, pressure_guess
+from ..core.plausibility import PLAUSIBLE_PRESSURE, pressure_guess
 from ..core.yaml_io import load_yaml_file
 
 BENCHES = ("angle", "force")

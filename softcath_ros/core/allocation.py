@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .design import PLAUSIBLE_PRESSURE, pressure_guess
+from .plausibility import PLAUSIBLE_PRESSURE, pressure_guess
 from .errors import ModelError, SoftcathError
 from .kinematics import curvature_for_tip, tip_pose_single
 from .prediction import arc_and_cap, body_reach

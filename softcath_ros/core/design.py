@@ -12,13 +12,11 @@ from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 
-
-
 from .yaml_io import load_yaml_file
-
 from .errors import DesignError
 from .materials import YeohMaterial, material_from_spec
 from .checks import NAME_RULE, is_file_name
+from .plausibility import check_plausible, plausible_length
 from . import geometry
 from .geometry.shapes import nonnegative_field as _nonnegative, number_field as _number, required_field as _req
 
@@ -53,6 +51,11 @@ class Hole:
 
     def spec(self) -> dict:
         return {"diameter": self.diameter, "center": list(self.center)}
+
+    def sizes(self, name: str) -> list[tuple[str, float]]:
+        """(field, m) of the sizes the plausibility check reads."""
+        return [(f"{name}.diameter", self.diameter), (f"{name}.center[0]", self.center[0]),
+                (f"{name}.center[1]", self.center[1])]
 
 
 @dataclass(frozen=True)
@@ -96,6 +99,16 @@ class ShapedHole:
 
     def spec(self) -> dict:
         return self.shape.spec()
+
+    def sizes(self, name: str) -> list[tuple[str, float]]:
+        """(field, m) of the sizes the plausibility check reads."""
+        shape = self.shape
+        if shape.kind == "sector":
+            return [(f"{name}.inner_radius", shape.inner_radius), (f"{name}.outer_radius", shape.outer_radius),
+                    (f"{name}.fillet", shape.fillet)]
+        field_name = f"{name}.points" if shape.kind == "polygon" else f"{name}.path"
+        largest = max(abs(c) for p in shape.points for c in p[:2])
+        return [(field_name, largest)] + ([(f"{name}.fillet", shape.fillet)] if shape.kind == "polygon" else [])
 
 
 @dataclass(frozen=True)
@@ -244,81 +257,6 @@ def _material_dict(m: YeohMaterial) -> dict:
             "bulk_modulus": m.bulk_modulus, "density": m.density}
 
 
-# --------------------------------------------------------------------------- plausibility
-# Magnitudes a catheter-scale soft actuator can have. Outside them a value is almost always a unit
-# slip (millimetres for metres, bar for pascals), refused with the likely intended value.
-PLAUSIBLE_LENGTH = (1.0e-3, 2.0)          # m: body length
-PLAUSIBLE_SIZE = 0.1                      # m: largest diameter, offset, thickness or pitch on the section
-PLAUSIBLE_PRESSURE = (1.0e3, 2.0e6)       # Pa: max_pressure (0.01 to 20 bar)
-PLAUSIBLE_MODULUS = (100.0, 1.0e12)       # Pa: Yeoh c1, thread Young's modulus
-
-
-def _plausible_size(value: float, field_name: str, upper: float = PLAUSIBLE_SIZE) -> float:
-    if abs(value) > upper:
-        raise DesignError(field_name, value, f"{value:g} m {field_name} is implausible: design files are in "
-                                             f"metres; {value * 1e-3:g}?")
-    return value
-
-
-def _plausible_pascals(value: float, field_name: str, bounds: tuple[float, float], guess) -> float:
-    """``value`` (Pa) within ``bounds``; below them ``guess(value)`` names the likely intended value."""
-    lo, hi = bounds
-    if value < lo:
-        raise DesignError(field_name, value, f"{value:g} Pa {field_name} is implausible: design files are in "
-                                             f"pascals; {guess(value)}?")
-    if value > hi:
-        raise DesignError(field_name, value, f"{value:g} Pa ({value / 1e5:g} bar) {field_name} is implausible "
-                                             f"(above {hi:g} Pa): design files are in pascals")
-    return value
-
-
-def pressure_guess(v: float) -> str:
-    return f"{v * 1e5:g} ({v:g} bar)" if v <= 20 else f"{v * 1e3:g} ({v:g} kPa)"
-
-
-def _modulus_guess(v: float) -> str:
-    return f"{v * 1e3:g} ({v:g} kPa)" if v >= 1 else f"{v * 1e6:g} ({v:g} MPa)"
-
-
-def plausible_length(value: float) -> float:
-    """A body length (m) a catheter-scale actuator can have, else the slip named (mm for m)."""
-    if value < PLAUSIBLE_LENGTH[0]:
-        raise DesignError("length", value, f"{value:g} m length is implausible (below "
-                                           f"{PLAUSIBLE_LENGTH[0] * 1e3:g} mm): lengths are in metres")
-    return _plausible_size(value, "length", PLAUSIBLE_LENGTH[1])
-
-
-def check_plausible(design: "Design") -> None:
-    """Refuse magnitudes no catheter-scale actuator has, naming field, value and the likely slip."""
-    plausible_length(design.length)
-    sizes = [("outer_diameter", design.outer_diameter), ("cap_thickness", design.cap_thickness),
-             ("min_wall_thickness", design.min_wall_thickness)]
-    holes = [(f"channels[{i}]", c) for i, c in enumerate(design.channels)]
-    holes += [("lumen", design.lumen)] if design.lumen is not None else []
-    holes += [("limiting_fibre", design.limiting_fibre)] if design.limiting_fibre is not None else []
-    for name, h in holes:
-        if isinstance(h, ShapedHole):
-            sizes += _shape_sizes(name, h.shape)
-            continue
-        sizes += [(f"{name}.diameter", h.diameter), (f"{name}.center[0]", h.center[0]),
-                  (f"{name}.center[1]", h.center[1])]
-    if design.reinforcement is not None:
-        sizes += [("reinforcement.pitch", design.reinforcement.pitch),
-                  ("reinforcement.thread_diameter", design.reinforcement.thread_diameter)]
-    if design.device is not None:
-        sizes += [("device.diameter", design.device.diameter)]
-    for name, v in sizes:
-        _plausible_size(v, name)
-    _plausible_pascals(design.max_pressure, "limits.max_pressure", PLAUSIBLE_PRESSURE, pressure_guess)
-    moduli = [("material.c1", design.material.c1)]
-    if design.limiting_fibre is not None:
-        moduli.append(("limiting_fibre.material.c1", design.limiting_fibre.material.c1))
-    if design.reinforcement is not None:
-        moduli.append(("reinforcement.youngs_modulus", design.reinforcement.youngs_modulus))
-    for name, v in moduli:
-        _plausible_pascals(v, name, PLAUSIBLE_MODULUS, _modulus_guess)
-
-
 # --------------------------------------------------------------------------- loading
 
 _REQUIRED = ("name", "length", "outer_diameter", "channels", "material", "limits")
@@ -343,6 +281,7 @@ def load_design(name_or_path: str | Path) -> Design:
 
 
 def design_from_dict(data, source: str | None = None) -> Design:
+    """The validated design from a design file's mapping (``source``: its path, for CAD outlines beside it)."""
     if not isinstance(data, dict):
         raise DesignError("design", data, "must be a mapping of fields")
     for key in _REQUIRED:
@@ -369,45 +308,9 @@ def design_from_dict(data, source: str | None = None) -> Design:
 
     material = material_from_spec(data["material"], "material")
 
-    fibre = None
-    if get("limiting_fibre") is not None:
-        f = _mapping(get("limiting_fibre"), "limiting_fibre", {"diameter", "center", "material"})
-        fibre = LimitingFibre(
-            diameter=_positive(_req(f, "diameter", "limiting_fibre"), "limiting_fibre.diameter"),
-            center=_point(_req(f, "center", "limiting_fibre"), "limiting_fibre.center"),
-            material=material_from_spec(f.get("material", "polyester_fibre"), "limiting_fibre.material"))
-
-    reinforcement = None
-    if get("reinforcement") is not None:
-        r = _mapping(get("reinforcement"), "reinforcement",
-                     {"pitch", "thread_diameter", "shape", "youngs_modulus", "poisson_ratio"})
-        shape = r.get("shape", "square")
-        if shape not in ("square", "round"):
-            raise DesignError("reinforcement.shape", shape, "must be 'square' or 'round'")
-        nu = _number(_req(r, "poisson_ratio", "reinforcement"), "reinforcement.poisson_ratio")
-        if not -1.0 < nu < 0.5:
-            raise DesignError("reinforcement.poisson_ratio", nu, "must lie in (-1, 0.5)")
-        reinforcement = Reinforcement(
-            pitch=_positive(_req(r, "pitch", "reinforcement"), "reinforcement.pitch"),
-            thread_diameter=_positive(_req(r, "thread_diameter", "reinforcement"), "reinforcement.thread_diameter"),
-            shape=shape,
-            youngs_modulus=_positive(_req(r, "youngs_modulus", "reinforcement"), "reinforcement.youngs_modulus"),
-            poisson_ratio=nu)
-        if reinforcement.thread_diameter > reinforcement.pitch:
-            raise DesignError("reinforcement.thread_diameter", reinforcement.thread_diameter,
-                              f"larger than the pitch {reinforcement.pitch}: threads would overlap")
-
-    device = None
-    if get("device") is not None:
-        dv = _mapping(get("device"), "device", {"diameter", "bending_stiffness"})
-        device = Device(diameter=_positive(_req(dv, "diameter", "device"), "device.diameter"),
-                        bending_stiffness=_nonnegative(_req(dv, "bending_stiffness", "device"),
-                                                       "device.bending_stiffness"))
-        if lumen is None:
-            raise DesignError("device", get("device"), "a device needs a lumen, and lumen is null")
-        if isinstance(lumen, Hole) and device.diameter > lumen.diameter:
-            raise DesignError("device.diameter", device.diameter,
-                              f"larger than the lumen diameter {lumen.diameter}")
+    fibre = None if get("limiting_fibre") is None else _limiting_fibre(get("limiting_fibre"))
+    reinforcement = None if get("reinforcement") is None else _reinforcement(get("reinforcement"))
+    device = None if get("device") is None else _device(get("device"), lumen)
 
     limits = _mapping(data["limits"], "limits", {"max_pressure"})
     if "max_pressure" not in limits:
@@ -431,14 +334,45 @@ def design_from_dict(data, source: str | None = None) -> Design:
     return design
 
 
-def _shape_sizes(name: str, shape) -> list[tuple[str, float]]:
-    """The sizes of a non-circular hole the plausibility check reads (m)."""
-    if shape.kind == "sector":
-        return [(f"{name}.inner_radius", shape.inner_radius), (f"{name}.outer_radius", shape.outer_radius),
-                (f"{name}.fillet", shape.fillet)]
-    field_name = f"{name}.points" if shape.kind == "polygon" else f"{name}.path"
-    largest = max(abs(c) for p in shape.points for c in p[:2])
-    return [(field_name, largest)] + ([(f"{name}.fillet", shape.fillet)] if shape.kind == "polygon" else [])
+def _limiting_fibre(value) -> LimitingFibre:
+    f = _mapping(value, "limiting_fibre", {"diameter", "center", "material"})
+    return LimitingFibre(
+        diameter=_positive(_req(f, "diameter", "limiting_fibre"), "limiting_fibre.diameter"),
+        center=_point(_req(f, "center", "limiting_fibre"), "limiting_fibre.center"),
+        material=material_from_spec(f.get("material", "polyester_fibre"), "limiting_fibre.material"))
+
+
+def _reinforcement(value) -> Reinforcement:
+    r = _mapping(value, "reinforcement", {"pitch", "thread_diameter", "shape", "youngs_modulus", "poisson_ratio"})
+    shape = r.get("shape", "square")
+    if shape not in ("square", "round"):
+        raise DesignError("reinforcement.shape", shape, "must be 'square' or 'round'")
+    nu = _number(_req(r, "poisson_ratio", "reinforcement"), "reinforcement.poisson_ratio")
+    if not -1.0 < nu < 0.5:
+        raise DesignError("reinforcement.poisson_ratio", nu, "must lie in (-1, 0.5)")
+    reinforcement = Reinforcement(
+        pitch=_positive(_req(r, "pitch", "reinforcement"), "reinforcement.pitch"),
+        thread_diameter=_positive(_req(r, "thread_diameter", "reinforcement"), "reinforcement.thread_diameter"),
+        shape=shape,
+        youngs_modulus=_positive(_req(r, "youngs_modulus", "reinforcement"), "reinforcement.youngs_modulus"),
+        poisson_ratio=nu)
+    if reinforcement.thread_diameter > reinforcement.pitch:
+        raise DesignError("reinforcement.thread_diameter", reinforcement.thread_diameter,
+                          f"larger than the pitch {reinforcement.pitch}: threads would overlap")
+    return reinforcement
+
+
+def _device(value, lumen) -> Device:
+    """The tool in the lumen; a circular lumen must be at least as wide (a shaped one is checked on the section)."""
+    dv = _mapping(value, "device", {"diameter", "bending_stiffness"})
+    device = Device(diameter=_positive(_req(dv, "diameter", "device"), "device.diameter"),
+                    bending_stiffness=_nonnegative(_req(dv, "bending_stiffness", "device"),
+                                                   "device.bending_stiffness"))
+    if lumen is None:
+        raise DesignError("device", value, "a device needs a lumen, and lumen is null")
+    if isinstance(lumen, Hole) and device.diameter > lumen.diameter:
+        raise DesignError("device.diameter", device.diameter, f"larger than the lumen diameter {lumen.diameter}")
+    return device
 
 
 def check_geometry(design: Design) -> None:

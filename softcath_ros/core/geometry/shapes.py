@@ -26,7 +26,7 @@ _KEYS = {"circle": {"shape", "diameter", "center"},
          "file": {"shape", "path", "units", "layer", "id"}}
 MAX_POINTS = 10_000
 MIN_EDGE = 1e-9   # m: points closer than this are one point
-MAX_REACH = 0.1   # m: no hole of a catheter-scale section reaches further from the axis (design.PLAUSIBLE_SIZE)
+MAX_REACH = 0.1   # m: no hole of a catheter-scale section reaches further from the axis (plausibility.PLAUSIBLE_SIZE)
 # m: an outline must be simple on polygons this close to its arcs (and at the default chord tolerance)
 SIMPLE_CHECK_TOLERANCE = 1e-9
 

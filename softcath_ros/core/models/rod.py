@@ -32,9 +32,9 @@ from ..continuation import Correction, StepControl, ramp, stop_tag
 from ..design import Design
 from ..errors import ModelError
 from ..rod.law import LawRangeError, LinearLaw
-from ..rod.loads import REST_TIP, Loads, TipPlaneContact
+from ..rod.loads import REST_TIP, Loads, PlanarLoads, PlaneContact, TipPlaneContact
 from ..rod.section_law import LAW_VERSION, LawGrid, section_law
-from ..rod.statics import PlanarLoads, PlaneContact, RodSolution, solve_rod
+from ..rod.statics import RodSolution, solve_rod
 from ..section_properties import transformed_section
 from ..options import Option
 from ..units import PA_PER_BAR

@@ -1,5 +1,5 @@
 """What acts on the actuator besides its pressures (softcath_base frame, SI): the loads a scene
-names and the rod rung models."""
+names and the rod rung models, and their planar form in the rod's bending plane (core/rod/statics.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,3 +27,19 @@ class Loads:
     @property
     def any(self) -> bool:
         return self.tip_force is not None or self.gravity is not None or self.contact is not None
+
+
+@dataclass(frozen=True)
+class PlaneContact:
+    """A plane the tip may touch: ``normal`` (a, b) unit, pointing to the side the tip stays on;
+    ``point`` (a, b) on the plane (m)."""
+
+    normal: tuple[float, float]
+    point: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class PlanarLoads:
+    tip_force: tuple[float, float] = (0.0, 0.0)          # N, (a, b)
+    weight_per_length: tuple[float, float] = (0.0, 0.0)  # N per m of reference length, (a, b)
+    contact: PlaneContact | None = None

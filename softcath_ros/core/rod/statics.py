@@ -48,22 +48,7 @@ import numpy as np
 from ..continuation import LIMIT_POINT, NUMERICAL_FAILURE
 from ..units import PA_PER_BAR
 from .law import LawRangeError, LawSlice
-
-
-@dataclass(frozen=True)
-class PlaneContact:
-    """A plane the tip may touch: ``normal`` (a, b) unit, pointing to the side the tip stays on;
-    ``point`` (a, b) on the plane (m)."""
-
-    normal: tuple[float, float]
-    point: tuple[float, float]
-
-
-@dataclass(frozen=True)
-class PlanarLoads:
-    tip_force: tuple[float, float] = (0.0, 0.0)          # N, (a, b)
-    weight_per_length: tuple[float, float] = (0.0, 0.0)  # N per m of reference length, (a, b)
-    contact: PlaneContact | None = None
+from .loads import PlanarLoads
 
 
 @dataclass
@@ -452,4 +437,4 @@ def _continue_contact(rod: _Rod, law: LawSlice, limit, guess: RodSolution):
                 NUMERICAL_FAILURE, th0, R0, its)
 
 
-__all__ = ["LawRangeError", "PlaneContact", "PlanarLoads", "RodSolution", "solve_rod"]
+__all__ = ["LawRangeError", "PlanarLoads", "RodSolution", "solve_rod"]
