@@ -497,7 +497,7 @@ def test_mirror_planes_of_the_three_channel_design():
     plane through channel 2 (-30 deg), which the section is turned by 120 deg to put on x = 0; a 2:1
     pair lies on none. In the turned half model the unmeshed channel takes its partner's volume."""
     from softcath_ros.core.design import load_design
-    from softcath_ros.core.fe3d.mesh import channel_shares, mirror_plane, rotated_section
+    from softcath_ros.core.fe3d.symmetry import channel_shares, mirror_plane, rotated_section
 
     design = load_design("three_channel_5mm")
     assert math.degrees(mirror_plane(design, (1.0, 0.0, 0.0))) == pytest.approx(90.0)
@@ -986,7 +986,7 @@ def test_sector_channels_are_meshed_from_their_outlines_and_bend_the_body_away(s
     channel 0 (at +y) bends the body towards -y, inflates the channel and reports the whole body's
     channel volumes."""
     from softcath_ros.core.fe3d.measure import channel_area
-    from softcath_ros.core.fe3d.mesh import can_use_half_model, mirror_plane
+    from softcath_ros.core.fe3d.symmetry import can_use_half_model, mirror_plane
     from softcath_ros.core.geometry import symmetry
 
     d = sector_design

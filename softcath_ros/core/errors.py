@@ -20,3 +20,7 @@ class DesignError(SoftcathError):
 
 class ModelError(SoftcathError):
     """A model was asked for something it cannot do (unknown rung, bad input shape)."""
+
+
+class AllocationError(SoftcathError):
+    """A request the allocator cannot interpret (non-finite, negative angle, ...)."""

@@ -281,7 +281,7 @@ def fe3d_options(case: Case, options: dict) -> dict:
     plane of a design that is not symmetric about x = 0 as a whole (the 3-channel design bent by one
     channel or by an equal pair: the half body about that plane); the others as given (so their
     cached rows keep their key)."""
-    from .fe3d.mesh import can_use_half_model, mirror_plane
+    from .fe3d.symmetry import can_use_half_model, mirror_plane
 
     design = case.sample
     if can_use_half_model(design) or mirror_plane(design, case.direction) is None:

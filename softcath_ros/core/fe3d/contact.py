@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from ..section_fe.terms.contact import KAPPA_SCALE, barrier
-from .mesh import hole_size
+from .holes import hole_size
 
 # energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c, the section rung's
 KAPPA = KAPPA_SCALE

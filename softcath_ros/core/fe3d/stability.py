@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import is_circle
+from .holes import is_circle
 
 
 # the second solve's shift, in 2 c1 (module docstring): negative eigenvalues seen at stops are -0.003 to -0.13

@@ -129,7 +129,7 @@ class Fe3dModel(BendModel):
         not empty (a device, a fill). ``half``: None (default) the half body when the whole design is
         mirror symmetric about x = 0; True: for each direction on a mirror plane of the section (the
         3-channel design: one channel, or two equal), the half body about that plane, the section
-        turned so that it is x = 0 (core/fe3d/mesh.py ``mirror_plane``), the full body for the
+        turned so that it is x = 0 (core/fe3d/symmetry.py ``mirror_plane``), the full body for the
         others; False: the full body.
         ``pressure_order``, ``interior_order``: the element (Fe3dProblem): by default P2 with order-3
         interior bubbles and a P1 pressure, the element that passes the lumen shoulders' fold to
@@ -145,7 +145,7 @@ class Fe3dModel(BendModel):
         except ImportError as exc:
             raise ModelError("model 'fe3d' needs NGSolve: pip install 'softcath_ros[fe]' "
                              f"(or pip install ngsolve) ({exc})") from None
-        from ..fe3d.mesh import can_use_half_model
+        from ..fe3d.symmetry import can_use_half_model
         from ..fe3d.ramp import default_step_control
         from ..fe3d.solver import NewtonSettings, check_element
 
@@ -196,7 +196,7 @@ class Fe3dModel(BendModel):
     def problem(self):
         """The problem of a direction-independent model: the half body when the whole design is
         symmetric about x = 0 and ``half`` allows, else the full body."""
-        from ..fe3d.mesh import can_use_half_model
+        from ..fe3d.symmetry import can_use_half_model
 
         return self._problem_on(bool(self.half) and can_use_half_model(self.design), 0.0)
 
@@ -204,7 +204,7 @@ class Fe3dModel(BendModel):
         """With ``half`` True: the rotation (rad) that turns a mirror plane of the section and of
         the channel pressures ``direction`` onto x = 0, where the half model's symmetry condition
         is (0 when x = 0 is one); None when the direction lies on no mirror plane (full model)."""
-        from ..fe3d.mesh import can_use_half_model, mirror_plane
+        from ..fe3d.symmetry import can_use_half_model, mirror_plane
 
         if not self._turns_to_mirror():
             return None
@@ -221,7 +221,7 @@ class Fe3dModel(BendModel):
         return self._problem_on(turn is not None, turn or 0.0)
 
     def _problem_on(self, half: bool, turn: float):
-        from ..fe3d.mesh import rotated_section
+        from ..fe3d.symmetry import rotated_section
         from ..fe3d.solver import Fe3dProblem
 
         key = (half, round(turn, 12))
