@@ -46,7 +46,8 @@ from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure, outer_surface_stretch  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control, run_ramp  # noqa: E402
-from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.newton import NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.solver import Fe3dProblem  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 COARSE = MeshSettings(section_h=1.0e-3, wall_h=0.7e-3, layer_h=4.5e-3, cap_layers=1)   # test/test_fe3d.py's

@@ -101,4 +101,4 @@ def fe3d_solver_log() -> None:
     import logging
 
     logging.basicConfig(level=logging.WARNING, format="%(relativeCreated)9.0f ms %(message)s")
-    logging.getLogger("softcath_ros.core.fe3d.solver").setLevel(logging.DEBUG)
+    logging.getLogger("softcath_ros.core.fe3d.newton").setLevel(logging.DEBUG)

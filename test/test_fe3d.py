@@ -20,7 +20,7 @@ pytest.importorskip("ngsolve", reason="fe3d needs the 'fe' extra (scripts/test.s
 
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
-from softcath_ros.core.fe3d.solver import NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.newton import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
@@ -800,7 +800,8 @@ def test_a_stalled_newton_solve_fails_early_and_says_so(short_design):
     iterations fails then, named "stalled", instead of using its whole budget; without it the same
     solve runs to its budget. NewtonSettings.cut_iterations fails it once that many steps in a row
     were cut short, naming what the full step does."""
-    from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonFailure
+    from softcath_ros.core.fe3d.newton import NewtonFailure
+    from softcath_ros.core.fe3d.solver import Fe3dProblem
 
     outcomes = {}
     for stall, cuts in ((None, None), (3, None), (None, 3)):
@@ -825,7 +826,8 @@ def test_the_tangent_after_a_failed_solve_is_the_converged_states_own(short_desi
     """A failed Newton solve leaves no factorisation of its last iterate behind: the tangent du/ds at
     the converged state restored afterwards (a ramp's predictor after a cut) equals the one computed
     there before the failure."""
-    from softcath_ros.core.fe3d.solver import Fe3dProblem, NewtonFailure
+    from softcath_ros.core.fe3d.newton import NewtonFailure
+    from softcath_ros.core.fe3d.solver import Fe3dProblem
 
     pb = Fe3dProblem(short_design, COARSE, NewtonSettings(threads=1, max_iterations=6), contact_distance=0.02)
     pb.set_direction(np.array([1.0]))

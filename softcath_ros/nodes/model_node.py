@@ -38,6 +38,7 @@ import threading
 import time
 from collections import deque
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
@@ -76,6 +77,32 @@ class ModelNode(Node):
     def __init__(self, **node_options):
         """``node_options`` go to rclpy's Node (e.g. ``context`` for in-process tests)."""
         super().__init__(topics.MODEL_NODE, **node_options)
+        prm = self._declare_parameters()
+        self._load_model(prm.design, prm.model, prm.scene, prm.calibration, prm.n_points)
+        self.counters = InputCounters(extra={"design": self.design.name, "model": self.model.name,
+                                             "max_pressure_pa": f"{self.max_pressure:g}",
+                                             "out_of_range": self.out_of_range})
+        self._open_streams(stream_qos(int(prm.depth), prm.reliability))
+        self.view = None
+        if prm.display_rate > 0:
+            from .live_view import LiveView
+
+            self.view = LiveView(self, self.design, self.n_points, prm.display_rate, prm.body_sides, prm.tip_frame,
+                                 stream_qos(10, prm.reliability))
+        # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
+        self.answer_load = AnswerLoad(time.monotonic())
+        self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
+                                                self.design.name, prm.diag_period, answer_load=self.answer_load)
+        self.get_logger().info(
+            f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
+            f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
+            f"executor={self.executor_name}, qos {prm.reliability} depth {prm.depth}, messages {self.preparation}, "
+            "commands "
+            + ("answered in the callback" if self._solver is None else "answered on the solve thread")
+            + f" (a command waiting over {self.supersede_age * 1e3:g} ms behind a newer one is superseded)")
+
+    def _declare_parameters(self) -> SimpleNamespace:
+        """The node's parameters: those it keeps as attributes set, the others returned; unknown ones refused."""
         p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design YAML file, or the name of a shipped design")
         model_name = p("model", "surrogate", "model rung (core.models), e.g. surrogate, closed_form, or auto (needs scene)")
@@ -105,7 +132,13 @@ class ModelNode(Node):
         body_sides = p("body_sides", 12, "vertices around the body tube of the 3D view", minimum=3, maximum=64)
         tip_frame = p("tip_frame", "softcath_tip", "TF frame of the tip (broadcast where tf2_ros exists)")
         refuse_unknown_parameters(self, later=("max_pressure",))   # before a rung is built on a typo's default
+        return SimpleNamespace(design=design_name, model=model_name, scene=scene_name, calibration=calibration_file,
+                               n_points=n_points, depth=depth, reliability=reliability, diag_period=diag_period,
+                               display_rate=display_rate, body_sides=body_sides, tip_frame=tip_frame)
 
+    def _load_model(self, design_name: str, model_name: str, scene_name: str, calibration_file: str,
+                    n_points: int) -> None:
+        """The design, the rung (``auto``: chosen for the scene) and the design's pressure limit."""
         self.design = load_design(design_name)
         require_live_rung(model_name, self.design.name)   # fe3d: refused at once, not after a first solve
         self.calibration = load_calibration(calibration_file) if calibration_file else None
@@ -132,10 +165,9 @@ class ModelNode(Node):
         # Rungs with a one-command fast path (closed form) skip the BendState allocation.
         self._fast = self.model.curvature_single if self.model.info.linear_gain else None
 
-        self.counters = InputCounters(extra={"design": self.design.name, "model": self.model.name,
-                                             "max_pressure_pa": f"{self.max_pressure:g}",
-                                             "out_of_range": self.out_of_range})
-        qos = stream_qos(int(depth), reliability)
+    def _open_streams(self, qos) -> None:
+        """The clock, the pose publishers and their messages, and the command subscription (answered in
+        the callback, or on the solve thread for a slow rung)."""
         self._clock = self.get_clock()
         # Without simulated time the ROS clock is the system clock (CLOCK_REALTIME): read it
         # directly (0.1 us instead of ~5 us for Clock.now()); decided at start-up.
@@ -164,22 +196,6 @@ class ModelNode(Node):
         self._command_sub = self.create_subscription(
             Float64MultiArray, topics.PRESSURE_CMD, self._on_command_inline if self._solver is None else self._hand_over,
             qos)
-        self.view = None
-        if display_rate > 0:
-            from .live_view import LiveView
-
-            self.view = LiveView(self, self.design, self.n_points, display_rate, body_sides, tip_frame,
-                                 stream_qos(10, reliability))
-        # Commands arriving faster than the rung answers show on /diagnostics, not as silent lag.
-        self.answer_load = AnswerLoad(time.monotonic())
-        self._diagnostics = DiagnosticsReporter(self, self.counters, "softcath_model: pressure commands",
-                                                self.design.name, diag_period, answer_load=self.answer_load)
-        self.get_logger().info(
-            f"design {self.design.name} ({self.n_channels} channel(s), max_pressure {self.max_pressure:g} Pa), "
-            f"model {self.model.name}, {self.n_points} backbone points, out_of_range={self.out_of_range}, "
-            f"executor={self.executor_name}, qos {reliability} depth {depth}, messages {self.preparation}, commands "
-            + ("answered in the callback" if self._solver is None else "answered on the solve thread")
-            + f" (a command waiting over {self.supersede_age * 1e3:g} ms behind a newer one is superseded)")
 
     def _make_model(self, model_name: str):
         """The rung, saying so when start-up may wait for it: a rung that builds something when neither

@@ -80,61 +80,17 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     # rcl's own error type is exposed only through rclpy's implementation module (no public alias)
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-    from ..graph import default_to_localhost_discovery
-    from .parameters import refuse_unknown_parameters
-
-    # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
-    # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
-    # (an except clause, the bench recording's finalisation) and print a traceback. A no-op
-    # Python handler, installed before rclpy.init so rclpy still chains to it, leaves the
-    # shutdown to the context alone, as for SIGTERM. Inside ``interruptible_start`` (a table
-    # being built at start-up) it raises KeyboardInterrupt, so the build stops at once.
-    signal.signal(signal.SIGINT, _on_sigint)
-    default_to_localhost_discovery()
-    try:
-        argv = sys.argv if args is None else list(args)
-        record_started_argv(argv)
-        check_parameter_rules(argv)
-        for path in params_files(argv):
-            check_params_file(path)
-        rclpy.init(args=args)
-    except SoftcathError as exc:
-        print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
-        return 2
-    except _rclpy.RCLError as exc:      # e.g. a -p value rcl cannot parse
-        print(f"[ERROR] cannot start: invalid ROS arguments: {_rcl_reason(exc)}", file=sys.stderr)
+    if _init_ros(args, _rclpy.RCLError):
         return 2
     node = None
     name = ""
     code = 0
     try:
-        try:
-            node = factory()
-        except startup_errors as exc:
-            print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:      # SIGINT inside interruptible_start
-            print("[INFO] stopped during start-up (SIGINT)", file=sys.stderr)
-            return 0
-        try:    # each node refuses these itself before acting on its parameters; this covers every node
-            refuse_unknown_parameters(node)
-        except SoftcathError as exc:
-            print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
-            node.destroy_node()
-            node = None
-            return 2
+        node, refused = _create(factory, startup_errors)
+        if node is None:
+            return refused
         name = getattr(node, "executor_name", "events")
-        executor = make_executor(name)
-        executor.add_node(node)
-        priority = getattr(node, "realtime_priority", 0)
-        if priority:
-            problem = set_realtime_priority(priority)
-            if problem:
-                node.get_logger().warning(problem + "; running with normal scheduling")
-        announce_ready(node, name)
-        node.get_logger().info(f"spinning on the {name} executor")
-        ends = hasattr(type(node), "finished")
-        spin(executor, name, (lambda: node.finished) if ends else None)
+        _spin_node(node, name)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except _rclpy.RCLError:
@@ -158,3 +114,72 @@ def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
         sys.stderr.flush()
         os._exit(code)
     return code
+
+
+def _init_ros(args, rcl_error) -> bool:
+    """Initialise rclpy with ``args`` after softcath's checks of the command line and its params
+    files; True when it cannot start (said in one line)."""
+    import rclpy
+
+    from ..graph import default_to_localhost_discovery
+
+    # rclpy's SIGINT handler shuts the context down, which ends the spin, and then chains to the
+    # handler it found: Python's, which would raise KeyboardInterrupt at whatever line runs next
+    # (an except clause, the bench recording's finalisation) and print a traceback. A no-op
+    # Python handler, installed before rclpy.init so rclpy still chains to it, leaves the
+    # shutdown to the context alone, as for SIGTERM. Inside ``interruptible_start`` (a table
+    # being built at start-up) it raises KeyboardInterrupt, so the build stops at once.
+    signal.signal(signal.SIGINT, _on_sigint)
+    default_to_localhost_discovery()
+    try:
+        argv = sys.argv if args is None else list(args)
+        record_started_argv(argv)
+        check_parameter_rules(argv)
+        for path in params_files(argv):
+            check_params_file(path)
+        rclpy.init(args=args)
+    except SoftcathError as exc:
+        print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+        return True
+    except rcl_error as exc:      # e.g. a -p value rcl cannot parse
+        print(f"[ERROR] cannot start: invalid ROS arguments: {_rcl_reason(exc)}", file=sys.stderr)
+        return True
+    return False
+
+
+def _create(factory: Callable, startup_errors: tuple):
+    """(the node, None), or (None, the exit code) when it cannot start: a startup error or unknown
+    parameters (2, said in one line), or SIGINT during start-up (0)."""
+    from .parameters import refuse_unknown_parameters
+
+    try:
+        node = factory()
+    except startup_errors as exc:
+        print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+        return None, 2
+    except KeyboardInterrupt:      # SIGINT inside interruptible_start
+        print("[INFO] stopped during start-up (SIGINT)", file=sys.stderr)
+        return None, 0
+    try:    # each node refuses these itself before acting on its parameters; this covers every node
+        refuse_unknown_parameters(node)
+    except SoftcathError as exc:
+        print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
+        node.destroy_node()
+        return None, 2
+    return node, None
+
+
+def _spin_node(node, name: str) -> None:
+    """Spin ``node`` on the executor ``name`` (with its real-time priority, if it asks for one) until
+    it finishes or the context shuts down; says it is ready once it spins."""
+    executor = make_executor(name)
+    executor.add_node(node)
+    priority = getattr(node, "realtime_priority", 0)
+    if priority:
+        problem = set_realtime_priority(priority)
+        if problem:
+            node.get_logger().warning(problem + "; running with normal scheduling")
+    announce_ready(node, name)
+    node.get_logger().info(f"spinning on the {name} executor")
+    ends = hasattr(type(node), "finished")
+    spin(executor, name, (lambda: node.finished) if ends else None)

@@ -15,10 +15,12 @@ import numpy as np
 
 from ..body_contact import body_contact
 from ..continuation import (LIMIT_POINT, MATERIAL_RANGE, NUMERICAL_FAILURE, OUTSIDE_MODEL, UNSTABLE, Correction,
-                            StepControl, ramp, stop_tag)
+                            StepControl, ramp, secant, stop_tag)
 from ..energy import yeoh_convexity_limit
 from .measure import deformed_backbone, measure
-from .solver import CorotationalPredictor, Fe3dProblem, NewtonFailure
+from .newton import NewtonFailure
+from .predictor import CorotationalPredictor
+from .solver import Fe3dProblem
 from ..units import PA_PER_BAR, describe_pressure
 
 
@@ -108,6 +110,86 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
                        f"its mode largest at the {s.where}")
 
 
+class _Steps:
+    """The corrector, predictor and accepted-step hook of one fe3d ramp (``run_ramp``) on the shared
+    continuation: the 3D Newton at a load, refused past the Yeoh set's convex range or the body
+    reaching itself; the tangent (or corotational, or secant) predictor; each accepted state measured."""
+
+    def __init__(self, problem: Fe3dProblem, direction, targets, out: Fe3dRamp, tangent_predictor: bool,
+                 corotational: bool, progress, t0: float):
+        self.problem, self.direction, self.targets, self.out = problem, direction, targets, out
+        self.tangent_predictor, self.progress = tangent_predictor, progress
+        self.radius = problem.design.outer_radius
+        mat = problem.design.material
+        self.limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)
+        self.corot = CorotationalPredictor(problem) if tangent_predictor and corotational else None
+        self.curvature_at: dict[float, np.ndarray] = {}   # fitted curvature of accepted states, by load
+        self.accepted = t0   # the last accepted load, for an interrupt's message
+        self.shown = 0.0
+        self.t_start = time.perf_counter()
+
+    def corrector(self, guess, t, previous):
+        problem, limit = self.problem, self.limit
+        problem.set_state(guess)
+        problem.load.Set(t)
+        try:
+            its = problem.newton()
+        except NewtonFailure as exc:
+            problem.set_state(previous)
+            return Correction(state=previous, converged=False, iterations=exc.iterations, message=exc.reason)
+        if limit is not None:
+            i1 = problem.max_isochoric_i1()
+            if i1 > limit[0]:
+                problem.set_state(previous)
+                return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
+                                  stop_reason=MATERIAL_RANGE,
+                                  message=(f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit[0]:.3g} "
+                                           f"(uniaxial stretch {limit[1]:.3g}) where its Yeoh energy (c3 < 0) "
+                                           "stops being convex"))
+        reached = body_contact(deformed_backbone(problem, 0.5 * self.radius), self.radius)
+        if reached is not None:
+            problem.set_state(previous)
+            return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
+                              stop_reason=OUTSIDE_MODEL, message=reached.describe())
+        return Correction(state=problem.get_state(), converged=True, iterations=its, effort=problem.last_effort)
+
+    def predictor(self, t0, s0, t1, s1, t):
+        if not self.tangent_predictor:
+            return secant(t0, s0, t1, s1, t)
+        curvature_at = self.curvature_at
+        if self.corot is not None and t0 in curvature_at and t1 in curvature_at:
+            guess = self.corot.predict(t0, s0, curvature_at[t0], t1, s1, curvature_at[t1], t)
+            if guess is not None:
+                return guess
+        problem = self.problem
+        problem.set_state(s1)
+        problem.load.Set(t1)   # the tangent of the state at its own load (a failed attempt left its own)
+        try:
+            return s1 + (t - t1) * problem.tangent()
+        except Exception:  # noqa: BLE001 - a singular tangent falls back to the secant
+            return secant(t0, s0, t1, s1, t)
+
+    def on_step(self, t, corr):
+        # The problem holds the accepted state: measure it (the predictor needs its curvature).
+        out = self.out
+        self.accepted = t
+        self.problem.set_state(corr.state)
+        m = measure(self.problem)
+        if "lumen_min_gap_m" in m:
+            out.min_gap_m.append((t, m["lumen_min_gap_m"]))
+        if m["arc_length_m"] > 0:
+            self.curvature_at[t] = m["bending_angle_rad"] / m["arc_length_m"] * m["bending_direction"]
+        if any(abs(t - c) <= 1e-9 * max(1.0, c) for c in self.targets) and \
+                (not out.points or out.points[-1].load != t):
+            out.points.append(Fe3dPoint(load=t, pressures=t * self.direction, measured=m,
+                                        iterations=corr.iterations,
+                                        wall_time=time.perf_counter() - self.t_start))
+        if self.progress is not None:
+            self.progress.update(t - self.shown)
+            self.shown = t
+            self.progress.set_postfix_str(f"{t / PA_PER_BAR:.3f} bar, {corr.iterations} it")
+
+
 def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl | None = None,
              tangent_predictor: bool = True, progress=None, corotational: bool = False,
              start: tuple[float, np.ndarray] | None = None,
@@ -130,83 +212,15 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
     t0 = 0.0 if start is None else float(start[0])
     problem.set_state(np.zeros(problem.fes.ndof) if start is None else np.asarray(start[1], dtype=float))
     out = Fe3dRamp()
-    t_start = time.perf_counter()
     targets = [float(c) for c in checkpoints]
-    shown = [0.0]
-
-    def corrector(guess, t, previous):
-        problem.set_state(guess)
-        problem.load.Set(t)
-        try:
-            its = problem.newton()
-        except NewtonFailure as exc:
-            problem.set_state(previous)
-            return Correction(state=previous, converged=False, iterations=exc.iterations, message=exc.reason)
-        if limit is not None:
-            i1 = problem.max_isochoric_i1()
-            if i1 > limit[0]:
-                problem.set_state(previous)
-                return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
-                                  stop_reason=MATERIAL_RANGE,
-                                  message=(f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit[0]:.3g} "
-                                           f"(uniaxial stretch {limit[1]:.3g}) where its Yeoh energy (c3 < 0) "
-                                           "stops being convex"))
-        reached = body_contact(deformed_backbone(problem, 0.5 * radius), radius)
-        if reached is not None:
-            problem.set_state(previous)
-            return Correction(state=previous, converged=False, iterations=its, outside_domain=True,
-                              stop_reason=OUTSIDE_MODEL, message=reached.describe())
-        return Correction(state=problem.get_state(), converged=True, iterations=its, effort=problem.last_effort)
-
-    radius = problem.design.outer_radius
-    mat = problem.design.material
-    limit = yeoh_convexity_limit(mat.c1, mat.c2, mat.c3)
-
-    corot = CorotationalPredictor(problem) if tangent_predictor and corotational else None
-    curvature_at: dict[float, np.ndarray] = {}   # fitted curvature of accepted states, by load
-
-    def predictor(t0, s0, t1, s1, t):
-        if not tangent_predictor:
-            return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
-        if corot is not None and t0 in curvature_at and t1 in curvature_at:
-            guess = corot.predict(t0, s0, curvature_at[t0], t1, s1, curvature_at[t1], t)
-            if guess is not None:
-                return guess
-        problem.set_state(s1)
-        problem.load.Set(t1)   # the tangent of the state at its own load (a failed attempt left its own)
-        try:
-            return s1 + (t - t1) * problem.tangent()
-        except Exception:  # noqa: BLE001 - a singular tangent falls back to the secant
-            return s1 + (s1 - s0) * ((t - t1) / (t1 - t0))
-
-    accepted = [t0]   # the last accepted load, for an interrupt's message
-
-    def on_step(t, corr):
-        # The problem holds the accepted state: measure it (the predictor needs its curvature).
-        accepted[0] = t
-        problem.set_state(corr.state)
-        m = measure(problem)
-        if "lumen_min_gap_m" in m:
-            out.min_gap_m.append((t, m["lumen_min_gap_m"]))
-        if m["arc_length_m"] > 0:
-            curvature_at[t] = m["bending_angle_rad"] / m["arc_length_m"] * m["bending_direction"]
-        if any(abs(t - c) <= 1e-9 * max(1.0, c) for c in targets) and \
-                (not out.points or out.points[-1].load != t):
-            out.points.append(Fe3dPoint(load=t, pressures=t * direction, measured=m,
-                                        iterations=corr.iterations,
-                                        wall_time=time.perf_counter() - t_start))
-        if progress is not None:
-            progress.update(t - shown[0])
-            shown[0] = t
-            progress.set_postfix_str(f"{t / PA_PER_BAR:.3f} bar, {corr.iterations} it")
-
+    steps = _Steps(problem, direction, targets, out, tangent_predictor, corotational, progress, t0)
     if start is None and targets and targets[0] <= 0.0:  # the straight state needs no solve
         out.points.append(Fe3dPoint(0.0, 0.0 * direction, measure(problem), 0, 0.0))
     targets = [t for t in targets if t > t0]
     try:
-        result = ramp(corrector, problem.get_state(), targets, control, start=t0,
-                      extrapolate=predictor if control.adaptive else None,
-                      describe=describe_pressure, on_step=on_step)
+        result = ramp(steps.corrector, problem.get_state(), targets, control, start=t0,
+                      extrapolate=steps.predictor if control.adaptive else None,
+                      describe=describe_pressure, on_step=steps.on_step)
         out.converged, out.stop_reason = result.converged, result.stop_reason
         why = ""
         # (a given start state, e.g. with an imperfection, is not known to be converged)
@@ -220,6 +234,6 @@ def run_ramp(problem: Fe3dProblem, direction, checkpoints, control: StepControl 
     except KeyboardInterrupt:
         out.converged, out.interrupted = False, True
         last = f", checkpoint {describe_pressure(out.points[-1].load)}" if out.points else ""
-        out.message = f"interrupted after {describe_pressure(accepted[0])} (the last accepted state{last})"
-    out.wall_time = time.perf_counter() - t_start
+        out.message = f"interrupted after {describe_pressure(steps.accepted)} (the last accepted state{last})"
+    out.wall_time = time.perf_counter() - steps.t_start
     return out

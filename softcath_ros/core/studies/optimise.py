@@ -27,6 +27,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import yaml
@@ -224,6 +225,9 @@ OPTIONS = (Option("max_stretch", "float", "largest principal stretch allowed in 
 
 def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRETCH,
         counts: tuple[int, ...] = COUNTS, max_iter: int = MAX_ITER) -> StudyResult:
+    """The channels' shapes that bend ``design`` most at the study's pressure within ``max_stretch``,
+    per channel count (one for a 1-DOF design, ``counts`` else): a table against the baseline, the
+    optimum's design file, and R_C against pressure for the optimum, the baseline and the implemented design."""
     if design.lumen is None:
         raise DesignError("lumen", None, "the optimiser keeps the lumen (it carries the device); this design has none")
     kind = "1dof" if design.n_channels == 1 else "2dof"
@@ -233,8 +237,34 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
     found = [(s, b) for s, b in bests if b is not None]
     stem = f"optimised_{kind}_{design.outer_diameter * 1e3:g}mm"
     p_bar = ctx.pressure / PA_PER_BAR
+    rows = _rows(design, ctx, bests, stem)
+    findings, extra = [], {}
+    optimum = opt_design = None
+    if found:
+        opt_design, optimum = _optimum(design, ctx, bests, found, rows, stem, max_stretch, findings, extra)
+    else:
+        findings.append("no candidate met the constraints; no design file written")
+    curve_designs = [design] + ([opt_design] if optimum else [])
+    if design.name != "implemented_5mm":
+        try:
+            curve_designs.append(load_design("implemented_5mm"))
+        except DesignError:
+            pass
+    curves = _curves(design, ctx, curve_designs, stem, findings, extra)
+    history = [{k: v for k, v in r.items() if k != "design"} for s in searches for r in s.history.values()]
+    plot = partial(_plot, curve_designs=curve_designs, curves=curves, searches=searches, p_bar=p_bar,
+                   max_stretch=max_stretch, title=f"optimise {kind} from {where(design, ctx)}")
+    cols = [("design", "design"), ("count", "channels"), ("label", "shape"), ("channel_area_mm2", "channel [mm^2]"),
+            ("area_ratio", "area ratio"), ("thinnest_wall_mm", "thinnest wall [mm]"),
+            ("radius_of_curvature_mm", f"R_C at {p_bar:g} bar [mm]"), ("max_principal_stretch", "max stretch"),
+            ("status", "status")]
+    return StudyResult("optimise", f"Optimised {kind.upper()} design", design.name, rows, cols, findings, plot,
+                       extra_files=extra, meta={"max_stretch": max_stretch, "history": history, "curves": curves,
+                                                "design_file": f"{stem}.yaml" if optimum else None})
 
-    # the baseline at the same pressure, as a table row
+
+def _rows(design: Design, ctx: StudyContext, bests, stem: str) -> list[dict]:
+    """The table: the baseline at the same pressure, then each count's best candidate."""
     base_case = ctx.solve([ctx.spec(design)], "optimise baseline")[0]["results"][0]
     rows = [{"design": design.name, "count": design.n_channels, "label": "baseline",
              "channel_area_mm2": design.channels[0].area * 1e6, "area_ratio": area_ratio(design),
@@ -250,48 +280,48 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
                      "radius_of_curvature_mm": b and b["radius_of_curvature_mm"],
                      "max_principal_stretch": b and b["max_principal_stretch"],
                      "status": f"best of {len(s.history)} evaluated" if b else "no feasible design"})
-    findings, extra = [], {}
-    optimum = None
-    if found:
-        s_opt, optimum = min(found, key=lambda sb: sb[1]["radius_of_curvature_mm"])
-        opt_design = replace(optimum["design"], name=stem)
-        rows[1 + bests.index((s_opt, optimum))]["design"] = stem
-        extra[f"{stem}.yaml"] = design_file_text(
-            opt_design, f"maximum bending at {p_bar:g} bar from {design.name}: {s_opt.count} channel(s), walls >= "
-                        f"{design.min_wall_thickness * 1e3:g} mm, max principal stretch <= {max_stretch:g} "
-                        f"(softcath study optimise, rung {ctx.rung})")
-        base_rc = rows[0]["radius_of_curvature_mm"]
-        findings.append(
-            f"optimum ({s_opt.count} fan(s)): {optimum['label']}, channel {optimum['channel_area_mm2']:.3f} mm^2, "
-            f"area ratio {optimum['area_ratio']:.3f} (baseline {rows[0]['area_ratio']:.3f}); R_C at {p_bar:g} bar "
-            f"{optimum['radius_of_curvature_mm']:.2f} mm vs baseline "
-            + (f"{base_rc:.2f} mm ({base_rc / optimum['radius_of_curvature_mm']:.2f}x the curvature)" if base_rc else
-               "(baseline did not converge)")
-            + f"; max principal stretch {optimum['max_principal_stretch']:.2f} (limit {max_stretch:g})")
-        walls_at_min = abs(optimum["thinnest_wall_mm"] - design.min_wall_thickness * 1e3) < 0.02
-        findings.append(
-            ("published: the optimised 1-DOF design has one channel of maximal area with walls at a fabricable minimum"
-             if s_opt.count == 1 else "published: the 2-DOF design has three channels at 120 degrees, each as large "
-             "as the minimum walls allow") + " -> "
-            + ("the optimum's thinnest wall sits on the minimum: holds" if walls_at_min else
-               "the optimum keeps every wall above the minimum (the strain or convergence limit binds)"))
-        if base_rc and abs(base_rc / optimum["radius_of_curvature_mm"] - 1) < 0.005:
-            findings.append(f"{design.name} is already this family's optimum: the design file written repeats its "
-                            "geometry under the new name")
-        if len(found) > 1:
-            findings.append("count: " + ", ".join(f"{s.count} channels R_C {b['radius_of_curvature_mm']:.2f} mm"
-                                                  for s, b in found)
-                            + " (3 is the fewest that bend in every direction)")
-    else:
-        findings.append("no candidate met the constraints; no design file written")
+    return rows
 
-    # R_C against pressure: optimum vs baseline (and the implemented design)
-    curve_designs = [design] + ([opt_design] if optimum else [])
-    if design.name != "implemented_5mm":
-        try:
-            curve_designs.append(load_design("implemented_5mm"))
-        except DesignError:
-            pass
+
+def _optimum(design: Design, ctx: StudyContext, bests, found, rows, stem: str, max_stretch: float, findings, extra):
+    """(the optimum's design, its evaluation): the best of ``found``, named ``stem`` in ``rows``, its
+    design file in ``extra`` and what it says about the published optimum in ``findings``."""
+    p_bar = ctx.pressure / PA_PER_BAR
+    s_opt, optimum = min(found, key=lambda sb: sb[1]["radius_of_curvature_mm"])
+    opt_design = replace(optimum["design"], name=stem)
+    rows[1 + bests.index((s_opt, optimum))]["design"] = stem
+    extra[f"{stem}.yaml"] = design_file_text(
+        opt_design, f"maximum bending at {p_bar:g} bar from {design.name}: {s_opt.count} channel(s), walls >= "
+                    f"{design.min_wall_thickness * 1e3:g} mm, max principal stretch <= {max_stretch:g} "
+                    f"(softcath study optimise, rung {ctx.rung})")
+    base_rc = rows[0]["radius_of_curvature_mm"]
+    findings.append(
+        f"optimum ({s_opt.count} fan(s)): {optimum['label']}, channel {optimum['channel_area_mm2']:.3f} mm^2, "
+        f"area ratio {optimum['area_ratio']:.3f} (baseline {rows[0]['area_ratio']:.3f}); R_C at {p_bar:g} bar "
+        f"{optimum['radius_of_curvature_mm']:.2f} mm vs baseline "
+        + (f"{base_rc:.2f} mm ({base_rc / optimum['radius_of_curvature_mm']:.2f}x the curvature)" if base_rc else
+           "(baseline did not converge)")
+        + f"; max principal stretch {optimum['max_principal_stretch']:.2f} (limit {max_stretch:g})")
+    walls_at_min = abs(optimum["thinnest_wall_mm"] - design.min_wall_thickness * 1e3) < 0.02
+    findings.append(
+        ("published: the optimised 1-DOF design has one channel of maximal area with walls at a fabricable minimum"
+         if s_opt.count == 1 else "published: the 2-DOF design has three channels at 120 degrees, each as large "
+         "as the minimum walls allow") + " -> "
+        + ("the optimum's thinnest wall sits on the minimum: holds" if walls_at_min else
+           "the optimum keeps every wall above the minimum (the strain or convergence limit binds)"))
+    if base_rc and abs(base_rc / optimum["radius_of_curvature_mm"] - 1) < 0.005:
+        findings.append(f"{design.name} is already this family's optimum: the design file written repeats its "
+                        "geometry under the new name")
+    if len(found) > 1:
+        findings.append("count: " + ", ".join(f"{s.count} channels R_C {b['radius_of_curvature_mm']:.2f} mm"
+                                              for s, b in found)
+                        + " (3 is the fewest that bend in every direction)")
+    return opt_design, optimum
+
+
+def _curves(design: Design, ctx: StudyContext, curve_designs: list, stem: str, findings, extra) -> list[dict]:
+    """R_C against pressure for ``curve_designs``: rows, their CSV in
+    ``extra`` and where a rung stopped converging in ``findings``."""
     levels = [b * PA_PER_BAR for b in CURVE_BAR]
     curve_results = ctx.solve([ctx.spec(d, levels) for d in curve_designs], "optimise curves")
     curves = []
@@ -310,51 +340,44 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
         if stop:
             findings.append(f"{d.name}: the rung did not converge from {min(stop):g} bar on the curve (listed in the "
                             "curves CSV)")
+    return curves
 
-    history = [{k: v for k, v in r.items() if k != "design"} for s in searches for r in s.history.values()]
 
-    def plot(path: str) -> None:
-        plt = pyplot()
-        from matplotlib.patches import Circle, Polygon
+def _plot(path: str, curve_designs, curves, searches, p_bar: float, max_stretch: float, title: str) -> None:
+    """R_C against pressure, the candidates, and the sections of the baseline and the optimum."""
+    plt = pyplot()
+    from matplotlib.patches import Circle, Polygon
 
-        fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
-        for i, d in enumerate(curve_designs):
-            pts = [(c["pressure_bar"], c["radius_of_curvature_mm"]) for c in curves
-                   if c["design"] == d.name and c["converged"]]
-            if pts:
-                axes[0].plot(*zip(*pts), "o-", color=f"C{i}", label=d.name)
-        axes[0].set_yscale("log")
-        axes[0].set_xlabel("pressure [bar]")
-        axes[0].set_ylabel("R_C [mm]")
-        axes[0].set_title("R_C against pressure (missing points: did not converge)", fontsize=9)
-        axes[0].legend(fontsize=8)
-        axes[0].grid(alpha=0.3)
-        for j, s in enumerate(searches):
-            ev = [r for r in s.history.values() if r["radius_of_curvature_mm"] is not None]
-            axes[1].scatter([r["area_ratio"] for r in ev], [r["radius_of_curvature_mm"] for r in ev],
-                            c=["C2" if r["feasible"] else "C3" for r in ev], marker="os^"[j % 3], s=18,
-                            label=f"{s.count} channel(s)")
-        axes[1].set_xlabel("channel area / body area")
-        axes[1].set_ylabel(f"R_C at {p_bar:g} bar [mm]")
-        axes[1].set_title(f"candidates (green feasible, red: stretch > {max_stretch:g})", fontsize=9)
-        axes[1].legend(fontsize=8)
-        axes[1].grid(alpha=0.3)
-        ax = axes[2]
-        for d, style in zip(curve_designs[:2], ("--", "-")):
-            ax.add_patch(Circle((0, 0), d.outer_radius * 1e3, fill=False, ls=style))
-            for h in d.section.holes:   # the real outlines
-                ax.add_patch(Polygon(np.asarray(h.polygon.exterior.coords) * 1e3, closed=True, fill=False, ls=style,
-                                     color="C0" if h.role == "channel" else "C1"))
-        ax.set_xlim(-3, 3)
-        ax.set_ylim(-3, 3)
-        ax.set_aspect("equal")
-        ax.set_title("sections: baseline dashed, optimum solid (mm)", fontsize=9)
-        save(fig, path, f"optimise {kind} from {where(design, ctx)}")
-
-    cols = [("design", "design"), ("count", "channels"), ("label", "shape"), ("channel_area_mm2", "channel [mm^2]"),
-            ("area_ratio", "area ratio"), ("thinnest_wall_mm", "thinnest wall [mm]"),
-            ("radius_of_curvature_mm", f"R_C at {p_bar:g} bar [mm]"), ("max_principal_stretch", "max stretch"),
-            ("status", "status")]
-    return StudyResult("optimise", f"Optimised {kind.upper()} design", design.name, rows, cols, findings, plot,
-                       extra_files=extra, meta={"max_stretch": max_stretch, "history": history, "curves": curves,
-                                                "design_file": f"{stem}.yaml" if optimum else None})
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
+    for i, d in enumerate(curve_designs):
+        pts = [(c["pressure_bar"], c["radius_of_curvature_mm"]) for c in curves
+               if c["design"] == d.name and c["converged"]]
+        if pts:
+            axes[0].plot(*zip(*pts), "o-", color=f"C{i}", label=d.name)
+    axes[0].set_yscale("log")
+    axes[0].set_xlabel("pressure [bar]")
+    axes[0].set_ylabel("R_C [mm]")
+    axes[0].set_title("R_C against pressure (missing points: did not converge)", fontsize=9)
+    axes[0].legend(fontsize=8)
+    axes[0].grid(alpha=0.3)
+    for j, s in enumerate(searches):
+        ev = [r for r in s.history.values() if r["radius_of_curvature_mm"] is not None]
+        axes[1].scatter([r["area_ratio"] for r in ev], [r["radius_of_curvature_mm"] for r in ev],
+                        c=["C2" if r["feasible"] else "C3" for r in ev], marker="os^"[j % 3], s=18,
+                        label=f"{s.count} channel(s)")
+    axes[1].set_xlabel("channel area / body area")
+    axes[1].set_ylabel(f"R_C at {p_bar:g} bar [mm]")
+    axes[1].set_title(f"candidates (green feasible, red: stretch > {max_stretch:g})", fontsize=9)
+    axes[1].legend(fontsize=8)
+    axes[1].grid(alpha=0.3)
+    ax = axes[2]
+    for d, style in zip(curve_designs[:2], ("--", "-")):
+        ax.add_patch(Circle((0, 0), d.outer_radius * 1e3, fill=False, ls=style))
+        for h in d.section.holes:   # the real outlines
+            ax.add_patch(Polygon(np.asarray(h.polygon.exterior.coords) * 1e3, closed=True, fill=False, ls=style,
+                                 color="C0" if h.role == "channel" else "C1"))
+    ax.set_xlim(-3, 3)
+    ax.set_ylim(-3, 3)
+    ax.set_aspect("equal")
+    ax.set_title("sections: baseline dashed, optimum solid (mm)", fontsize=9)
+    save(fig, path, title)
