@@ -27,7 +27,8 @@ exit 6. If the rig is sim_bench_node (its node is in the graph or it announced i
 ``recording: PATH`` and a one-line summary.
 
 The run's logic (waiting, follow test, steps, venting, aborts) is bench/bench_run.py's state machine;
-this node adapts it (its observations in, its actions out). A managed (lifecycle) node: configure
+this node adapts it (its observations in, its actions out; the rig's inputs and the run's view of
+the rig in nodes/bench_rig.py). A managed (lifecycle) node: configure
 loads the protocol and opens the recording, activate runs, deactivate stops (abort marker, zero
 command, exit 130); ``autostart`` (default true) does configure and activate at start-up.
 
@@ -37,7 +38,6 @@ The node spins on the EventsExecutor and writes in a background thread by defaul
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from datetime import datetime
@@ -46,21 +46,21 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import Vector3Stamped
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import FluidPressure
-from std_msgs.msg import Float64, Float64MultiArray, String
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, String
 
 from .. import topics
 from ..bench.protocol import ProtocolRunner, design_steps, load_protocol
 from ..bench.bench_run import (EXIT_FIGHT, EXIT_RECORDING, Begin, BenchRun, Command, Markers,
                                Say, Vent, VentDirectly)
-from ..bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
+from ..bench.rig_contract import FollowCheck, follow_test_command
 from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from ..recording import BagWriter, RecordingError
+from .bench_rig import RigWatch
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .recorder import TopicRecorder
@@ -76,11 +76,7 @@ DEFAULT_TOPICS = topics.RECORDED
 EXIT_INTERRUPTED = 130
 
 
-def _stamp_s(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
-
-
-class BenchNode(LifecycleNode):
+class BenchNode(RigWatch, LifecycleNode):
     def __init__(self, **node_options):
         super().__init__(topics.BENCH_NODE, **node_options)
         p = partial(declare, self)
@@ -181,33 +177,10 @@ class BenchNode(LifecycleNode):
         else:
             self.pub_cmd = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, reliable)
         self.pub_step = self.create_publisher(String, topics.BENCH_STEP, reliable)
-        # The rig's topics (docs/rig.md), and the deprecated unstamped ones for one release.
         n = self.design.n_channels
-        extra = [topics.PRESSURE_CMD] if self.by_direction else []  # allocation_node keeps publishing
-        # only the readings of the benches this protocol uses are required (all are recorded)
-        benches = tuple(dict.fromkeys(b.kind for b in self.protocol.benches))
-        self.contract = RigMonitor(topics.rig_topics(n, benches) + extra, stale_after)
-        self.legacy = RigMonitor(topics.deprecated_rig_topics(benches) + extra, stale_after)
-        self.monitor: RigMonitor | None = None   # the one chosen when the rig is found
-        self.channel_pressures = np.full(n, np.nan)
-        self.legacy_pressures: np.ndarray | None = None
-        for c in range(n):
-            self.create_subscription(FluidPressure, topics.pressure_measured_topic(c),
-                                     partial(self.on_channel_pressure, c), 10)
-        self.create_subscription(Vector3Stamped, topics.BENCH_BEND_ANGLE,
-                                 partial(self.on_stamped, topics.BENCH_BEND_ANGLE), 10)
-        self.create_subscription(WrenchStamped, topics.BENCH_WRENCH, partial(self.on_stamped, topics.BENCH_WRENCH), 10)
-        self.create_subscription(Float64MultiArray, topics.PRESSURE_MEASURED, self.on_legacy_pressure, 10)
-        for t in (topics.BENCH_ANGLE, topics.BENCH_FORCE):
-            self.create_subscription(Float64, t, partial(self.on_legacy, t), 10)
-        if self.by_direction:
-            self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_allocator_command, 10)
+        self.watch_rig(n, stale_after)
         test_pressures, self.follow_bend = follow_test_command(self.steps, self.follow_pressure)
         self.pub_vent = None
-        self.rig_info: dict | None = None
-        self.create_subscription(String, topics.BENCH_RIG, self.on_rig,
-                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                            durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.recorder = TopicRecorder(self, self.writer, list(dict.fromkeys(list(record_topics) + topics.rig_topics(n))),
                                       message_info=self.executor_name != "events")
         self.run = BenchRun(self.runner, FollowCheck(test_pressures, timeout=self.follow_timeout), self.follow_bend,
@@ -216,49 +189,6 @@ class BenchNode(LifecycleNode):
         self.create_timer(1.0, self.diagnostics)
         self.get_logger().info(f"protocol {self.protocol.name}: {len(self.steps)} steps on design "
                                f"{self.design.name}; recording to {self.writer.path}")
-
-    # -------------------------------------------------------------- inputs
-    def clock_s(self) -> float:
-        """The ROS clock the rig's stamps are compared with, s."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
-    def on_channel_pressure(self, channel: int, msg):
-        if math.isfinite(msg.fluid_pressure):
-            self.channel_pressures[channel] = msg.fluid_pressure
-            self.contract.seen(topics.pressure_measured_topic(channel), self.now(), _stamp_s(msg.header))
-
-    def on_stamped(self, topic: str, msg):
-        self.contract.seen(topic, self.now(), _stamp_s(msg.header))
-
-    def on_legacy_pressure(self, msg):
-        p = np.asarray(msg.data, dtype=float)
-        if p.shape == (self.design.n_channels,) and np.all(np.isfinite(p)):
-            self.legacy_pressures = p
-            self.legacy.seen(topics.PRESSURE_MEASURED, self.now())
-
-    def on_legacy(self, topic: str, msg):
-        self.legacy.seen(topic, self.now())
-
-    def on_allocator_command(self, msg):
-        for m in (self.contract, self.legacy):
-            m.seen(topics.PRESSURE_CMD, self.now())
-
-    def measured(self) -> np.ndarray | None:
-        """The measured pressures (Pa per channel) if every channel's reading is fresh, else None:
-        a stale reading is never used as a fresh one."""
-        if self.monitor is None:
-            return None
-        t, clock = self.now(), self.clock_s()
-        if self.monitor is self.legacy:
-            return self.legacy_pressures if self.legacy.alive(topics.PRESSURE_MEASURED, t) else None
-        chans = [topics.pressure_measured_topic(c) for c in range(self.design.n_channels)]
-        return self.channel_pressures.copy() if all(self.contract.alive(c, t, clock) for c in chans) else None
-
-    def on_rig(self, msg):
-        try:
-            self.rig_info = json.loads(msg.data)
-        except ValueError:
-            self.rig_info = {"raw": msg.data}
 
     # -------------------------------------------------------------- protocol
     def now(self) -> float:
@@ -276,55 +206,6 @@ class BenchNode(LifecycleNode):
                     self.writer.flush()
                 except RecordingError as exc:
                     self.recorder.error = str(exc)
-
-    # -------------------------------------------------------------- the run's view of the rig (RigView)
-    def problems(self) -> dict[str, str]:
-        out = self.rig_problems()
-        if out:
-            self.monitor = None   # chosen afresh when the rig is ready again
-        return out
-
-    def stale(self, lost_after: float) -> dict[str, str]:
-        return self.monitor.problems(self.now(), None if self.monitor is self.legacy else self.clock_s(), lost_after)
-
-    def recording_error(self) -> str | None:
-        return self.recorder.error
-
-    def rig_problems(self) -> dict[str, str]:
-        """What keeps the rig from being ready, by topic (empty: ready). Chooses the contract's
-        topics, or the deprecated ones when nothing publishes the contract's."""
-        t, clock = self.now(), self.clock_s()
-        stamped = any(self.count_publishers(x) for x in topics.rig_topics(self.design.n_channels))
-        legacy_up = self.count_publishers(topics.PRESSURE_MEASURED) > 0
-        monitor = self.legacy if legacy_up and not stamped else self.contract
-        out = {}
-        for topic in monitor.topics:
-            if self.count_publishers(topic) == 0:
-                out[topic] = "no publisher"
-            else:
-                why = monitor.problem(topic, t, clock)
-                if why:
-                    out[topic] = why
-        if self.count_subscribers(topics.PRESSURE_CMD) == 0:
-            out[topics.PRESSURE_CMD] = "nothing subscribes (the rig's pressure source)"
-        if self.by_direction and self.count_subscribers(topics.BEND_CMD) == 0:
-            out[topics.BEND_CMD] = "nothing subscribes (allocation_node)"
-        if not out and self.monitor is None:
-            self.monitor = monitor
-            if monitor is self.legacy:
-                self.get_logger().warning(
-                    f"the rig publishes the deprecated unstamped {', '.join(topics.DEPRECATED_RIG_TOPICS)}: "
-                    "accepted for this release (freshness by arrival time only); publish the stamped "
-                    "topics of docs/rig.md")
-        return out
-
-    def other_commanders(self) -> list[str]:
-        """Nodes publishing /softcath/pressure_cmd that should not: besides this node (per channel)
-        or besides allocation_node (by direction)."""
-        allowed = topics.ALLOCATION_NODE if self.by_direction else self.get_name()
-        return [f"{i.node_namespace.rstrip('/')}/{i.node_name}"
-                for i in self.get_publishers_info_by_topic(topics.PRESSURE_CMD)
-                if i.node_name != allowed]
 
     def perform(self, actions) -> None:
         """Carry out what the run decided (bench.bench_run)."""
