@@ -252,3 +252,39 @@ def test_optimise_shapes_fans_keeping_the_lumen_and_the_minimum_walls():
     # a fan reaching the axis is refused in one line, not built
     bad = Search(load_design("implemented_5mm"), StudyContext(rung="closed_form"), 1, 2.0).variant((0.5, 2.5, 180.0, 0.2))
     assert not bad.feasible and "\n" not in bad.reason
+
+
+def test_optimise_names_the_best_feasible_candidate_and_writes_its_design_file_and_curves(tmp_path):
+    """optimise.run on a stand-in rung (R_C falls as the channel grows; past an area ratio of 0.29 the
+    stretch limit binds): the optimum is the largest feasible channel, named in the table and
+    written as a loadable design file; the curves CSV has every design at every pressure."""
+    import yaml
+
+    from softcath_ros.core.design import design_from_dict, load_design
+    from softcath_ros.core.studies import optimise
+
+    class StandIn(StudyContext):
+        def solve(self, specs, label):
+            out = []
+            for spec in specs:
+                ratio = area_ratio(design_from_dict(spec.design))
+                out.append({"results": [{"radius_of_curvature_m": 0.01 / ratio, "max_principal_stretch": 1.0 + ratio / 0.29,
+                                         "converged": True, "message": ""} for _ in spec.pressures]})
+            return out
+
+    base = load_design("implemented_5mm")
+    result = optimise.run(base, StandIn(rung="closed_form"), max_iter=0)
+    stem = "optimised_1dof_5mm"
+    assert result.rows[0]["label"] == "baseline" and result.rows[1]["design"] == stem
+    feasible = [r for r in result.meta["history"] if r["feasible"]]
+    best = max(feasible, key=lambda r: r["area_ratio"])
+    assert result.rows[1]["area_ratio"] == pytest.approx(best["area_ratio"]) and best["area_ratio"] < 0.29
+    written = design_from_dict(yaml.safe_load(result.extra_files[f"{stem}.yaml"]))
+    assert written.name == stem and written.channels[0].kind == "sector"
+    assert written.lumen.diameter == base.lumen.diameter
+    assert result.meta["design_file"] == f"{stem}.yaml"
+    csv = result.extra_files[f"{stem}_curves.csv"].splitlines()
+    assert len(csv) == 1 + 2 * len(optimise.CURVE_BAR)   # baseline (the implemented design) and the optimum
+    assert any(f.startswith("optimum (1 fan(s))") for f in result.findings)
+    result.plot(str(tmp_path / "optimise.png"))
+    assert (tmp_path / "optimise.png").stat().st_size > 0
