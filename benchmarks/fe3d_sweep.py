@@ -18,7 +18,8 @@ Writes benchmarks/results/<name>.{json,csv}: per checkpoint pressure, bending an
 R_C = L/theta (and the section rung's at the same pressure with its relative difference:
 section vs 3D), curvature, stretch, channel volume/area, Newton iterations, wall time; the
 meta block holds the total time, peak RSS, DOF count, convergence and the failure message.
-Ctrl-C stops the sweep and writes what converged. Times are wall clock on a shared machine.
+Ctrl-C (or SIGTERM) stops the sweep and writes what converged (meta "interrupted"). Times are wall
+clock (total_s) and the process's CPU time (cpu_s) on a shared machine.
 """
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from harness import fe3d_solver_log, pressure_option, save_figure, write_results  # noqa: E402
+from harness import (fe3d_solver_log, pressure_option, save_figure, signals_held, stop_on_signals,  # noqa: E402
+                     write_results)
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
@@ -86,9 +88,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-retry", action="store_true",
                     help="StepControl.retry_from_last = False: a failed predicted step is cut at once")
     ap.add_argument("--no-section", action="store_true", help="skip the section rung's comparison columns")
-    ap.add_argument("--channel", type=int, default=0,
-                    help="the channel pressurised (a multi-channel design: the half body on its mirror plane when "
-                         "it has one)")
+    ap.add_argument("--channel", type=int, nargs="+", default=[0],
+                    help="the channel(s) pressurised, two or more at equal pressure (a multi-channel design: the "
+                         "half body on the direction's mirror plane when it has one)")
     ap.add_argument("--name", default="fe3d_sweep")
     ap.add_argument("--plot-only", action="store_true", help="only redraw the PNG from the committed JSON")
     args = ap.parse_args(argv)
@@ -98,10 +100,11 @@ def main(argv=None) -> int:
 
     design = load_design(args.design).with_length(args.length)
     checkpoints = np.round(np.arange(0.0, args.to + 1e-4, args.step) / PA_PER_BAR, 6) * PA_PER_BAR
-    if not 0 <= args.channel < design.n_channels:
-        ap.error(f"--channel {args.channel}: {design.name} has channels 0..{design.n_channels - 1}")
+    if not all(0 <= c < design.n_channels for c in args.channel) or len(set(args.channel)) < len(args.channel):
+        ap.error(f"--channel {' '.join(map(str, args.channel))}: {design.name} has channels "
+                 f"0..{design.n_channels - 1}, each once")
     commands = np.zeros((len(checkpoints), design.n_channels))
-    commands[:, args.channel] = checkpoints
+    commands[:, args.channel] = checkpoints[:, None]
     control = None
     if args.fixed_steps is not None:
         control = dataclasses.replace(default_step_control(adaptive=False), initial_step=args.fixed_steps)
@@ -141,12 +144,17 @@ def main(argv=None) -> int:
                           **({"half": True} if design.n_channels > 1 else {}), **contact)
     except ModelError as exc:   # a bad option, as one line
         ap.error(str(exc))
-    t0 = time.perf_counter()
-    problem = model.problem_for(commands[-1] / commands[-1].max())
+    stop_on_signals()   # Ctrl-C or kill: the ramp stops and what converged is written below
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        problem = model.problem_for(commands[-1] / commands[-1].max())
+    except KeyboardInterrupt:
+        print(f"{args.name}: interrupted while meshing, nothing measured", file=sys.stderr)
+        return 130
     ndof = problem.fes.ndof
     t_setup = time.perf_counter() - t0
     state, ramp = model.sweep(commands)
-    total = time.perf_counter() - t0
+    total, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     # the section rung at the same pressures, as the same R_C = L / theta (its arc over the channelled
     # part, the tip cap straight: angle_per_length): the section-vs-3D comparison (after the fe3d timing
@@ -160,14 +168,16 @@ def main(argv=None) -> int:
                           for a, ok in zip(angle_per_length(section, section_model), section.converged)]
         except (ModelError, DesignError) as exc:   # a design the section rung does not take yet
             section_refused = str(exc)
+        except KeyboardInterrupt:
+            section_refused = "interrupted"
     gaps = {pt.load: pt.measured.get("lumen_min_gap_m") for pt in (ramp.points if ramp else [])}
     rows = []
     for i, p in enumerate(checkpoints):
         ok = bool(state.converged[i])
         diag = state.diagnostics
         rc = float(state.radius_l_over_theta[i]) if ok else None
-        volume, area = (float(diag.channel_volume[i, args.channel]),   # NaN at p = 0
-                        float(diag.channel_area[i, args.channel]))
+        volume, area = (float(diag.channel_volume[i, args.channel[0]]),   # NaN at p = 0
+                        float(diag.channel_area[i, args.channel[0]]))
         pub = PUBLISHED_40MM.get(float(p)) if abs(args.length - 0.040) < 1e-9 else None
         rows.append({
             "pressure_bar": float(p) / PA_PER_BAR, "converged": ok,
@@ -177,20 +187,23 @@ def main(argv=None) -> int:
             "error_vs_published": ((rc - pub) / pub if (pub and rc) else None),
             "section_radius_l_over_theta_mm": section_rc[i] * 1e3 if section_rc[i] else None,
             "section_vs_fe3d": ((section_rc[i] - rc) / rc if (section_rc[i] and rc and np.isfinite(rc)) else None),
+            "section_bending_angle_deg": math.degrees(args.length / section_rc[i]) if section_rc[i] else None,
             "curvature_y_per_m": float(state.curvature[i, 1]) if ok else None,
+            "curvature_per_m": float(np.hypot(*state.curvature[i])) if ok else None,
             "axial_stretch": float(state.axial_stretch[i]) if ok else None,
             "channel_volume_mm3": volume * 1e9 if ok and math.isfinite(volume) else None,
             "channel_area_mm2": area * 1e6 if ok and math.isfinite(area) else None,
             "newton_iterations": int(diag.newton_iterations[i]) if ok else None,
             "lumen_min_gap_um": (gaps[float(p)] * 1e6 if ok and gaps.get(float(p)) is not None else None),
             "time_s": float(diag.time_s[i]) if ok else None})
-    meta = {"design": design.name, "channel": args.channel, "section_refused": section_refused,
+    meta = {"design": design.name, "channel": args.channel if len(args.channel) > 1 else args.channel[0], "section_refused": section_refused,
             "command": " ".join(["benchmarks/fe3d_sweep.py", *(sys.argv[1:] if argv is None else argv)]),
             "length_m": args.length, "mesh": dataclasses.asdict(model.mesh_settings),
             "mesh_size": args.mesh_size, "ndof": ndof, "half_model": problem.half,
             "step_control": "fixed" if args.fixed_steps else "adaptive",
             "step_settings": dataclasses.asdict(model.step_control), "threads": args.threads,
-            "setup_s": t_setup, "total_s": total, "peak_rss_mb": peak_mb,
+            "setup_s": t_setup, "total_s": total, "cpu_s": cpu, "peak_rss_mb": peak_mb,
+            "interrupted": bool(ramp.interrupted) if ramp else False,
             "converged": bool(ramp.converged) if ramp else True, "message": ramp.message if ramp else "",
             "stop_reason": ramp.stop_reason if ramp else "",
             "contact_distance": model.contact_distance, "lumen_h": args.lumen_h, "layer_h": layer_h,
@@ -204,7 +217,8 @@ def main(argv=None) -> int:
             "pair_searches": problem.contact.searches if problem.contact else None,
             "pair_searches_skipped": problem.contact.skipped if problem.contact else None,
             "note": "wall clock on a 2-core machine shared with other jobs (load average in meta)"}
-    path = write_results(args.name, meta, rows)
+    with signals_held():   # the files written whole
+        path = write_results(args.name, meta, rows)
     print(f"{args.name}: {total:.1f} s, peak {peak_mb:.0f} MB, {ndof} DOF, converged={meta['converged']} "
           f"{meta['message']}")
     for r in rows:

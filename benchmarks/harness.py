@@ -12,7 +12,9 @@ import argparse
 import csv
 import json
 import os
+import signal
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -102,3 +104,25 @@ def fe3d_solver_log() -> None:
 
     logging.basicConfig(level=logging.WARNING, format="%(relativeCreated)9.0f ms %(message)s")
     logging.getLogger("softcath_ros.core.fe3d.newton").setLevel(logging.DEBUG)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def stop_on_signals() -> None:
+    """SIGINT and SIGTERM raise KeyboardInterrupt, which a long run catches to keep what it measured:
+    also when SIGINT came ignored (a job started with ``&`` from a script) or the run is killed politely."""
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
+@contextmanager
+def signals_held():
+    """SIGINT and SIGTERM ignored inside (the results being written whole), restored after."""
+    saved = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)

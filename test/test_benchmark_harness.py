@@ -1,6 +1,7 @@
 """benchmarks/harness.py: timing over repeats, results and charts with the machine metadata; and
 every benchmark script still loads (imports resolve) without running its measurement."""
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -97,3 +98,20 @@ def test_benchmark_pressures_carry_their_unit(harness):
     bare = [f"{p.name}: {m.group(0)}" for p in BENCHMARKS.glob("*.py") for m in option.finditer(p.read_text())
             if "degree" not in m.group(0)]   # (a --step in degrees is no pressure)
     assert not bare, f"pressure options read as bare floats: {bare}"
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_long_run_stops_on_a_signal_and_keeps_what_it_measured(sig, tmp_path):
+    """stop_on_signals: SIGINT (even when the run was started with it ignored, as a job backgrounded from
+    a script is) and SIGTERM raise KeyboardInterrupt in the run, which writes what it has."""
+    child = (f"import os, signal, sys; sys.path.insert(0, {str(BENCHMARKS)!r}); import harness\n"
+             f"harness.RESULTS = __import__('pathlib').Path({str(tmp_path)!r})\n"
+             "harness.stop_on_signals()\nrows = [{'p': 0.1}]\n"
+             f"try:\n    os.kill(os.getpid(), signal.{sig})\n    import time; time.sleep(5); rows.append({{'p': 0.2}})\n"
+             "except KeyboardInterrupt:\n    pass\n"
+             "with harness.signals_held():\n    os.kill(os.getpid(), signal.SIGTERM)   # ignored while writing\n"
+             "    harness.write_results('partial', {}, rows)\n")
+    out = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=60,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "partial.json").read_text())["results"] == [{"p": 0.1}]

@@ -1090,3 +1090,21 @@ def test_a_section_netgen_cannot_mesh_is_one_line(short_design, monkeypatch):
     with pytest.raises(ModelError, match=r"could not mesh implemented_5mm's section: Meshing failed! surface 3") as err:
         mesh_section(short_design, Settings(), True)
     assert "\n" not in str(err.value)
+
+
+def test_shaped_holes_are_meshed_without_clusters_at_their_fillets(sector_design, implemented_design):
+    """netgen's curvature safety: 0.5 where a hole is shaped (2 fills a 0.1 mm fillet with 50 um
+    elements graded into the walls: 1.5x the DOF for 1 % in R_C, docs/validation.md), each arc still
+    in two segments (its exact area); its own 2 where every hole is a circle (those designs' meshes
+    as validated), or as MeshSettings says."""
+    from softcath_ros.core.fe3d.mesh import MeshSettings, curvature_safety, mesh_section
+    from softcath_ros.core.models.fe3d import mesh_settings
+
+    base = mesh_settings()
+    assert curvature_safety(sector_design, base) == 0.5 and curvature_safety(implemented_design, base) == 2.0
+    fine = dataclasses.replace(base, curvature_safety=2.0)
+    assert MeshSettings().scaled(2.0).curvature_safety is None and fine.scaled(2.0).curvature_safety == 2.0
+    shaped, clustered = (mesh_section(sector_design, m, True) for m in (base, fine))
+    assert len(shaped.triangles) < 0.7 * len(clustered.triangles)
+    circles, as_before = (mesh_section(implemented_design, m, True) for m in (base, fine))
+    np.testing.assert_array_equal(circles.points, as_before.points)

@@ -55,7 +55,7 @@ def mesh_settings(mesh_size: float = DEFAULT_MESH_SIZE, layer_h: float | None = 
     if body == 1.0:
         return mesh
     return MeshSettings(mesh.section_h * body, mesh.wall_h * body, mesh.layer_h * body, mesh.cap_layers,
-                        None if mesh.lumen_h is None else mesh.lumen_h * body)
+                        None if mesh.lumen_h is None else mesh.lumen_h * body, mesh.curvature_safety)
 
 
 def _reference_mesh(mesh_size, layer_h):
