@@ -34,6 +34,28 @@ from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 
 DEFAULT = ("fe3d_sweep_20mm_contact", "fe3d_sweep_40mm_contact")
 TARGET = {0.02: 0.08, 0.04: 0.05}   # |section / fe3d - 1| in R_C over 0-0.35 bar (issue 12)
+DESIGN_TARGET = {"three_sector_5mm": 0.05, "optimised_1dof_5mm": 0.05}   # issue 36, at any length
+DESIGNS = Path(__file__).resolve().parent / "designs"   # designs kept with the benchmarks
+
+
+def _design(name: str):
+    """A sweep's design by name: the shipped ones, else benchmarks/designs/<name>.yaml."""
+    from softcath_ros.core.errors import DesignError
+
+    try:
+        return load_design(name)
+    except DesignError:
+        if (DESIGNS / f"{name}.yaml").is_file():
+            return load_design(DESIGNS / f"{name}.yaml")
+        raise
+
+
+def _commands(meta: dict, design, pressures: np.ndarray) -> np.ndarray:
+    """The sweep's commands: its pressure on the channel(s) in meta (fe3d_sweep --channel)."""
+    channels = meta.get("channel", 0)
+    out = np.zeros((len(pressures), design.n_channels))
+    out[:, np.atleast_1d(channels)] = pressures[:, None]
+    return out
 
 
 def _fe3d_row(row: dict) -> dict | None:
@@ -58,35 +80,38 @@ def main(argv=None) -> int:
             doc = json.loads(path.read_text())
             meta = doc["meta"]
             length = float(meta["length_m"])
-            design = load_design(meta.get("design", "implemented_5mm")).with_length(length)
+            design = _design(meta.get("design", "implemented_5mm")).with_length(length)
         except (OSError, ValueError, KeyError) as exc:
             print(f"section_vs_fe3d: {path}: not an fe3d_sweep or fe3d_stability result ({exc})", file=sys.stderr)
             return 2
         sources[name] = {"git_commit": meta.get("git_commit"), "date": meta.get("date"), "length_m": length,
+                         "design": design.name, "channel": meta.get("channel", 0),
                          "stop": meta.get("message", "")[:200]}
+        target = DESIGN_TARGET.get(design.name, TARGET.get(round(length, 4)) if design.name == "implemented_5mm" else None)
         fe = [_fe3d_row(r) for r in doc["results"]]
         fe = [r for r in fe if r is not None]
         if not fe:
             continue
         p = np.array([r["pressure_bar"] for r in fe]) * PA_PER_BAR
         section = make_model("section", design)
-        state = section.evaluate(p[:, None])
+        state = section.evaluate(_commands(meta, design, p))
         with np.errstate(divide="ignore"):
             rc = 1e3 / angle_per_length(state, section)                               # mm, the cap straight
             rc_long = 1e3 / (np.hypot(*np.asarray(state.curvature).T) * state.axial_stretch)   # mm, cap bent too
         for r, ok, a, b in zip(fe, state.converged, rc, rc_long):
             f = r["radius_l_over_theta_mm"]
             unbent = length * 1e3 * (1.0 - b / f) if ok else None   # theta_fe3d / theta_long = R_long / R_fe3d
-            rows.append({"length_mm": length * 1e3, "pressure_bar": r["pressure_bar"], "fe3d_rc_mm": f,
+            rows.append({"case": name, "length_mm": length * 1e3, "pressure_bar": r["pressure_bar"], "fe3d_rc_mm": f,
                          "section_rc_mm": float(a) if ok else None,
+                         "fe3d_angle_deg": math.degrees(length * 1e3 / f),
+                         "section_angle_deg": math.degrees(length * 1e3 / a) if ok else None,
                          "section_vs_fe3d": float(a / f - 1.0) if ok else None,
                          "section_no_cap_rc_mm": float(b) if ok else None,
                          "no_cap_vs_fe3d": float(b / f - 1.0) if ok else None,
                          "unbent_length_mm": unbent,
                          "base_share_mm": None if unbent is None else unbent - design.cap_thickness * 1e3,
-                         "target": TARGET.get(round(length, 4)),
-                         "within_target": bool(abs(a / f - 1.0) <= TARGET[round(length, 4)])
-                         if ok and round(length, 4) in TARGET else None})
+                         "target": target,
+                         "within_target": bool(abs(a / f - 1.0) <= target) if ok and target else None})
     if not rows:
         print("section_vs_fe3d: no converged fe3d rows in the inputs", file=sys.stderr)
         return 2
@@ -95,10 +120,11 @@ def main(argv=None) -> int:
             "note": "R_C = l / theta; fe3d rows as committed (their own commits in fe3d_sources); section rung at "
                     "its default mesh at the same pressures"}
     stem = write_results(args.name, meta, rows)
-    for length in sorted({r["length_mm"] for r in rows}):
-        mine = [r for r in rows if r["length_mm"] == length and r["section_vs_fe3d"] is not None]
+    for case in dict.fromkeys(r["case"] for r in rows):
+        mine = [r for r in rows if r["case"] == case and r["section_vs_fe3d"] is not None]
+        length = mine[0]["length_mm"]
         worst = max(mine, key=lambda r: abs(r["section_vs_fe3d"]))
-        print(f"{length:g} mm: {len(mine)} pressures to {max(r['pressure_bar'] for r in mine):.4g} bar; section vs fe3d "
+        print(f"{case}, {length:g} mm: {len(mine)} pressures to {max(r['pressure_bar'] for r in mine):.4g} bar; section vs fe3d "
               f"{min(r['section_vs_fe3d'] for r in mine):+.2%} .. {max(r['section_vs_fe3d'] for r in mine):+.2%} "
               f"(worst {worst['section_vs_fe3d']:+.2%} at {worst['pressure_bar']:.4g} bar; before the straight cap "
               f"{worst['no_cap_vs_fe3d']:+.2%}); unbent length {min(r['unbent_length_mm'] for r in mine):.2f}.."
@@ -115,15 +141,17 @@ def _plot(rows, name) -> None:
     import matplotlib.pyplot as plt
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for length, colour in zip(sorted({r["length_mm"] for r in rows}), ("C0", "C1", "C2", "C3")):
-        mine = [r for r in rows if r["length_mm"] == length and r["section_vs_fe3d"] is not None]
-        p = [r["pressure_bar"] for r in mine]
-        ax1.plot(p, [100 * r["section_vs_fe3d"] for r in mine], "o-", color=colour, label=f"{length:g} mm, cap straight")
-        ax1.plot(p, [100 * r["no_cap_vs_fe3d"] for r in mine], "x:", color=colour, label=f"{length:g} mm, cap bent")
+    for case, colour in zip(dict.fromkeys(r["case"] for r in rows), ("C0", "C1", "C2", "C3", "C4", "C5")):
+        mine = [r for r in rows if r["case"] == case and r["section_vs_fe3d"] is not None]
+        if not mine:
+            continue
+        p, label = [r["pressure_bar"] for r in mine], f"{case} ({mine[0]['length_mm']:g} mm)"
+        ax1.plot(p, [100 * r["section_vs_fe3d"] for r in mine], "o-", color=colour, label=f"{label}, cap straight")
+        ax1.plot(p, [100 * r["no_cap_vs_fe3d"] for r in mine], "x:", color=colour, label=f"{label}, cap bent")
         target = mine[0]["target"]
         if target:
             ax1.axhspan(-100 * target, 100 * target, color=colour, alpha=0.08)
-        ax2.plot(p, [r["unbent_length_mm"] for r in mine], "o-", color=colour, label=f"{length:g} mm")
+        ax2.plot(p, [r["unbent_length_mm"] for r in mine], "o-", color=colour, label=label)
     ax1.axhline(0, color="k", lw=0.5)
     ax1.set(xlabel="pressure [bar]", ylabel="section / fe3d - 1 in R_C = l / theta [%]",
             title="section rung against fe3d (bands: targets)")
