@@ -273,7 +273,7 @@ def test_optimise_names_the_best_feasible_candidate_and_writes_its_design_file_a
             return out
 
     base = load_design("implemented_5mm")
-    result = optimise.run(base, StandIn(rung="closed_form"), max_iter=0)
+    result = optimise.run(base, StandIn(rung="section"), max_iter=0)
     stem = "optimised_1dof_5mm"
     assert result.rows[0]["label"] == "baseline" and result.rows[1]["design"] == stem
     feasible = [r for r in result.meta["history"] if r["feasible"]]
@@ -288,3 +288,16 @@ def test_optimise_names_the_best_feasible_candidate_and_writes_its_design_file_a
     assert any(f.startswith("optimum (1 fan(s))") for f in result.findings)
     result.plot(str(tmp_path / "optimise.png"))
     assert (tmp_path / "optimise.png").stat().st_size > 0
+
+
+def test_optimise_refuses_a_rung_without_stretch(tmp_path, capsys):
+    """The optimiser's stretch limit needs the principal stretch: a rung that reports none (the closed
+    form) is refused in one line before any candidate is solved, not a TypeError mid-search."""
+    from softcath_ros.cli import main
+
+    assert main(["study", "optimise", "--design", "implemented_5mm", "--model", "closed_form", "--pressure", "0.14bar",
+                 "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "softcath study: error: rung closed_form reports no principal stretch, which the optimiser's stretch limit "
+        "needs: use --model section"]
+    assert not any(tmp_path.iterdir())

@@ -33,7 +33,9 @@ import numpy as np
 import yaml
 
 from ..design import Design, load_design
-from ..errors import DesignError
+from ..errors import DesignError, SoftcathError
+from ..models import rung_class
+from ..models.base import BendModel
 from ..units import PA_PER_BAR
 from ..options import Option
 from .context import StudyContext, StudyResult
@@ -230,6 +232,9 @@ def run(design: Design, ctx: StudyContext, max_stretch: float = DEFAULT_MAX_STRE
     optimum's design file, and R_C against pressure for the optimum, the baseline and the implemented design."""
     if design.lumen is None:
         raise DesignError("lumen", None, "the optimiser keeps the lumen (it carries the device); this design has none")
+    if rung_class(ctx.rung).max_principal_stretch is BendModel.max_principal_stretch:
+        raise SoftcathError(f"rung {ctx.rung} reports no principal stretch, which the optimiser's stretch limit "
+                            "needs: use --model section")
     kind = "1dof" if design.n_channels == 1 else "2dof"
     searches = [Search(design, ctx, 1, max_stretch, max_iter)] if kind == "1dof" else \
         [Search(design, ctx, n, max_stretch, max_iter) for n in counts]
