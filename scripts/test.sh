@@ -4,9 +4,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh "ros,test,fe,cluster,hardware"
 # DDS stays on loopback; test/conftest.py leases each test process its own domain and every node
-# test another (softcath_ros.graph), so parallel runs do not see each other. One process by
-# default: with two pytest-xdist workers (SOFTCATH_TEST_WORKERS=2, a test file per worker) the suite
-# takes 8 min instead of about 15, but three signal and full-disk tests of characterise still fail
-# there (they pass alone), so parallel runs are not the default yet.
+# test another (softcath_ros.graph), so parallel runs do not see each other. Two pytest-xdist
+# workers by default, a test file per worker (about half the wall time of one process on two
+# cores); SOFTCATH_TEST_WORKERS=0 runs the suite in this process, N in N workers.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-exec .venv/bin/python -m pytest -n "${SOFTCATH_TEST_WORKERS:-0}" --dist loadfile "$@"
+exec .venv/bin/python -m pytest -n "${SOFTCATH_TEST_WORKERS:-2}" --dist loadfile "$@"

@@ -71,14 +71,24 @@ def _foreign_participants(domain: int, listen_s: float) -> list[str]:
     return names
 
 
+def last_leased(domain: int) -> float:
+    """When ``domain`` was last leased (or tried) by any process: its lock file's time; 0 if never."""
+    try:
+        return (LOCK_DIR / f"{domain}.lock").stat().st_mtime
+    except OSError:
+        return 0.0
+
+
 def lease_domain(domain_range: tuple[int, int] = DOMAIN_RANGE, probe_s: float = 0.0) -> DomainLease:
     """A domain no other process using this module holds (and, with ``probe_s`` > 0, where no
     foreign node answers within that time). SoftcathError when every domain is taken."""
     LOCK_DIR.mkdir(parents=True, exist_ok=True)
     lo, hi = domain_range
-    domains = list(range(lo, hi + 1))
-    start = random.randrange(len(domains))
-    for domain in domains[start:] + domains[:start]:
+    # Least recently leased first (a lease opens its lock file for writing): Fast DDS keeps a domain's
+    # shared-memory ports for a moment, and a participant made soon after on the same domain can read
+    # what a stopped graph's nodes sent there. Ties in random order.
+    domains = sorted(range(lo, hi + 1), key=lambda d: (last_leased(d), random.random()))
+    for domain in domains:
         f = open(LOCK_DIR / f"{domain}.lock", "w")
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -307,5 +317,5 @@ class NodeGraph:
                 self.lease.release()
 
 
-__all__ = ["DOMAIN_RANGE", "DomainLease", "NodeGraph", "ReadyWatch", "graph_env", "lease_domain", "node_command",
-           "ros_args", "stop_process", "wait_output", "wait_ready"]
+__all__ = ["DOMAIN_RANGE", "DomainLease", "NodeGraph", "ReadyWatch", "graph_env", "last_leased", "lease_domain",
+           "node_command", "ros_args", "stop_process", "wait_output", "wait_ready"]

@@ -1,5 +1,6 @@
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -7,6 +8,12 @@ from pathlib import Path
 
 import pytest
 
+
+# A suite started as a shell script's background job (`scripts/test.sh &`) inherits SIGINT ignored,
+# and every process a test starts would inherit it too: they start as from a terminal instead
+# (test_manual_bench and test_rig_faults start characterise with SIGINT ignored on purpose).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Parallel test runs must not see each other's nodes: loopback only, and this run's in-process
 # nodes on a domain leased for the whole session (node processes lease their own: domains.py).

@@ -11,22 +11,15 @@ import os
 import sys
 
 from softcath_ros.core.errors import SoftcathError
-from softcath_ros.graph import DOMAIN_RANGE, LOCK_DIR, graph_env, lease_domain
+from softcath_ros.graph import DOMAIN_RANGE, last_leased, graph_env, lease_domain
 
 LEASES = []
 USED: set[int] = set()
 
 
-def _last_leased(domain: int) -> float:
-    try:
-        return (LOCK_DIR / f"{domain}.lock").stat().st_mtime
-    except OSError:
-        return 0.0
-
-
 def private_domain() -> int:
     lo, hi = DOMAIN_RANGE
-    for domain in sorted(range(lo, hi + 1), key=lambda d: (d in USED, _last_leased(d))):
+    for domain in sorted(range(lo, hi + 1), key=lambda d: (d in USED, last_leased(d))):
         try:
             lease = lease_domain((domain, domain))
         except SoftcathError:

@@ -14,7 +14,7 @@ from lifecycle_listener import LifecycleListener  # noqa: E402
 from softcath_ros import topics  # noqa: E402
 from softcath_ros.bench.bringup import AskState, Bringup, Transition  # noqa: E402
 from softcath_ros.cli.managed import activate_managed  # noqa: E402
-from softcath_ros.graph import NodeGraph  # noqa: E402
+from softcath_ros.graph import NodeGraph, ReadyWatch, wait_ready  # noqa: E402
 
 pytestmark = [pytest.mark.ros]
 NODE = "/" + topics.REGULATOR_NODE
@@ -52,7 +52,14 @@ def test_a_regulator_left_unconfigured_is_configured_and_activated():
             proc = graph.start("regulator_node", {"backend": "serial", "port": emu.port, "autostart": False})
             graph.wait_ready(proc)
             said = []
-            assert activate_managed(graph.watch, said.append) == [NODE]
+            # A watch of its own (as characterise's): once the node said it spins and is managed, its
+            # services are waited for, however slow their discovery is (no fixed window).
+            fresh = ReadyWatch(graph.domain)
+            try:
+                wait_ready(proc, watch=fresh)
+                assert activate_managed(fresh, said.append, discovery_s=0.0) == [NODE]
+            finally:
+                fresh.close()
             assert said == [f"[characterise] configure {NODE}", f"[characterise] activate {NODE}"]
             listener = LifecycleListener(graph.domain, topics.REGULATOR_NODE, {})
             try:
@@ -60,14 +67,12 @@ def test_a_regulator_left_unconfigured_is_configured_and_activated():
             finally:
                 listener.close()
             said.clear()
-            assert activate_managed(graph.watch, said.append) == [NODE] and said == []   # active: nothing to do
+            assert activate_managed(graph.watch, said.append, discovery_s=0.0) == [NODE] and said == []  # active
     finally:
         emu.close()
 
 
 @pytest.mark.timeout(240)
-@pytest.mark.xfail(strict=False, reason="known: passes alone and as a file, but after other test files in the same "
-                   "process characterise did not find the regulator's lifecycle services (exit 3, no rig); cause open")
 def test_characterise_rig_ros_names_the_managed_node_that_fails_its_check(tmp_path):
     with NodeGraph() as graph:
         proc = graph.start("regulator_node", {"backend": "serial", "port": "/nonexistent/tty", "autostart": False})
@@ -82,7 +87,6 @@ def test_characterise_rig_ros_names_the_managed_node_that_fails_its_check(tmp_pa
 
 
 @pytest.mark.timeout(240)
-@pytest.mark.xfail(strict=False, reason="known: passes alone and as a file; in the full suite (one process, after other files) it failed on 2026-12-07 (SIGINT exit code / readiness); cause open, see the closing note")
 def test_bench_node_is_managed_configure_opens_activate_runs_deactivate_vents_and_stops(tmp_path):
     """bench_node with autostart off: nothing recorded until configured; activate runs the protocol;
     deactivate mid-run: the abort marker, zero command, the recording finalised incomplete (exit 130)."""

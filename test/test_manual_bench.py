@@ -167,12 +167,20 @@ def test_ninety_step_protocol_typed_through_stdin(tmp_path, monkeypatch, impleme
     assert report_form(manual_text) == report_form(Path(sim["report"]).read_text())
 
 
-@pytest.mark.parametrize("how", ["interrupt", "kill"])
-@pytest.mark.xfail(strict=False, reason="known: passes alone and as a file; in the full suite (one process, after other files) it failed on 2026-12-07 (SIGINT exit code / readiness); cause open, see the closing note")
+def _inherit_ignored_and_blocked_sigint():
+    """What a shell script's background job (`cmd &`) or a parent that blocks SIGINT hands down."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+@pytest.mark.parametrize("how", ["interrupt", "interrupt_inherited_ignored", "kill"])
 def test_entries_survive_ctrl_c_and_a_crash(tmp_path, how):
+    """Ctrl-C finalises the recording (exit 130), also when characterise was started with SIGINT
+    ignored and blocked (it restores the default); a crash leaves a recoverable file."""
     proc = subprocess.Popen(SOFTCATH + ["characterise", "--rig", "manual", "--protocol", "quick",
                                         "--output-dir", str(tmp_path)],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_inherit_ignored_and_blocked_sigint if how.endswith("ignored") else None)
     for v in range(1, 8):
         proc.stdin.write(f"{v}\n")
     proc.stdin.flush()
@@ -181,11 +189,11 @@ def test_entries_survive_ctrl_c_and_a_crash(tmp_path, how):
     while "[8/28]" not in seen and time.monotonic() < deadline:
         seen += os.read(proc.stdout.fileno(), 4096).decode()
     assert "[8/28]" in seen
-    proc.send_signal(signal.SIGINT if how == "interrupt" else signal.SIGKILL)
+    proc.send_signal(signal.SIGKILL if how == "kill" else signal.SIGINT)
     proc.communicate(timeout=20)
     bag = next(tmp_path.glob("bench_quick_manual_*"))
     mcap = next(bag.glob("*.mcap"))
-    if how == "interrupt":
+    if how != "kill":
         assert proc.returncode == 130
         assert read_metadata(mcap)["softcath_result"]["complete"] == "false"
     else:

@@ -96,12 +96,14 @@ def run(args) -> int:
     from ..core.design import load_design
 
     check_rung_names([*args.model, *([args.sim_model] if args.rig == "sim" else [])])
+    main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
+    if main_thread:
+        restore_interrupt()
     if args.rig == "manual":
         return run_manual(args)
     protocol = load_protocol(args.protocol)
     design = load_design(args.design or protocol.design or "implemented_5mm")
     design_steps(protocol, design, args.model[0])   # a step beyond the design (or its reach): refused now
-    main_thread = threading.current_thread() is threading.main_thread()  # signals go to the main thread only
     previous = signal.signal(signal.SIGTERM, _raise_stopped) if main_thread else None
     try:
         return RIGS[args.rig].run(args, protocol, design)
@@ -112,6 +114,14 @@ def run(args) -> int:
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
+
+
+def restore_interrupt() -> None:
+    """Ctrl-C (SIGINT) stops the run and finalises its recording, also when this process was started
+    with SIGINT ignored or blocked (a shell script's background job, a parent that ignores it):
+    both are inherited through exec, and Python keeps an inherited SIG_IGN."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
 
 
 def _raise_stopped(signum, frame):

@@ -8,7 +8,7 @@ import time
 
 from ..core.errors import SoftcathError
 
-MANAGED_DISCOVERY_S = 5.0   # the rig's lifecycle services are looked for this long (a loaded machine takes seconds)
+MANAGED_DISCOVERY_S = 2.0   # a rig's lifecycle services are looked for this long (softcath's own nodes: until seen)
 MANAGED_TIMEOUT_S = 60.0    # each managed node configured and active by then (configure opens a device)
 
 
@@ -17,6 +17,13 @@ def _lifecycle_nodes(node) -> list[str]:
     suffix = "/change_state"
     return sorted(name[:-len(suffix)] for name, types in node.get_service_names_and_types()
                   if name.endswith(suffix) and "lifecycle_msgs/srv/ChangeState" in types)
+
+
+def announced_managed(watch) -> set[str]:
+    """The managed nodes that said they spin on the watch's domain (nodes/runtime.announce_ready):
+    their services are waited for however long discovery takes (a third-party node is found only
+    within the discovery window)."""
+    return {info["node"] for info in watch.ready.values() if info.get("managed") and isinstance(info.get("node"), str)}
 
 
 def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeout_s: float = MANAGED_TIMEOUT_S) -> list[str]:
@@ -32,10 +39,16 @@ def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeo
     from ..bench.bringup import AskState, Bringup, Transition
 
     node = watch.node
-    end = time.monotonic() + discovery_s
-    while time.monotonic() < end:   # discovery: services show up over a second or two
+    start = time.monotonic()
+    while True:   # discovery: services show up over a second or two (seconds on a loaded machine)
         watch.poll(0.1)
-    names = _lifecycle_nodes(node)
+        names = _lifecycle_nodes(node)
+        if time.monotonic() - start >= discovery_s and announced_managed(watch) <= set(names):
+            break
+        if time.monotonic() - start >= discovery_s + timeout_s:
+            missing = sorted(announced_managed(watch) - set(names))
+            raise SoftcathError(f"{', '.join(missing)} said it spins but its lifecycle services did not show up "
+                                f"within {discovery_s + timeout_s:g} s")
     if not names:
         return []
     reasons: dict[str, str] = {}

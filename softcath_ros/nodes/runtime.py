@@ -52,9 +52,11 @@ def _rcl_reason(exc: Exception) -> str:
 
 
 def announce_ready(node, executor_name: str) -> None:
-    """Say on the latched ``topics.READY`` that ``node`` spins: its name, process id and executor."""
+    """Say on the latched ``topics.READY`` that ``node`` spins: its name, process id, executor and
+    whether it is managed (lifecycle: characterise then waits until it sees its services)."""
     import json
 
+    from rclpy.lifecycle import LifecycleNode
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from std_msgs.msg import String
 
@@ -63,7 +65,8 @@ def announce_ready(node, executor_name: str) -> None:
     qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     node.ready_publisher = node.create_publisher(String, topics.READY, qos)
     node.ready_publisher.publish(String(data=json.dumps(
-        {"node": node.get_fully_qualified_name(), "pid": os.getpid(), "executor": executor_name})))
+        {"node": node.get_fully_qualified_name(), "pid": os.getpid(), "executor": executor_name,
+         "managed": isinstance(node, LifecycleNode)})))
 
 
 def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
