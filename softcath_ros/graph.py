@@ -56,15 +56,20 @@ class DomainLease:
 
 
 def _foreign_participants(domain: int, listen_s: float) -> list[str]:
-    """Node names another graph has on ``domain`` (loopback), seen within ``listen_s`` seconds."""
+    """Node names another graph has on ``domain`` (loopback), seen within ``listen_s`` seconds (the
+    first seen ends the wait: a free domain costs the whole window, a busy one only its discovery)."""
     import rclpy
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain)
     try:
         node = rclpy.create_node("softcath_domain_probe", context=context)
-        time.sleep(listen_s)
-        names = [n for n in node.get_node_names() if n != "softcath_domain_probe"]
+        end = time.monotonic() + listen_s
+        while True:
+            names = [n for n in node.get_node_names() if n != "softcath_domain_probe"]
+            if names or time.monotonic() >= end:
+                break
+            time.sleep(0.05)
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
