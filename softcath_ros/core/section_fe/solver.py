@@ -21,10 +21,17 @@ ROUND_OFF = 1e-11           # potential differences below this (relative) are ro
 
 
 class LinearSolver:
-    """Sparse symmetric solves with a fixed pattern: factor once symbolically, then refactor."""
+    """Sparse symmetric solves: a symbolic factor kept while the pattern of non-zeros stays the same,
+    refactored numerically at each call.
+
+    The problem's tangent has a fixed pattern that reserves every pair of wall nodes of a hole for
+    self-contact (``terms/contact.py``), but only the pairs within the barrier's range are non-zero:
+    the entries that are exactly zero are left out of the factor (keeping them triples its fill and
+    costs ten times the time), and the symbolic analysis is redone when that set changes."""
 
     def __init__(self):
         self._ldl = None
+        self._pattern = None          # (indptr, indices, kept mask) of the factorised matrix
         self._shifted = None          # the factor of shifted tangents (solve_positive_definite)
         try:
             import qdldl  # noqa: F401
@@ -32,20 +39,29 @@ class LinearSolver:
         except ImportError:
             self._have_qdldl = False
 
+    def _upper(self, K):
+        """K's upper triangle without its zero entries (diagonal kept) as CSC arrays, and whether
+        its pattern is the one last factorised (then the symbolic factor is reused)."""
+        n = K.shape[0]
+        rows = np.repeat(np.arange(n), np.diff(K.indptr))
+        keep = (K.indices <= rows) & ((K.data != 0) | (K.indices == rows))
+        last = self._pattern
+        same = (last is not None and len(last[2]) == len(keep) and np.array_equal(last[2], keep)
+                and (last[0] is K.indptr and last[1] is K.indices
+                     or np.array_equal(last[0], K.indptr) and np.array_equal(last[1], K.indices)))
+        if not same:
+            self._pattern = (K.indptr, K.indices, keep)
+        # K symmetric: the CSR arrays of its lower triangle are the CSC arrays of its upper one.
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=n))])
+        return sp.csc_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape), same
+
     def solve(self, K, rhs: np.ndarray) -> np.ndarray:
-        """Solve K z = rhs for a symmetric CSR matrix K whose pattern is the same at every call."""
+        """Solve K z = rhs for a symmetric CSR matrix K."""
         if self._have_qdldl:
             import qdldl
 
-            if self._ldl is None:
-                n = K.shape[0]
-                rows = np.repeat(np.arange(n), np.diff(K.indptr))
-                self._lower = K.indices <= rows
-                self._upper_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[self._lower], minlength=n))])
-            # K symmetric: the CSR arrays of its lower triangle are the CSC arrays of its upper one.
-            upper = sp.csc_matrix((K.data[self._lower], K.indices[self._lower], self._upper_indptr),
-                                  shape=K.shape)
-            if self._ldl is None:
+            upper, same = self._upper(K)
+            if self._ldl is None or not same:
                 self._ldl = qdldl.Solver(upper, upper=True)
             else:
                 self._ldl.update(upper, upper=True)
@@ -53,6 +69,8 @@ class LinearSolver:
             z += self._ldl.solve(rhs - K @ z)  # one step of iterative refinement (no pivoting)
             return z
         # A symmetric ordering without row pivoting keeps SuperLU's factor sparse.
+        K = K.copy()
+        K.eliminate_zeros()
         return spla.splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                          options={"SymmetricMode": True}).solve(rhs)
 
@@ -83,14 +101,13 @@ class LinearSolver:
         (qdldl only; a second factor of the same pattern)."""
         if self._shifted is None:
             self._shifted = LinearSolver()
-            rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
-            self._diag = np.flatnonzero(rows == K.indices)
             self._sigma = None
-        scale = float(np.max(np.abs(K.data[self._diag])))
+        diag = np.flatnonzero(np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)) == K.indices)
+        scale = float(np.max(np.abs(K.data[diag])))
         sigma = 1e-6 * scale if self._sigma is None else max(self._sigma / 3, 1e-9 * scale)
         for _ in range(24):
             data = K.data.copy()
-            data[self._diag] += sigma
+            data[diag] += sigma
             z = self._shifted.solve(K.__class__((data, K.indices, K.indptr), shape=K.shape), rhs)
             if self._shifted.negative_pivots() == 0 and np.all(np.isfinite(z)):
                 self._sigma = sigma
