@@ -13,12 +13,12 @@ REASON = "Long because:"
 
 # To split (issue 35 item 4): path -> the most lines it may have until then.
 OVERSIZED_MODULES = {
-    "core/models/section.py": 567,
+    "core/models/section.py": 501,
     "core/section_fe/mesh.py": 577,
 }
 # To split or to give a reason: "path:function" -> the most lines it may have until then.
 LONG_FUNCTIONS = {
-    "core/models/section.py:_solve_path": 198,
+    "core/models/section.py:_solve_path": 130,
     "core/section_fe/mesh.py:_mesh_wedge": 103,
     "core/section_fe/problem.py:__init__": 109,
     "core/section_fe/solver.py:newton": 89,

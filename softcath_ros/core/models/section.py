@@ -30,14 +30,13 @@ from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.settings import SectionSettings, discretise
-from ..section_fe.solver import LinearSolver, PathStep, leave_saddle, newton, unstable_directions
+from ..section_fe.solver import LinearSolver, PathStep, newton, unstable_directions
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, options_of
+from .section_stability import ESCAPE_ITERATIONS, StableStates
 from ..units import PA_PER_BAR
 
 
-# a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
-LIMIT_RATIO = 0.25
 # limit points passed by arc length per continuation (snaps), and the largest drop of the pressure
 # (fraction of the limit pressure) a snap may have before the limit point counts as the branch's end
 MAX_SNAPS = 4
@@ -47,9 +46,6 @@ PREDICTOR_CUTS = 3
 # retries a step plain Newton failed
 SNAP_ITERATIONS = 40
 RETRY_ITERATIONS = 30
-# iterations of the minimiser that leaves a saddle (it steps with shifted tangents until past the
-# indefinite region: 48-49 at D/30 near 0.27 bar)
-ESCAPE_ITERATIONS = 80
 MAX_FAILED_RETRIES = 10    # per continuation
 MAX_SNAP_DROP = 0.3
 
@@ -71,7 +67,7 @@ def _ray_order(pressures: np.ndarray) -> list[int]:
     return [k[2] for k in sorted(keys)]
 
 
-class SectionModel(BendModel):
+class SectionModel(StableStates, BendModel):
     name = "section"
     solver_version = "section-7"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states; 7: Triangle mesher)
     info = RungInfo(
@@ -248,78 +244,10 @@ class SectionModel(BendModel):
 
         c_ref = self.problem.c_ref
 
-        hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
-
         failed_retries = [0]
 
         def corrector(guess, t, previous, minimise: bool = False) -> Correction:
-            if minimise:      # the stable state a snap at this pressure lands in
-                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                              max_iterations=SNAP_ITERATIONS, linear=self.linear, minimise=True)
-            else:
-                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                              max_iterations=self.settings.max_newton, linear=self.linear)
-            for _ in range(0 if minimise else PREDICTOR_CUTS):
-                if not corr.info.get("inadmissible_start") or guess is previous:
-                    break
-                # the secant predictor pushed the walls through each other: halve its step
-                guess = previous + 0.5 * (guess - previous)
-                iterations = corr.iterations
-                corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                              max_iterations=self.settings.max_newton, linear=self.linear)
-                corr.iterations += iterations
-            if (not corr.converged and not minimise and self.settings.adaptive and failed_retries[0] < MAX_FAILED_RETRIES
-                    and not corr.info.get("inadmissible_start")):
-                # again as a minimiser of the potential (line search, no wandering test: slower,
-                # surer); not with fixed steps (adaptive False), which are plain load stepping, and
-                # not after MAX_FAILED_RETRIES failed ones (the ramp is then at a limit point)
-                retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
-                               max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
-                retry.iterations += corr.iterations
-                failed_retries[0] += not retry.converged
-                corr = retry if retry.converged else corr
-            if corr.converged and not minimise and corr.info.get("negative_directions"):
-                corr = self._leave_saddle(corr, pressure_at(t) / c_ref, describe(t))
-            if not corr.converged and corr.stop_reason == UNSTABLE:
-                return corr
-            if not corr.converged:
-                # say how close the holes were to closing: failures cluster just before contact
-                gaps = self.problem.hole_gaps(previous)
-                i = int(np.argmin(gaps))
-                corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
-                if self.problem.fill is not None:
-                    corr.message += f", lumen fill min det F {self.problem.fill_min_jacobian(previous):.3g}"
-                if gaps[i] < 2 * self.settings.min_hole_gap and np.isfinite(self.problem.open_hole_gaps(previous)[i]):
-                    # the walls are about to touch: the same validity limit as contact itself
-                    corr.outside_domain = True
-                    corr.stop_reason = OUTSIDE_MODEL
-                    corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"
-            else:
-                gaps = self.problem.open_hole_gaps(corr.state)
-                if gaps.min() < self.settings.min_hole_gap:
-                    name = hole_names[int(np.argmin(gaps))]
-                    corr.converged = False
-                    corr.outside_domain = True
-                    corr.stop_reason = OUTSIDE_MODEL
-                    corr.message = (f"the walls of the {name} touch (gap {gaps.min():.1%} of its diameter); "
-                                    "self-contact is off (contact_distance None)")
-                elif self.problem.crossed_walls(corr.state):
-                    name = hole_names[self.problem.crossed_walls(corr.state)[0]]
-                    corr.converged = False
-                    corr.outside_domain = True
-                    corr.stop_reason = OUTSIDE_MODEL
-                    corr.message = (f"the wall of the {name} crosses itself (its folded shoulders pass through "
-                                    "each other); self-contact is off (contact_distance None)")
-                elif self._material_limit is not None:
-                    i1 = self.problem.max_isochoric_i1(corr.state)
-                    limit, stretch = self._material_limit
-                    if i1 > limit:
-                        corr.converged = False
-                        corr.outside_domain = True
-                        corr.stop_reason = MATERIAL_RANGE
-                        corr.message = (f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit:.3g} (uniaxial "
-                                        f"stretch {stretch:.3g}) where its Yeoh energy (c3 < 0) stops being convex")
-            return corr
+            return self._correct(guess, t, previous, minimise, pressure_at, describe, failed_retries)
 
         def describe(t: float) -> str:
             p = pressure_at(t)
@@ -427,79 +355,85 @@ class SectionModel(BendModel):
         self._failures.append((tuple(float(v) for v in last_p), failing_p, why, last))
         return done, failed, self._failure_message(pressures[failed], why), last
 
-    def _leave_saddle(self, corr: Correction, pressures: np.ndarray, where: str) -> Correction:
-        """A converged state whose tangent has negative directions is a saddle of the potential, not
-        a state the body rests in. Where the lumen wall's contact is active, or the lumen is filled
-        (the creased shoulders of a closing lumen make such saddles), it is left for the stable
-        state next to it (``solver.leave_saddle``) and the ramp goes on from there; a saddle it
-        cannot leave stops the ramp (UNSTABLE). Elsewhere (no contact, no fill) it is kept: a state
-        just past a limit point, which the limit-point probe steps back from; ``_evaluate_batch``
-        never answers with one."""
-        count = corr.info["negative_directions"]
-        if self.problem.fill is None and not self.problem.contact_active(corr.state):
-            return corr
-        stable, here = self._escape(corr.state, pressures)
-        if here == 0:          # stable at the state itself (the count was the iterate's before it)
-            corr.info["negative_directions"] = 0
-            return corr
-        if stable is None:
-            return Correction(corr.state, False, corr.iterations, stop_reason=UNSTABLE, outside_domain=True,
-                              message=f"the equilibrium at {where} is a saddle ({count} direction(s) of negative "
-                                      "stiffness at the closed lumen's wall) and minimising the potential from "
-                                      "it finds no stable state below it")
-        stable.iterations += corr.iterations
-        stable.info["restart_predictor"] = True     # the secant through the saddle's branch would overshoot
-        return stable
-
-    def _stable_answer(self, x: np.ndarray, pressures: np.ndarray) -> tuple[np.ndarray, int]:
-        """(state, negative directions) to answer with at the saddle ``x``: the stable state next to
-        it (``solver.leave_saddle``) with 0, or ``x`` itself with its count when there is none."""
-        stable, count = self._escape(x, pressures)
-        return (x, count) if stable is None else (stable.state, 0)
-
-    def _escape(self, x: np.ndarray, pressures: np.ndarray):
-        """``solver.leave_saddle`` at ``x`` with this rung's settings, a stable state found recorded in
-        ``left_saddles``: (its Correction or None, the negative directions at ``x``)."""
-        stable, count = leave_saddle(self.problem, x, pressures, tol=self.settings.tol,
-                                     max_iterations=ESCAPE_ITERATIONS, linear=self.linear)
-        if stable is not None:
-            self.left_saddles.append({"pressure": (pressures * self.problem.c_ref).tolist(),
-                                      "negative_directions": count, "energy_drop": stable.info["energy_drop"]})
-        return stable, count
-
-    def _probe_limit_point(self, result, corrector, t_probe: float, pressure_of, describe):
-        """A ramp that failed for no named reason, looked at closer: creep on from its last state
-        with steps of min_step / 64 and compare the tangent's smallest eigenvalue there with its
-        value at rest. Near zero (below LIMIT_RATIO of it), the path has reached a limit point or a
-        bifurcation that pressure control cannot pass; otherwise it stays a numerical failure."""
-        s = self.settings
-        probe = ramp(corrector, result.last_state, [t_probe],
-                     StepControl(initial_step=s.min_step / 8, max_step=s.min_step, min_step=s.min_step / 64),
-                     start=result.last_load, describe=describe)
-        crossed = 0
-        if probe.steps:
-            crossed = unstable_directions(self.problem, probe.last_state, pressure_of(probe.last_load))
-            if not crossed:       # an unstable state is never reported as the last converged one
-                result.last_load, result.last_state = probe.last_load, probe.last_state
-        if self._rest_eigenvalue is None:
-            x0 = self.problem.consistent_pressures(self.problem.initial_state())
-            self._rest_eigenvalue = self.problem.smallest_tangent_eigenvalue(x0, pressure_of(0.0) * 0)
-        ratio = self.problem.smallest_tangent_eigenvalue(result.last_state, pressure_of(result.last_load)) \
-            / self._rest_eigenvalue
-        if crossed:
-            result.stop_reason = LIMIT_POINT
-            result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: just past it, at "
-                               f"{describe(probe.last_load)}, the equilibrium is unstable ({crossed} direction(s) "
-                               "of negative stiffness; pressure control cannot pass it)")
-        elif ratio < LIMIT_RATIO:
-            result.stop_reason = LIMIT_POINT
-            result.message += (f"; {LIMIT_POINT} at {describe(result.last_load)}: the tangent's smallest "
-                               f"eigenvalue is {ratio:.1%} of its value at rest (pressure control cannot pass it)")
+    def _correct(self, guess, t, previous, minimise: bool, pressure_at, describe, failed_retries: list) -> Correction:
+        """The ramp's corrector at path parameter ``t`` (pressures ``pressure_at(t)``): Newton (a
+        stable-only minimiser where saddles are met), with the predictor's step halved while it is
+        inadmissible, a minimiser as retry, saddles left, and the validity checks that stop a ramp."""
+        c_ref = self.problem.c_ref
+        hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
+        # where saddles are met (contact, fill), a minimiser that ends only at a stable state
+        # follows the stable branch from the last state: cheaper than converging to the saddle
+        # by Newton and leaving it afterwards
+        plain = {"max_iterations": self.settings.max_newton}
+        if not minimise and self.settings.adaptive and self._saddles_likely(previous):
+            plain = {"max_iterations": ESCAPE_ITERATIONS, "stable_only": True}
+        if minimise:      # the stable state a snap at this pressure lands in
+            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                          max_iterations=SNAP_ITERATIONS, linear=self.linear, minimise=True)
         else:
-            result.message += (f"; {NUMERICAL_FAILURE}: the tangent's smallest eigenvalue at the last converged "
-                               f"state ({describe(result.last_load)}) is {ratio:.0%} of its value at rest, "
-                               "so no limit point is near")
-        return result
+            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                          linear=self.linear, **plain)
+        for _ in range(0 if minimise else PREDICTOR_CUTS):
+            if not corr.info.get("inadmissible_start") or guess is previous:
+                break
+            # the secant predictor pushed the walls through each other: halve its step
+            guess = previous + 0.5 * (guess - previous)
+            iterations = corr.iterations
+            corr = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                          linear=self.linear, **plain)
+            corr.iterations += iterations
+        if (not corr.converged and not minimise and self.settings.adaptive and failed_retries[0] < MAX_FAILED_RETRIES
+                and not corr.info.get("inadmissible_start")):
+            # again as a minimiser of the potential (line search, no wandering test: slower,
+            # surer); not with fixed steps (adaptive False), which are plain load stepping, and
+            # not after MAX_FAILED_RETRIES failed ones (the ramp is then at a limit point)
+            retry = newton(self.problem, guess, pressure_at(t) / c_ref, tol=self.settings.tol,
+                           max_iterations=RETRY_ITERATIONS, linear=self.linear, minimise=True)
+            retry.iterations += corr.iterations
+            failed_retries[0] += not retry.converged
+            corr = retry if retry.converged else corr
+        if corr.converged and not minimise and corr.info.get("negative_directions"):
+            corr = self._leave_saddle(corr, pressure_at(t) / c_ref, describe(t))
+        if not corr.converged and corr.stop_reason == UNSTABLE:
+            return corr
+        if not corr.converged:
+            # say how close the holes were to closing: failures cluster just before contact
+            gaps = self.problem.hole_gaps(previous)
+            i = int(np.argmin(gaps))
+            corr.message += f"; narrowest hole at the last converged state: {hole_names[i]}, gap {gaps[i]:.0%}"
+            if self.problem.fill is not None:
+                corr.message += f", lumen fill min det F {self.problem.fill_min_jacobian(previous):.3g}"
+            if gaps[i] < 2 * self.settings.min_hole_gap and np.isfinite(self.problem.open_hole_gaps(previous)[i]):
+                # the walls are about to touch: the same validity limit as contact itself
+                corr.outside_domain = True
+                corr.stop_reason = OUTSIDE_MODEL
+                corr.message = f"the walls of the {hole_names[i]} are about to touch ({corr.message})"
+        else:
+            gaps = self.problem.open_hole_gaps(corr.state)
+            if gaps.min() < self.settings.min_hole_gap:
+                name = hole_names[int(np.argmin(gaps))]
+                corr.converged = False
+                corr.outside_domain = True
+                corr.stop_reason = OUTSIDE_MODEL
+                corr.message = (f"the walls of the {name} touch (gap {gaps.min():.1%} of its diameter); "
+                                "self-contact is off (contact_distance None)")
+            elif self.problem.crossed_walls(corr.state):
+                name = hole_names[self.problem.crossed_walls(corr.state)[0]]
+                corr.converged = False
+                corr.outside_domain = True
+                corr.stop_reason = OUTSIDE_MODEL
+                corr.message = (f"the wall of the {name} crosses itself (its folded shoulders pass through "
+                                "each other); self-contact is off (contact_distance None)")
+            elif self._material_limit is not None:
+                i1 = self.problem.max_isochoric_i1(corr.state)
+                limit, stretch = self._material_limit
+                if i1 > limit:
+                    corr.converged = False
+                    corr.outside_domain = True
+                    corr.stop_reason = MATERIAL_RANGE
+                    corr.message = (f"the silicone reaches I1b = {i1:.3g}, past I1b = {limit:.3g} (uniaxial "
+                                    f"stretch {stretch:.3g}) where its Yeoh energy (c3 < 0) stops being convex")
+        return corr
 
     def _known_failure(self, start_key: tuple, target: np.ndarray):
         start = np.asarray(start_key)
