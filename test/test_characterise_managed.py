@@ -12,7 +12,7 @@ pytest.importorskip("serial")
 from hardware_emulators import SerialRegulatorEmulator  # noqa: E402
 from lifecycle_listener import LifecycleListener  # noqa: E402
 from softcath_ros import topics  # noqa: E402
-from softcath_ros.bench.bringup import AskState, Bringup, Transition  # noqa: E402
+from softcath_ros.bench.bringup import AskState, Bringup, Teardown, Transition  # noqa: E402
 from softcath_ros.cli.managed import activate_managed  # noqa: E402
 from softcath_ros.graph import NodeGraph, ReadyWatch, wait_ready  # noqa: E402
 
@@ -43,6 +43,28 @@ def test_bringup_configures_then_activates_and_names_the_node_that_fails():
     final.start(0.0)
     final.on_state("/f", "finalized")
     assert "cannot be activated" in final.failure
+
+
+def test_teardown_deactivates_then_shuts_down_and_a_node_that_ended_is_done():
+    t = Teardown(["/bench", "/idle"], timeout_s=5.0)
+    assert t.start(0.0) == [AskState("/bench"), AskState("/idle")]
+    assert t.on_state("/bench", "active") == [Transition("/bench", "deactivate")]
+    assert t.on_state("/idle", "unconfigured") == [Transition("/idle", "shutdown")]
+    assert t.on_transition("/bench", "deactivate", True) == [AskState("/bench")]
+    assert t.on_state("/bench", "inactive") == [Transition("/bench", "shutdown")]
+    t.on_ended("/bench")                 # bench_node ends by itself once deactivated (vented, finalised)
+    assert not t.done
+    assert t.on_transition("/idle", "shutdown", True) == [AskState("/idle")]
+    t.on_state("/idle", "finalized")
+    assert t.done and t.failure is None
+    silent = Teardown(["/hung"], timeout_s=5.0)
+    silent.start(0.0)
+    silent.update(5.0)
+    assert silent.failure.startswith("/hung not finalized after 5 s")
+    up = Bringup(["/gone"])
+    up.start(0.0)
+    up.on_ended("/gone")
+    assert up.failure == "/gone ended before it was activated"
 
 
 def test_a_regulator_left_unconfigured_is_configured_and_activated():
@@ -87,6 +109,23 @@ def test_characterise_rig_ros_names_the_managed_node_that_fails_its_check(tmp_pa
 
 
 @pytest.mark.timeout(240)
+def test_characterise_rig_ros_without_a_rig_names_bench_node_failing_its_configure_check(tmp_path):
+    """bench_node starts unconfigured; characterise configures it: its check (the rig's topics on the
+    graph within --wait-timeout) fails, named in one line, exit 3 (no rig), nothing recorded."""
+    with NodeGraph() as graph:
+        run = subprocess.run([str(Path(sys.executable).parent / "softcath"), "characterise", "--rig", "ros",
+                              "--protocol", "quick", "--wait-timeout", "1", "--output-dir", str(tmp_path)],
+                             env=graph.env, capture_output=True, text=True, timeout=200)
+    assert run.returncode == 3, run.stdout + run.stderr
+    assert f"[characterise] configure /{topics.BENCH_NODE}" in run.stdout
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in run.stderr, run.stderr
+    assert f"/{topics.BENCH_NODE} failed to configure" in lines[0] and "no rig after 1 s" in lines[0], lines[0]
+    assert f"{topics.pressure_measured_topic(0)}: no publisher" in lines[0]
+    assert not list(tmp_path.glob("bench_quick_*"))
+
+
+@pytest.mark.timeout(240)
 def test_bench_node_is_managed_configure_opens_activate_runs_deactivate_vents_and_stops(tmp_path):
     """bench_node with autostart off: nothing recorded until configured; activate runs the protocol;
     deactivate mid-run: the abort marker, zero command, the recording finalised incomplete (exit 130)."""
@@ -113,7 +152,7 @@ def test_bench_node_is_managed_configure_opens_activate_runs_deactivate_vents_an
         out = before + bench.communicate(timeout=60)[0]
     assert bench.returncode == 130, out
     s = summary(out)
-    assert s["complete"] is False and s["error"].startswith("deactivated (lifecycle): stopped and vented"), s
+    assert s["complete"] is False and s["error"].startswith("interrupted (lifecycle deactivate): stopped and vented"), s
     path = tmp_path / "managed" / "managed_0.mcap"
     assert read_metadata(path)["softcath_result"]["complete"] == "false"
     marks = [m.message.data for m in iter_messages(path, topics=[topics.BENCH_STEP])]

@@ -194,3 +194,36 @@ def test_recording_topics_of_a_torn_file(tmp_path):
     (tmp_path / "text.mcap").write_text("not a recording")
     with pytest.raises(SoftcathError, match="cannot read its topics"):
         recording_topics(tmp_path / "text.mcap")
+
+
+def test_graph_problems_name_each_topic_without_publisher_and_a_command_nobody_hears():
+    from softcath_ros.bench.rig_contract import graph_problems
+
+    contract, legacy = RigMonitor(topics.rig_topics(1), 0.5), RigMonitor(topics.deprecated_rig_topics(), 0.5)
+    pubs = {topics.pressure_measured_topic(0): 1, topics.PRESSURE_MEASURED: 1}
+    subs = {topics.PRESSURE_CMD: 1}
+    monitor, found = graph_problems(contract, legacy, 1, lambda t: pubs.get(t, 0), lambda t: subs.get(t, 0), False)
+    assert monitor is contract    # a stamped topic is published: the contract's, even beside deprecated ones
+    assert found == {topics.BENCH_BEND_ANGLE: "no publisher", topics.BENCH_WRENCH: "no publisher"}
+    del pubs[topics.pressure_measured_topic(0)]
+    monitor, found = graph_problems(contract, legacy, 1, lambda t: pubs.get(t, 0), lambda t: 0, True)
+    assert monitor is legacy and topics.PRESSURE_MEASURED not in found
+    assert {topics.PRESSURE_CMD, topics.BEND_CMD} <= set(found) and "pressure source" in found[topics.PRESSURE_CMD]
+
+
+def test_wait_for_rig_waits_its_bounded_time_then_names_what_is_missing_in_one_line():
+    from softcath_ros.bench.rig_contract import NoRig, wait_for_rig
+
+    clock = [0.0]
+
+    def sleep(dt):
+        clock[0] += dt
+
+    seen = iter([{"/a": "no publisher"}] * 5)
+    wait_for_rig(lambda: next(seen, {}), 2.0, lambda: clock[0], sleep)   # appears after 0.5 s
+    assert clock[0] == pytest.approx(0.5)
+    clock[0] = 0.0
+    with pytest.raises(NoRig) as err:
+        wait_for_rig(lambda: {"/a": "no publisher", "/b": "nothing subscribes"}, 2.0, lambda: clock[0], sleep)
+    assert clock[0] == pytest.approx(2.0, abs=0.11) and err.value.exit_code == 3
+    assert str(err.value) == "no rig after 2 s: /a: no publisher; /b: nothing subscribes"

@@ -133,6 +133,8 @@ def test_a_signal_to_characterise_stops_every_child_and_finalises(tmp_path, proc
     out = run.communicate(timeout=60)[0]
     assert run.returncode == 128 + sig, out
     assert f"stopped by {sig.name}" in out and "Traceback" not in out
+    # bench_node stopped through its lifecycle: deactivate (it vents, finalises and ends)
+    assert f"[characterise] deactivate /{topics.BENCH_NODE}" in out, out
     gone, alive = psutil.wait_procs(children, timeout=5)
     assert not alive, [c.name() for c in alive]
     bag = next(tmp_path.glob("bench_quick_*/*.mcap"))
@@ -170,14 +172,24 @@ def test_disk_full_mid_run_says_so_and_keeps_a_recoverable_file(tmp_path, procs)
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
 
 
+def _cannot_start(out: str) -> str:
+    """bench_node's one start-up error line (configure's rig check failed)."""
+    [line] = [x for x in out.splitlines() if "cannot start" in x]
+    assert "Traceback" not in out, out
+    return line
+
+
 def test_no_rig_names_each_missing_topic(tmp_path, procs):
+    """configure's check: no publisher on the rig's topics within wait_timeout: one line, exit 3, no recording."""
     bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
                            "-p", "wait_timeout:=1.0", "-p", "name:=none"], private_env())
     out = bench.communicate(timeout=60)[0]
     assert bench.returncode == 3, out
-    err = _summary(out)["error"]
+    line = _cannot_start(out)
+    assert "no rig after 1 s" in line, line
     for t in topics.rig_topics(1):
-        assert f"{t}: no publisher" in err
+        assert f"{t}: no publisher" in line
+    assert not (tmp_path / "none").exists()      # nothing recorded for a run that never was
 
 
 def _short_protocol(tmp_path, levels=(0.0, 10000.0, 20000.0), trials=1) -> Path:
@@ -210,7 +222,7 @@ def test_a_protocol_on_the_angle_bench_alone_needs_no_scale(tmp_path, procs):
                           "-p", "wait_timeout:=8.0", "-p", "name:=both"], env)
     out = both.communicate(timeout=60)[0]
     assert both.returncode == 3, out
-    err = _summary(out)["error"]
+    err = _cannot_start(out)
     assert f"{topics.BENCH_WRENCH}: no publisher" in err and topics.BENCH_BEND_ANGLE not in err, err
 
 

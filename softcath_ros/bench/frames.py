@@ -93,3 +93,78 @@ class FrameSource:
     def close(self) -> None:
         if self._capture is not None:
             self._capture.release()
+
+
+class TrackedInput:
+    """tracker_node's core: an input (camera, video file or folder) and the tracker set on its first
+    frame, in the lifecycle of the device cores (bench/hardware) so nodes/device_node.py drives it:
+    ``configure`` opens the input and sets the scene (False and ``reason`` on a fault), ``activate``,
+    ``deactivate``, ``next_frame`` and ``measure``, ``close``. No ROS."""
+
+    def __init__(self, spec: str, settings: dict, loop: bool = False):
+        self.spec, self.settings, self.loop = str(spec), dict(settings), loop
+        self.state, self.reason = "unconfigured", ""
+        self.source: FrameSource | None = None
+        self.tracker = self.scene = self._frames = None
+        self.ended = False
+        self.measured = self.unmeasured = 0
+        self.last_problem = ""      # why the last frame that could not be measured was not
+
+    @property
+    def name(self) -> str:
+        return self.spec
+
+    @property
+    def live(self) -> bool:
+        return self.source is not None and self.source.live
+
+    def configure(self, sleep=None) -> bool:
+        from .tracker import Tracker
+        from .tracker_scene import scene_from_settings
+
+        try:
+            source = FrameSource(self.spec)
+            try:
+                scene = scene_from_settings(source.first().pixels, flag="", **self.settings)
+            except SoftcathError:
+                source.close()
+                raise
+        except SoftcathError as exc:
+            self.reason = str(exc)
+            return False
+        self.source, self.scene, self.tracker, self._frames = source, scene, Tracker(scene), iter(source)
+        self.state, self.reason = "inactive", ""
+        return True
+
+    def activate(self) -> None:
+        self.state = "active"
+
+    def deactivate(self) -> None:
+        self.state = "inactive"
+
+    def close(self) -> None:
+        if self.source is not None:
+            self.source.close()
+        self.source = self.tracker = self._frames = None
+        self.state = "unconfigured"
+
+    def next_frame(self) -> Frame | None:
+        """The next frame, or None once the input has no more (``ended``; a video or folder replays
+        from its start with ``loop``)."""
+        frame = next(self._frames, None)
+        if frame is None and self.loop and not self.source.live:
+            self.source.rewind()
+            self._frames = iter(self.source)
+            frame = next(self._frames, None)
+        self.ended = frame is None
+        return frame
+
+    def measure(self, frame: Frame):
+        """The frame's Measurement; one that is not ``ok`` is counted with its reason (never a guess)."""
+        m = self.tracker.measure(frame.pixels, frame.index)
+        if m.ok:
+            self.measured += 1
+        else:
+            self.unmeasured += 1
+            self.last_problem = m.reason
+        return m

@@ -5,6 +5,9 @@ arrivals of the rig's topics.
   *alive* when a message arrived within ``stale_after`` s and its stamp (where it has one) lies
   within ``stale_after`` s of the receiver's clock; otherwise ``problems`` names it with the
   reason. bench_node uses only readings that are alive, before the first step and during the run.
+- ``graph_problems`` / ``wait_for_rig``: what the ROS graph lacks for a run (a rig topic with no
+  publisher, nothing listening to the command); bench_node's configure waits a bounded time for it
+  to be empty and fails with ``NoRig`` (exit code 3) naming each missing topic.
 - ``FollowCheck``: before the first step, the pressure source must follow a small test command:
   a baseline at zero command, then the test pressures; it passes once every commanded channel
   has risen by ``fraction`` of its test pressure above the baseline, fails after ``timeout`` s.
@@ -12,8 +15,48 @@ arrivals of the rig's topics.
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
+
+from .. import topics as T
+from ..errors import SoftcathError
+from .bench_run import EXIT_NO_RIG
+
+
+class NoRig(SoftcathError):
+    """The rig's topics are not on the graph: exit code 3 (docs/rig.md)."""
+    exit_code = EXIT_NO_RIG
+
+
+def graph_problems(contract: "RigMonitor", legacy: "RigMonitor", n_channels: int, publishers: Callable[[str], int],
+                   subscribers: Callable[[str], int], by_direction: bool) -> tuple["RigMonitor", dict[str, str]]:
+    """The monitor whose topics the rig publishes (``contract``'s, or ``legacy``'s deprecated ones when
+    nothing publishes the contract's) and what the graph lacks for it, by topic: each of its topics with
+    no publisher, nothing subscribing the pressure command (the rig's pressure source) or, by direction,
+    the bend command (allocation_node)."""
+    stamped = any(publishers(t) for t in T.rig_topics(n_channels))
+    monitor = legacy if publishers(T.PRESSURE_MEASURED) > 0 and not stamped else contract
+    out = {t: "no publisher" for t in monitor.topics if publishers(t) == 0}
+    if subscribers(T.PRESSURE_CMD) == 0:
+        out[T.PRESSURE_CMD] = "nothing subscribes (the rig's pressure source)"
+    if by_direction and subscribers(T.BEND_CMD) == 0:
+        out[T.BEND_CMD] = "nothing subscribes (allocation_node)"
+    return monitor, out
+
+
+def wait_for_rig(problems: Callable[[], dict[str, str]], timeout_s: float, clock: Callable[[], float],
+                 sleep: Callable[[float], None], period_s: float = 0.1) -> None:
+    """Until ``problems()`` is empty; ``NoRig`` naming each problem if it is not within ``timeout_s``
+    (``clock``, ``sleep`` injected)."""
+    end = clock() + timeout_s
+    while True:
+        found = problems()
+        if not found:
+            return
+        if clock() >= end:
+            raise NoRig(f"no rig after {timeout_s:g} s: " + "; ".join(f"{t}: {why}" for t, why in found.items()))
+        sleep(period_s)
 
 
 class RigMonitor:

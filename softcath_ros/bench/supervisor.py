@@ -1,11 +1,13 @@
 """`softcath characterise`'s supervision of its node graph as a pure state machine on an injected clock.
 
 helpers (the rig, model_node, allocation_node: each waited for until it says it spins, at most
-``helper_ready_s``) -> bench (bench_node runs the protocol) -> done (bench_node ended). ``update(now,
+``helper_ready_s``) -> bench (bench_node, started unconfigured, is brought up through its lifecycle
+once it spins, then runs the protocol) -> done (bench_node ended). ``update(now,
 ready, exited, bench_has_output)`` takes what the adapter observed (node names that said they spin,
 exit codes of the ended ones, whether bench_node made its recording's folder) and returns commands:
-``StartBench``, ``StopBench`` (SIGINT; ``KillBench`` follows when it outlives its grace), ``Say``,
-``Fail``. No rclpy, no threads, no sleeping (test/test_graph_supervisor.py drives it).
+``StartBench``, ``BringUpBench`` (configure: it checks the rig, then activate), ``StopBench``
+(deactivate then shutdown once it was brought up, else SIGINT; ``KillBench`` follows when it
+outlives its grace), ``Say``, ``Fail``. No rclpy, no threads, no sleeping (test/test_graph_supervisor.py drives it).
 
 What it decides:
 - the watchdog: bench_node still running ``timeout_s`` after its start is stopped (``timed_out``);
@@ -36,8 +38,15 @@ class StartBench:
 
 
 @dataclass(frozen=True)
+class BringUpBench:
+    """bench_node spins: configure it (it checks the rig) and activate it (it runs)."""
+
+
+@dataclass(frozen=True)
 class StopBench:
-    """SIGINT to bench_node (it finalises its recording)."""
+    """Stop bench_node (it vents and finalises its recording): by its lifecycle (deactivate, then
+    shutdown) when it was brought up, else SIGINT."""
+    lifecycle: bool = False
 
 
 @dataclass(frozen=True)
@@ -70,6 +79,7 @@ class GraphSupervisor:
         self.state = GraphState.HELPERS
         self.t0: float | None = None
         self.attempt = 0
+        self.brought_up = 0                  # the attempt whose bench_node was brought up
         self.t_bench = 0.0
         self.timed_out = self.stalled = False
         self.died: list[str] = []
@@ -86,7 +96,7 @@ class GraphSupervisor:
         if self.kill_at is not None:
             return []
         self.kill_at = now + grace_s
-        return [StopBench()]
+        return [StopBench(lifecycle=self.brought_up == self.attempt)]
 
     def update(self, now: float, ready: set[str], exited: dict[str, int], bench_has_output: bool = False) -> list:
         if self.t0 is None:
@@ -118,6 +128,9 @@ class GraphSupervisor:
             return []
         if self.kill_at is not None:
             return [KillBench()] if now >= self.kill_at else []
+        if BENCH in ready and self.brought_up < self.attempt:
+            self.brought_up = self.attempt
+            return [BringUpBench()]
         if now - self.t_bench >= self.timeout_s:
             self.timed_out = True
             return self._stop(now, STOP_GRACE_S)

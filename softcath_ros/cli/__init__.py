@@ -65,9 +65,9 @@ def main(argv: list[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else 2
     try:
         return args.func(args)
-    except SoftcathError as exc:
+    except SoftcathError as exc:   # bad input: 2 (a failed rig check carries its own: 3)
         print(f"softcath {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_code", 2)
     except OSError as exc:  # a file the user named cannot be read or written (missing folder, permission)
         where = f": {exc.filename}" if exc.filename else ""
         print(f"softcath {args.command}: error: {exc.strerror or exc}{where}", file=sys.stderr)

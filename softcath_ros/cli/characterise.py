@@ -39,6 +39,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
+from .. import topics
 from ..core.errors import SoftcathError
 from ..graph import NodeGraph, stop_process
 from .common import bounded_float, check_rung_names
@@ -56,6 +57,7 @@ CHILD_GRACE_S = {"model_node": 0.0}
 HELPER_READY_S = 60.0
 BENCH_READY_S = 60.0   # bench_node not spinning by then: started once more
 RIG_CHILD_GRACE_S = 1.5
+BENCH_NODE = "/" + topics.BENCH_NODE   # bench_node's lifecycle services live under its name
 
 
 class Stopped(Exception):
@@ -245,7 +247,8 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
     """The ROS path shared by the rigs: helpers + bench_node on one domain, supervised by
     bench.supervisor.GraphSupervisor (readiness said over ROS: graph.ReadyWatch); the report at the
     end (also on the completed steps of a failed run)."""
-    from ..bench.supervisor import Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench, StopBench
+    from ..bench.supervisor import (BringUpBench, Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench,
+                                    StopBench)
     from ..graph import ReadyWatch
     from .managed import activate_managed
 
@@ -265,11 +268,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
         watch = ReadyWatch(graph.domain)
         blog = _Log(logs / "bench_node.log", say)
         try:
-            for node, params in helpers:
-                log = _Log(logs / f"{node}.log", say)
-                children[node] = graph.start(node, params, stdout=log.f or subprocess.DEVNULL)
-                log.close()
-                say(f"[characterise] started {node} (log {logs / (node + '.log')})")
+            children.update(_start_helpers(graph, helpers, logs, say))
             while sup.state is not GraphState.DONE:
                 if output is not None:
                     output.read(0.05)
@@ -279,18 +278,21 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                 if bench is not None and bench.poll() is not None:
                     output.drain()
                 for cmd in sup.update(time.monotonic(), ready, exited, (out_dir / name).exists()):
-                    if isinstance(cmd, StartBench) and cmd.attempt == 1:
-                        activate_managed(watch, say)   # the rig's managed nodes: configured and active
+                    if isinstance(cmd, StartBench) and cmd.attempt == 1:   # the rig's managed nodes: active
+                        activate_managed(watch, say, exclude=(BENCH_NODE,))
                     if isinstance(cmd, StartBench):
                         lines.clear()
                         bench = children["bench_node"] = graph.start(
                             "bench_node", {"protocol": args.protocol, "design": design_arg, "model": args.model[0],
-                                           "output_dir": out_dir, "name": name, "wait_timeout": args.wait_timeout})
+                                           "output_dir": out_dir, "name": name, "wait_timeout": args.wait_timeout,
+                                           "autostart": False})
                         output = _BenchOutput(bench, blog, say, lines)
+                    elif isinstance(cmd, BringUpBench):
+                        _bring_up_bench(watch, bench, args.wait_timeout, say)
                         say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
                             f"ROS_DOMAIN_ID={graph.domain}")
                     elif isinstance(cmd, StopBench):
-                        bench.send_signal(signal.SIGINT)
+                        _stop_bench(watch, bench, cmd.lifecycle, say)
                     elif isinstance(cmd, KillBench):
                         bench.kill()
                     elif isinstance(cmd, Say):
@@ -303,7 +305,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
             if threading.current_thread() is threading.main_thread():
                 signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
-                stop_process(bench, 15.0)
+                _stop_bench(watch, bench, sup.brought_up == sup.attempt, say, wait_s=15.0)
                 output.drain()
         finally:
             blog.close()
@@ -320,6 +322,50 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
         raise SoftcathError(f"characterisation took longer than {args.timeout:g} s; stopped "
                             f"(recording finalised; logs in {logs})")
     return _outcome(args, design, bench.returncode, summary, died, lines, t0, logs, out_dir / name, say)
+
+
+def _start_helpers(graph, helpers, logs: Path, say) -> dict[str, subprocess.Popen]:
+    """The rig, model_node, allocation_node, each logging to its file under ``logs``."""
+    children = {}
+    for node, params in helpers:
+        log = _Log(logs / f"{node}.log", say)
+        children[node] = graph.start(node, params, stdout=log.f or subprocess.DEVNULL)
+        log.close()
+        say(f"[characterise] started {node} (log {logs / (node + '.log')})")
+    return children
+
+
+def _bring_up_bench(watch, bench: subprocess.Popen, wait_timeout: float, say) -> None:
+    """bench_node, started unconfigured: configure (it checks the rig, up to ``wait_timeout``), then
+    activate (it runs). A failed check is one of the checks before the first step: exit 3 (docs/rig.md)."""
+    from ..bench.rig_contract import NoRig
+    from .managed import MANAGED_TIMEOUT_S, activate_managed
+
+    try:
+        activate_managed(watch, say, names=[BENCH_NODE], timeout_s=MANAGED_TIMEOUT_S + wait_timeout,
+                         ended=lambda n: bench.poll() is not None)
+    except SoftcathError as exc:
+        raise NoRig(str(exc)) from None
+
+
+def _stop_bench(watch, bench: subprocess.Popen, lifecycle: bool, say, wait_s: float | None = None) -> None:
+    """bench_node stops early (it vents, marks the recording incomplete, exits): deactivate then shutdown
+    when it was brought up, SIGINT when it was not or its lifecycle services do not answer. ``wait_s``:
+    wait that long for it to end (it finalises its recording), then SIGINT and a kill after 5 s."""
+    from .managed import shutdown_managed
+
+    if lifecycle and bench.poll() is None:
+        failure = shutdown_managed(watch, say, [BENCH_NODE], ended=lambda n: bench.poll() is not None)
+        if failure is not None:
+            say(f"[characterise] {failure}; stopping bench_node by SIGINT")
+            lifecycle = False
+    if not lifecycle and bench.poll() is None:
+        bench.send_signal(signal.SIGINT)
+    if wait_s is not None:
+        try:
+            bench.wait(timeout=wait_s)
+        except subprocess.TimeoutExpired:
+            stop_process(bench, 5.0)
 
 
 def _outcome(args, design, code: int, summary: dict | None, died: list[str], lines: list[str], t0: float,

@@ -1,15 +1,18 @@
-"""The rig's managed (lifecycle) nodes brought to active by `softcath characterise` before the first
-step: bench.bringup decides (configure, then activate, each node that offers lifecycle_msgs'
-ChangeState service); here its requests go over the GetState / ChangeState services of the graph
-supervisor's ReadyWatch node."""
+"""The managed (lifecycle) nodes of a run, driven by `softcath characterise`: the rig's nodes brought
+to active before bench_node starts, then bench_node itself (configure checks the rig, activate runs
+the protocol) and, to stop it early, deactivate (it vents) then shutdown. bench.bringup decides;
+here its requests go over the GetState / ChangeState services of the graph supervisor's ReadyWatch
+node."""
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 from ..core.errors import SoftcathError
 
 MANAGED_DISCOVERY_S = 2.0   # a rig's lifecycle services are looked for this long (softcath's own nodes: until seen)
 MANAGED_TIMEOUT_S = 60.0    # each managed node configured and active by then (configure opens a device)
+TEARDOWN_TIMEOUT_S = 5.0    # deactivate + shutdown answered by then, else the caller falls back to a signal
 
 
 def _lifecycle_nodes(node) -> list[str]:
@@ -26,39 +29,69 @@ def announced_managed(watch) -> set[str]:
     return {info["node"] for info in watch.ready.values() if info.get("managed") and isinstance(info.get("node"), str)}
 
 
-def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeout_s: float = MANAGED_TIMEOUT_S) -> list[str]:
-    """Configure then activate every managed node of the rig (bench.bringup decides, here its
-    requests go over the lifecycle_msgs GetState / ChangeState services); the nodes brought up.
-    SoftcathError (one line) naming the node that fails a check, with the reason it put on
-    /diagnostics."""
+def _discover(watch, names: list[str] | None, exclude: tuple, discovery_s: float, timeout_s: float) -> list[str]:
+    """``names`` once all offer their services, or every managed node seen within ``discovery_s`` but
+    those in ``exclude`` (and at least those that said they spin); SoftcathError after
+    ``discovery_s + timeout_s`` naming the ones whose services did not show up."""
+    start = time.monotonic()
+    while True:   # discovery: services show up over a second or two (seconds on a loaded machine)
+        watch.poll(0.1)
+        found = set(_lifecycle_nodes(watch.node))
+        wanted = set(names) if names is not None else announced_managed(watch) - set(exclude)
+        elapsed = time.monotonic() - start
+        if wanted <= found and (names is not None or elapsed >= discovery_s):
+            return list(names) if names is not None else sorted(found - set(exclude))
+        if elapsed >= discovery_s + timeout_s:
+            raise SoftcathError(f"{', '.join(sorted(wanted - found))} said it spins but its lifecycle services "
+                                f"did not show up within {discovery_s + timeout_s:g} s")
+
+
+def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeout_s: float = MANAGED_TIMEOUT_S,
+                     names: list[str] | None = None, exclude: tuple = (),
+                     ended: Callable[[str], bool] = lambda n: False) -> list[str]:
+    """Configure then activate ``names`` (default: every managed node on the graph but ``exclude``;
+    ``ended(name)``: its process is gone); the nodes brought up. SoftcathError (one line) naming the node that fails a check, with the
+    reason it put on /diagnostics."""
+    from ..bench.bringup import Bringup
+
+    names = _discover(watch, names, exclude, discovery_s, timeout_s)
+    if names:
+        failure = _drive(watch, say, Bringup(names, timeout_s), ended)
+        if failure:
+            raise SoftcathError(failure)
+    return names
+
+
+def shutdown_managed(watch, say, names: list[str], ended: Callable[[str], bool],
+                     timeout_s: float = TEARDOWN_TIMEOUT_S) -> str | None:
+    """Deactivate then shut down ``names`` (``ended(name)``: its process is gone, nothing to ask);
+    the one-line failure (no answer, a refused transition) or None."""
+    from ..bench.bringup import Teardown
+
+    return _drive(watch, say, Teardown(names, timeout_s), ended)
+
+
+def _drive(watch, say, machine, ended: Callable[[str], bool]) -> str | None:
+    """Perform ``machine``'s (bench.bringup) requests until it is done; its failure or None."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from lifecycle_msgs.msg import Transition as TransitionMsg
     from lifecycle_msgs.srv import ChangeState, GetState
 
     from .. import topics
-    from ..bench.bringup import AskState, Bringup, Transition
+    from ..bench.bringup import AskState
 
     node = watch.node
-    start = time.monotonic()
-    while True:   # discovery: services show up over a second or two (seconds on a loaded machine)
-        watch.poll(0.1)
-        names = _lifecycle_nodes(node)
-        if time.monotonic() - start >= discovery_s and announced_managed(watch) <= set(names):
-            break
-        if time.monotonic() - start >= discovery_s + timeout_s:
-            missing = sorted(announced_managed(watch) - set(names))
-            raise SoftcathError(f"{', '.join(missing)} said it spins but its lifecycle services did not show up "
-                                f"within {discovery_s + timeout_s:g} s")
-    if not names:
-        return []
     reasons: dict[str, str] = {}
     diag = node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: reasons.update(
         {s.name.split(":")[0]: s.message for s in m.status if s.level == DiagnosticStatus.ERROR}), 50)
     clients = {n: (node.create_client(GetState, f"{n}/get_state"), node.create_client(ChangeState, f"{n}/change_state"))
-               for n in names}
-    ids = {"configure": TransitionMsg.TRANSITION_CONFIGURE, "activate": TransitionMsg.TRANSITION_ACTIVATE}
+               for n in machine.nodes}
+    ids = {"configure": TransitionMsg.TRANSITION_CONFIGURE, "activate": TransitionMsg.TRANSITION_ACTIVATE,
+           "deactivate": TransitionMsg.TRANSITION_DEACTIVATE,
+           "shutdown": TransitionMsg.TRANSITION_INACTIVE_SHUTDOWN}
+    shutdown_from = {"unconfigured": TransitionMsg.TRANSITION_UNCONFIGURED_SHUTDOWN}
     pending = []   # (future, request)
-    bring = Bringup(names, timeout_s)
+    states: dict[str, str] = {}
 
     def send(requests):
         for r in requests:
@@ -67,31 +100,37 @@ def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeo
                 pending.append((get.call_async(GetState.Request()), r))
             else:
                 say(f"[characterise] {r.transition} {r.node}")
-                pending.append((change.call_async(ChangeState.Request(transition=TransitionMsg(id=ids[r.transition]))), r))
+                tid = shutdown_from.get(states.get(r.node), ids[r.transition]) if r.transition == "shutdown" \
+                    else ids[r.transition]
+                pending.append((change.call_async(ChangeState.Request(transition=TransitionMsg(id=tid))), r))
+
+    def reason_of(n: str) -> str:
+        return reasons.get(n.rsplit("/", 1)[-1], "")
 
     try:
-        send(bring.start(time.monotonic()))
-        while not bring.done:
+        send(machine.start(time.monotonic()))
+        while not machine.done:
             watch.poll(0.05)
+            for n in machine.nodes:
+                if n not in machine.reached and ended(n):
+                    machine.on_ended(n)
             for item in [x for x in pending if x[0].done()]:
                 pending.remove(item)
                 future, r = item
                 result = future.result()
                 if isinstance(r, AskState):
-                    send(bring.on_state(r.node, result.current_state.label))
+                    states[r.node] = result.current_state.label
+                    send(machine.on_state(r.node, result.current_state.label))
                 else:
                     if not result.success:
                         end = time.monotonic() + 1.0    # the node's reason arrives on /diagnostics at once
-                        while r.node.rsplit("/", 1)[-1] not in reasons and time.monotonic() < end:
+                        while not reason_of(r.node) and time.monotonic() < end:
                             watch.poll(0.05)
-                    send(bring.on_transition(r.node, r.transition, result.success,
-                                             reasons.get(r.node.rsplit("/", 1)[-1], "")))
-            bring.update(time.monotonic())
+                    send(machine.on_transition(r.node, r.transition, result.success, reason_of(r.node)))
+            machine.update(time.monotonic())
     finally:
         for get, change in clients.values():
             node.destroy_client(get)
             node.destroy_client(change)
         node.destroy_subscription(diag)
-    if bring.failure:
-        raise SoftcathError(bring.failure)
-    return names
+    return machine.failure

@@ -12,13 +12,14 @@ stops with an error, exit code 4). A protocol by bending direction publishes the
 curvature on /softcath/bend_cmd and allocation_node, then the only publisher allowed,
 turns it into /softcath/pressure_cmd.
 
-The rig contract (docs/rig.md): it waits (up to ``wait_timeout`` s) until every rig topic the
+The rig contract (docs/rig.md): configure waits up to ``wait_timeout`` s until every rig topic the
 protocol uses (/softcath/pressure_measured/ch<i>; /softcath/bench/bend_angle for an angle bench,
-/softcath/bench/wrench for a force bench) is alive
-with fresh stamps and something listens to /softcath/pressure_cmd (by direction also
-allocation_node, whose /softcath/pressure_cmd must keep coming); a timeout names each missing
-topic (exit 3). A rig on the deprecated unstamped topics is accepted with a warning. Then the
-pressure source must follow a small test command (exit 3 if not). During the run a reading
+/softcath/bench/wrench for a force bench) has a publisher and something listens to
+/softcath/pressure_cmd (by direction allocation_node too), else it fails naming each missing topic
+(exit 3 at start-up, nothing recorded). The run then waits (as long) until each is alive with fresh
+stamps (by direction allocation_node's /softcath/pressure_cmd keeps coming; a timeout names each
+topic, exit 3) and the pressure source follows a small test command (exit 3 if not). A rig on
+the deprecated unstamped topics is accepted with a warning. During the run a reading
 older than ``stale_after`` s is never used; when any rig topic (or allocation_node's command)
 has been stale for ``lost_after`` s the run stops: the "protocol_abort" marker, zero command for
 0.3 s, the recording finalised and marked incomplete, exit 5. A failing recording (disk full) stops it likewise,
@@ -28,9 +29,10 @@ exit 6. If the rig is sim_bench_node (its node is in the graph or it announced i
 
 The run's logic (waiting, follow test, steps, venting, aborts) is bench/bench_run.py's state machine;
 this node adapts it (its observations in, its actions out; the rig's inputs and the run's view of
-the rig in nodes/bench_rig.py). A managed (lifecycle) node: configure
-loads the protocol and opens the recording, activate runs, deactivate stops (abort marker, zero
-command, exit 130); ``autostart`` (default true) does configure and activate at start-up.
+the rig in nodes/bench_rig.py). A managed (lifecycle) node: configure loads the protocol, checks
+the rig and opens the recording, activate runs, deactivate stops (abort marker, zero command, exit
+130); ``autostart`` (default true) does both at start-up, else `softcath characterise` (or any
+lifecycle manager) drives them.
 
 The node spins on the EventsExecutor and writes in a background thread by default
 (``executor`` parameter; see nodes/recorder.py and benchmarks/recorder_throughput.py).
@@ -55,17 +57,17 @@ from .. import topics
 from ..bench.protocol import ProtocolRunner, design_steps, load_protocol
 from ..bench.bench_run import (EXIT_FIGHT, EXIT_RECORDING, Begin, BenchRun, Command, Markers,
                                Say, Vent, VentDirectly)
-from ..bench.rig_contract import FollowCheck, follow_test_command
+from ..bench.rig_contract import FollowCheck, follow_test_command, wait_for_rig
 from ..core.checks import NAME_RULE, is_file_name
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..recording import BagWriter, RecordingError
+from ..recording import BagWriter, RecordingError, check_destination
 from .bench_rig import RigWatch
 from .diagnostics import diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .recorder import TopicRecorder
 from .executors import EXECUTORS
-from .runtime import run_node
+from .runtime import pause, run_node
 
 DEFAULT_TOPICS = topics.RECORDED
 
@@ -107,18 +109,18 @@ class BenchNode(RigWatch, LifecycleNode):
         self.follow_timeout = p("follow_timeout", 3.0, "s the pressure source gets to follow the test command",
                                 minimum=0.1, maximum=120.0)
         self.executor_name = p("executor", "events", f"executor: {' | '.join(EXECUTORS)}", choices=EXECUTORS)
-        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it: "
-                      "configure loads the protocol and opens the recording, activate runs, deactivate vents and stops)")
+        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it: configure "
+                      "loads the protocol, checks the rig, opens the recording; activate runs; deactivate vents, stops)")
         refuse_unknown_parameters(self)    # before a recording is opened on a typo's default
         self.run: BenchRun | None = None
         self.timer = None
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
-        self.configure_error = ""
+        self.configure_error: SoftcathError | None = None
         self._autostart = autostart
         if autostart:
             self.trigger_configure()
             if self.run is None:
-                raise SoftcathError(self.configure_error)
+                raise self.configure_error   # its exit code: 3 for no rig (NoRig), else 2
             self.trigger_activate()
 
     # -------------------------------------------------------------- lifecycle
@@ -127,7 +129,7 @@ class BenchNode(RigWatch, LifecycleNode):
         try:
             self.configure_run(**self.settings)
         except (SoftcathError, ValueError) as exc:
-            self.configure_error = str(exc)
+            self.configure_error = exc if isinstance(exc, SoftcathError) else SoftcathError(str(exc))
             if not self._autostart:   # (at start-up the one line is the exit's)
                 self.get_logger().error(f"configure: {exc}")
                 publish_statuses(self, self.pub_diag, diagnostic_status(
@@ -145,7 +147,7 @@ class BenchNode(RigWatch, LifecycleNode):
         """Stop: after a command, the abort marker and zero command (the tick vents until done); before
         one, done at once. The recording is finalised on the way out."""
         if not self.run.done:
-            message = "deactivated (lifecycle): stopped" + (" and vented" if self.run.commanding else "")
+            message = "interrupted (lifecycle deactivate): stopped" + (" and vented" if self.run.commanding else "")
             if self.run.commanding:
                 self.perform(self.run.abort(self.now(), message, EXIT_INTERRUPTED))
             else:
@@ -161,25 +163,28 @@ class BenchNode(RigWatch, LifecycleNode):
             raise SoftcathError("no design: set the 'design' parameter or 'design' in the protocol")
         self.design = load_design(design_name)
         self.steps = design_steps(self.protocol, self.design, model_name)
-        stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
+        self.by_direction = self.protocol.drive == "direction"
         if run_name and not is_file_name(run_name):   # it names the recording folder under output_dir
             raise SoftcathError(f"parameter name = {run_name!r}: {NAME_RULE}")
-        name = run_name or f"bench_{self.protocol.name}_{stamp}"
+        test_pressures, self.follow_bend = follow_test_command(self.steps, self.follow_pressure)
+        name = run_name or f"bench_{self.protocol.name}_{datetime.now().strftime('%Y%m%d_%H%M%S')}"
+        check_destination(Path(output_dir) / name)     # a bad output_dir is bad input (2), not "no rig"
+        n = self.design.n_channels
+        self.rig_monitors(n, stale_after)
+        # the check: the rig's topics on the graph within wait_timeout (before a recording is opened)
+        wait_for_rig(lambda: self.graph_problems()[1], self.wait_timeout, time.monotonic, partial(pause, self))
         self.writer = BagWriter(Path(output_dir) / name, flush_period_s=flush_period,
                                 min_free_bytes=min_free_mb << 20, background=True,
                                 custom_data={"protocol": self.protocol.name, "design": self.design.name,
                                              "stale_after_s": f"{stale_after:g}"})
         self.runner = ProtocolRunner(self.protocol, self.steps)
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.by_direction = self.protocol.drive == "direction"
         if self.by_direction:
             self.pub_bend = self.create_publisher(Vector3Stamped, topics.BEND_CMD, reliable)
         else:
             self.pub_cmd = self.create_publisher(Float64MultiArray, topics.PRESSURE_CMD, reliable)
         self.pub_step = self.create_publisher(String, topics.BENCH_STEP, reliable)
-        n = self.design.n_channels
-        self.watch_rig(n, stale_after)
-        test_pressures, self.follow_bend = follow_test_command(self.steps, self.follow_pressure)
+        self.watch_rig(n)
         self.pub_vent = None
         self.recorder = TopicRecorder(self, self.writer, list(dict.fromkeys(list(record_topics) + topics.rig_topics(n))),
                                       message_info=self.executor_name != "events")

@@ -14,7 +14,7 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
-from ..bench.rig_contract import RigMonitor
+from ..bench.rig_contract import RigMonitor, graph_problems
 
 
 def _stamp_s(header) -> float:
@@ -25,14 +25,17 @@ class RigWatch:
     """The rig's inputs and the run's view of the rig (a mixin of ``BenchNode``: it reads the node's
     design, protocol, clock and recorder)."""
 
-    def watch_rig(self, n: int, stale_after: float) -> None:
-        """Subscribe to the rig's topics (docs/rig.md) for ``n`` channels, and the deprecated unstamped
-        ones for one release; readings older than ``stale_after`` s are stale."""
+    def rig_monitors(self, n: int, stale_after: float) -> None:
+        """The rig's topics (docs/rig.md) for ``n`` channels, and the deprecated unstamped ones for one
+        release; readings older than ``stale_after`` s are stale."""
         extra = [topics.PRESSURE_CMD] if self.by_direction else []  # allocation_node keeps publishing
         # only the readings of the benches this protocol uses are required (all are recorded)
         benches = tuple(dict.fromkeys(b.kind for b in self.protocol.benches))
         self.contract = RigMonitor(topics.rig_topics(n, benches) + extra, stale_after)
         self.legacy = RigMonitor(topics.deprecated_rig_topics(benches) + extra, stale_after)
+
+    def watch_rig(self, n: int) -> None:
+        """Subscribe to the rig's topics (``rig_monitors`` first)."""
         self.monitor: RigMonitor | None = None   # the one chosen when the rig is found
         self.channel_pressures = np.full(n, np.nan)
         self.legacy_pressures: np.ndarray | None = None
@@ -108,25 +111,19 @@ class RigWatch:
     def recording_error(self) -> str | None:
         return self.recorder.error
 
+    def graph_problems(self) -> tuple[RigMonitor, dict[str, str]]:
+        return graph_problems(self.contract, self.legacy, self.design.n_channels, self.count_publishers,
+                              self.count_subscribers, self.by_direction)
+
     def rig_problems(self) -> dict[str, str]:
-        """What keeps the rig from being ready, by topic (empty: ready). Chooses the contract's
-        topics, or the deprecated ones when nothing publishes the contract's."""
+        """What keeps the rig from being ready, by topic (empty: ready): the graph's lacks, then each
+        topic that is not alive. Chooses the monitor when the rig is ready."""
         t, clock = self.now(), self.clock_s()
-        stamped = any(self.count_publishers(x) for x in topics.rig_topics(self.design.n_channels))
-        legacy_up = self.count_publishers(topics.PRESSURE_MEASURED) > 0
-        monitor = self.legacy if legacy_up and not stamped else self.contract
-        out = {}
+        monitor, out = self.graph_problems()
         for topic in monitor.topics:
-            if self.count_publishers(topic) == 0:
-                out[topic] = "no publisher"
-            else:
-                why = monitor.problem(topic, t, clock)
-                if why:
-                    out[topic] = why
-        if self.count_subscribers(topics.PRESSURE_CMD) == 0:
-            out[topics.PRESSURE_CMD] = "nothing subscribes (the rig's pressure source)"
-        if self.by_direction and self.count_subscribers(topics.BEND_CMD) == 0:
-            out[topics.BEND_CMD] = "nothing subscribes (allocation_node)"
+            why = None if topic in out else monitor.problem(topic, t, clock)
+            if why:
+                out[topic] = why
         if not out and self.monitor is None:
             self.monitor = monitor
             if monitor is self.legacy:

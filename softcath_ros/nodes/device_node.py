@@ -1,5 +1,5 @@
-"""The managed (lifecycle) node shape of the hardware drivers (regulator_node, scale_node) around a
-pure core of bench/hardware (``Regulator``, ``Scale``): configure builds the core and checks the
+"""The managed (lifecycle) node shape of the rig's drivers (regulator_node, scale_node, tracker_node)
+around a pure core (bench/hardware's ``Regulator``, ``Scale``; bench/frames' ``TrackedInput``): configure builds the core and checks the
 device (a fault is one line and a failed transition; at start-up with ``autostart`` exit code 2),
 activate starts the ``tick`` timer at ``rate_hz``, deactivate stops it (the core vents), cleanup,
 shutdown and the way out on SIGINT/SIGTERM (``finish``, runtime.run_node) close the core (which
@@ -7,13 +7,16 @@ vents first). A core that goes to ``error`` is logged and on /diagnostics at onc
 from __future__ import annotations
 
 import time
+from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
 from .. import topics
 from ..bench.hardware.devices import DeviceFault
+from ..bench.hardware.regulator import MAX_SILENCE_TIMEOUT, SILENCE_TIMEOUT
 from ..core.errors import SoftcathError
+from .parameters import declare, refuse_unknown_parameters
 
 
 class DeviceNode(LifecycleNode):
@@ -29,8 +32,26 @@ class DeviceNode(LifecycleNode):
         """The lifecycle publishers of the readings (created at configure)."""
         raise NotImplementedError
 
-    def start(self, autostart: bool) -> None:
-        """Call at the end of __init__, once every parameter is declared."""
+    def declare_serial(self, default_port: str, note: str = "") -> None:
+        """``port`` and ``baud`` of a serial device (``note``: "serial: " where it is one backend of several)."""
+        p = partial(declare, self)
+        self.port = p("port", default_port, f"{note}the device's serial port")
+        self.baud = p("baud", 115200, f"{note}baud rate", minimum=300, maximum=4000000)
+
+    def declare_checks(self, on_silence: str, must_answer: str) -> None:
+        """``silence_timeout`` (then ``on_silence``) and ``check_timeout`` (configure: ``must_answer`` by then)."""
+        p = partial(declare, self)
+        self.silence_timeout = p("silence_timeout", SILENCE_TIMEOUT, f"no valid reading for this long (s): {on_silence}",
+                                 minimum=0.05, maximum=MAX_SILENCE_TIMEOUT)
+        self.check_timeout = p("check_timeout", 2.0, f"configure: {must_answer} within this, s", minimum=0.1,
+                               maximum=60.0)
+
+    def start(self) -> None:
+        """Call at the end of __init__, once every other parameter is declared: declares ``autostart``,
+        refuses parameters the node does not declare, and with ``autostart`` configures and activates."""
+        autostart = declare(self, "autostart", True, "configure and activate at start (false: a lifecycle "
+                            "manager drives it)")
+        refuse_unknown_parameters(self)
         self.core = self.timer = None
         self.pubs = []
         self.configure_failed, self.last_reason = False, ""
@@ -63,8 +84,12 @@ class DeviceNode(LifecycleNode):
         self.core, self.configure_failed, self.last_reason = core, False, ""
         self.pubs = self.make_publishers()   # (self.core is set)
         self._autostart = False
-        self.get_logger().info(f"configured: {core.device.name}")
+        self.get_logger().info(f"configured: {self.configured()}")
         return TransitionCallbackReturn.SUCCESS
+
+    def configured(self) -> str:
+        """What configure opened, for the log line."""
+        return self.core.device.name
 
     def on_activate(self, state) -> TransitionCallbackReturn:
         self.core.activate()

@@ -33,12 +33,12 @@ from std_msgs.msg import Float64MultiArray, String
 
 from .. import topics
 from ..bench.hardware.devices import ModbusRegulator, RegisterMap, SerialLines, SimRegulator
-from ..bench.hardware.regulator import MAX_SILENCE_TIMEOUT, SILENCE_TIMEOUT, Regulator
+from ..bench.hardware.regulator import Regulator
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .device_node import DeviceNode
 from .diagnostics import diagnostic_status, publish_statuses
-from .parameters import declare, refuse_unknown_parameters
+from .parameters import declare
 from .executors import take_waiting
 from .runtime import run_node
 
@@ -59,10 +59,7 @@ class RegulatorNode(DeviceNode):
         self.rate_hz = p("rate_hz", 50.0, "device polls and setpoint updates per second", minimum=20.0, maximum=1000.0)
         self.command_timeout = p("command_timeout", 0.5, "no pressure command for this long (s): vent",
                                  minimum=0.01, maximum=60.0)
-        self.silence_timeout = p("silence_timeout", SILENCE_TIMEOUT, "no valid reading for this long (s): vent, ERROR",
-                                 minimum=0.05, maximum=MAX_SILENCE_TIMEOUT)
-        self.check_timeout = p("check_timeout", 2.0, "configure: every channel must answer within this, s",
-                               minimum=0.1, maximum=60.0)
+        self.declare_checks("vent, ERROR", "every channel must answer")
         self.max_rate = p("max_rate", 1e9, "setpoint rate limit, Pa/s (1e9: none); venting is immediate", minimum=1.0, maximum=1e9)
         reading_max = p("reading_max", 0.0, "a reading above this (Pa) is refused (0: twice max_pressure)",
                         minimum=0.0, maximum=1e8) or 2.0 * self.max_pressure
@@ -70,8 +67,7 @@ class RegulatorNode(DeviceNode):
                                 maximum=0.0), reading_max)
         self.variance = p("pressure_variance", 0.0, "the gauge's variance published with each reading, Pa^2 (0: unknown)",
                           minimum=0.0, maximum=1e12)
-        self.port = p("port", "/dev/ttyACM0", "serial: the device's port")
-        self.baud = p("baud", 115200, "serial: baud rate", minimum=300, maximum=4000000)
+        self.declare_serial("/dev/ttyACM0", note="serial: ")
         self.modbus = dict(
             host=p("modbus_host", "192.168.0.10", "modbus: the device's address"),
             port=p("modbus_port", 502, "modbus: TCP port", minimum=1, maximum=65535),
@@ -91,13 +87,11 @@ class RegulatorNode(DeviceNode):
             signed=p("reading_signed", False, "modbus: readings are two's complement"),
             unit=p("modbus_unit", 1, "modbus: device (slave) id", minimum=0, maximum=247))
         self.seed = p("seed", -1, "sim: noise seed (-1: fresh)", minimum=-1, maximum=2**32 - 1)
-        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it)")
-        refuse_unknown_parameters(self)
         self.ignored = 0            # commands while not active
         self._command_sub = self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_command, 100)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_rig = self.create_publisher(String, topics.BENCH_RIG, latched)
-        self.start(autostart)
+        self.start()
 
     def _device(self):
         low, high = self.reading_range

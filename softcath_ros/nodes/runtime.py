@@ -45,6 +45,18 @@ def interruptible_start():
         _start_interruptible[0] = False
 
 
+def pause(node, seconds: float) -> None:
+    """Sleep inside a callback or at start-up (a bounded wait, e.g. bench_node's rig check); SIGINT or
+    SIGTERM (rclpy shut the node's context down) ends it at once with KeyboardInterrupt."""
+    import time
+
+    import rclpy
+
+    if not rclpy.ok(context=node.context):
+        raise KeyboardInterrupt
+    time.sleep(seconds)
+
+
 def _rcl_reason(exc: Exception) -> str:
     """rcl's error text without its source locations (``, at /project/src/...``)."""
     text = " ".join(str(exc).split())
@@ -72,8 +84,8 @@ def announce_ready(node, executor_name: str) -> None:
 def run_node(factory: Callable, args=None, startup_errors: tuple = ()) -> int:
     """Create the node with ``factory()``, spin it on ``node.executor_name``; return the exit code.
 
-    ``startup_errors``: exception types that mean "cannot start with this configuration";
-    they are logged as one line and give exit code 2. A node that ends by itself has a
+    ``startup_errors``: exception types that mean "cannot start with this configuration"; logged
+    as one line, exit code 2 (or the error's ``exit_code``: bench_node's NoRig, 3). A node that ends by itself has a
     ``finished`` property (spinning stops when it is true) and a ``finish()`` method, called on
     the way out whether it finished or was interrupted, that returns the exit code. Once the node
     spins it says so on the latched ``topics.READY`` (what ``graph.wait_ready`` waits for).
@@ -152,14 +164,14 @@ def _init_ros(args, rcl_error) -> bool:
 
 def _create(factory: Callable, startup_errors: tuple):
     """(the node, None), or (None, the exit code) when it cannot start: a startup error or unknown
-    parameters (2, said in one line), or SIGINT during start-up (0)."""
+    parameters (2, or the error's ``exit_code``; said in one line), or SIGINT during start-up (0)."""
     from .parameters import refuse_unknown_parameters
 
     try:
         node = factory()
     except startup_errors as exc:
         print(f"[ERROR] cannot start: {exc}", file=sys.stderr)
-        return None, 2
+        return None, getattr(exc, "exit_code", 2)
     except KeyboardInterrupt:      # SIGINT inside interruptible_start
         print("[INFO] stopped during start-up (SIGINT)", file=sys.stderr)
         return None, 0

@@ -21,12 +21,11 @@ from std_msgs.msg import Empty
 
 from .. import topics
 from ..bench.hardware.devices import SerialLines
-from ..bench.hardware.regulator import MAX_SILENCE_TIMEOUT, SILENCE_TIMEOUT
 from ..bench.hardware.scale import Scale
 from ..core.errors import SoftcathError
 from .device_node import DeviceNode
 from .diagnostics import diagnostic_status, publish_statuses
-from .parameters import declare, refuse_unknown_parameters
+from .parameters import declare
 from .runtime import run_node
 
 
@@ -35,20 +34,14 @@ class ScaleNode(DeviceNode):
     def __init__(self, **node_options):
         super().__init__(topics.SCALE_NODE, **node_options)
         p = partial(declare, self)
-        self.port = p("port", "/dev/ttyUSB0", "the board's serial port")
-        self.baud = p("baud", 115200, "baud rate", minimum=300, maximum=4000000)
+        self.declare_serial("/dev/ttyUSB0")
         self.max_force = p("max_force", 5.0, "the cell's capacity, N: a reading beyond +-this is refused",
                            minimum=1e-3, maximum=1e5)
         self.rate_hz = p("rate_hz", 100.0, "port polls per second (each publishes the newest reading)",
                          minimum=20.0, maximum=1000.0)
-        self.silence_timeout = p("silence_timeout", SILENCE_TIMEOUT, "no valid reading for this long (s): ERROR",
-                                 minimum=0.05, maximum=MAX_SILENCE_TIMEOUT)
-        self.check_timeout = p("check_timeout", 2.0, "configure: a reading must come within this, s",
-                               minimum=0.1, maximum=60.0)
-        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it)")
-        refuse_unknown_parameters(self)
+        self.declare_checks("ERROR", "a reading must come")
         self.create_subscription(Empty, topics.BENCH_TARE, self.on_tare, 10)
-        self.start(autostart)
+        self.start()
 
     def make_core(self) -> Scale:
         return Scale(SerialLines(self.port, self.baud, "F", 1, -self.max_force, self.max_force), time.monotonic,

@@ -1,5 +1,6 @@
 """tracker_node (node ``softcath_tracker``): the camera half of the rig contract (docs/rig.md,
-docs/tracker.md). A managed (lifecycle) node around ``softcath_ros.bench.tracker``:
+docs/tracker.md). A managed (lifecycle) node (nodes/device_node.py) around
+``softcath_ros.bench.frames.TrackedInput`` and ``softcath_ros.bench.tracker``:
 
 - configure: opens the input (camera device, video file or folder of images), reads the first
   frame and sets the scene on it (scale, base and axis: given, or from ArUco markers); any fault
@@ -23,19 +24,18 @@ from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
 from .. import topics
 from ..core.errors import SoftcathError
+from .device_node import DeviceNode
 from .diagnostics import diagnostic_status, publish_statuses
-from .parameters import declare, refuse_unknown_parameters
+from .parameters import declare
 from .runtime import run_node
 
 MAX_MARKER_ID = 49   # the 4x4_50 dictionary
 
 
-class TrackerNode(LifecycleNode):
-    executor_name = "single"
+class TrackerNode(DeviceNode):
 
     def __init__(self, **node_options):
         super().__init__(topics.TRACKER_NODE, **node_options)
@@ -67,113 +67,38 @@ class TrackerNode(LifecycleNode):
         self.rate_hz = p("rate_hz", 30.0, "frames read per second (a camera: at most its own rate)",
                          minimum=0.1, maximum=1000.0)
         self.loop = p("loop", False, "replay a video or folder from its start when it ends")
-        autostart = p("autostart", True, "configure and activate at start (false: a lifecycle manager drives it)")
-        refuse_unknown_parameters(self)
-        self.source = self.frames = self.tracker = self.timer = None
-        self.pub_angle = self.pub_tip = None
-        self.measured = self.unmeasured = self._reported_unmeasured = 0
-        self.last_reason = ""
-        self.ended = self.configure_failed = self.live = False
-        self.state_name = "unconfigured"
-        from diagnostic_msgs.msg import DiagnosticArray
+        self._reported_unmeasured = 0
+        self.start()
 
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
-        self.create_timer(1.0, self.diagnostics)
-        self._autostart = autostart
-        if autostart:
-            self.trigger_configure()
-            if self.state_name != "inactive":
-                raise SoftcathError(f"configure failed: {self.last_reason}")
-            self.trigger_activate()
+    def make_core(self):
+        from ..bench.frames import TrackedInput
 
-    # -- lifecycle ----------------------------------------------------------------------------------
-    def on_configure(self, state) -> TransitionCallbackReturn:
-        from ..bench.frames import FrameSource
-        from ..bench.tracker import Tracker
-        from ..bench.tracker_scene import scene_from_settings
+        return TrackedInput(self.input, self.settings, loop=self.loop)
 
-        try:
-            source = FrameSource(self.input)
-            try:
-                first = source.first()
-                scene = scene_from_settings(first.pixels, flag="", **self.settings)
-            except SoftcathError:
-                source.close()
-                raise
-        except SoftcathError as exc:
-            self.last_reason, self.configure_failed = str(exc), True
-            if not self._autostart:   # (at start-up the one line is the exit's)
-                self.get_logger().error(f"configure: {exc}")
-            return TransitionCallbackReturn.FAILURE
-        self.source, self.tracker, self.live = source, Tracker(scene), source.live
-        self.configure_failed, self.last_reason = False, ""
-        self.frames = iter(source)
-        self.pub_angle = self.create_lifecycle_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10)
-        self.pub_tip = self.create_lifecycle_publisher(PoseStamped, topics.TIP_MEASURED, 100)
-        self.state_name = "inactive"
-        self._autostart = False
-        self.get_logger().info(f"configured: {self.input}, {scene.mm_per_px:.5f} mm/px, base {scene.base_px}")
-        return TransitionCallbackReturn.SUCCESS
+    def make_publishers(self) -> list:
+        return [self.create_lifecycle_publisher(Vector3Stamped, topics.BENCH_BEND_ANGLE, 10),
+                self.create_lifecycle_publisher(PoseStamped, topics.TIP_MEASURED, 100)]
 
-    def on_activate(self, state) -> TransitionCallbackReturn:
-        self.timer = self.create_timer(1.0 / self.rate_hz, self.tick)
-        self.state_name = "active"
-        return super().on_activate(state)
-
-    def on_deactivate(self, state) -> TransitionCallbackReturn:
-        self._stop_timer()
-        self.state_name = "inactive"
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state) -> TransitionCallbackReturn:
-        self._release()
-        self.state_name = "unconfigured"
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state) -> TransitionCallbackReturn:
-        self._release()
-        self.state_name = "finalized"
-        return TransitionCallbackReturn.SUCCESS
-
-    def _stop_timer(self) -> None:
-        if self.timer is not None:
-            self.destroy_timer(self.timer)
-            self.timer = None
-
-    def _release(self) -> None:
-        self._stop_timer()
-        if self.source is not None:
-            self.source.close()
-        for pub in (self.pub_angle, self.pub_tip):
-            if pub is not None:
-                self.destroy_lifecycle_publisher(pub)
-        self.source = self.frames = self.tracker = self.pub_angle = self.pub_tip = None
+    def configured(self) -> str:
+        scene = self.core.scene
+        return f"{self.input}, {scene.mm_per_px:.5f} mm/px, base {scene.base_px}"
 
     # -- frames -------------------------------------------------------------------------------------
     def tick(self) -> None:
-        frame = next(self.frames, None)
-        if frame is None and self.loop and not self.source.live:
-            self.source.rewind()
-            self.frames = iter(self.source)
-            frame = next(self.frames, None)
+        frame = self.core.next_frame()
         if frame is None:
-            if not self.ended:
-                self.get_logger().info(f"{self.input}: no more frames")
-            self.ended = True
+            self.get_logger().info(f"{self.input}: no more frames")
             self._stop_timer()
             return
         stamp = self.get_clock().now()          # the time the frame was read
-        m = self.tracker.measure(frame.pixels, frame.index)
-        if not m.ok:                            # never a guessed reading
-            self.unmeasured += 1
-            self.last_reason = m.reason
+        m = self.core.measure(frame)
+        if not m.ok:                            # never a guessed reading (counted by the core)
             return
-        self.measured += 1
         theta = math.radians(m.bend_angle_deg)
         a = Vector3Stamped()
         a.header.stamp, a.header.frame_id = stamp.to_msg(), topics.FRAME_ID
         a.vector.x = theta
-        self.pub_angle.publish(a)
+        self.pubs[0].publish(a)
         t = PoseStamped()
         t.header = a.header
         bx, by = self.bending        # the bending plane in softcath_base: (bx, by, 0) and z
@@ -181,26 +106,26 @@ class TrackerNode(LifecycleNode):
         t.pose.position.x, t.pose.position.y, t.pose.position.z = across * bx, across * by, along
         half = math.sin(0.5 * theta)  # rotation by theta about z x (bx, by, 0), as core/kinematics
         t.pose.orientation.x, t.pose.orientation.y, t.pose.orientation.w = -by * half, bx * half, math.cos(0.5 * theta)
-        self.pub_tip.publish(t)
+        self.pubs[1].publish(t)
 
     def diagnostics(self) -> None:
-        new = self.unmeasured - self._reported_unmeasured     # since the last report
-        self._reported_unmeasured = self.unmeasured
-        if self.state_name == "active" and not self.ended and new == 0:
-            level, message = DiagnosticStatus.OK, "measuring"
-        elif self.state_name == "active" and not self.ended:
-            level, message = DiagnosticStatus.WARN, f"{new} frame(s) not measured: {self.last_reason}"
-        elif self.ended and self.live:
+        c = self.core
+        measured, unmeasured = (c.measured, c.unmeasured) if c is not None else (0, 0)
+        new = unmeasured - self._reported_unmeasured     # since the last report
+        self._reported_unmeasured = unmeasured
+        if c is None or not (c.state == "active" or c.ended):
+            level, message = self.level_and_message([])
+        elif not c.ended:
+            level, message = self.level_and_message([new and f"{new} frame(s) not measured: {c.last_problem}"])
+            message = "measuring" if level == DiagnosticStatus.OK else message
+        elif c.live:
             level, message = DiagnosticStatus.ERROR, "the camera stopped delivering frames"
-        elif self.ended:
-            level, message = DiagnosticStatus.WARN, "the input has no more frames"
-        elif self.configure_failed:
-            level, message = DiagnosticStatus.ERROR, f"configure failed: {self.last_reason}"
         else:
-            level, message = DiagnosticStatus.OK, self.state_name
+            level, message = DiagnosticStatus.WARN, "the input has no more frames"
         publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.TRACKER_NODE, message, [
-            ("state", self.state_name), ("input", self.input), ("frames_measured", self.measured),
-            ("frames_not_measured", self.unmeasured), ("last_reason", self.last_reason)], hardware_id=self.input))
+            ("state", self.state_name), ("input", self.input), ("frames_measured", measured),
+            ("frames_not_measured", unmeasured), ("last_reason", (c and c.last_problem) or self.last_reason)],
+            hardware_id=self.input))
 
 
 def main(args=None) -> int:

@@ -13,6 +13,7 @@ simulated rig's regulator and gauge (bench/sim_rig.py).
 """
 from __future__ import annotations
 
+import importlib
 import inspect
 from dataclasses import dataclass
 
@@ -28,30 +29,56 @@ class DeviceFault(SoftcathError):
     """The device cannot be opened or used (one line, naming it)."""
 
 
-class SerialLines:
+def first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+class Connection:
+    """The open/close the serial and Modbus backends share: ``open`` imports the backend's package
+    (``module``; missing: one line naming the extra) and keeps what ``connect(module)`` returns (a fault
+    there raises DeviceFault), ``close`` closes it once, quietly (the device may be gone)."""
+    module = package = ""
+    link = None
+    fault = ""           # the last I/O error (the device then counts as silent)
+
+    def connect(self, module):
+        raise NotImplementedError
+
+    def open(self) -> None:
+        try:
+            module = importlib.import_module(self.module)
+        except ImportError:
+            raise DeviceFault(f"the {self.name.split(':')[0]} backend needs {self.package}: "
+                              "pip install 'softcath_ros[hardware]'") from None
+        self.link = self.connect(module)
+
+    def close(self) -> None:
+        link, self.link = self.link, None
+        if link is not None:
+            try:
+                link.close()
+            except Exception:   # pyserial / pymodbus on a device that is gone
+                pass
+
+
+class SerialLines(Connection):
     """A serial device speaking a line protocol: readings tagged ``tag`` (``P`` or ``F``)."""
+    module = package = "serial"
 
     def __init__(self, port: str, baud: int, tag: str, n_channels: int, low: float, high: float):
         self.port, self.baud, self.tag = port, int(baud), tag
         self.n_channels, self.low, self.high = n_channels, low, high
-        self.link = None
         self.lines = protocol.LineSplitter()
-        self.fault = ""           # the last I/O error (the device then counts as silent)
 
     @property
     def name(self) -> str:
         return f"serial:{self.port}"
 
-    def open(self) -> None:
+    def connect(self, serial):
         try:
-            import serial
-        except ImportError:
-            raise DeviceFault("the serial backend needs pyserial: pip install 'softcath_ros[hardware]'") from None
-        try:
-            self.link = serial.Serial(self.port, self.baud, timeout=0, write_timeout=0.1)
+            return serial.Serial(self.port, self.baud, timeout=0, write_timeout=0.1)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise DeviceFault(f"cannot open serial port {self.port} at {self.baud} baud: "
-                              f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+            raise DeviceFault(f"cannot open serial port {self.port} at {self.baud} baud: {first_line(exc)}") from None
 
     def write(self, data: bytes) -> None:
         if self.link is None:
@@ -83,14 +110,6 @@ class SerialLines:
             if line.strip():
                 out.append(protocol.parse_line(line, self.tag, self.n_channels, self.low, self.high))
         return out
-
-    def close(self) -> None:
-        if self.link is not None:
-            try:
-                self.link.close()
-            except Exception:
-                pass
-            self.link = None
 
 
 @dataclass(frozen=True)
@@ -128,43 +147,38 @@ class RegisterMap:
         return raw * self.reading_pa_per_count + self.reading_offset_pa
 
 
-class ModbusRegulator:
+class ModbusRegulator(Connection):
     """A proportional regulator or valve terminal on Modbus TCP (pymodbus' synchronous client)."""
+    module, package = "pymodbus.client", "pymodbus"
 
     def __init__(self, host: str, port: int, registers: RegisterMap, n_channels: int, low: float, high: float,
                  timeout: float = 0.05):
         registers.check(n_channels)
         self.host, self.port, self.map = host, int(port), registers
         self.n_channels, self.low, self.high, self.timeout = n_channels, low, high, timeout
-        self.client = None
-        self.fault = ""
         self._unit_kw = "slave"
 
     @property
     def name(self) -> str:
         return f"modbus:{self.host}:{self.port}/{self.map.unit}"
 
-    def open(self) -> None:
-        try:
-            from pymodbus.client import ModbusTcpClient
-        except ImportError:
-            raise DeviceFault("the modbus backend needs pymodbus: pip install 'softcath_ros[hardware]'") from None
-        self.client = ModbusTcpClient(self.host, port=self.port, timeout=self.timeout, retries=0)
-        params = inspect.signature(self.client.read_holding_registers).parameters
+    def connect(self, pymodbus_client):
+        client = pymodbus_client.ModbusTcpClient(self.host, port=self.port, timeout=self.timeout, retries=0)
+        params = inspect.signature(client.read_holding_registers).parameters
         self._unit_kw = "device_id" if "device_id" in params else "slave"   # (pymodbus >= 3.10 renamed it)
-        if not self.client.connect():
-            self.client.close()
-            self.client = None
+        if not client.connect():
+            client.close()
             raise DeviceFault(f"cannot connect to Modbus TCP {self.host}:{self.port}")
+        return client
 
     def _call(self, method: str, *args, **kw):
         """The response, or None (no answer, a Modbus exception, a closed connection)."""
-        if self.client is None:
+        if self.link is None:
             return None
         try:
-            response = getattr(self.client, method)(*args, **{self._unit_kw: self.map.unit}, **kw)
+            response = getattr(self.link, method)(*args, **{self._unit_kw: self.map.unit}, **kw)
         except Exception as exc:   # pymodbus raises ModbusException / ConnectionException / OSError
-            self.fault = f"{method}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+            self.fault = f"{method}: {first_line(exc)}"
             return None
         if response is None or response.isError():
             self.fault = f"{method}: {response}"
@@ -189,11 +203,6 @@ class ModbusRegulator:
             out.append(protocol.check_reading(ch, self.map.pascal(raw), self.n_channels, self.low, self.high,
                                               f"register {reg} = {raw}"))
         return out
-
-    def close(self) -> None:
-        if self.client is not None:
-            self.client.close()
-            self.client = None
 
 
 class SimRegulator:
