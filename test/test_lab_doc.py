@@ -1,8 +1,11 @@
 """docs/lab.md's node and tracker lines run as written, against emulated devices: the only change
 is the device each names (the serial ports /dev/ttyACM0 and /dev/ttyUSB0 become the emulators'
 pseudo-terminals, the Modbus address 192.168.0.10:502 the emulator on 127.0.0.1, camera 0 a folder
-of rendered frames, replayed in a loop as a camera never ends). Its `softcath` lines parse in test_docs_commands.py; `softcath track` runs here."""
+of rendered frames, replayed in a loop as a camera never ends). Its `softcath` lines parse in
+test_docs_commands.py; `softcath track` and `softcath characterise --rig ros` run here."""
 import shlex
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -94,3 +97,35 @@ def test_the_camera_lines_run_as_written(tmp_path, monkeypatch):
     # the camera never ends: its stand-in, the folder, loops
     run_line(line, {"input:=0": [f"input:={tmp_path / 'frames'}", "-p", "loop:=true"]}, topics.BENCH_BEND_ANGLE, Vector3Stamped,
              topics.TRACKER_NODE, cwd=tmp_path)
+
+
+@pytest.mark.timeout(400)   # the quick protocol as the page runs it: about 90 s
+def test_the_first_recording_line_runs_as_written_and_drives_every_managed_node(tmp_path):
+    """The three node lines with ``autostart:=false`` (regulator: its sim line; scale: an emulated
+    board; camera: a folder of rendered frames), then the characterise line as written:
+    characterise configures and activates each node and bench_node, and the run completes."""
+    pytest.importorskip("cv2", reason="the vision extra")
+    from softcath_ros.bench.tracker_render import write_demo_frames
+
+    write_demo_frames(tmp_path / "frames", angles_deg=(0, 45, 90))
+    scale = SerialScaleEmulator(load=0.1).start()
+    devices = {"port:=/dev/ttyUSB0": [f"port:={scale.port}"],
+               "input:=0": [f"input:={tmp_path / 'frames'}", "-p", "loop:=true"]}
+    manual = ["-p", "autostart:=false"]
+    [regulator] = [line for line in lab_lines("regulator_node") if "backend:=sim" in line]
+    [characterise] = [line for line in lab_lines("softcath characterise") if "--rig" in line]
+    try:
+        with NodeGraph() as graph:
+            procs = [graph.start(line[0], extra_ros_args=[b for a in line[2:] for b in devices.get(a, [a])] + manual,
+                                 cwd=ROOT, stdout=subprocess.DEVNULL)
+                     for line in (regulator, *lab_lines("scale_node"), *lab_lines("tracker_node"))]
+            graph.wait_ready(*procs, timeout_s=120)
+            run = subprocess.run([str(Path(sys.executable).parent / "softcath"), *characterise[1:]], env=graph.env,
+                                 cwd=tmp_path, capture_output=True, text=True, timeout=350)
+    finally:
+        scale.close()
+    assert run.returncode == 0, run.stdout + run.stderr
+    for node in (topics.REGULATOR_NODE, topics.SCALE_NODE, topics.TRACKER_NODE, topics.BENCH_NODE):
+        for transition in ("configure", "activate"):
+            assert f"[characterise] {transition} /{node}" in run.stdout, run.stdout
+    assert list((tmp_path / "runs").glob("bench_quick_*/*.mcap")) and "report:" in run.stdout

@@ -55,6 +55,22 @@ def _write_failed(path, exc: OSError) -> RecordingError:
     return RecordingError(f"writing {path} failed: {exc.strerror or exc}")
 
 
+_EXISTS = "recording directory {} already exists; choose a new name (recordings are never overwritten)"
+
+
+def check_destination(bag_dir: Path) -> None:
+    """RecordingError (one line) if no recording can be made at ``bag_dir``: it exists, or the folder
+    it goes in cannot be made. Creates that folder, not ``bag_dir`` (bench_node checks before it
+    waits for a rig; the writer again when it makes ``bag_dir``)."""
+    bag_dir = Path(bag_dir)
+    if bag_dir.exists():
+        raise RecordingError(_EXISTS.format(bag_dir))
+    try:
+        bag_dir.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RecordingError(f"cannot create recording directory {bag_dir}: {exc.strerror or exc}") from None
+
+
 class BagWriter:
     def __init__(self, bag_dir, *, compression: str = "zstd", chunk_size: int = 1 << 20,
                  flush_period_s: float = 1.0, fsync: bool = True, min_free_bytes: int = 64 << 20,
@@ -96,11 +112,11 @@ class BagWriter:
             self._thread.start()
 
     def _check_destination(self, min_free_bytes: int) -> None:
+        check_destination(self.bag_dir)
         try:
-            self.bag_dir.mkdir(parents=True, exist_ok=False)
-        except FileExistsError:
-            raise RecordingError(f"recording directory {self.bag_dir} already exists; "
-                                 "choose a new name (recordings are never overwritten)") from None
+            self.bag_dir.mkdir(exist_ok=False)
+        except FileExistsError:    # made since the check
+            raise RecordingError(_EXISTS.format(self.bag_dir)) from None
         except OSError as exc:
             raise RecordingError(f"cannot create recording directory {self.bag_dir}: "
                                  f"{exc.strerror or exc}") from None
