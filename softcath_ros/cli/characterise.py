@@ -39,9 +39,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Callable
 
-from .. import topics
 from ..core.errors import SoftcathError
-from ..graph import NodeGraph, stop_process
+from ..graph import NodeGraph
 from .common import bounded_float, check_rung_names
 from .report import add_overlay_arguments
 
@@ -57,7 +56,6 @@ CHILD_GRACE_S = {"model_node": 0.0}
 HELPER_READY_S = 60.0
 BENCH_READY_S = 60.0   # bench_node not spinning by then: started once more
 RIG_CHILD_GRACE_S = 1.5
-BENCH_NODE = "/" + topics.BENCH_NODE   # bench_node's lifecycle services live under its name
 
 
 class Stopped(Exception):
@@ -250,7 +248,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
     from ..bench.supervisor import (BringUpBench, Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench,
                                     StopBench)
     from ..graph import ReadyWatch
-    from .managed import activate_managed
+    from .managed import BENCH_NODE, activate_managed, bring_up_bench, stop_bench
 
     out_dir, name, design_arg, helpers, logs = _plan(args, protocol, design, rig_nodes)
     t0 = time.monotonic()
@@ -288,11 +286,11 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                                            "autostart": False})
                         output = _BenchOutput(bench, blog, say, lines)
                     elif isinstance(cmd, BringUpBench):
-                        _bring_up_bench(watch, bench, args.wait_timeout, say)
+                        bring_up_bench(watch, bench, args.wait_timeout, say)
                         say(f"[characterise] bench_node running protocol '{protocol.name}' on the {args.rig} rig, "
                             f"ROS_DOMAIN_ID={graph.domain}")
                     elif isinstance(cmd, StopBench):
-                        _stop_bench(watch, bench, cmd.lifecycle, say)
+                        stop_bench(watch, bench, cmd.lifecycle, say)
                     elif isinstance(cmd, KillBench):
                         bench.kill()
                     elif isinstance(cmd, Say):
@@ -305,7 +303,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
             if threading.current_thread() is threading.main_thread():
                 signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second signal must not cut the finalisation
             if bench is not None:
-                _stop_bench(watch, bench, sup.brought_up == sup.attempt, say, wait_s=15.0)
+                stop_bench(watch, bench, sup.brought_up == sup.attempt, say, wait_s=15.0)
                 output.drain()
         finally:
             blog.close()
@@ -333,39 +331,6 @@ def _start_helpers(graph, helpers, logs: Path, say) -> dict[str, subprocess.Pope
         log.close()
         say(f"[characterise] started {node} (log {logs / (node + '.log')})")
     return children
-
-
-def _bring_up_bench(watch, bench: subprocess.Popen, wait_timeout: float, say) -> None:
-    """bench_node, started unconfigured: configure (it checks the rig, up to ``wait_timeout``), then
-    activate (it runs). A failed check is one of the checks before the first step: exit 3 (docs/rig.md)."""
-    from ..bench.rig_contract import NoRig
-    from .managed import MANAGED_TIMEOUT_S, activate_managed
-
-    try:
-        activate_managed(watch, say, names=[BENCH_NODE], timeout_s=MANAGED_TIMEOUT_S + wait_timeout,
-                         ended=lambda n: bench.poll() is not None)
-    except SoftcathError as exc:
-        raise NoRig(str(exc)) from None
-
-
-def _stop_bench(watch, bench: subprocess.Popen, lifecycle: bool, say, wait_s: float | None = None) -> None:
-    """bench_node stops early (it vents, marks the recording incomplete, exits): deactivate then shutdown
-    when it was brought up, SIGINT when it was not or its lifecycle services do not answer. ``wait_s``:
-    wait that long for it to end (it finalises its recording), then SIGINT and a kill after 5 s."""
-    from .managed import shutdown_managed
-
-    if lifecycle and bench.poll() is None:
-        failure = shutdown_managed(watch, say, [BENCH_NODE], ended=lambda n: bench.poll() is not None)
-        if failure is not None:
-            say(f"[characterise] {failure}; stopping bench_node by SIGINT")
-            lifecycle = False
-    if not lifecycle and bench.poll() is None:
-        bench.send_signal(signal.SIGINT)
-    if wait_s is not None:
-        try:
-            bench.wait(timeout=wait_s)
-        except subprocess.TimeoutExpired:
-            stop_process(bench, 5.0)
 
 
 def _outcome(args, design, code: int, summary: dict | None, died: list[str], lines: list[str], t0: float,

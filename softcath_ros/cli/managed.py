@@ -5,11 +5,16 @@ here its requests go over the GetState / ChangeState services of the graph super
 node."""
 from __future__ import annotations
 
+import signal
+import subprocess
 import time
 from typing import Callable
 
+from .. import topics
 from ..core.errors import SoftcathError
+from ..graph import stop_process
 
+BENCH_NODE = "/" + topics.BENCH_NODE   # bench_node's lifecycle services live under its name
 MANAGED_DISCOVERY_S = 2.0   # a rig's lifecycle services are looked for this long (softcath's own nodes: until seen)
 MANAGED_TIMEOUT_S = 60.0    # each managed node configured and active by then (configure opens a device)
 TEARDOWN_TIMEOUT_S = 5.0    # deactivate + shutdown answered by then, else the caller falls back to a signal
@@ -71,13 +76,42 @@ def shutdown_managed(watch, say, names: list[str], ended: Callable[[str], bool],
     return _drive(watch, say, Teardown(names, timeout_s), ended)
 
 
+def bring_up_bench(watch, bench: subprocess.Popen, wait_timeout: float, say) -> None:
+    """bench_node, started unconfigured: configure (it checks the rig, up to ``wait_timeout``), then
+    activate (it runs). A failed check is one of the checks before the first step: exit 3 (docs/rig.md)."""
+    from ..bench.rig_contract import NoRig
+
+    try:
+        activate_managed(watch, say, names=[BENCH_NODE], timeout_s=MANAGED_TIMEOUT_S + wait_timeout,
+                         ended=lambda n: bench.poll() is not None)
+    except SoftcathError as exc:
+        raise NoRig(str(exc)) from None
+
+
+def stop_bench(watch, bench: subprocess.Popen, lifecycle: bool, say, wait_s: float | None = None) -> None:
+    """bench_node stops early (it vents, marks the recording incomplete, exits): deactivate then shutdown
+    when it was brought up, SIGINT when it was not or its lifecycle services do not answer. ``wait_s``:
+    wait that long for it to end (it finalises its recording), then SIGINT and a kill after 5 s."""
+    if lifecycle and bench.poll() is None:
+        failure = shutdown_managed(watch, say, [BENCH_NODE], ended=lambda n: bench.poll() is not None)
+        if failure is not None:
+            say(f"[characterise] {failure}; stopping bench_node by SIGINT")
+            lifecycle = False
+    if not lifecycle and bench.poll() is None:
+        bench.send_signal(signal.SIGINT)
+    if wait_s is not None:
+        try:
+            bench.wait(timeout=wait_s)
+        except subprocess.TimeoutExpired:
+            stop_process(bench, 5.0)
+
+
 def _drive(watch, say, machine, ended: Callable[[str], bool]) -> str | None:
     """Perform ``machine``'s (bench.bringup) requests until it is done; its failure or None."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from lifecycle_msgs.msg import Transition as TransitionMsg
     from lifecycle_msgs.srv import ChangeState, GetState
 
-    from .. import topics
     from ..bench.bringup import AskState
 
     node = watch.node
