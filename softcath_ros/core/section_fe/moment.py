@@ -30,6 +30,9 @@ from .settings import SectionSettings
 from .solver import LinearSolver, newton
 
 
+STABLE_ITERATIONS = 60   # the held section's minimiser (where Newton reaches a saddle, or stalls on a snap)
+
+
 @dataclass
 class HeldResult:
     moment: float          # N m about the direction e (positive: resists bending towards e)
@@ -99,18 +102,40 @@ class HeldSection:
         out[self.i_k] = -x[self.i_k] / x[self.i_lam] * dz[self.i_lam]
         return out
 
-    def solve(self, x0: np.ndarray, kappa0: float, pressures: np.ndarray) -> Correction:
-        """Equilibrium at rotation rate ``kappa0`` (1/m) and channel ``pressures`` (Pa)."""
+    def solve(self, x0: np.ndarray, kappa0: float, pressures: np.ndarray, snap: bool = False) -> Correction:
+        """Stable equilibrium at rotation rate ``kappa0`` (1/m) and channel ``pressures`` (Pa).
+
+        Newton first; where it reaches a saddle of the potential (an unstable held state: the
+        lumen's shoulders folding), the potential's minimiser with kappa0 held (line search, the
+        tangent shifted to positive definite where it is not; converged only where it is) finds the
+        stable state. ``snap``: also where Newton stalls (past a limit point of the path: the stable
+        state the section snaps to)."""
         p = self.problem
         self._kappa0 = float(kappa0)
-        corr = newton(p, self.set_curvature(x0, kappa0), np.asarray(pressures, dtype=float) / p.c_ref,
-                      tol=self.tol, max_iterations=self.max_newton, linear=self.linear, constraint=self)
+        load = np.asarray(pressures, dtype=float) / p.c_ref
+        guess = self.set_curvature(x0, kappa0)
+        corr = newton(p, guess, load, tol=self.tol, max_iterations=self.max_newton, linear=self.linear,
+                      constraint=self)
+        stalled = snap and not corr.converged and not corr.info.get("inadmissible_start")
+        if stalled or (corr.converged and corr.info.get("negative_directions")):
+            corr = newton(p, guess, load, tol=self.tol, max_iterations=STABLE_ITERATIONS, linear=self.linear,
+                          constraint=self, stable_only=True)
+            turn = abs(p.frame_motion(corr.state)[1])
+            if corr.converged and turn > np.pi / 2:
+                # the gauge (one node pinned, one held on its vertical) lets a far descent turn the
+                # section over, where the held rate bends it the other way: not this state
+                corr.converged = False
+                corr.message = f"the minimiser turned the section over ({np.degrees(turn):.0f} deg)"
         if corr.converged:
             gaps = p.open_hole_gaps(corr.state)     # a filled lumen resists closing: not a stop
+            crossed = p.crossed_walls(corr.state)
             if gaps.min() < self.min_hole_gap:
                 corr.converged, corr.outside_domain = False, True
                 corr.message = (f"the walls of a hole touch (gap {gaps.min():.1%} of its diameter); "
                                 "self-contact is not modelled")
+            elif crossed:
+                corr.converged, corr.outside_domain = False, True
+                corr.message = "the wall of a hole crosses itself; self-contact is not modelled"
         return corr
 
     def result(self, x: np.ndarray, pressures: np.ndarray) -> HeldResult:
@@ -159,7 +184,9 @@ def moment_table(held: HeldSection, curvatures, pressures, pressure_direction, c
     messages: list[str] = []
     i0 = int(np.flatnonzero(ks == 0)[0])
     rest = prob.consistent_pressures(prob.initial_state())
-    straight = ramp(lambda guess, t, prev: held.solve(guess, 0.0, t * pdir), rest, ps[1:], control,
+    # the pressure ramp follows the straight section's snaps (the lumen closing) as a bench does;
+    # a curvature branch ends at its limit point (past it the law would jump)
+    straight = ramp(lambda guess, t, prev: held.solve(guess, 0.0, t * pdir, snap=True), rest, ps[1:], control,
                     describe=describe_pressure)
     if not straight.converged:
         messages.append(f"held straight: {straight.message}")

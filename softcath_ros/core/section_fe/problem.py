@@ -215,17 +215,23 @@ class SectionProblem:
         w is the best-fit (least-squares, weighted by the silicone's area) rotation of the
         reference section onto the deformed one: exact for any finite rigid turn, so states that
         differ by one (another gauge) report the same k."""
-        u = x[:self.n_u].reshape(-1, 2)
         lam, kx, ky = x[self.n_u:self.n]
+        o, w = self.frame_motion(x)
+        s = 1 - kx * o[0] - ky * o[1]
+        c, si = np.cos(w), np.sin(w)
+        k = np.array([c * kx + si * ky, -si * kx + c * ky]) / s
+        return lam * s, k
+
+    def frame_motion(self, x) -> tuple[np.ndarray, float]:
+        """The silicone's mean displacement (/ R) and its best-fit (least-squares, area-weighted)
+        rotation (rad) from the reference section to the deformed one."""
+        u = x[:self.n_u].reshape(-1, 2)
         o = self._w_node @ u / self._w_node.sum()
         d = self.X - self._centroid
         v = u - o
         w = float(np.arctan2(np.sum(self._rot_weights * (d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0])),
                              1.0 + np.sum(self._rot_weights * (d[:, 0] * v[:, 0] + d[:, 1] * v[:, 1]))))
-        s = 1 - kx * o[0] - ky * o[1]
-        c, si = np.cos(w), np.sin(w)
-        k = np.array([c * kx + si * ky, -si * kx + c * ky]) / s
-        return lam * s, k
+        return o, w
 
     def initial_state(self) -> np.ndarray:
         x = np.zeros(self.n_state)

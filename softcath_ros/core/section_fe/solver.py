@@ -18,6 +18,7 @@ from .problem import SectionProblem
 ARMIJO = 1e-4               # sufficient decrease of the potential, as a fraction of the slope
 MIN_DESCENT_STEP = 1 / 64   # the descent test stops cutting here (admissibility does not)
 ROUND_OFF = 1e-11           # potential differences below this (relative) are round-off
+ESCAPE_STEP = 1e-2          # the stable minimiser's step off a saddle (largest non-dimensional entry)
 
 
 class LinearSolver:
@@ -148,18 +149,23 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
         # the tangent's inertia: needed by the minimiser at every iteration, else only at the end
-        negative = linear.negative_pivots() if constraint is None and stable_only else None
+        negative = linear.negative_pivots() if stable_only else None
         shifted = False
-        if constraint is not None:
-            dz = constraint.expand(x, dz)
-        elif stable_only and negative:
+        if stable_only and negative:
             # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
             # tangent shifted until positive definite (it descends, and leaves along the negative
             # directions); converged only where the unshifted tangent is positive definite
             dz, _ = linear.solve_positive_definite(K, -g)
+            if np.max(np.abs(dz[:n])) < 100 * tol:
+                # at (or next to) a saddle the shifted step vanishes with the gradient: leave it
+                # downhill along the tangent's most negative direction of curvature
+                v = linear.negative_curvature_direction()
+                dz = dz + ESCAPE_STEP * (v if float(g @ v) <= 0 else -v)
             shifted = True
         elif minimise and float(g @ dz) >= 0:
             dz = _descent_direction(K, g)
+        if constraint is not None:
+            dz = constraint.expand(x, dz)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
         if not np.all(np.isfinite(dx)):
             return Correction(x, False, it, "singular tangent")
@@ -182,7 +188,7 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
                 e_trial = assembled[0]
             else:
                 e_trial = problem.energy(trial, pressures)
-            if np.isfinite(e_trial) and (slope >= 0 or alpha <= MIN_DESCENT_STEP
+            if np.isfinite(e_trial) and ((slope >= 0 and not shifted) or alpha <= MIN_DESCENT_STEP
                                          or e_trial <= E + ARMIJO * alpha * slope + tolerance):
                 break
             alpha *= 0.5
@@ -195,7 +201,7 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         # iteration (quadratic convergence observed): what is left is then below ~5 tol.
         if alpha == 1.0 and not shifted and (step < tol or (steps and step < 100 * tol and step < 0.05 * steps[-1])):
             # the inertia of the last tangent (a step below tol before x): 0 at a stable state
-            if constraint is None and negative is None:
+            if negative is None:
                 negative = linear.negative_pivots()
             return Correction(x, True, it, info={} if negative is None else {"negative_directions": negative})
         # Newton converges quadratically near a solution; a step that has not halved in two
