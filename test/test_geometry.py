@@ -206,3 +206,18 @@ def test_symmetry_survives_positions_typed_to_the_micrometre_and_not_a_10_um_shi
     d["channels"][1]["center"][0] += 10e-6
     sym = symmetry(design_from_dict(d).section)
     assert sym.rotation_order == 1 and sym.mirrors == ()
+
+
+def test_symmetry_is_found_once_per_section_content_and_the_tolerance(design_dict):
+    from softcath_ros.core.geometry.symmetry import _symmetry_of
+
+    d = sector_design(design_dict, n=3)
+    first = symmetry(design_from_dict(d).section)
+    assert symmetry(design_from_dict(copy.deepcopy(d)).section) is first   # the same content: kept
+    _symmetry_of.cache_clear()
+    assert symmetry(design_from_dict(d).section) == first                   # ... and what a new search finds
+    d["channels"][1]["direction"] += math.degrees(10e-6 / 1.6e-3)           # channel 1 moved ~10 um along its arc
+    moved = design_from_dict(d).section
+    assert symmetry(moved).rotation_order == 1                               # not the kept answer
+    assert symmetry(moved, tolerance=30e-6).rotation_order == 3              # the tolerance is part of the key
+    assert symmetry(moved).rotation_order == 1

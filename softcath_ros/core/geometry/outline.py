@@ -82,6 +82,18 @@ def arc_of(p0, p1, bulge: float) -> Arc:
     return Arc(tuple(p0), tuple(p1), tuple(centre), radius, sweep)
 
 
+def rotation_matrix(angle: float) -> np.ndarray:
+    """The turn by ``angle`` (rad, counter-clockwise) about the origin."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def mirror_matrix(angle: float) -> np.ndarray:
+    """The reflection in the line through the origin at ``angle`` (rad from +x)."""
+    c, s = math.cos(2 * angle), math.sin(2 * angle)
+    return np.array([[c, s], [s, -c]])
+
+
 _GAUSS_U, _GAUSS_W = np.polynomial.legendre.leggauss(24)
 # Below this half-angle (rad) a segment is integrated over its chord (sector minus triangle would
 # lose digits to cancellation on a flat arc of a large circle).
@@ -161,13 +173,11 @@ class Outline:
         return Outline(self.vertices @ m.T + np.asarray(offset, float), -self.bulges if flip else self.bulges)
 
     def rotated(self, angle: float) -> "Outline":
-        c, s = math.cos(angle), math.sin(angle)
-        return self.transformed([[c, -s], [s, c]])
+        return self.transformed(rotation_matrix(angle))
 
     def mirrored(self, angle: float) -> "Outline":
         """Mirrored about the line through the origin at ``angle`` (rad from +x)."""
-        c, s = math.cos(2 * angle), math.sin(2 * angle)
-        return self.transformed([[c, s], [s, -c]])
+        return self.transformed(mirror_matrix(angle))
 
     # ---------------------------------------------------------------- edges
     def edges(self) -> list[Line | Arc]:
