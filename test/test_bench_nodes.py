@@ -1,5 +1,6 @@
 """bench_node + sim_bench_node as separate processes: a short protocol end to end, SIGINT, bad paths."""
 import json
+import re
 import shlex
 import signal
 import subprocess
@@ -143,14 +144,17 @@ def test_per_channel_protocol_refuses_a_second_pressure_publisher(tmp_path, proc
 
 @pytest.mark.timeout(240)   # the whole main job on the quick protocol: about a minute, longer under load
 def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, procs):
-    """The main job on the quick protocol: sim_bench_node, model_node, bench_node as processes."""
-    env = _env()
-    run = _start(procs, ["softcath", "characterise", "--protocol", "quick", "--output-dir", str(tmp_path),
-                         "--json"], env)
+    """README's `softcath characterise --protocol quick`, as written (in a fresh folder: runs/ lands
+    there): the main job on the quick protocol, sim_bench_node, model_node, bench_node as processes."""
+    argv = readme_command("softcath characterise --protocol quick")
+    assert argv == ["softcath", "characterise", "--protocol", "quick"]
+    run = _start(procs, argv, _env(), cwd=tmp_path)
     out, _ = run.communicate(timeout=RUN_TIMEOUT_S + 60)
     assert run.returncode == 0, out
-    result = json.loads(out[out.index("{"):])
-    assert result["dropped"] == 0 and Path(result["report"]).is_file()
+    assert re.search(r"^\[characterise\] done[^:]*: \d+ messages recorded, 0 dropped$", out, re.M), out
+    result = dict(line.split(":", 1) for line in out.splitlines() if line.startswith(("recording:", "report:")))
+    result = {k: v.strip() for k, v in result.items()}
+    assert Path(result["report"]).is_file()
     with open(result["recording"], "rb") as f:
         summary = make_reader(f).get_summary()
     counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
@@ -164,10 +168,10 @@ def test_characterise_records_model_predictions_and_writes_the_report(tmp_path, 
     assert 0 <= rig["seed"] < 2**32 and f"seed {rig['seed']}," in text
     assert f"(1 − {rig['pressure_shift']:g}) × the true pressure" in text and "softcath calibrate" in text
     assert "| 20 |" in text.split("## Tip position")[1] and "Not compared" not in text
-    # the logs stay out of the README's `softcath report runs/bench_default_*/` glob
+    # the logs stay out of the README's `softcath report runs/bench_quick_*/` glob
     run_dir = Path(result["recording"]).parent
-    assert [p.name for p in tmp_path.glob("bench_quick_*/")] == [run_dir.name]
-    assert (tmp_path / "logs" / run_dir.name / "bench_node.log").is_file()
+    assert run_dir.parent == tmp_path / "runs" and [p.name for p in run_dir.parent.glob("bench_quick_*/")] == [run_dir.name]
+    assert (tmp_path / "runs" / "logs" / run_dir.name / "bench_node.log").is_file()
     # The Foxglove layout opens this recording: every topic it names is here with its type.
     from layout_check import ONLY_WITH_A_TRACKER, check_recording
     assert check_recording(result["recording"]) <= ONLY_WITH_A_TRACKER

@@ -1,43 +1,32 @@
 """The commands README.md and docs/ show: every `softcath` and `pressure_sweep` line in a code block
 parses as written and gives its pressures by the one unit rule (core/units.py); the README's Quick
-start predictions run as written. (The bench lines run in test_bench_nodes.py and test_inputs.py.)"""
-import re
-import shlex
-from pathlib import Path
-
+start predictions run as written (the other lines run in test_docs_run.py or the tests it names)."""
 import pytest
 
+from doc_commands import doc_argv, doc_commands
 from softcath_ros.cli import build_parser, main
 from softcath_ros.core.units import parse_pressure_list
 
-ROOT = Path(__file__).resolve().parents[1]
-COMMAND = re.compile(r"(?:\.venv/bin/)?(softcath|python -m softcath_ros\.tools\.pressure_sweep) (.*)")
 PRESSURE_DESTS = {"pressure": "--pressure", "p_from": "--from", "p_to": "--to", "max_pressure": "--max-pressure",
                   "start": "--from", "stop": "--to"}
+# The README's Quick start lines run here (by the start of their words); test_docs_run.py counts them as run.
+QUICK_START = [
+    "predict --design implemented_5mm --pressure 0.1 0.2 --unit bar",
+    "predict --design implemented_5mm --model surrogate --pressure 0.15 --unit bar --json",
+    "predict --design implemented_5mm --model auto --scene free_bending_live",
+    "sweep --design implemented_5mm --model section --to 0.25bar",
+    "allocate --design three_channel_5mm --curvature 3,0 --json",
+]
 
 
 def documented_commands():
-    """(file:line, tool, argv) of each command line in a fenced block; a line with a placeholder
-    (``$s`` of a shell loop, ``[--optional]``) is not a command as written."""
-    found = []
-    for path in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
-        fenced = False
-        for number, line in enumerate(path.read_text().splitlines(), 1):
-            if line.startswith("```"):
-                fenced = not fenced
-                continue
-            m = COMMAND.match(line.strip()) if fenced else None
-            if m and "$" not in line and "[" not in line:
-                found.append((f"{path.relative_to(ROOT)}:{number}", m.group(1),
-                              shlex.split(m.group(2), comments=True)))
-    return found
+    """(file:line, tool, argv) of each command line in a fenced block of README.md and docs/
+    (doc_commands.py)."""
+    return [(c.where, c.tool, list(c.argv)) for c in doc_commands()]
 
 
 def readme_line(prefix: str) -> list[str]:
-    for _, tool, argv in documented_commands():
-        if tool == "softcath" and " ".join(argv).startswith(prefix):
-            return argv
-    raise AssertionError(f"README.md has no command starting 'softcath {prefix}'")
+    return doc_argv(("README.md",), f"softcath {prefix}")
 
 
 def test_documented_commands_parse_and_give_each_pressure_its_unit():
@@ -55,13 +44,7 @@ def test_documented_commands_parse_and_give_each_pressure_its_unit():
                 parse_pressure_list(value, option, args.unit)   # raises naming the option and the line's value
 
 
-@pytest.mark.parametrize("prefix", [
-    "predict --design implemented_5mm --pressure 0.1 0.2 --unit bar",
-    "predict --design implemented_5mm --model surrogate --pressure 0.15 --unit bar --json",
-    "predict --design implemented_5mm --model auto --scene free_bending_live",
-    "sweep --design implemented_5mm --model section --to 0.25bar",
-    "allocate --design three_channel_5mm --curvature 3,0 --json",
-])
+@pytest.mark.parametrize("prefix", QUICK_START)
 def test_readme_quick_start_runs_as_written(prefix, tmp_path, monkeypatch, capsys):
     argv = readme_line(prefix)
     monkeypatch.chdir(tmp_path)

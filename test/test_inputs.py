@@ -119,7 +119,7 @@ def test_no_cache_reaches_the_rung(monkeypatch, capsys):
 
 
 def test_documented_report_glob_matches_recordings_only(tmp_path, monkeypatch, capsys):
-    """`softcath report runs/bench_default_*/` (README): characterise keeps its logs out of that glob, and
+    """`softcath report runs/bench_default_*/` (docs/bench.md): characterise keeps its logs out of that glob, and
     several matching runs mean the newest; no argument means the newest under runs/."""
     import yaml
 

@@ -22,6 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PointStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
+from doc_commands import doc_argv  # noqa: E402
 from domains import private_domain  # noqa: E402
 from softcath_ros import topics  # noqa: E402
 from softcath_ros.core.kinematics import tip_pose_single  # noqa: E402
@@ -31,18 +32,21 @@ SOFTCATH = Path(sys.executable).parent / "softcath"
 
 
 def test_steer_sim_step_settles_over_dds(tmp_path):
+    """docs/steering.md's step line, as written (in a fresh folder: runs/ lands there)."""
+    argv = doc_argv(("docs/steering.md",), "softcath steer-sim --design three_channel_5mm --trajectory step")
+    duration = float(argv[argv.index("--duration") + 1])
     domain = private_domain()
     env = {**graph_env(domain), "ROS_DOMAIN_ID": str(domain)}
-    res = subprocess.run([str(SOFTCATH), "steer-sim", "--trajectory", "step", "--duration", "5", "--json",
-                          "--output-dir", str(tmp_path)], env=env, capture_output=True, text=True, timeout=110)
+    res = subprocess.run([str(SOFTCATH), *argv], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=110)
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads(res.stdout)
-    assert out["settling_time_s"] < 5.0 / 3   # each of the 3 steps settles within its 1.67 s hold and stays
+    assert out["settling_time_s"] < duration / 3   # each of the 3 steps settles within its hold and stays
     # closed loop beats open loop's steady-state error (0.84 mm): quiet 0.05-0.06 mm, but with one busy
     # core beside the suite 0.36-0.55 mm in some runs (its accuracy target is benchmarks/steering.py's)
     assert out["comparison"]["mode"] == "open_loop"
     assert out["steady_state_error_mm"] < out["comparison"]["steady_state_error_m"] * 1e3
     assert Path(out["recording"]).exists() and Path(out["plot"]).exists()
+    assert Path(out["recording"]).is_relative_to(tmp_path / "runs")
 
 
 class Operator:
