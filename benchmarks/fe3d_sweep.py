@@ -72,6 +72,8 @@ def main(argv=None) -> int:
                     help="Newton's |du.r| tolerance relative to c1 x volume (default: the solver's, 1e-9)")
     ap.add_argument("--lumen-h", type=float, default=None,
                     help="edge length on the lumen wall, m, after --mesh-size (default: wall_h)")
+    ap.add_argument("--curvature-safety", type=float, default=None,
+                    help="netgen's curvature safety in the section (default: 2 for circles, 0.5 with a shaped hole)")
     ap.add_argument("--layer-h", default=None,
                     help=f"prism height along the body, m (default {DEFAULT_LAYER_H}); 'scaled': the base mesh's "
                          "scaled by --mesh-size")
@@ -134,6 +136,10 @@ def main(argv=None) -> int:
         ap.error(str(exc))
     if args.lumen_h is not None:
         mesh = dataclasses.replace(mesh, lumen_h=args.lumen_h)
+    if args.curvature_safety is not None:
+        if not (math.isfinite(args.curvature_safety) and 0.1 <= args.curvature_safety <= 10):
+            ap.error(f"--curvature-safety {args.curvature_safety}: a number in [0.1, 10]")
+        mesh = dataclasses.replace(mesh, curvature_safety=args.curvature_safety)
     newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
                             **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
     if args.debug:

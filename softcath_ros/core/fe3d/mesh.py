@@ -49,7 +49,7 @@ class MeshSettings:
 
 # netgen's curvature safety: 2 (its own default) where every hole is a circle, the mesh those designs were
 # validated on; 0.5 with a shaped hole, whose 0.1 mm fillets 2 fills with 50 um elements graded into the
-# walls (three_sector_5mm, 10 mm: 1.5x the DOF, 2.5x the CPU time; R_C 1.0 % apart at 0.05 bar)
+# walls (three_sector_5mm, 10 mm: 1.5x the DOF, 2.1x the CPU time; R_C 1.0 % apart at 0.05 bar)
 CIRCLE_CURVATURE_SAFETY = 2.0
 SHAPED_CURVATURE_SAFETY = 0.5
 
