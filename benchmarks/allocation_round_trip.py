@@ -8,7 +8,7 @@ then says how those pressures bend the body. Reported per request: the R_C error
 the requested 1/|k|) and the direction error.
 
     .venv/bin/python benchmarks/allocation_round_trip.py [--design three_channel_5mm] [--step 30]
-        [--fractions 0.3,0.6,0.9] [--workers 2]
+        [--fractions 0.3,0.6,0.9] [--workers 2] [--name allocation_round_trip]
 
 Writes benchmarks/results/allocation_round_trip.{json,csv,png}.
 """
@@ -38,6 +38,7 @@ def main() -> None:
     ap.add_argument("--fractions", default="0.3,0.6,0.9", help="fractions of the reachable curvature")
     ap.add_argument("--offset", type=float, default=7.0, help="first direction, degrees (off the channels' own)")
     ap.add_argument("--workers", type=int, default=default_workers())
+    ap.add_argument("--name", default="allocation_round_trip", help="results stem under benchmarks/results/")
     args = ap.parse_args()
     from tqdm import tqdm
 
@@ -79,13 +80,13 @@ def main() -> None:
         sel = [r for r in rows if r["fraction_of_reach"] == fr]
         print(f"  at {fr:.0%} of reach: R_C max {max(r['rc_rel_error'] for r in sel):.3%}, "
               f"direction max {max(r['direction_error_deg'] for r in sel):.3f} deg")
-    write_results("allocation_round_trip", {"design": design.name, "allocator_model": args.model,
+    write_results(args.name, {"design": design.name, "allocator_model": args.model,
                                             "target_rc_rel": 0.01, "target_direction_deg": 0.5,
                                             "note": "section rung fresh from rest per command; shared machine"}, rows)
-    plot(rows)
+    plot(rows, args.name)
 
 
-def plot(rows) -> None:
+def plot(rows, name: str = "allocation_round_trip") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -106,7 +107,7 @@ def plot(rows) -> None:
         ax.legend(fontsize=7)
     fig.suptitle("allocation round trip: surrogate allocator, section rung at its pressures")
     fig.tight_layout()
-    save_figure(fig, "allocation_round_trip", dpi=110)
+    save_figure(fig, name, dpi=110)
 
 
 if __name__ == "__main__":

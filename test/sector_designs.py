@@ -1,12 +1,10 @@
 """Sector-channel designs for the section rung's tests: three annular-sector channels round the
 1.5 mm lumen of three_channel_5mm, walls >= 0.5 mm, optionally turned about the body axis."""
-from pathlib import Path
 
 from softcath_ros.core.design import design_from_dict, load_design
 
-# the 2-DOF fan design (walls on the 0.5 mm fabrication minimum); it ships in config/designs once its
-# surrogate table is built
-THREE_SECTOR_5MM = str(Path(__file__).resolve().parents[1] / "benchmarks" / "designs" / "three_sector_5mm.yaml")
+# the 2-DOF fan design (walls on the 0.5 mm fabrication minimum), shipped in config/designs
+THREE_SECTOR_5MM = "three_sector_5mm"
 
 
 def three_sector(turn: float = 0.0, span: float = 90.0, fillet: float = 0.0, channels: int = 3):
