@@ -8,7 +8,7 @@
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --no-section --name fe3d_timing_20mm   # the timed case only
     .venv/bin/python benchmarks/fe3d_sweep.py --design docs/examples/sectors.yaml --channel 0 --to 0.35bar \
         --name fe3d_sweep_sectors_ch0   # one channel of a multi-channel design: the half body on its mirror plane
-    .venv/bin/python benchmarks/fe3d_sweep.py --design benchmarks/designs/three_sector_5mm.yaml --channel 1 2 \
+    .venv/bin/python benchmarks/fe3d_sweep.py --design three_sector_5mm --channel 1 2 \
         --length 0.02 --to 0.35bar --threads 1 --name fe3d_sector_pair_20mm   # an equal pair (docs/validation.md)
     .venv/bin/python benchmarks/fe3d_sweep.py --length 0.02 --to 0.35bar --order 0 --interior-order none \
         --contact-distance 0.01 --mesh-size 1.0 --layer-h scaled --name fe3d_p2p0   # the former default (fe3d-7)
