@@ -215,8 +215,13 @@ def test_shipped_params_files_set_only_parameters_their_node_declares(tmp_path, 
     wanted = body["ros__parameters"]
     monkeypatch.chdir(tmp_path)                     # bench_node opens its recording under runs/
     context = rclpy.Context()
-    rclpy.init(context=context, args=["--ros-args", "--params-file", str(path)])
     module = importlib.import_module(f"softcath_ros.nodes.{name}")
+    # a managed node is not brought up (bench_node's configure would wait for a rig): declarations are the point
+    from rclpy.lifecycle import LifecycleNode
+
+    managed = issubclass(getattr(module, NODE_CLASSES[name]), LifecycleNode) and "autostart" not in wanted
+    rclpy.init(context=context, args=["--ros-args", "--params-file", str(path),
+                                      *(["-p", "autostart:=false"] if managed else [])])
     node = getattr(module, NODE_CLASSES[name])(context=context)
     try:
         assert node.get_name() == node_key
