@@ -482,24 +482,28 @@ def test_each_channels_direction_and_reach_come_from_its_own_answer_not_its_cent
     np.testing.assert_allclose(r.achieved_curvature, r.requested_curvature, rtol=1e-6, atol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="the inverse on three_sector_5mm's table does not converge for most requests "
-                   "at 60-90 % of reach (57 of 96 every 15 deg at 30-90 %: 'Newton did not reach rtol 1e-06'); "
-                   "the 2-DOF default stays three_channel_5mm until it does")
-def test_three_sector_requests_at_60_to_90_percent_of_reach_round_trip_through_its_table():
+@pytest.mark.parametrize("limit", [
+    20000.0,   # below the peak of |k| (about 0.3 bar) and where the 40 mm body reaches its shaft (0.2 bar)
+    pytest.param(None, marks=pytest.mark.xfail(strict=True, reason=(
+        "at the design limit (0.5 bar) the inverse on three_sector_5mm's table does not converge for most "
+        "requests at 60-90 % of reach (57 of 96 every 15 deg at 30-90 %: |k| falls again past 0.3 bar); "
+        "the 2-DOF default stays three_channel_5mm until it does"))),
+])
+def test_three_sector_requests_at_60_to_90_percent_of_reach_round_trip_through_its_table(limit):
     """three_sector_5mm: requests every 45 degrees (off the channels' own) at 60, 75
     and 90 % of the reachable curvature there, allocated on its shipped table, are met by the table
     within 0.5 degrees and 1 % (against the section rung itself: benchmarks/allocation_round_trip.py)."""
     design = load_design(THREE_SECTOR_5MM)
     model = make_model("surrogate", design, build=False)
     assert model.origin == "shipped"
-    allocator = Allocator(model)
+    allocator = Allocator(model) if limit is None else Allocator(model, max_pressure=limit)
     for deg in np.arange(7.0, 360.0, 45.0):
         phi = math.radians(deg)
         for f in (0.6, 0.75, 0.9):
             k = f * allocator.max_curvature(phi) * np.array([math.cos(phi), math.sin(phi)])
             res = allocator.allocate(k)
             assert res.converged and res.reachable and not res.saturated, res.message
-            assert res.pressures.max() <= design.max_pressure and np.count_nonzero(res.pressures) <= 2
+            assert res.pressures.max() <= allocator.max_pressure and np.count_nonzero(res.pressures) <= 2
             back = model.evaluate(res.pressures).curvature
             assert abs(math.degrees(math.remainder(math.atan2(back[1], back[0]) - phi, 2 * math.pi))) \
                 <= DIRECTION_TOL_DEG
