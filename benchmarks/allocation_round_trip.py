@@ -9,6 +9,7 @@ the requested 1/|k|) and the direction error.
 
     .venv/bin/python benchmarks/allocation_round_trip.py [--design three_channel_5mm] [--step 30]
         [--fractions 0.3,0.6,0.9] [--workers 2] [--name allocation_round_trip]
+        [--max-pressure 20000]
 
 Writes benchmarks/results/allocation_round_trip.{json,csv,png}.
 """
@@ -39,11 +40,13 @@ def main() -> None:
     ap.add_argument("--offset", type=float, default=7.0, help="first direction, degrees (off the channels' own)")
     ap.add_argument("--workers", type=int, default=default_workers())
     ap.add_argument("--name", default="allocation_round_trip", help="results stem under benchmarks/results/")
+    ap.add_argument("--max-pressure", type=float, default=None, help="the allocator's limit, Pa (default: the design's)")
     args = ap.parse_args()
     from tqdm import tqdm
 
     design = load_design(args.design)
-    alloc = Allocator(make_model(args.model, design))
+    model = make_model(args.model, design)
+    alloc = Allocator(model) if args.max_pressure is None else Allocator(model, max_pressure=args.max_pressure)
     requests = []
     for deg in np.arange(args.offset, 360.0 + args.offset, args.step):
         phi = math.radians(deg)
@@ -81,6 +84,7 @@ def main() -> None:
         print(f"  at {fr:.0%} of reach: R_C max {max(r['rc_rel_error'] for r in sel):.3%}, "
               f"direction max {max(r['direction_error_deg'] for r in sel):.3f} deg")
     write_results(args.name, {"design": design.name, "allocator_model": args.model,
+                              "allocator_max_pressure_pa": alloc.max_pressure,
                                             "target_rc_rel": 0.01, "target_direction_deg": 0.5,
                                             "note": "section rung fresh from rest per command; shared machine"}, rows)
     plot(rows, args.name)
