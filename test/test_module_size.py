@@ -21,7 +21,6 @@ LONG_FUNCTIONS = {
     "core/models/section.py:_solve_path": 130,
     "core/section_fe/mesh.py:_mesh_wedge": 103,
     "core/section_fe/problem.py:__init__": 109,
-    "core/section_fe/solver.py:newton": 89,
 }
 
 

@@ -117,6 +117,28 @@ class LinearSolver:
         return rhs / scale, scale
 
 
+def _minimiser_step(linear: LinearSolver, K, g: np.ndarray, dz: np.ndarray, n: int, tol: float, minimise: bool,
+                    stable_only: bool) -> tuple[np.ndarray, int | None, bool]:
+    """Newton's step ``dz`` made a minimiser's: (step, the tangent's negative pivots when
+    ``stable_only`` asks for them, whether the tangent was shifted). The tangent's inertia is needed
+    by the stable-only minimiser at every iteration (else only at the end)."""
+    negative = linear.negative_pivots() if stable_only else None
+    if stable_only and negative:
+        # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
+        # tangent shifted until positive definite (it descends, and leaves along the negative
+        # directions); converged only where the unshifted tangent is positive definite
+        dz, _ = linear.solve_positive_definite(K, -g)
+        if np.max(np.abs(dz[:n])) < 100 * tol:
+            # at (or next to) a saddle the shifted step vanishes with the gradient: leave it
+            # downhill along the tangent's most negative direction of curvature
+            v = linear.negative_curvature_direction()
+            dz = dz + ESCAPE_STEP * (v if float(g @ v) <= 0 else -v)
+        return dz, negative, True
+    if minimise and float(g @ dz) >= 0:
+        dz = _descent_direction(K, g)
+    return dz, negative, False
+
+
 def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: float = 1e-7,
            max_iterations: int = 12, linear: LinearSolver | None = None, constraint=None,
            line_search: bool = False, minimise: bool = False, stable_only: bool = False) -> Correction:
@@ -148,22 +170,7 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
             dz = linear.solve(K, -g)
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
-        # the tangent's inertia: needed by the minimiser at every iteration, else only at the end
-        negative = linear.negative_pivots() if stable_only else None
-        shifted = False
-        if stable_only and negative:
-            # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
-            # tangent shifted until positive definite (it descends, and leaves along the negative
-            # directions); converged only where the unshifted tangent is positive definite
-            dz, _ = linear.solve_positive_definite(K, -g)
-            if np.max(np.abs(dz[:n])) < 100 * tol:
-                # at (or next to) a saddle the shifted step vanishes with the gradient: leave it
-                # downhill along the tangent's most negative direction of curvature
-                v = linear.negative_curvature_direction()
-                dz = dz + ESCAPE_STEP * (v if float(g @ v) <= 0 else -v)
-            shifted = True
-        elif minimise and float(g @ dz) >= 0:
-            dz = _descent_direction(K, g)
+        dz, negative, shifted = _minimiser_step(linear, K, g, dz, n, tol, minimise, stable_only)
         if constraint is not None:
             dz = constraint.expand(x, dz)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
