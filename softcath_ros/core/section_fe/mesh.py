@@ -53,6 +53,9 @@ AREA_BOUND = math.sqrt(3) / 2
 GRADING = 0.4
 POLYGON_TOLERANCE = 1e-5     # x R: chords of the polygons that classify points (not the walls)
 AREA_TOLERANCE = 1e-3        # relative: the mesh's area against the outlines' exact one
+# x R: a wall point this near a wedge ray is on it (the ray's angle is rounded to 1e-6 deg, so a
+# corner on a mirror line can be ~1e-8 R off it); a ray crossing a piece this near its end is its end
+ON_RAY = 1e-7
 
 
 # ---------------------------------------------------------------------------- outlines
@@ -97,7 +100,7 @@ class _Arc:
             q = r * e - c
             a = (math.atan2(q[1], q[0]) - self.start) * np.sign(self.sweep) % (2 * math.pi)
             t = a / abs(self.sweep)
-            if 1e-9 < t < 1 - 1e-9:
+            if ON_RAY < t * self.length and ON_RAY < (1 - t) * self.length:
                 out.append(t)
         return out
 
@@ -134,7 +137,8 @@ class _Line:
             return []
         t = (a[1] * e[0] - a[0] * e[1]) / den
         r = float((a + t * d) @ e)
-        return [float(t)] if 1e-9 < t < 1 - 1e-9 and r > -1e-12 else []
+        inside = ON_RAY < t * self.length and ON_RAY < (1 - t) * self.length
+        return [float(t)] if inside and r > -1e-12 else []
 
 
 
@@ -353,7 +357,7 @@ def _mesh_wedge(loops: list[list[_Piece]], polys, h: float, wedge, filled, latti
         cuts = {0.0: None}
         for k, q in pieces:
             for end in (q.point(0.0), q.point(1.0)):
-                if abs(_cross(end, e)) < 1e-9 and end @ e > 1e-9:
+                if abs(_cross(end, e)) < ON_RAY and end @ e > ON_RAY:
                     cuts[float(end @ e)] = k
         radii = sorted(cuts)
         for a, b in zip(radii[:-1], radii[1:]):
@@ -456,13 +460,14 @@ def _merge_points(V: np.ndarray, S: np.ndarray, rays, tol: float):
     from scipy.sparse import coo_matrix
     from scipy.spatial import cKDTree
 
+    # a point on a ray is put exactly on it (a ray on an axis then has exact zeros), before the
+    # merge: a wall's corner and the ray's cut there are then one point
+    for e in rays:
+        on = np.abs(V[:, 0] * e[1] - V[:, 1] * e[0]) < ON_RAY
+        V[on] = (V[on] @ e)[:, None] * e[None]
     pairs = np.array(sorted(cKDTree(V).query_pairs(tol)), dtype=np.int64).reshape(-1, 2)
     g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(V), len(V)))
     _, label = connected_components(g, directed=False)
-    # a point on a ray is put exactly on it (a ray on an axis then has exact zeros)
-    for e in rays:
-        on = np.abs(V[:, 0] * e[1] - V[:, 1] * e[0]) < tol
-        V[on] = (V[on] @ e)[:, None] * e[None]
     first = {}
     keep = []
     for i, lab in enumerate(label):
