@@ -110,6 +110,27 @@ def test_templates_deserialise_to_the_messages_they_stand_for():
         assert (ps.header.stamp.sec, ps.header.stamp.nanosec, ps.header.frame_id) == (12, 34, "softcath_base")
 
 
+def test_path_template_finds_each_stamp_beside_its_pose_when_stray_bytes_repeat_a_sentinel(monkeypatch):
+    """The serialiser leaves CDR's alignment padding unwritten: stray bytes equal to a stamp's
+    sentinel elsewhere in the buffer (model_node once failed to start on "sentinel 0000c05a found
+    more than one time(s)") do not move or stop the template: each stamp is found beside its pose."""
+    import struct
+
+    from rclpy.serialization import serialize_message
+
+    from softcath_ros.nodes import live_view
+
+    stray = struct.pack("<II", 0x5AC00000, 0x0ACE0000) * 2
+    monkeypatch.setattr(live_view, "serialize_message", lambda msg: serialize_message(msg) + stray)
+    t, poses, stamps = live_view.path_template("softcath_base", 3)
+    for i, stamp in enumerate(stamps):
+        stamp[:] = (100 + i, 7)
+    data = bytes(t.to_bytes())
+    assert data.endswith(stray)
+    for i in range(3):
+        assert data.count(struct.pack("<II", 100 + i, 7)) == 1
+
+
 def test_model_node_publishes_the_view_at_its_own_rate_without_tf2(start_node):
     """Commands at ~200 Hz; the view comes at the display rate (10 Hz here), from the latest pose."""
     from nav_msgs.msg import Path

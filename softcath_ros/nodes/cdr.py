@@ -76,10 +76,13 @@ class MessageTemplate(_StampedBuffer):
             raise ValueError("template is not little-endian plain CDR")
         super().__init__(bytearray(data))
 
-    def find(self, sentinel: bytes) -> int:
-        """Offset of the one occurrence of ``sentinel``."""
-        i = self._buf.find(sentinel)
-        if i < 0 or self._buf.find(sentinel, i + 1) >= 0:
+    def find(self, sentinel: bytes, start: int = 0, end: int | None = None) -> int:
+        """Offset of the one occurrence of ``sentinel`` in ``[start, end)`` of the message (CDR's
+        alignment padding is not written by the serialiser: a short sentinel is looked for next to
+        the field it belongs with, and long enough not to be met in stray bytes)."""
+        end = len(self._buf) if end is None else end
+        i = self._buf.find(sentinel, start, end)
+        if i < 0 or self._buf.find(sentinel, i + 1, end) >= 0:
             raise ValueError(f"sentinel {sentinel.hex()} found {'no' if i < 0 else 'more than one'} time(s)")
         return i
 

@@ -70,14 +70,16 @@ def path_template(frame_id: str, n_poses: int) -> tuple[MessageTemplate, list[np
     msg.poses = [PoseStamped() for _ in range(n_poses)]
     for i, ps in enumerate(msg.poses):
         ps.header.frame_id = frame_id
-        ps.header.stamp.sec = 0x5AC00000 + i
+        ps.header.stamp.sec, ps.header.stamp.nanosec = 0x5AC00000 + i, 0x0ACE0000 + i
         ps.pose.position.x = _S_FIRST * (i + 2)
     t = MessageTemplate(serialize_message(msg))
     poses, stamps = [], []
     for i in range(n_poses):
         off = t.find(struct.pack("<d", _S_FIRST * (i + 2)))
         poses.append(t.view(off, "<f8", (7,)))
-        stamps.append(t.view(t.find(struct.pack("<I", 0x5AC00000 + i)), "<u4", (2,)))
+        # the pose's stamp lies before its position: its header (stamp, frame_id, padding) apart
+        stamp = t.find(struct.pack("<II", 0x5AC00000 + i, 0x0ACE0000 + i), max(0, off - 32 - len(frame_id)), off)
+        stamps.append(t.view(stamp, "<u4", (2,)))
         poses[-1][:] = 0.0
         stamps[-1][:] = 0
     return t, poses, stamps
