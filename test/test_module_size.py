@@ -14,7 +14,7 @@ REASON = "Long because:"
 # To split (issue 35 item 4): path -> the most lines it may have until then.
 OVERSIZED_MODULES = {
     "core/models/section.py": 501,
-    "core/section_fe/mesh.py": 577,
+    "core/section_fe/mesh.py": 474,
 }
 # To split or to give a reason: "path:function" -> the most lines it may have until then.
 LONG_FUNCTIONS = {

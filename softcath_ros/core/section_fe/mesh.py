@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ModelError
+from .wall_pieces import ON_RAY, Arc, Piece, wall_pieces
 
 # Sizes are proportional to h (so a finer h refines every part alike): a wall thinner than
 # WALL_REFERENCE (outer radii) gets a spacing smaller than h in proportion (not below
@@ -53,115 +54,6 @@ AREA_BOUND = math.sqrt(3) / 2
 GRADING = 0.4
 POLYGON_TOLERANCE = 1e-5     # x R: chords of the polygons that classify points (not the walls)
 AREA_TOLERANCE = 1e-3        # relative: the mesh's area against the outlines' exact one
-# x R: a wall point this near a wedge ray is on it (the ray's angle is rounded to 1e-6 deg, so a
-# corner on a mirror line can be ~1e-8 R off it); a ray crossing a piece this near its end is its end
-ON_RAY = 1e-7
-
-
-# ---------------------------------------------------------------------------- outlines
-
-@dataclass(frozen=True)
-class _Arc:
-    """A circular arc: centre, radius, start angle and signed sweep (rad, > 0 counter-clockwise)."""
-    center: tuple[float, float]
-    radius: float
-    start: float
-    sweep: float
-
-    @property
-    def length(self) -> float:
-        return self.radius * abs(self.sweep)
-
-    def point(self, t) -> np.ndarray:
-        a = self.start + self.sweep * np.asarray(t, float)
-        return np.stack([self.center[0] + self.radius * np.cos(a), self.center[1] + self.radius * np.sin(a)], -1)
-
-    def project(self, p: np.ndarray) -> np.ndarray:
-        v = p - np.asarray(self.center)
-        return np.asarray(self.center) + self.radius * v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-    def sub(self, t0: float, t1: float) -> "_Arc":
-        return _Arc(self.center, self.radius, self.start + self.sweep * t0, self.sweep * (t1 - t0))
-
-    def scaled(self, f: float) -> "_Arc":
-        return _Arc((self.center[0] * f, self.center[1] * f), self.radius * f, self.start, self.sweep)
-
-    def ray_hits(self, e: np.ndarray) -> list[float]:
-        """Parameters t in (0, 1) where the ray {r e, r > 0} crosses the arc."""
-        c = np.asarray(self.center)
-        ec, cc = float(e @ c), float(c @ c)
-        disc = ec * ec - cc + self.radius ** 2
-        if disc <= 0:
-            return []
-        out = []
-        for r in (ec - math.sqrt(disc), ec + math.sqrt(disc)):
-            if r < -1e-12:          # the origin is on the ray (a wall through the axis is cut there)
-                continue
-            q = r * e - c
-            a = (math.atan2(q[1], q[0]) - self.start) * np.sign(self.sweep) % (2 * math.pi)
-            t = a / abs(self.sweep)
-            if ON_RAY < t * self.length and ON_RAY < (1 - t) * self.length:
-                out.append(t)
-        return out
-
-
-
-@dataclass(frozen=True)
-class _Line:
-    """A straight segment from a to b."""
-    a: tuple[float, float]
-    b: tuple[float, float]
-
-    @property
-    def length(self) -> float:
-        return math.dist(self.a, self.b)
-
-    def point(self, t) -> np.ndarray:
-        t = np.asarray(t, float)[..., None]
-        return (1 - t) * np.asarray(self.a) + t * np.asarray(self.b)
-
-    def project(self, p: np.ndarray) -> np.ndarray:
-        a, d = np.asarray(self.a), np.asarray(self.b) - np.asarray(self.a)
-        return a + (((p - a) @ d) / (d @ d))[..., None] * d
-
-    def sub(self, t0: float, t1: float) -> "_Line":
-        return _Line(tuple(self.point(t0).tolist()), tuple(self.point(t1).tolist()))
-
-    def scaled(self, f: float) -> "_Line":
-        return _Line((self.a[0] * f, self.a[1] * f), (self.b[0] * f, self.b[1] * f))
-
-    def ray_hits(self, e: np.ndarray) -> list[float]:
-        a, d = np.asarray(self.a), np.asarray(self.b) - np.asarray(self.a)
-        den = d[0] * e[1] - d[1] * e[0]
-        if abs(den) < 1e-15 * max(1.0, float(d @ d)):
-            return []
-        t = (a[1] * e[0] - a[0] * e[1]) / den
-        r = float((a + t * d) @ e)
-        inside = ON_RAY < t * self.length and ON_RAY < (1 - t) * self.length
-        return [float(t)] if inside and r > -1e-12 else []
-
-
-
-_Piece = _Arc | _Line
-
-
-def _pieces(outline, scale: float, start: float) -> list[_Piece]:
-    """The outline's exact edges (``geometry.Outline.edges``) as pieces, lengths times ``scale``;
-    a circle as one arc from the direction ``start`` (degrees: it turns with the design)."""
-    from ..geometry import Line
-
-    if outline.is_circle:
-        e = outline.edges()[0]
-        return [_Arc(tuple(e.center), e.radius, math.radians(start), 2 * math.pi).scaled(scale)]
-    out: list[_Piece] = []
-    for e in outline.edges():
-        if isinstance(e, Line):
-            out.append(_Line(tuple(e.start), tuple(e.end)).scaled(scale))
-        else:
-            out.append(_Arc(tuple(e.center), e.radius, e.start_angle, e.sweep).scaled(scale))
-    return out
-
-
 # ---------------------------------------------------------------------------- the mesh
 
 @dataclass
@@ -245,7 +137,7 @@ def mesh_section(section, h: float, filled: tuple[int, ...] = (), symmetry=None)
     # without symmetry the interior lattice and the circles' first points are placed by the holes'
     # first moment of area (they turn with the design)
     free = math.degrees(math.atan2(*_first_moment(section)[::-1])) if start is None else start
-    loops = [_pieces(o, 1.0 / R, free) for o in outlines]
+    loops = [wall_pieces(o, 1.0 / R, free) for o in outlines]
     polys = [shapely.transform(o.polygon(POLYGON_TOLERANCE * R), lambda c: c / R) for o in outlines]
     group = _group(sym.rotation_order, mirror)
     mesh = _replicate(_mesh_wedge(loops, polys, h / R, wedge, filled, free), group, outlines, R)
@@ -311,7 +203,7 @@ class _Wedge:
     walls: np.ndarray            # (b, 3) quadratic wall edges (start, mid, end)
 
 
-def _mesh_wedge(loops: list[list[_Piece]], polys, h: float, wedge, filled, lattice_angle: float) -> _Wedge:
+def _mesh_wedge(loops: list[list[Piece]], polys, h: float, wedge, filled, lattice_angle: float) -> _Wedge:
     """Mesh of the fundamental wedge (all the section if None), in units of R: walls are the
     pieces of ``loops`` (outer first) inside the wedge; ``polys`` their polygons (classification)."""
     import shapely
@@ -347,7 +239,7 @@ def _mesh_wedge(loops: list[list[_Piece]], polys, h: float, wedge, filled, latti
     t = np.linspace(0.0, 1.0, 65)
     for i, (k, q) in enumerate(pieces):
         density = q.length / wall_size(q.point(t), k)
-        if isinstance(q, _Arc):    # round walls: at most ARC_STEP h radians per edge
+        if isinstance(q, Arc):    # round walls: at most ARC_STEP h radians per edge
             density = np.maximum(density, abs(q.sweep) / min(ARC_STEP * h, MAX_ARC_STEP))
         add_chain(q.point(_graded(t, density)), i)
     # the rays' stretches in the meshed region (silicone, filled holes), cut where walls end on them
