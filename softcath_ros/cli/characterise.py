@@ -241,6 +241,15 @@ def _plan(args, protocol, design, rig_nodes):
     return out_dir, name, design_arg, helpers, logs
 
 
+def _rig_readings(protocol, design) -> list[list[str]]:
+    """The rig topics this protocol's run reads (as bench_node's configure checks them): the contract's,
+    or the deprecated unstamped ones."""
+    from .. import topics
+
+    benches = tuple(dict.fromkeys(b.kind for b in protocol.benches))
+    return [topics.rig_topics(design.n_channels, benches), topics.deprecated_rig_topics(benches)]
+
+
 def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private: bool) -> int:
     """The ROS path shared by the rigs: helpers + bench_node on one domain, supervised by
     bench.supervisor.GraphSupervisor (readiness said over ROS: graph.ReadyWatch); the report at the
@@ -248,7 +257,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
     from ..bench.supervisor import (BringUpBench, Fail, GraphState, GraphSupervisor, KillBench, Say, StartBench,
                                     StopBench)
     from ..graph import ReadyWatch
-    from .managed import BENCH_NODE, activate_managed, bring_up_bench, stop_bench
+    from .managed import activate_rig, bring_up_bench, stop_bench
 
     out_dir, name, design_arg, helpers, logs = _plan(args, protocol, design, rig_nodes)
     t0 = time.monotonic()
@@ -277,7 +286,7 @@ def run_graph(args, protocol, design, rig_nodes: list[tuple[str, dict]], private
                     output.drain()
                 for cmd in sup.update(time.monotonic(), ready, exited, (out_dir / name).exists()):
                     if isinstance(cmd, StartBench) and cmd.attempt == 1:   # the rig's managed nodes: active
-                        activate_managed(watch, say, exclude=(BENCH_NODE,))
+                        activate_rig(watch, say, _rig_readings(protocol, design), args.wait_timeout)
                     if isinstance(cmd, StartBench):
                         lines.clear()
                         bench = children["bench_node"] = graph.start(

@@ -67,6 +67,22 @@ def activate_managed(watch, say, discovery_s: float = MANAGED_DISCOVERY_S, timeo
     return names
 
 
+def activate_rig(watch, say, readings: list[list[str]], wait_timeout: float,
+                 discovery_s: float = MANAGED_DISCOVERY_S) -> list[str]:
+    """The rig's managed nodes (all but bench_node) brought to active, looked for again until one of
+    ``readings`` (lists of topics: the contract's, the deprecated ones) has a publisher on every topic
+    or ``wait_timeout`` s pass: an unconfigured node publishes nothing, and on a loaded machine its
+    services can show up after the first discovery window. bench_node's configure then names what is
+    still missing. The nodes brought up."""
+    brought: list[str] = []
+    end = time.monotonic() + wait_timeout
+    while True:
+        brought += activate_managed(watch, say, discovery_s=discovery_s, exclude=(BENCH_NODE, *brought))
+        if any(all(watch.node.count_publishers(t) for t in topics_) for topics_ in readings) \
+                or time.monotonic() >= end:
+            return brought
+
+
 def shutdown_managed(watch, say, names: list[str], ended: Callable[[str], bool],
                      timeout_s: float = TEARDOWN_TIMEOUT_S) -> str | None:
     """Deactivate then shut down ``names`` (``ended(name)``: its process is gone, nothing to ask);
