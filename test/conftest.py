@@ -1,7 +1,6 @@
 import os
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -26,19 +25,11 @@ os.environ["ROS_DOMAIN_ID"] = str(_SESSION_DOMAIN.domain)
 
 
 def _clean_dds_shared_memory() -> None:
-    """Remove Fast DDS shared-memory segments and ports whose owners are gone (Fast DDS's own
-    ``fastdds shm clean``: the pip wheels' tools/fastdds/fastdds.py, or ``fastdds`` on PATH in a ROS
-    install). With LOCALHOST discovery rmw_fastrtps always adds the shared-memory transport, and
-    a participant opening a port segment that a killed process left behind can spin forever (a CI
-    run hung so in rclpy.create_node); several tests kill nodes on purpose."""
-    tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
-    cmd = [sys.executable, str(tool)] if tool.exists() else ([shutil.which("fastdds")] if shutil.which("fastdds") else None)
-    if cmd is not None:
-        try:
-            subprocess.run([*cmd, "shm", "clean"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60,
-                           check=False)
-        except (OSError, subprocess.TimeoutExpired):
-            pass   # a stuck cleaner must not stop the run; the hang it guards against is rare
+    """Remove Fast DDS shared-memory files whose owners are gone. With LOCALHOST discovery
+    rmw_fastrtps always adds the shared-memory transport, and a participant opening a port segment
+    that a killed process left behind can spin forever (a CI run hung so in rclpy.create_node);
+    several tests kill nodes on purpose. (The wheels' ``fastdds shm clean`` was run here as well:
+    it recognises none of this Fast DDS's files, so it cost a process per test and cleaned nothing.)"""
     _remove_unused_dds_shared_memory()
 
 
