@@ -3,9 +3,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh "ros,test,fe,cluster,hardware"
-# DDS stays on loopback; test/conftest.py leases each test process its own domain and every node
-# test another (softcath_ros.graph), so parallel runs do not see each other. Two pytest-xdist
+# DDS stays on loopback, over UDP only (test/conftest.py: config/dds/loopback_udp.xml); conftest
+# leases each test process its own domain and every node test another (softcath_ros.graph), so
+# parallel runs do not see each other. Two pytest-xdist
 # workers by default, a test file per worker (about half the wall time of one process on two
 # cores); SOFTCATH_TEST_WORKERS=0 runs the suite in this process, N in N workers.
-export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 exec .venv/bin/python -m pytest -n "${SOFTCATH_TEST_WORKERS:-2}" --dist loadfile "$@"

@@ -3,7 +3,6 @@ import shutil
 import signal
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -15,85 +14,32 @@ import pytest
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-# Parallel test runs must not see each other's nodes: loopback only, and this run's in-process
-# nodes on a domain leased for the whole session (node processes lease their own: domains.py).
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# Parallel test runs must not see each other's nodes: discovery and data on loopback only, and this
+# run's in-process nodes on a domain leased for the whole session (node processes lease their own:
+# domains.py). UDP only, by the shipped Fast DDS profile: with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# rmw_fastrtps always adds its shared-memory transport, and a port segment a killed node left in
+# /dev/shm made the next participant on that port spin for ever in rclpy.create_node (full runs hung
+# or nodes never came up; several tests kill nodes on purpose). SYSTEM_DEFAULT leaves the transports
+# to the profile, which keeps discovery on 127.0.0.1 as LOCALHOST does.
+from softcath_ros.resources import config_dir  # noqa: E402
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SYSTEM_DEFAULT"
+os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(config_dir() / "dds" / "loopback_udp.xml")
 from softcath_ros.graph import lease_domain  # noqa: E402
 
 _SESSION_DOMAIN = lease_domain()
 os.environ["ROS_DOMAIN_ID"] = str(_SESSION_DOMAIN.domain)
 
 
-def _clean_dds_shared_memory() -> None:
-    """Remove Fast DDS shared-memory files whose owners are gone. With LOCALHOST discovery
-    rmw_fastrtps always adds the shared-memory transport, and a participant opening a port segment
-    that a killed process left behind can spin forever (a CI run hung so in rclpy.create_node);
-    several tests kill nodes on purpose. (The wheels' ``fastdds shm clean`` was run here as well:
-    it recognises none of this Fast DDS's files, so it cost a process per test and cleaned nothing.)"""
-    _remove_unused_dds_shared_memory()
-
-
-def _remove_unused_dds_shared_memory() -> None:
-    """Unlink the Fast DDS shared-memory files no live process has open or mapped. ``fastdds shm
-    clean`` of the wheels does not recognise this Fast DDS's files ("0 ports in use" beside hundreds
-    of them), and a port segment a killed node left half made makes the next participant on that port
-    spin for ever in rclpy.create_node (seen in full runs)."""
-    shm = Path("/dev/shm")
-    names = {p.name for p in shm.glob("*fastdds*")} if shm.is_dir() else set()
-    if not names:
-        return
-    used = set()
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
-            continue
-        try:
-            used.update(line.split("/dev/shm/", 1)[1].strip() for line in (proc / "maps").read_text().splitlines()
-                        if "/dev/shm/" in line)
-            for fd in (proc / "fd").iterdir():
-                target = os.readlink(fd)
-                if target.startswith("/dev/shm/"):
-                    used.add(target[len("/dev/shm/"):])
-        except OSError:
-            continue   # the process ended meanwhile, or is not ours to read
-    # a file made in the last minute may belong to a node starting now that has not mapped it yet
-    # (the other test worker's graph): only older ones are left-overs
-    recent = time.time() - 60.0
-    for name in names - {u.replace(" (deleted)", "") for u in used}:
-        try:
-            if (shm / name).stat().st_mtime < recent:
-                (shm / name).unlink()
-        except OSError:
-            pass
-
-
-def _dds_shared_memory() -> set:
-    shm = Path("/dev/shm")
-    return {p.name for p in shm.glob("*fastdds*")} if shm.is_dir() else set()
-
-
-_clean_dds_shared_memory()
-_SHM_AFTER_CLEAN = [_dds_shared_memory()]
-
-
-def _clean_if_changed() -> None:
-    if _dds_shared_memory() != _SHM_AFTER_CLEAN[0]:
-        _clean_dds_shared_memory()
-        _SHM_AFTER_CLEAN[0] = _dds_shared_memory()
-
-
 @pytest.fixture(autouse=True)
 def _release_private_domains():
-    """Leases a test took (domains.private_domain) end with the test; no test starts on, or
-    leaves behind, a dead process's DDS shared memory (cleaned before and after each test when
-    /dev/shm changed: a process killed at a test's end may still hold its segments for a moment)."""
+    """Leases a test took (domains.private_domain) end with the test."""
     from domains import LEASES
 
-    _clean_if_changed()
     taken = len(LEASES)
     yield
     while len(LEASES) > taken:
         LEASES.pop().release()
-    _clean_if_changed()
 
 # Every run starts from an empty cache of its own (set here, at import, so the subprocesses the
 # tests start inherit it), so no test passes on results an earlier run left behind.

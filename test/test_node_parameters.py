@@ -70,7 +70,7 @@ def test_bad_values_are_one_line_errors(make_node, name, default, value, kw, wor
                                         ("allocation_node", "max_request_curvature:=.nan"),
                                         ("model_node", "backbone_points:=20000000")])
 def test_nodes_refuse_bad_parameters_at_start_in_one_line(node, param):
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(os.environ)   # the suite's loopback discovery (conftest)
     proc = subprocess.run([sys.executable, "-m", f"softcath_ros.nodes.{node}", "--ros-args", "-p", param],
                           env=env, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2, proc.stderr
@@ -90,7 +90,7 @@ PARAMS_FILES = {
 
 
 def _start(node: str, *ros_args: str, timeout: float = 60.0, cwd=None) -> subprocess.CompletedProcess:
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(os.environ)   # the suite's loopback discovery (conftest)
     return subprocess.run([sys.executable, "-m", f"softcath_ros.nodes.{node}", "--ros-args", *ros_args],
                           env=env, capture_output=True, text=True, timeout=timeout, cwd=cwd)
 
