@@ -367,6 +367,7 @@ def test_the_three_channel_table_reaches_the_design_limit_and_far_requests_satur
     assert model.evaluate(np.eye(3) * three.max_pressure).converged.all()
     allocator = Allocator(model)
     assert allocator.max_pressure == three.max_pressure and not allocator.limited_by_rung
+    assert not allocator.limited_by_peak
     for deg in range(0, 360, 15):
         phi = math.radians(deg)
         res = allocator.allocate(1e3 * np.array([math.cos(phi), math.sin(phi)]))   # far beyond reach
@@ -484,27 +485,76 @@ def test_each_channels_direction_and_reach_come_from_its_own_answer_not_its_cent
 
 @pytest.mark.parametrize("limit", [
     20000.0,   # below the peak of |k| (about 0.3 bar) and where the 40 mm body reaches its shaft (0.2 bar)
-    pytest.param(None, marks=pytest.mark.xfail(strict=True, reason=(
-        "at the design limit (0.5 bar) the inverse on three_sector_5mm's table does not converge for most "
-        "requests at 60-90 % of reach (57 of 96 every 15 deg at 30-90 %: |k| falls again past 0.3 bar); "
-        "the 2-DOF default stays three_channel_5mm until it does"))),
+    None,      # the design's 0.5 bar: the allocator keeps below the peak (limited_by_peak)
 ])
 def test_three_sector_requests_at_60_to_90_percent_of_reach_round_trip_through_its_table(limit):
-    """three_sector_5mm: requests every 45 degrees (off the channels' own) at 60, 75
-    and 90 % of the reachable curvature there, allocated on its shipped table, are met by the table
-    within 0.5 degrees and 1 % (against the section rung itself: benchmarks/allocation_round_trip.py)."""
+    """three_sector_5mm: requests every 45 degrees (off the channels' own) at 60, 75, 90 and 99 %
+    of the reachable curvature there, allocated on its shipped table, are met by the table
+    within 0.5 degrees and 1 % (against the section rung itself: benchmarks/allocation_round_trip.py).
+    The body is taken half as long, so that no request meets the shaft (the 40 mm body does past
+    0.2 bar, and is limited there: test_a_bend_that_would_reach_the_shaft_...): this is the inverse
+    over the whole pressure box."""
     design = load_design(THREE_SECTOR_5MM)
     model = make_model("surrogate", design, build=False)
     assert model.origin == "shipped"
     allocator = Allocator(model) if limit is None else Allocator(model, max_pressure=limit)
     for deg in np.arange(7.0, 360.0, 45.0):
         phi = math.radians(deg)
-        for f in (0.6, 0.75, 0.9):
+        for f in (0.6, 0.75, 0.9, 0.99):
             k = f * allocator.max_curvature(phi) * np.array([math.cos(phi), math.sin(phi)])
-            res = allocator.allocate(k)
-            assert res.converged and res.reachable and not res.saturated, res.message
+            res = allocator.allocate(k, length=0.5 * design.length)
+            assert res.converged and res.reachable and not res.saturated, (deg, f, res.message)
             assert res.pressures.max() <= allocator.max_pressure and np.count_nonzero(res.pressures) <= 2
             back = model.evaluate(res.pressures).curvature
             assert abs(math.degrees(math.remainder(math.atan2(back[1], back[0]) - phi, 2 * math.pi))) \
                 <= DIRECTION_TOL_DEG
             assert np.hypot(*back) == pytest.approx(np.hypot(*k), rel=MAGNITUDE_RTOL)
+
+
+def test_three_sector_allocates_up_to_where_a_channel_alone_bends_most():
+    """three_sector_5mm's table: each channel alone bends most near 0.3 bar and less beyond (its wall
+    balloons), so the allocator's limit is that peak, said in one line, and each channel's reach is
+    the most it bends anywhere the table answers (before: the limit was 0.437 bar, where the table
+    ends, and each reach the smaller bend there)."""
+    design = load_design(THREE_SECTOR_5MM)
+    model = make_model("surrogate", design, build=False)
+    allocator = Allocator(model)
+    assert "answers each channel alone only up to" in allocator.limited_by_rung
+    assert "bends most at" in allocator.limited_by_peak and "\n" not in allocator.limited_by_peak
+    assert 0.25e5 < allocator.max_pressure < 0.35e5
+    grid = np.linspace(0.0, design.max_pressure, 501)
+    for c in range(3):
+        batch = np.zeros((len(grid), 3))
+        batch[:, c] = grid
+        state = model.evaluate(batch)
+        bends = np.hypot(*np.asarray(state.curvature)[state.converged].T)
+        assert allocator.channel_max_curvature[c] == pytest.approx(bends.max(), rel=1e-5)
+    for deg in range(0, 360, 15):   # far beyond reach: saturated at the limit, never past it
+        phi = math.radians(deg)
+        res = allocator.allocate(1e3 * np.array([math.cos(phi), math.sin(phi)]), length=0.5 * design.length)
+        assert res.saturated and res.converged and res.pressures.max() <= allocator.max_pressure
+
+
+def test_a_channel_that_bends_less_beyond_a_pressure_is_allocated_up_to_it(three):
+    """A stand-in rung whose every channel bends most at 0.6 of the design's limit: the allocator's
+    limit is that pressure (to 1e-4 of the limit), said in ``limited_by_peak``, and a request along
+    a channel at 99 % of its reach is met below it."""
+    from rung_stand_ins import closed_form_peaking_at
+
+    peak_pa = 0.6 * three.max_pressure
+    allocator = Allocator(closed_form_peaking_at(three, peak_pa))
+    assert allocator.max_pressure == pytest.approx(peak_pa, abs=1e-4 * three.max_pressure)
+    assert f"bends most at {peak_pa:.0f} Pa" in allocator.limited_by_peak and not allocator.limited_by_rung
+    u = np.array([math.cos(allocator.channel_directions[0]), math.sin(allocator.channel_directions[0])])
+    res = allocator.allocate(0.99 * allocator.channel_max_curvature[0] * u)
+    assert res.converged and not res.saturated and 0 < res.pressures[0] < peak_pa
+
+
+@pytest.mark.parametrize("factory", ["closed_form", "nonlinear", "surrogate"])
+def test_a_design_that_bends_more_all_the_way_keeps_its_limit(three, factory):
+    """three_channel_5mm: every channel bends more up to the design's limit, on the linear closed
+    form, the non-linear test double and the shipped table: no peak, the limit is the design's."""
+    model = {"closed_form": lambda: make_model("closed_form", three), "nonlinear": lambda: CoupledNonlinear(three),
+             "surrogate": lambda: make_model("surrogate", three, build=False)}[factory]()
+    allocator = Allocator(model)
+    assert allocator.max_pressure == three.max_pressure and not allocator.limited_by_peak

@@ -15,7 +15,10 @@ that is linear in pressure (it exposes ``curvature_per_pa``, the 2 x C matrix, l
 the closed form) is inverted exactly in one shot, in plain floats for speed.
 
 Reachable set: for each direction, the largest curvature with every pressure in
-[0, max_pressure]. A request beyond it saturates *along the requested direction*
+[0, max_pressure], where max_pressure is kept where the rung answers each channel alone and
+below the pressure at which a channel alone bends most (core/channel_limits.py). Where Newton
+from its usual start fails near a fold of the rung's map, the answer is followed from rest along
+the request's direction (the branch of least pressure). A request beyond it saturates *along the requested direction*
 (the larger active pressure at max_pressure) and says so. A direction no sector
 covers (a 1-channel design asked to bend sideways) is reported unreachable, never
 approximated, unless it lies within ``direction_tolerance_deg`` of a channel's own
@@ -35,6 +38,7 @@ import numpy as np
 
 from .allocation_result import Allocation, ReachableSet
 from .bend_targets import BendTargets
+from .channel_limits import answered_limit, peak_limit
 from .errors import AllocationError, ModelError
 from .models.base import BendModel
 from .pair_inverse import PairInverse, Sector, brentq
@@ -104,26 +108,17 @@ class Allocator(PairInverse, BendTargets):
         if self.linear:
             self._g = [[float(v) for v in row] for row in np.asarray(model.curvature_per_pa)]
 
-        # Each channel alone at max_pressure: its bending direction and its reach. Where the rung
-        # stops answering a channel alone below max_pressure (a table ends where its source failed),
-        # the allocator's limit is the largest pressure every channel alone reaches (said in
-        # ``limited_by_rung``), never a command the rung cannot answer.
-        single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
-        self.limited_by_rung = ""
-        if not np.all(single.converged):
-            reach = self._single_channel_reach(model)
-            if reach <= 0.05 * self.max_pressure:
-                raise ModelError(f"allocation needs model '{model.name}' at max_pressure {self.max_pressure:g} Pa on "
-                                 f"each channel alone, but it did not converge ({single.message}); allocate with a "
-                                 "lower max_pressure inside the rung's range")
-            self.limited_by_rung = (f"model '{model.name}' answers each channel alone only up to {reach:.0f} Pa "
-                                    f"(not {self.max_pressure:g} Pa): allocating up to {reach:.0f} Pa")
-            self.max_pressure = reach
-            single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
-        self.fd_step = fd_step * self.max_pressure  # Pa, finite-difference step for the Jacobian
+        # Each channel alone at max_pressure: its bending direction and its reach. The limit is first
+        # kept where the rung answers every channel alone (a table ends where its source failed; said in
+        # ``limited_by_rung``), then below the smallest pressure at which a channel alone bends most
+        # (said in ``limited_by_peak``): never a command the rung cannot answer, nor one past a peak.
         rest = model.evaluate(np.zeros(self.n_channels))
         self._rest_curvature = np.asarray(rest.curvature, dtype=float)
         self._rest_stretch = float(rest.axial_stretch)
+        self.limited_by_rung = self._limit_to_the_rung(model)
+        self.limited_by_peak = self._limit_to_the_peak(model)
+        single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
+        self.fd_step = fd_step * self.max_pressure  # Pa, finite-difference step for the Jacobian
         k1 = np.asarray(single.curvature, dtype=float) - self._rest_curvature
         mags = np.hypot(k1[:, 0], k1[:, 1])
         steerable = mags > 1e-9 * max(float(mags.max()), 1e-300)
@@ -149,17 +144,33 @@ class Allocator(PairInverse, BendTargets):
         # vector): a stream of nearby requests starts Newton there (2-3 steps instead of ~6)
         self._warm = None
 
-    def _single_channel_reach(self, model, iterations: int = 16) -> float:
-        """Largest pressure (Pa, to max_pressure / 2**iterations) at which the rung answers every
-        channel alone, by bisection from rest (which every rung answers)."""
-        lo, hi = 0.0, self.max_pressure
-        for _ in range(iterations):
-            mid = 0.5 * (lo + hi)
-            if np.all(model.evaluate(np.eye(self.n_channels) * mid).converged):
-                lo = mid
-            else:
-                hi = mid
-        return lo
+    def _limit_to_the_rung(self, model) -> str:
+        """Lower max_pressure to the largest pressure the rung answers every channel alone at; the
+        one-line reason, or "" when it answers them at max_pressure."""
+        single = model.evaluate(np.eye(self.n_channels) * self.max_pressure)
+        if np.all(single.converged):
+            return ""
+        reach = answered_limit(model, self.max_pressure)
+        if reach <= 0.05 * self.max_pressure:
+            raise ModelError(f"allocation needs model '{model.name}' at max_pressure {self.max_pressure:g} Pa on "
+                             "each channel alone, but it did not converge ({single.message}); allocate with a "
+                             "lower max_pressure inside the rung's range")
+        said = (f"model '{model.name}' answers each channel alone only up to {reach:.0f} Pa "
+                f"(not {self.max_pressure:g} Pa): allocating up to {reach:.0f} Pa")
+        self.max_pressure = reach
+        return said
+
+    def _limit_to_the_peak(self, model) -> str:
+        """Lower max_pressure to where a channel alone bends most, if that is below it; the one-line
+        reason, or "" when every channel bends more all the way to max_pressure."""
+        peak = peak_limit(model, self.max_pressure, self._rest_curvature)
+        if peak is None:
+            return ""
+        pressure, channel, bend = peak
+        said = (f"model '{model.name}': channel {channel} alone bends most at {pressure:.0f} Pa ({bend:.1f} 1/m) "
+                f"and less beyond (not up to {self.max_pressure:g} Pa): allocating up to {pressure:.0f} Pa")
+        self.max_pressure = pressure
+        return said
 
     # ------------------------------------------------------------------ public API
 
@@ -341,7 +352,7 @@ class Allocator(PairInverse, BendTargets):
             q, (k, stretch), iterations, outside = self._newton(s, q, target)
         except ModelError as exc:
             self._warm = None
-            return self._failed(requested, (s.a, s.b), str(exc))
+            return self._on_branch(s, requested, kappa, ux, uy, exc)
         self._warm = None if outside else (s, q.copy(), target)
         if not outside:  # max_curvature is not computed here: it costs a boundary solve
             return self._result(self._full(s, q), requested, k, stretch, float("nan"), False, (s.a, s.b), iterations)
@@ -357,8 +368,17 @@ class Allocator(PairInverse, BendTargets):
         try:
             q, (k, stretch), n_r, _ = self._newton(s, q_sat * (kappa / kmax), target, allow_outside=False)
         except ModelError as exc:
-            return self._failed(requested, (s.a, s.b), str(exc))
+            return self._on_branch(s, requested, kappa, ux, uy, exc, kmax, iterations)
         return self._result(self._full(s, q), requested, k, stretch, kmax, False, (s.a, s.b), iterations + n_r)
+
+    def _on_branch(self, s: Sector, requested, kappa, ux, uy, failure, kmax=float("nan"), iterations=0):
+        """Where Newton from its usual start fails (a rung whose bend folds back near the box's edge):
+        the pressures on the branch of answers connected to rest, followed from it (``_follow_branch``)."""
+        try:
+            q, (k, stretch), n = self._follow_branch(s, kappa, ux, uy)
+        except ModelError as exc:
+            return self._failed(requested, (s.a, s.b), f"{failure}; followed from rest: {exc}")
+        return self._result(self._full(s, q), requested, k, stretch, kmax, False, (s.a, s.b), iterations + n)
 
     def _full(self, s: Sector, q) -> np.ndarray:
         p = np.zeros(self.n_channels)

@@ -30,6 +30,10 @@ class Sector:
     inv: tuple          # secant inverse (i00, i01, i10, i11): pressures per unit curvature, Pa m
 
 
+# curvature steps from rest when following the branch of answers connected to rest
+BRANCH_STEPS = 8
+
+
 class PairInverse:
     """Newton and the reachable boundary for a sector's two channels (a mixin of ``Allocator``)."""
 
@@ -94,6 +98,22 @@ class PairInverse:
             return best[1], best[2], self.max_iterations, False
         raise ModelError(f"Newton did not reach rtol {self.rtol} in {self.max_iterations} iterations "
                          f"(best relative residual {best[0] / scale:.2e})")
+
+    def _follow_branch(self, s: Sector, kappa: float, ux: float, uy: float, steps: int = BRANCH_STEPS):
+        """Newton along the request's direction from rest in ``steps`` equal steps of curvature, each
+        started from the last answer extrapolated: it stays on the branch of answers connected to
+        rest (the least pressure), where a start near a fold of the rung's map can leave it.
+        Returns (q, (curvature, stretch) at q, evaluations); ModelError where a step fails."""
+        q_prev, q = np.zeros(2), np.zeros(2)
+        total = 0
+        point = None
+        for j in range(1, steps + 1):
+            target = np.array([ux, uy]) * (kappa * j / steps) + self._rest_curvature
+            guess = np.clip(2.0 * q - q_prev, 0.0, self.max_pressure) if j > 1 else q
+            q_prev = q
+            q, point, n, _ = self._newton(s, guess, target, allow_outside=False)
+            total += n
+        return q, point, total
 
     def _local(self, s: Sector, q, h: float, pmax: float):
         """(curvature, 2 x 2 Jacobian over the pair's pressures, (pressure-induced curvature,

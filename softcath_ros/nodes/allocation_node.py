@@ -99,8 +99,9 @@ class AllocationNode(Node):
         calibration = load_calibration(calibration_file) if calibration_file else None
         self.allocator = Allocator(build_model(model_name, design, calibration), max_pressure=self.max_pressure,
                                    hysteresis_deg=hysteresis)
-        if self.allocator.limited_by_rung:
-            self.get_logger().warning(self.allocator.limited_by_rung)
+        for said in (self.allocator.limited_by_rung, self.allocator.limited_by_peak):
+            if said:
+                self.get_logger().warning(said)
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
                                   "tip_target farther than this from the base (m) is a fault and rejected",
                                   minimum=0.0)

@@ -1,0 +1,90 @@
+"""The allocator's working pressure limit, from each channel's own answers on the rung.
+
+Two limits below the design's (or a requested) max_pressure, each said in one line:
+
+- the rung's: the largest pressure at which it answers every channel alone (a surrogate table
+  ends where its source stopped converging);
+- the peak's: the smallest pressure at which one channel alone stops bending more (|k| peaks,
+  e.g. a sector channel whose wall balloons): beyond it more pressure bends less, so a request
+  there has two answers or none and allocating past it is never right.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# pressures on each channel's ray (0, max_pressure] sampled to find where |k| stops growing
+PEAK_SAMPLES = 64
+# the peak is refined by golden section to this fraction of max_pressure
+PEAK_XTOL = 1e-4
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def answered_limit(model, max_pressure: float, iterations: int = 16) -> float:
+    """Largest pressure (Pa, to max_pressure / 2**iterations) at which the rung answers every
+    channel alone, by bisection from rest (which every rung answers)."""
+    lo, hi = 0.0, max_pressure
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        if np.all(model.evaluate(np.eye(model.n_channels) * mid).converged):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _bend(model, channel: int, pressures, rest) -> np.ndarray:
+    """|k - k_rest| (1/m) of ``channel`` alone at each of ``pressures`` (nan where not answered)."""
+    batch = np.zeros((len(pressures), model.n_channels))
+    batch[:, channel] = pressures
+    state = model.evaluate(batch)
+    k = np.asarray(state.curvature, dtype=float).reshape(len(pressures), 2) - rest
+    return np.where(np.asarray(state.converged, dtype=bool), np.hypot(k[:, 0], k[:, 1]), np.nan)
+
+
+def _peak_between(model, channel: int, lo: float, hi: float, rest, xtol: float) -> float:
+    """Pressure (Pa) in [lo, hi] where ``channel`` alone bends most (golden section: |k| rises then
+    falls there)."""
+    a, b = lo + (1 - _GOLDEN) * (hi - lo), lo + _GOLDEN * (hi - lo)
+    fa, fb = _bend(model, channel, [a, b], rest)
+    while hi - lo > xtol:
+        if fa >= fb:
+            hi, b, fb = b, a, fa
+            a = lo + (1 - _GOLDEN) * (hi - lo)
+            fa = _bend(model, channel, [a], rest)[0]
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + _GOLDEN * (hi - lo)
+            fb = _bend(model, channel, [b], rest)[0]
+    return a if fa >= fb else b
+
+
+def peak_limit(model, max_pressure: float, rest) -> tuple[float, int, float] | None:
+    """(pressure Pa, channel, |k| 1/m) of the smallest pressure <= max_pressure at which a channel
+    alone stops increasing |k|, or None when every channel's |k| grows all the way to max_pressure.
+    A rung linear in pressure grows by construction and is not sampled."""
+    if model.info.linear_gain:
+        return None
+    rest = np.asarray(rest, dtype=float)
+    grid = np.linspace(0.0, max_pressure, PEAK_SAMPLES + 1)
+    bends = np.array([np.concatenate([[0.0], _bend(model, c, grid[1:], rest)]) for c in range(model.n_channels)])
+    steerable = np.nanmax(bends, axis=1) > 1e-9 * max(float(np.nanmax(bends)), 1e-300)
+    first = {}
+    for c in np.flatnonzero(steerable):
+        # the first sample after which |k| no longer grows (a sample the rung leaves unanswered is no stop)
+        stops = np.flatnonzero(np.diff(bends[c]) <= 0.0)
+        if len(stops):
+            first[int(c)] = int(stops[0])
+    if not first:
+        return None
+    lowest = min(first.values())
+    best = None
+    for c, i in first.items():
+        if i > lowest + 1:      # its peak lies beyond the lowest sampled one's bracket
+            continue
+        lo, hi = grid[max(i - 1, 0)], grid[i + 1]
+        p = _peak_between(model, c, lo, hi, rest, PEAK_XTOL * max_pressure)
+        if best is None or p < best[0]:
+            best = (float(p), c, float(_bend(model, c, [p], rest)[0]))
+    return best
