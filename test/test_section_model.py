@@ -206,7 +206,7 @@ def test_batch_is_path_independent_and_cached(implemented_design, tmp_path):
 def test_commands_out_of_order_on_a_ray_are_one_increasing_ramp(implemented_design, monkeypatch):
     """A batch is solved per ray by increasing pressure (one ramp up through its commands, not back
     down), so its answers are those of the sorted batch; commands on rays of their own keep their order."""
-    from softcath_ros.core.models.section import _ray_order
+    from softcath_ros.core.models.section_path import ray_order
 
     p = np.array([[0.20 * BAR], [0.05 * BAR], [0.15 * BAR], [0.0], [0.10 * BAR]])
     model = make_model("section", implemented_design, mesh_size=0.005 / 12)
@@ -220,9 +220,9 @@ def test_commands_out_of_order_on_a_ray_are_one_increasing_ramp(implemented_desi
     ordered = make_model("section", implemented_design, mesh_size=0.005 / 12).evaluate(p[order])
     np.testing.assert_allclose(mixed.curvature[order], ordered.curvature, rtol=1e-9, atol=1e-12)
     three = np.array([[2.0, 0, 0], [1.0, 1.0, 0], [1.0, 0, 0], [0, 0, 0], [2.0, 2.0, 0], [0, 1.0, 0.5]])
-    assert _ray_order(three) == [3, 2, 0, 1, 4, 5]
+    assert ray_order(three) == [3, 2, 0, 1, 4, 5]
     trajectory = np.array([[1.0, 0, 0], [1.0, 0.1, 0], [1.0, 0.2, 0], [0.9, 0.3, 0]])
-    assert _ray_order(trajectory) == [0, 1, 2, 3]
+    assert ray_order(trajectory) == [0, 1, 2, 3]
 
 
 def test_ramp_reaches_checkpoints_and_reports_the_last_converged_state():

@@ -6,7 +6,7 @@ line through the section-frame origin) is a circular arc of uniform curvature k 
 unit deformed arc length and axial stretch lambda. With r(X, Z) = c(s) + x d1(s) + y d2(s),
 s = lambda Z, and the frame turning as d3' = kx d1 + ky d2 (so the backbone bends *towards* k,
 base.py's convention), dr/dZ = lambda (1 - kx x - ky y) d3: the side at +k is shortened. The
-in-plane rigid motions are removed by a gauge (see ``SectionProblem.__init__``), so the origin
+in-plane rigid motions are removed by a gauge (``SectionProblem._place_gauge``), so the origin
 stays on the body axis and k is in the body frame.
 
 Potential per unit reference length (all terms SI, J/m), one module per term in ``terms/``:
@@ -62,17 +62,32 @@ class SectionProblem:
         self.design = design
         self.end_cap_only = end_cap_only
         self.mesh = mesh
-        R = design.outer_radius
-        self.R = R
-        mat = design.material
-        c_ref = mat.c1
-        self.c_ref = c_ref
-        silicone = mesh.silicone
-        has_fill = not silicone.all()
+        self.R = design.outer_radius
+        self.c_ref = design.material.c1
+        has_fill = not mesh.silicone.all()
         if has_fill != (lumen_fill is not None):
             raise ValueError("section problem: lumen_fill must be given exactly when the mesh has a fill region")
-        self.fill = None if not has_fill else np.flatnonzero(~silicone)   # fill element indices
+        self.fill = None if not has_fill else np.flatnonzero(~mesh.silicone)   # fill element indices
         self.filled_holes = np.isin(np.arange(len(mesh.hole_edges)), mesh.filled)
+        self._number_unknowns(contact_distance)
+        self._list_terms(hoop_tension_only, lumen_fill, contact_distance)
+        self._place_gauge()
+        # terms in order of assembly: the silicone (the costly one) last, so an inadmissible state
+        # (crossed walls) is found before it is assembled
+        self._assembly_order = [i for i in range(len(self.terms)) if self.terms[i] is not self.body] + \
+            [self.terms.index(self.body)]
+        self._build_pattern()
+
+    @property
+    def area_e(self) -> np.ndarray:
+        """Reference element areas (/ R^2), silicone and fill."""
+        return self.body.area_e
+
+    # ------------------------------------------------------------------ set-up helpers
+    def _number_unknowns(self, contact_distance: float | None) -> None:
+        """Reference nodes ``X`` (/ R) and the numbering of the unknowns: 2 per node, then the
+        globals (lambda, k R), then one pressure per element."""
+        design, mesh, R = self.design, self.mesh, self.R
         X = mesh.nodes / R
         # a device in an empty lumen with wall contact lies free in it: its centre is one more node
         # (in no element), at the lumen's centre at rest
@@ -82,21 +97,24 @@ class SectionProblem:
             self.device_node = len(X)
             X = np.vstack([X, np.asarray(design.lumen.center) / R])
         self.X = X
-        nn = len(X)
-        self.n_u = 2 * nn
+        self.n_u = 2 * len(X)
         self.n = self.n_u + N_GLOBAL                       # unknowns of the Newton system
         self.n_state = self.n + len(mesh.triangles)        # + element pressures p_e / c1
         self.i_glob = self.n_u + np.arange(N_GLOBAL)
-        tri = mesh.triangles
-        self.elem_dofs = block_dofs(tri, self.i_glob)
+        self.elem_dofs = block_dofs(mesh.triangles, self.i_glob)
 
-        # --- the terms of the potential (adding one: write a module in terms/ and list it here)
+    def _list_terms(self, hoop_tension_only: bool, lumen_fill: float | None,
+                    contact_distance: float | None) -> None:
+        """The terms of the potential (adding one: write a module in terms/ and list it here)."""
+        design, mesh, X, R, c_ref = self.design, self.mesh, self.X, self.R, self.c_ref
+        mat = design.material
+        tri = mesh.triangles
         self.rule = ElementRule(X, tri, TRIANGLE_POINTS, TRIANGLE_WEIGHTS)
-        self.body = SiliconeBody(self.rule, silicone, (mat.c1 / c_ref, mat.c2 / c_ref, mat.c3 / c_ref),
+        self.body = SiliconeBody(self.rule, mesh.silicone, (mat.c1 / c_ref, mat.c2 / c_ref, mat.c3 / c_ref),
                                  mat.bulk_modulus / c_ref, self.elem_dofs, self.n_u, self.n)
         self.terms: list[Term] = [self.body]
         self.lumen_fill = None
-        if has_fill:
+        if self.fill is not None:
             self.lumen_fill = LumenFill(ElementRule(X, tri[self.fill], NODAL_POINTS, NODAL_WEIGHTS),
                                         2.0 * float(lumen_fill) * mat.c1 / c_ref, self.elem_dofs[self.fill], self.n_u)
             self.terms.append(self.lumen_fill)
@@ -111,9 +129,16 @@ class SectionProblem:
             self.terms.append(HoopRings(X, mesh.outer_edges,
                                         design.reinforcement.hoop_stiffness_per_length / (c_ref * R),
                                         hoop_tension_only, block_dofs(mesh.outer_edges, self.i_glob), self.n_u))
-        self.channels = [ChannelPressure(X, edges, i, end_cap_only, block_dofs(edges, self.i_glob), self.n_u)
+        self.channels = [ChannelPressure(X, edges, i, self.end_cap_only, block_dofs(edges, self.i_glob), self.n_u)
                          for i, edges in enumerate(mesh.hole_edges[:design.n_channels])]
         self.terms += self.channels
+        self._list_contact(contact_distance)
+        if design.device is not None:
+            self.terms.append(DeviceBending(design.device.bending_stiffness / (c_ref * R**4), self.i_glob))
+
+    def _list_contact(self, contact_distance: float | None) -> None:
+        """Each empty hole's wall contact (``contact``), and the lumen wall's with a free device."""
+        design, mesh, X, R = self.design, self.mesh, self.X, self.R
         self.contact: list[tuple[int, WallContact]] = []   # (hole index, its wall contact)
         self.device = None                                  # the lumen wall's contact with the device
         holes = design.section.holes
@@ -133,39 +158,28 @@ class SectionProblem:
                 self.device = DeviceContact(X, mesh.hole_edges[i], 0.5 * design.device.diameter / R,
                                             wall.d_hat, self.device_node, self.n_u)
                 self.terms.append(self.device)
-        if design.device is not None:
-            self.terms.append(DeviceBending(design.device.bending_stiffness / (c_ref * R**4), self.i_glob))
 
-        # --- gauge: in-plane rigid motions are removed by pinning node A (both components) and
-        # the x component of a node B above or below it (their rows become identity rows, which
-        # keeps the tangent symmetric positive definite at stable states, so LDL^T needs no pivoting). Results
-        # are reported in the frame where the silicone's mean displacement and mean rotation vanish
-        # (``frame_state``), which does not depend on the choice of A and B.
+    def _place_gauge(self) -> None:
+        """Gauge: in-plane rigid motions are removed by pinning node A (both components) and the x
+        component of a node B above or below it (their rows become identity rows, which keeps the
+        tangent symmetric positive definite at stable states, so LDL^T needs no pivoting). Results
+        are reported in the frame where the silicone's mean displacement and mean rotation vanish
+        (``frame_state``), which does not depend on the choice of A and B."""
+        X, nn = self.X, len(self.X)
         w = np.einsum("eq,qa->ea", self.body.dA_silicone, self.rule.N)   # int N_a dA per node, silicone only
-        self._w_node = np.bincount(tri.ravel(), weights=w.ravel(), minlength=nn)
+        self._w_node = np.bincount(self.mesh.triangles.ravel(), weights=w.ravel(), minlength=nn)
         area = self._w_node.sum()
         self._centroid = self._w_node @ X / area
         r2 = np.sum(self._w_node * np.sum((X - self._centroid) ** 2, 1))
         self._rot_weights = self._w_node / r2
         # on a mirror-symmetric mesh both pins sit on the axis, so the gauge keeps the symmetry
-        off_axis = 0.0 if not mesh.symmetric else np.where(X[:, 0] == 0.0, 0.0, np.inf)
+        off_axis = 0.0 if not self.mesh.symmetric else np.where(X[:, 0] == 0.0, 0.0, np.inf)
         if self.device_node is not None:        # the free device is no gauge node
             off_axis = off_axis + np.where(np.arange(nn) == self.device_node, np.inf, 0.0)
         a = int(np.argmin(np.sum((X - self._centroid) ** 2, 1) + off_axis))
         b = int(np.argmax(np.abs(X[:, 1] - X[a, 1]) - 10 * np.abs(X[:, 0] - X[a, 0]) - off_axis))
         self.pinned = np.array([2 * a, 2 * a + 1, 2 * b])
-        # terms in order of assembly: the silicone (the costly one) last, so an inadmissible state
-        # (crossed walls) is found before it is assembled
-        self._assembly_order = [i for i in range(len(self.terms)) if self.terms[i] is not self.body] + \
-            [self.terms.index(self.body)]
-        self._build_pattern()
 
-    @property
-    def area_e(self) -> np.ndarray:
-        """Reference element areas (/ R^2), silicone and fill."""
-        return self.body.area_e
-
-    # ------------------------------------------------------------------ set-up helpers
     def _locate(self, point):
         """Element containing ``point`` and its reference coordinates (straight-sided inverse map)."""
         p = self.X[self.mesh.triangles[:, :3]]
