@@ -7,7 +7,7 @@ import pytest
 
 from softcath_ros import topics
 from softcath_ros.core.errors import SoftcathError
-from softcath_ros.graph import LOCK_DIR, NodeGraph, last_leased, lease_domain, wait_output, wait_ready
+from softcath_ros.graph import NodeGraph, last_leased, lease_domain, wait_output, wait_ready
 
 
 def _script(code: str) -> subprocess.Popen:
@@ -67,18 +67,21 @@ def test_node_graph_waits_for_its_nodes_stops_them_cleanly_and_releases_its_doma
         assert again.domain == domain
 
 
-def test_the_least_recently_leased_domain_is_leased_first():
+def test_the_least_recently_leased_domain_is_leased_first(tmp_path, monkeypatch):
     """A domain a graph used a moment ago may still carry its nodes' DDS traffic in shared memory:
-    leases go to the domain leased longest ago (NodeGraph's as the tests' private ones)."""
+    leases go to the domain leased longest ago (NodeGraph's as the tests' private ones). The lock
+    files are this test's own: the other test worker leases from the shared ones meanwhile."""
     import os
     import time
 
+    import softcath_ros.graph as graph
+
+    monkeypatch.setattr(graph, "LOCK_DIR", tmp_path)
     lo, hi = 224, 229
-    LOCK_DIR.mkdir(parents=True, exist_ok=True)
     now = time.time()
     for i, d in enumerate(range(lo, hi + 1)):     # 226 leased longest ago, then 227, ...
-        (LOCK_DIR / f"{d}.lock").touch()
-        os.utime(LOCK_DIR / f"{d}.lock", (now, now - 100 if d == 226 else now - 50 + i))
+        (tmp_path / f"{d}.lock").touch()
+        os.utime(tmp_path / f"{d}.lock", (now, now - 100 if d == 226 else now - 50 + i))
     with lease_domain((lo, hi)) as first:
         assert first.domain == 226 and last_leased(226) > now - 10
     with lease_domain((lo, hi)) as second:
