@@ -85,6 +85,30 @@ def test_wall_exactly_at_the_minimum_is_accepted_and_below_refused(design_dict):
     assert "wall to channels[0]" in str(info.value) or "overlaps" in str(info.value)
 
 
+def test_containment_is_decided_on_the_exact_arcs_not_the_chords():
+    r = 1e-3
+    circle = Outline.circle((0.0, 0.0), r)
+    p0, p1 = circle.polygon_points()[:2]
+    half = 0.5 * math.atan2(p1[1], p1[0])                 # half-way between two polygon vertices
+    sagitta = r * (1.0 - math.cos(half))                  # the chord's distance inside the arc there
+    between = (r - 0.5 * sagitta) * np.array([math.cos(half), math.sin(half)])   # inside the arc, outside the chord
+    assert circle.contains(between) and not circle.contains(between * (r + 0.5 * sagitta) / (r - 0.5 * sagitta))
+    assert not circle.contains((r, 0.0))                  # on the outline: not inside
+
+
+@pytest.mark.parametrize("channel", [
+    {"shape": "sector", "inner_radius": 0.0, "outer_radius": 1.95e-3, "direction": 0.0, "span": 298.0, "fillet": 0.6e-3},
+    {"shape": "polygon", "points": [[-1e-3, -1e-3], [1e-3, -1e-3], [1e-3, 1e-3], [-1e-3, 1e-3]]},
+])
+def test_a_circular_hole_wholly_inside_a_shaped_one_is_refused_as_overlapping(design_dict, channel):
+    d = copy.deepcopy(design_dict)
+    d.update(limiting_fibre=None, min_wall_thickness=0.05e-3, channels=[channel],
+             lumen={"diameter": 0.5e-3, "center": [0.0, 0.0]})
+    with pytest.raises(DesignError) as info:   # its centre is 0.5 mm or more from the outline: no wall at all
+        design_from_dict(d)
+    assert info.value.field.startswith("channels[0].") and str(info.value).endswith("overlaps lumen")
+
+
 def test_closed_form_takes_sectors_and_bends_away_from_each(design_dict):
     d = design_from_dict(sector_design(design_dict))
     model = make_model("closed_form", d)

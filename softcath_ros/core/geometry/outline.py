@@ -295,9 +295,15 @@ class Outline:
         return far
 
     def contains(self, p) -> bool:
+        """Whether ``p`` lies inside the exact outline (within a picometre of it counts as on it, not
+        inside): decided on a polygon whose chords stray from the arcs by less than ``p``'s distance."""
         from shapely.geometry import Point
 
-        return bool(self.shapely.contains(Point(*p)))
+        d = self.distance_to_point(p)
+        if d < 1e-12:
+            return False
+        poly = self.shapely if d > 2.0 * CHORD_TOLERANCE else self.polygon(0.5 * d)
+        return bool(poly.contains(Point(*p)))
 
     def __repr__(self) -> str:
         return f"Outline({len(self.vertices)} vertices, {int(np.count_nonzero(self.bulges))} arcs)"

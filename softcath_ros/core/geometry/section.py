@@ -148,6 +148,8 @@ class Section:
         elif a.is_circle or b.is_circle:
             c, other = (a, b) if a.is_circle else (b, a)
             gap = other.outline.distance_to_point(c.shape.center) - c.shape.radius
+            if other.outline.contains(c.shape.center):   # the circle's centre inside the shape: overlapping
+                gap = -1.0
         else:
             gap = bracketed_gap(a.outline, b.outline, decide_at)
         return Wall(gap, (a.name, b.name), pts)
