@@ -15,7 +15,7 @@ QUICK_START = [
     "predict --design implemented_5mm --model surrogate --pressure 0.15 --unit bar --json",
     "predict --design implemented_5mm --model auto --scene free_bending_live",
     "sweep --design implemented_5mm --model section --to 0.25bar",
-    "allocate --design three_channel_5mm --curvature 3,0 --json",
+    "allocate --design three_sector_5mm --curvature 3,0 --json",
 ]
 
 

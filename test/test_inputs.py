@@ -273,7 +273,7 @@ def test_a_direction_protocol_passes_characterise_checks_to_the_graph(rig, monke
         "stand-in", lambda args, protocol, design: handed.append((protocol.drive, design.name)) or 0))
     args = ["characterise", "--protocol", "three_channel_directions"] + (["--rig", rig] if rig != "sim" else [])
     assert main(args) == 0
-    assert handed == [("direction", "three_channel_5mm")]
+    assert handed == [("direction", "three_sector_5mm")]
 
 
 def test_a_direction_protocol_beyond_the_design_is_refused_in_one_line(capsys):

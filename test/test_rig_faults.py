@@ -247,7 +247,7 @@ def test_characterise_rig_ros_runs_against_a_rig_started_by_hand(tmp_path, procs
     from softcath_ros.recording.reader import read_metadata
 
     env = private_env()
-    design = "implemented_5mm" if drive == "channels" else "three_channel_5mm"
+    design = "implemented_5mm" if drive == "channels" else "three_sector_5mm"   # the protocols' designs
     protocol = _short_protocol(tmp_path) if drive == "channels" else _short_direction_protocol(tmp_path)
     _start(procs, ["sim_bench_node", "--ros-args", "-p", f"design:={design}"], env)
     run = _start(procs, ["softcath", "characterise", "--rig", "ros", "--protocol", str(protocol),

@@ -56,7 +56,7 @@ class AllocationNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         p = partial(declare, self)
-        design_name = p("design", "three_channel_5mm", "design file or shipped design name")
+        design_name = p("design", "three_sector_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung used for the inverse")
         calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
                                                 "('' = none)")

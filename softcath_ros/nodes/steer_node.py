@@ -95,6 +95,9 @@ class SteerNode(Node):
         self.design = steering_design(design, requested_max)
         self.max_pressure = self.design.max_pressure
         allocator = steering_allocator(model_name, design, self.max_pressure)   # the rung on the shipped design
+        for said in (allocator.limited_by_rung, allocator.limited_by_peak):
+            if said:
+                self.get_logger().warning(said)
         self.max_tip_distance = p("max_tip_distance", 10.0 * self.design.length,
                                   "tip_target farther than this from the base (m) is a fault and rejected", minimum=0.0)
         self.params = SteeringParams(**values)
