@@ -3,7 +3,8 @@ over the reachable set).
 
 The allocator on the default rung (the surrogate of the section rung) turns bend requests spread
 over the reachable set (every ``--step`` degrees, at fractions of the reachable curvature in that
-direction) into channel pressures; the section rung itself (fresh, from rest, on worker processes)
+direction: the allocator's answer to a request far beyond it, so the pressure box's edge or, where
+the body would meet its shaft first, the bend that clears it) into channel pressures; the section rung itself (fresh, from rest, on worker processes)
 then says how those pressures bend the body. Reported per request: the R_C error (1/|k| against
 the requested 1/|k|) and the direction error.
 
@@ -50,7 +51,7 @@ def main() -> None:
     requests = []
     for deg in np.arange(args.offset, 360.0 + args.offset, args.step):
         phi = math.radians(deg)
-        kmax = alloc.max_curvature(phi)
+        kmax = alloc.allocate(1e3 * np.array([math.cos(phi), math.sin(phi)])).max_curvature
         for f in (float(x) for x in args.fractions.split(",")):
             k = f * kmax * np.array([math.cos(phi), math.sin(phi)])
             a = alloc.allocate(k)
@@ -71,6 +72,7 @@ def main() -> None:
         d = math.atan2(ks[1], ks[0]) - math.atan2(k[1], k[0])
         rows.append({"direction_deg": float(deg), "fraction_of_reach": f, "requested_curvature_per_m": kr,
                      "pressures_pa": a.pressures.round(1).tolist(), "allocation_converged": bool(a.converged),
+                     "allocation_saturated": bool(a.saturated),
                      "section_converged": bool(got["n_ok"]), "section_curvature_per_m": kg,
                      "rc_rel_error": abs(kr / kg - 1.0) if kg > 0 else float("nan"),
                      "direction_error_deg": abs(math.degrees((d + math.pi) % (2 * math.pi) - math.pi))})
@@ -85,6 +87,7 @@ def main() -> None:
               f"direction max {max(r['direction_error_deg'] for r in sel):.3f} deg")
     write_results(args.name, {"design": design.name, "allocator_model": args.model,
                               "allocator_max_pressure_pa": alloc.max_pressure,
+                              "allocator_limited_by": alloc.limited_by_peak or alloc.limited_by_rung,
                                             "target_rc_rel": 0.01, "target_direction_deg": 0.5,
                                             "note": "section rung fresh from rest per command; shared machine"}, rows)
     plot(rows, args.name)
