@@ -1,6 +1,7 @@
 """Closed-loop steering against open loop (issue 16 targets).
 
-Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_channel_5mm design,
+Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_channel_5mm design
+(the steering default; ``--design`` for another),
 controller and rig truth on the section-rung surrogate (the table shipped for the design, the
 controller's inverse limited to 0.3 bar), the rig 25% pressure-shifted with material scale 1.2,
 a 10 Hz actuator behind the 80 ms regulator, a 100 Hz tip tracker with 0.1 mm noise, 20% of the
@@ -9,9 +10,10 @@ Modes: open_loop, integral, adaptive. The controller's CPU is the time spent in 
 simulated second (100 Hz measurements, 200 Hz output). Plus one DDS run (`softcath steer-sim`,
 separate processes, its defaults: the same surrogate).
 
-    .venv/bin/python benchmarks/steering.py [--quick]
+    .venv/bin/python benchmarks/steering.py [--quick] [--design three_sector_5mm] [--max-pressure 10000]
+        [--name steering]
 
-Writes benchmarks/results/steering.{json,csv,png}.
+Writes benchmarks/results/<name>.{json,csv,png}.
 """
 from __future__ import annotations
 
@@ -38,8 +40,12 @@ DURATION = {"step": 6.0, "circle": 10.0}
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="50 ms latency only, no DDS run")
+    ap.add_argument("--design", default=SteeringScenario.design, help="design name or file (the core runs)")
+    ap.add_argument("--max-pressure", type=float, default=SteeringScenario.max_pressure,
+                    help="the steering range, Pa (default 0.3 bar)")
+    ap.add_argument("--name", default="steering", help="results stem under benchmarks/results/")
     args = ap.parse_args()
-    built = build(SteeringScenario(model=RUNG, truth=RUNG))
+    built = build(SteeringScenario(design=args.design, model=RUNG, truth=RUNG, max_pressure=args.max_pressure))
     rows, runs = [], {}
     latencies = (0.05,) if args.quick else (0.05, 0.15)
     for kind in ("step", "circle"):
@@ -47,7 +53,8 @@ def main() -> int:
             for latency in latencies:
                 if mode == "open_loop" and latency != latencies[0]:
                     continue   # the open loop never uses the measurement
-                scenario = SteeringScenario(model=RUNG, truth=RUNG, controller=SteeringParams(mode=mode),
+                scenario = SteeringScenario(design=args.design, model=RUNG, truth=RUNG, max_pressure=args.max_pressure,
+                                            controller=SteeringParams(mode=mode),
                                             tracker=TrackerParams(latency=latency, drop_fraction=0.2))
                 t0 = time.perf_counter()
                 run = simulate(scenario, kind, DURATION[kind], built)
@@ -64,10 +71,11 @@ def main() -> int:
     if not args.quick:
         rows.append(dds_run())
         print(json.dumps(rows[-1]), flush=True)
-    write_results("steering", {"design": "three_channel_5mm", "rig": "pressure_shift 0.25, material_scale 1.2, "
-                               "regulator 80 ms, actuator 16 ms (10 Hz)", "tracker": "100 Hz, 0.1 mm noise",
-                               "note": "machine shared with other jobs; CPU fractions are upper bounds"}, rows)
-    chart(runs, latencies[0])
+    write_results(args.name, {"design": built[2].name, "allocator_max_pressure_pa": built[0].max_pressure,
+                              "quick": args.quick, "rig": "pressure_shift 0.25, material_scale 1.2, "
+                              "regulator 80 ms, actuator 16 ms (10 Hz)", "tracker": "100 Hz, 0.1 mm noise",
+                              "note": "machine shared with other jobs; CPU fractions are upper bounds"}, rows)
+    chart(runs, latencies[0], args.name)
     return 0
 
 
@@ -88,7 +96,7 @@ def dds_run() -> dict:
             "final_gain": None, "wall_s": time.perf_counter() - t0}
 
 
-def chart(runs: dict, latency: float) -> None:
+def chart(runs: dict, latency: float, name: str = "steering") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -114,7 +122,7 @@ def chart(runs: dict, latency: float) -> None:
     axes[0].axhline(0.3, color="grey", lw=0.5, ls=":")
     axes[1].axhline(0.3, color="grey", lw=0.5, ls=":")
     fig.tight_layout()
-    save_figure(fig, "steering")
+    save_figure(fig, name)
 
 
 if __name__ == "__main__":
