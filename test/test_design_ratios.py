@@ -2,9 +2,9 @@
 rung (0.14 bar, 40 mm; published FE: 1-DOF optimum 2.66x, 2-DOF optimum 1.58x, an equal pair +5 %
 over one channel). The 1-DOF optimum from its shipped surrogate table (within its charted error of
 the section rung); the fan design by a coarse section solve (D/12) of both designs. The fine
-figures: benchmarks/design_ratios.py -> benchmarks/results/design_ratios.json. optimised_2dof_5mm is
-still the round-channel layout (no fan layout met the optimiser's stretch limit,
-docs/design_studies.md) and is not asserted here."""
+figures: benchmarks/design_ratios.py -> benchmarks/results/design_ratios.json. optimised_2dof_5mm
+(fans narrowed until the optimiser's stretch limit holds, docs/design_studies.md) bends 1.096x there,
+short of the published 1.58x: asserted as measured, not as the published figure."""
 import math
 
 import numpy as np
@@ -28,6 +28,18 @@ def test_the_one_dof_optimum_bends_at_least_as_the_published_optimum_relative_to
     tables = [make_model("surrogate", load_design(n), build=False) for n in ("optimised_1dof_5mm", "implemented_5mm")]
     assert all(m.origin == "shipped" for m in tables)
     assert curvature(tables[0], [P]) / curvature(tables[1], [P]) >= 2.66
+
+
+def test_the_two_dof_optimum_bends_more_than_the_implemented_design_within_the_stretch_limit():
+    """The 2-DOF optimum from its shipped table: 1.096x the implemented design's curvature on the
+    section rung (the round-channel layout it replaces: 0.15x); its stretch at 0.14 bar on the coarse
+    section rung within the optimiser's 2.0."""
+    tables = [make_model("surrogate", load_design(n), build=False) for n in ("optimised_2dof_5mm", "implemented_5mm")]
+    assert all(m.origin == "shipped" for m in tables)
+    assert curvature(tables[0], [P, 0.0, 0.0]) / curvature(tables[1], [P]) > 1.0
+    section = make_model("section", load_design("optimised_2dof_5mm"), **COARSE)
+    curvature(section, [P, 0.0, 0.0])
+    assert section.max_principal_stretch([P, 0.0, 0.0]) <= 2.0
 
 
 def test_the_fan_design_bends_more_than_the_published_two_dof_optimum_and_a_pair_less_than_one():
