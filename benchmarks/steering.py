@@ -1,16 +1,17 @@
 """Closed-loop steering against open loop (issue 16 targets).
 
-Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_channel_5mm design
+Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_sector_5mm design
 (the steering default; ``--design`` for another),
 controller and rig truth on the section-rung surrogate (the table shipped for the design, the
-controller's inverse limited to 0.3 bar), the rig 25% pressure-shifted with material scale 1.2,
+controller's inverse limited to the design's steering range, core/steering.steering_range, or
+``--max-pressure``), the rig 25% pressure-shifted with material scale 1.2,
 a 10 Hz actuator behind the 80 ms regulator, a 100 Hz tip tracker with 0.1 mm noise, 20% of the
 samples dropped, latency 50 ms and 150 ms; trajectories: three steps, and a 0.2 Hz circle.
 Modes: open_loop, integral, adaptive. The controller's CPU is the time spent in its calls per
 simulated second (100 Hz measurements, 200 Hz output). Plus one DDS run (`softcath steer-sim`,
 separate processes, its defaults: the same surrogate).
 
-    .venv/bin/python benchmarks/steering.py [--quick] [--design three_sector_5mm] [--max-pressure 10000]
+    .venv/bin/python benchmarks/steering.py [--quick] [--design three_channel_5mm] [--max-pressure 10000]
         [--name steering]
 
 Writes benchmarks/results/<name>.{json,csv,png}.
@@ -41,8 +42,8 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="50 ms latency only, no DDS run")
     ap.add_argument("--design", default=SteeringScenario.design, help="design name or file (the core runs)")
-    ap.add_argument("--max-pressure", type=float, default=SteeringScenario.max_pressure,
-                    help="the steering range, Pa (default 0.3 bar)")
+    ap.add_argument("--max-pressure", type=float, default=None,
+                    help="the steering range, Pa (default the design's: core/steering.steering_range)")
     ap.add_argument("--name", default="steering", help="results stem under benchmarks/results/")
     args = ap.parse_args()
     built = build(SteeringScenario(design=args.design, model=RUNG, truth=RUNG, max_pressure=args.max_pressure))
@@ -69,9 +70,10 @@ def main() -> int:
                              "final_gain": m["final_gain"], "wall_s": time.perf_counter() - t0})
                 print(json.dumps(rows[-1]), flush=True)
     if not args.quick:
-        rows.append(dds_run())
+        rows.append(dds_run(args.design, args.max_pressure))
         print(json.dumps(rows[-1]), flush=True)
-    write_results(args.name, {"design": built[2].name, "allocator_max_pressure_pa": built[0].max_pressure,
+    write_results(args.name, {"design": built[2].name, "steering_range_pa": built[2].max_pressure,
+                              "allocator_max_pressure_pa": built[0].max_pressure,
                               "quick": args.quick, "rig": "pressure_shift 0.25, material_scale 1.2, "
                               "regulator 80 ms, actuator 16 ms (10 Hz)", "tracker": "100 Hz, 0.1 mm noise",
                               "note": "machine shared with other jobs; CPU fractions are upper bounds"}, rows)
@@ -79,13 +81,14 @@ def main() -> int:
     return 0
 
 
-def dds_run() -> dict:
+def dds_run(design: str, max_pressure: float | None) -> dict:
     exe = Path(sys.executable).parent / "softcath"
     with tempfile.TemporaryDirectory() as out:
         env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
         t0 = time.perf_counter()
-        res = subprocess.run([str(exe), "steer-sim", "--trajectory", "step", "--duration", "6", "--json",
-                              "--output-dir", out], capture_output=True, text=True, env=env, timeout=300)
+        argv = [str(exe), "steer-sim", "--design", design, "--trajectory", "step", "--duration", "6", "--json",
+                "--output-dir", out] + ([] if max_pressure is None else ["--max-pressure", f"{max_pressure!r}Pa"])
+        res = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=300)
         if res.returncode != 0:
             raise SystemExit(f"steer-sim failed: {res.stderr[-1000:]}")
         r = json.loads(res.stdout)

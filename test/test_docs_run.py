@@ -53,7 +53,7 @@ ELSEWHERE = [
      "test_design_shapes.py::test_the_commands_in_the_design_file_page_run_as_written"),
     (("docs/tracker.md",), "softcath track ", "test_tracker.py::test_the_documented_commands_run_as_written"),
     (("docs/lab.md",), "softcath track ", "test_lab_doc.py::test_the_camera_lines_run_as_written"),
-    (("docs/steering.md",), "softcath steer-sim --design three_channel_5mm --trajectory step",
+    (("docs/steering.md",), "softcath steer-sim --trajectory step",
      "test_steer_nodes.py::test_steer_sim_step_settles_over_dds"),
     (("docs/lab.md", "docs/rig.md"), "softcath characterise --rig ros",
      "test_lab_doc.py::test_the_first_recording_line_runs_as_written_and_drives_every_managed_node"),

@@ -229,7 +229,7 @@ def test_wrong_inputs_on_every_command_are_one_line_exit_2(tmp_path, capsys):
           "--max-pressure", "0.3Pa"], "0.3 Pa is implausible (below 1000 Pa): it is in pascals; 30000 (0.3 bar)?"),
         (["allocate", "--design", "three_channel_5mm", "--model", "closed_form", "--curvature", "3,0",
           "--max-pressure", "0.3"], "--max-pressure 0.3: which unit? write 0.3bar, 0.3kPa or 0.3Pa"),
-        (["steer-sim", "--max-pressure", "1e9Pa", "--output-dir", str(out)], "at most design 'three_channel_5mm''s"),
+        (["steer-sim", "--max-pressure", "1e9Pa", "--output-dir", str(out)], "at most design 'three_sector_5mm''s"),
         (["steer-sim", "--max-pressure", "0.3", "--unit", "Pa", "--output-dir", str(out)], "in pascals"),
         (["steer-sim", "--max-pressure", "0.3", "--output-dir", str(out)], "--max-pressure 0.3: which unit?"),
         (["steer-sim", "--duration", "1e9", "--output-dir", str(out)], "at most 3600 s"),

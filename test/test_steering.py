@@ -13,15 +13,18 @@ from softcath_ros.core.allocation import Allocator
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose_single
 from softcath_ros.core.models import make_model
-from softcath_ros.core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
-                                        bend_of_tip, steering_design)
+from softcath_ros.core.prediction import arc_and_cap
+from softcath_ros.core.steering import (STEERING_MAX_BEND_DEG, STEERING_MAX_PRESSURE, SteeringController,
+                                        SteeringError, SteeringParams, bend_of_tip, steering_allocator,
+                                        steering_design, steering_model, steering_range)
 
-DESIGN = steering_design(load_design("three_channel_5mm"))
+DESIGN = steering_design(load_design("three_channel_5mm"), STEERING_MAX_PRESSURE)
 
 
-@pytest.fixture(scope="module")
-def built():
-    return build(SteeringScenario())
+@pytest.fixture(scope="module", params=["three_channel_5mm", "three_sector_5mm"])
+def built(request):
+    """Each design at its default steering range (three_sector_5mm's on the closed form: 0.22 bar)."""
+    return build(SteeringScenario(design=request.param))
 
 
 def _controller(**params):
@@ -225,11 +228,51 @@ def test_steer_sim_bad_input_is_one_line_exit_2(argv, words, capsys):
     assert len(err) == 1 and err[0].startswith("softcath steer-sim: error:") and words in err[0]
 
 
+def _lone_channel_tip_angles(allocator) -> list[float]:
+    """Degrees between the tip's direction and the base's axis, each channel alone at the allocator's
+    limit: the saturated bend along its own direction, read back from the tip position."""
+    _, cap = arc_and_cap(allocator.model, allocator.design.length)
+    angles = []
+    for direction in allocator.channel_directions:
+        tip = allocator.tip_position(allocator.allocate_bend(float(direction), 1e3))
+        angles.append(math.degrees(math.hypot(*bend_of_tip(tip, cap))))
+    return angles
+
+
+def test_default_steering_range_keeps_a_soft_tip_in_front_of_its_base():
+    """three_sector_5mm bends about ten times more than three_channel_5mm per bar: at 0.3 bar one
+    channel alone would wrap its 40 mm body far past its shaft (650 degrees), so its default range
+    ends where a channel alone turns the tip 90 degrees from the base's axis."""
+    allocator = steering_allocator("surrogate", load_design("three_sector_5mm"))
+    assert STEERING_MAX_BEND_DEG == 90.0
+    assert 0.05e5 < allocator.max_pressure < 0.95 * STEERING_MAX_PRESSURE
+    assert max(_lone_channel_tip_angles(allocator)) == pytest.approx(STEERING_MAX_BEND_DEG, abs=0.05)
+    below = steering_allocator(allocator.model, allocator.design, 0.98 * allocator.max_pressure)
+    assert max(_lone_channel_tip_angles(below)) < STEERING_MAX_BEND_DEG - 1.0
+    # the simulation, steer-sim and steer_node default to it
+    _, _, design = build(SteeringScenario(model="surrogate", truth="surrogate"))
+    assert design.name == "three_sector_5mm" and design.max_pressure == allocator.max_pressure
+
+
+def test_three_channel_keeps_its_0_3_bar_steering_range():
+    """A stiffer body is limited by 0.3 bar, not by the bend: one channel alone turns its tip ~61 deg."""
+    for rung in ("surrogate", "closed_form"):
+        model = steering_model(rung, load_design("three_channel_5mm"))
+        assert steering_range(model) == STEERING_MAX_PRESSURE
+    allocator = steering_allocator(model, model.design)
+    assert max(_lone_channel_tip_angles(allocator)) < 0.8 * STEERING_MAX_BEND_DEG
+
+
+def test_an_explicit_steering_limit_wins_lowered_to_the_design():
+    design = load_design("three_sector_5mm")
+    model = steering_model("closed_form", design)
+    assert steering_allocator(model, design, 2.5e4).max_pressure == 2.5e4 > steering_range(model)
+    assert steering_design(design, 1e7).max_pressure == design.max_pressure
+
+
 def test_steering_reads_the_shipped_surrogate_table_and_builds_none(monkeypatch):
     """The controller's and the rig's surrogate are the shipped table of the design as shipped: no
-    table is built at start-up (a steering limit of 0.3 bar is the allocator's, not a new design)."""
-    from softcath_ros.bench.steering_sim import SteeringScenario, build
-    from softcath_ros.core.steering import steering_allocator
+    table is built at start-up (the steering range is the allocator's limit, not a new design)."""
 
     def no_build(model):
         raise AssertionError(f"a surrogate table was built for {model.design.name} "
@@ -240,7 +283,7 @@ def test_steering_reads_the_shipped_surrogate_table_and_builds_none(monkeypatch)
     assert alloc.model.origin == "shipped" and alloc.max_pressure == STEERING_MAX_PRESSURE
     assert np.all(alloc.allocate([0.0, -200.0]).pressures <= STEERING_MAX_PRESSURE)
     allocator, truth, design = build(SteeringScenario(model="surrogate", truth="surrogate"))
-    assert allocator.model.origin == "shipped" and design.max_pressure == STEERING_MAX_PRESSURE
+    assert allocator.model.origin == "shipped" and design.max_pressure == steering_range(allocator.model)
     # the rig's truth answers all three channels pressurised (a rate-limited change of sector), the
     # controller's table refuses beyond its measured common-mode limit
     three = np.array([[8e3, 12e3, 4e3]])

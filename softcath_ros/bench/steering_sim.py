@@ -17,8 +17,8 @@ import numpy as np
 
 from ..core.allocation import Allocator
 from ..core.design import load_design
-from ..core.steering import (STEERING_MAX_PRESSURE, SteeringController, SteeringParams, steering_allocator,
-                             steering_design)
+from ..core.steering import (SteeringController, SteeringParams, steering_allocator, steering_design,
+                             steering_model, steering_range)
 from .sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 
 TRAJECTORIES = ("step", "circle")
@@ -39,10 +39,10 @@ def steering_rig_params(**overrides) -> RigParams:
 
 @dataclass
 class SteeringScenario:
-    design: str = "three_channel_5mm"
+    design: str = "three_sector_5mm"
     model: str = "closed_form"           # the controller's rung
     truth: str = "closed_form"           # the rig's rung
-    max_pressure: float = STEERING_MAX_PRESSURE
+    max_pressure: float | None = None    # Pa, the controller's limit; None: the design's steering range
     rig: RigParams = field(default_factory=steering_rig_params)
     tracker: TrackerParams = field(default_factory=TrackerParams)
     controller: SteeringParams = field(default_factory=SteeringParams)
@@ -105,10 +105,13 @@ class SteeringRun:
 
 def build(scenario: SteeringScenario):
     """(controller's allocator, truth model, design with the steering limit) for ``scenario``; both
-    rungs on the design as shipped (a surrogate reads its shipped table)."""
+    rungs on the design as shipped (a surrogate reads its shipped table). No ``max_pressure``: the
+    steering range on the controller's rung (core/steering.steering_range)."""
     shipped = load_design(scenario.design)
-    allocator = steering_allocator(scenario.model, shipped, scenario.max_pressure)
-    return allocator, truth_model(scenario.truth, shipped, scenario.rig), steering_design(shipped, scenario.max_pressure)
+    model = steering_model(scenario.model, shipped)
+    limit = steering_range(model) if scenario.max_pressure is None else scenario.max_pressure
+    allocator = steering_allocator(model, shipped, limit)
+    return allocator, truth_model(scenario.truth, shipped, scenario.rig), steering_design(shipped, limit)
 
 
 def simulate(scenario: SteeringScenario, trajectory: str, duration: float, built=None) -> SteeringRun:

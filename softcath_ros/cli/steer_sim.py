@@ -26,7 +26,7 @@ MAX_DURATION_S = 3600.0   # of targets: the run, its recording and its plot are 
 def register(sub) -> None:
     p = sub.add_parser("steer-sim", help="closed-loop steering on the simulated rig (nodes over DDS): "
                        "tip errors, recording, plot")
-    p.add_argument("--design", default="three_channel_5mm", help="design name or file")
+    p.add_argument("--design", default="three_sector_5mm", help="design name or file")
     p.add_argument("--trajectory", choices=("step", "circle"), default="step")
     p.add_argument("--duration", type=float, default=6.0, help="seconds of targets (default 6)")
     p.add_argument("--open-loop", action="store_true", help="run the controller open loop (feed-forward only)")
@@ -34,7 +34,8 @@ def register(sub) -> None:
     p.add_argument("--model", default="surrogate", help="rung of the controller and of the rig's truth (default "
                    "surrogate: the section rung's shipped table)")
     p.add_argument("--max-pressure", default=None, metavar="P",
-                   help="pressure limit, e.g. 0.25bar (default 0.3 bar, lowered to the design's)")
+                   help="pressure limit, e.g. 0.25bar (at most the design's; default the design's steering "
+                   "range: 0.3 bar, lower where one channel would turn the tip past 90 degrees)")
     add_unit_argument(p, "--max-pressure")
     p.add_argument("--latency", type=float, default=0.05, help="tracker latency, s")
     p.add_argument("--drop", type=float, default=0.2, help="fraction of tracker samples lost")
@@ -69,7 +70,7 @@ def run(args) -> int:
 
     from ..bench.steering_sim import SteeringScenario, run_metrics, simulate, steering_rig_params
     from ..bench.sim_rig import TrackerParams
-    from ..core.steering import STEERING_MAX_PRESSURE, SteeringParams
+    from ..core.steering import SteeringParams, steering_model, steering_range
     from ..graph import NodeGraph, stop_process
 
     if not (0 < args.duration <= MAX_DURATION_S):
@@ -80,7 +81,7 @@ def run(args) -> int:
 
     design = load_design(args.design)   # a wrong name or file is one line here, not a node that fails to start
     check_rung_names([args.model])
-    max_pressure = (min(STEERING_MAX_PRESSURE, design.max_pressure) if args.max_pressure is None
+    max_pressure = (steering_range(steering_model(args.model, design)) if args.max_pressure is None
                     else lowered_max_pressure(parse_pressure(args.max_pressure, "--max-pressure", args.unit), design))
     rig = steering_rig_params()
     mode = "open_loop" if args.open_loop else args.mode

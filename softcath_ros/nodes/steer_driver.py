@@ -34,7 +34,7 @@ from ..bench.sim_rig import RigParams, truth_model
 from ..bench.steering_sim import TRAJECTORIES, metrics, targets_for
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..core.steering import STEERING_MAX_PRESSURE, steering_design
+from ..core.steering import steering_design, steering_model, steering_range
 from ..recording import BagWriter
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
@@ -51,11 +51,13 @@ class SteerDriver(Node):
     def __init__(self, **kwargs):
         super().__init__(topics.STEER_DRIVER, **kwargs)
         p = partial(declare, self)
-        design = load_design(p("design", "three_channel_5mm", "design file or shipped design name"))
+        design = load_design(p("design", "three_sector_5mm", "design file or shipped design name"))
         truth = p("truth", "surrogate", "rung the simulated rig plays (for targets on its workspace)")
         shift = p("pressure_shift", 0.25, "the rig's pressure shift", minimum=0.0, maximum=0.99)
         scale = p("material_scale", 1.2, "the rig's material scale", minimum=0.05, maximum=20.0)
-        max_pressure = p("max_pressure", STEERING_MAX_PRESSURE, "the controller's pressure limit, Pa", minimum=1.0)
+        max_pressure = p("max_pressure", steering_range(steering_model(truth, design)),
+                         "the controller's pressure limit, Pa (default the design's steering range on the truth's rung)",
+                         minimum=1.0)
         self.kind = p("trajectory", "step", f"one of {TRAJECTORIES}", choices=TRAJECTORIES)
         self.duration = p("duration", 6.0, "seconds of targets", minimum=0.1, maximum=3600.0)
         rate = p("target_rate", 100.0, "tip_target rate, Hz", minimum=1.0, maximum=1000.0)

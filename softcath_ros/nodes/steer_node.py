@@ -18,7 +18,8 @@ newest; the watchdog counts from its arrival, and one older than ``command_timeo
 
 Parameters: design, model (default surrogate: the shipped table), mode (integral | adaptive | open_loop), the SteeringParams fields,
 publish_rate (Hz), frame_id, max_tip_distance (m), diagnostics_period (s), executor;
-max_pressure (Pa, read-only, default the steering range 0.3 bar, never above the design's).
+max_pressure (Pa, read-only, default the design's steering range on the rung, core.steering.steering_range:
+0.3 bar, lower where one channel alone would turn the tip past 90 degrees; never above the design's).
 Time is the node's ROS clock, which the tracker's stamps are compared with.
 """
 from __future__ import annotations
@@ -41,8 +42,8 @@ from ..core.design import load_design
 from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
-from ..core.steering import (MODES, STEERING_MAX_PRESSURE, SteeringController, SteeringError, SteeringParams,
-                             steering_allocator, steering_design)
+from ..core.steering import (MODES, SteeringController, SteeringError, SteeringParams, steering_allocator,
+                             steering_design, steering_model, steering_range)
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
@@ -71,7 +72,7 @@ class SteerNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         p = partial(declare, self)
-        design_name = p("design", "three_channel_5mm", "design file or shipped design name")
+        design_name = p("design", "three_sector_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung of the feed-forward (surrogate: the shipped table)")
         mode = p("mode", SteeringParams.mode, f"feedback: {' | '.join(MODES)}", choices=MODES)
         values = {"mode": mode}
@@ -87,14 +88,15 @@ class SteerNode(Node):
         refuse_unknown_parameters(self, later=("max_pressure", "max_tip_distance"))   # before the rung is built
         design = load_design(design_name)
         require_live_rung(model_name, design.name)
-        requested_max = p("max_pressure", min(STEERING_MAX_PRESSURE, design.max_pressure),
-                          "safety limit on every published pressure, Pa (never above the design's)", minimum=1.0)
+        model = steering_model(model_name, design)   # the rung on the shipped design
+        requested_max = p("max_pressure", steering_range(model), "safety limit on every published pressure, Pa "
+                          "(default the design's steering range; never above the design's)", minimum=1.0)
         if requested_max > design.max_pressure:
             self.get_logger().warning(f"max_pressure {requested_max:g} Pa exceeds design '{design.name}' limit "
                                       f"{design.max_pressure:g} Pa: using the design's")
         self.design = steering_design(design, requested_max)
         self.max_pressure = self.design.max_pressure
-        allocator = steering_allocator(model_name, design, self.max_pressure)   # the rung on the shipped design
+        allocator = steering_allocator(model, design, self.max_pressure)
         for said in (allocator.limited_by_rung, allocator.limited_by_peak):
             if said:
                 self.get_logger().warning(said)
