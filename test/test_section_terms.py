@@ -13,13 +13,14 @@ from softcath_ros.core.section_fe.terms.fibre import Fibre
 from softcath_ros.core.section_fe.terms.hoop import HoopRings
 from softcath_ros.core.section_fe.terms.lumen_fill import LumenFill
 from softcath_ros.core.section_fe.terms.pressure_volume import ChannelPressure
+from softcath_ros.core.section_fe.terms.ring_bending import RingBending
 from softcath_ros.core.section_fe.terms.silicone import SiliconeBody
 
 
 @pytest.fixture(scope="module")
 def problem_and_state():
     d = dataclasses.replace(load_design("implemented_5mm"), device=Device(diameter=1e-3, bending_stiffness=2e-6))
-    problem = SectionModel(d, mesh_size=d.outer_diameter / 8, lumen_fill=0.05).problem
+    problem = SectionModel(d, mesh_size=d.outer_diameter / 8, lumen_fill=0.05, ring_bending=True).problem
     rng = np.random.default_rng(3)
     x = problem.initial_state()
     x[:problem.n_u] += 0.003 * rng.standard_normal(problem.n_u)
@@ -31,7 +32,7 @@ def test_every_kind_of_term_is_listed(problem_and_state):
     problem, _, _ = problem_and_state
     kinds = {type(t) for t in problem.terms}
     # the filled lumen has no wall contact; the empty channel has
-    assert kinds == {SiliconeBody, LumenFill, Fibre, HoopRings, ChannelPressure, DeviceBending, WallContact}
+    assert kinds == {SiliconeBody, LumenFill, Fibre, HoopRings, RingBending, ChannelPressure, DeviceBending, WallContact}
 
 
 def _scatter(problem, term, c):

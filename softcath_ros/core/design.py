@@ -145,6 +145,13 @@ class Reinforcement:
         """Homogenised hoop membrane stiffness E A / pitch, N/m."""
         return self.youngs_modulus * self.thread_area / self.pitch
 
+    @property
+    def hoop_bending_stiffness_per_length(self) -> float:
+        """The rings' own bending stiffness E I / pitch, N m (I of a square or a round thread)."""
+        d = self.thread_diameter
+        second_moment = d ** 4 / 12.0 if self.shape == "square" else math.pi * d ** 4 / 64.0
+        return self.youngs_modulus * second_moment / self.pitch
+
 
 @dataclass(frozen=True)
 class Device:

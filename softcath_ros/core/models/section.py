@@ -66,6 +66,7 @@ class SectionModel(PathContinuation, StableStates, BendModel):
             "min_step": "smallest continuation step, Pa",
             "adaptive": "False: fixed steps of initial_step, no cutting",
             "hoop_tension_only": "rings carry tension only",
+            "ring_bending": "the rings' own bending stiffness E I / pitch (resists wrinkling)",
             "min_hole_gap": "stop when opposite walls of a hole come closer (fraction of its diameter)",
             "contact_resolution": "how finely the wall-contact pressure is located, Pa",
             "local_radius": "a command this close (Pa) to a solved one starts from it",

@@ -41,6 +41,7 @@ from .terms.fibre import Fibre
 from .terms.hoop import HoopRings
 from .terms.lumen_fill import FILL_MIN_JACOBIAN, LumenFill
 from .terms.pressure_volume import ChannelPressure
+from .terms.ring_bending import RingBending
 from .terms.silicone import SiliconeBody
 
 __all__ = ["SectionProblem", "N_GLOBAL", "FILL_MIN_JACOBIAN"]
@@ -52,12 +53,12 @@ class SectionProblem:
 
     def __init__(self, design: Design, mesh: SectionMesh, hoop_tension_only: bool = False,
                  end_cap_only: bool = False, lumen_fill: float | None = None,
-                 contact_distance: float | None = None):
+                 contact_distance: float | None = None, ring_bending: bool = False):
         """``lumen_fill``: the fill's shear modulus as a fraction of the silicone's (2 c1); the
         mesh must then have a fill region (``mesh_section(..., filled=...)``), and vice versa.
         ``contact_distance``: self-contact of every empty hole's wall (channels and lumen) with this
         barrier distance, as a fraction of the hole's diameter (of the circle of its area if not
-        round; ``terms/contact.py``); None: no contact.
+        round; ``terms/contact.py``); None: no contact. ``ring_bending``: the rings' own bending stiffness.
         ``end_cap_only``: the pressure acts only through the end caps (the closed form's load)."""
         self.design = design
         self.end_cap_only = end_cap_only
@@ -70,7 +71,7 @@ class SectionProblem:
         self.fill = None if not has_fill else np.flatnonzero(~mesh.silicone)   # fill element indices
         self.filled_holes = np.isin(np.arange(len(mesh.hole_edges)), mesh.filled)
         self._number_unknowns(contact_distance)
-        self._list_terms(hoop_tension_only, lumen_fill, contact_distance)
+        self._list_terms(hoop_tension_only, ring_bending, lumen_fill, contact_distance)
         self._place_gauge()
         # terms in order of assembly: the silicone (the costly one) last, so an inadmissible state
         # (crossed walls) is found before it is assembled
@@ -103,7 +104,7 @@ class SectionProblem:
         self.i_glob = self.n_u + np.arange(N_GLOBAL)
         self.elem_dofs = block_dofs(mesh.triangles, self.i_glob)
 
-    def _list_terms(self, hoop_tension_only: bool, lumen_fill: float | None,
+    def _list_terms(self, hoop_tension_only: bool, ring_bending: bool, lumen_fill: float | None,
                     contact_distance: float | None) -> None:
         """The terms of the potential (adding one: write a module in terms/ and list it here)."""
         design, mesh, X, R, c_ref = self.design, self.mesh, self.X, self.R, self.c_ref
@@ -129,6 +130,10 @@ class SectionProblem:
             self.terms.append(HoopRings(X, mesh.outer_edges,
                                         design.reinforcement.hoop_stiffness_per_length / (c_ref * R),
                                         hoop_tension_only, block_dofs(mesh.outer_edges, self.i_glob), self.n_u))
+            if ring_bending:
+                self.terms.append(RingBending(X, mesh.outer_edges,
+                                              design.reinforcement.hoop_bending_stiffness_per_length / (c_ref * R**3),
+                                              lambda nodes: block_dofs(nodes, self.i_glob), self.n_u))
         self.channels = [ChannelPressure(X, edges, i, self.end_cap_only, block_dofs(edges, self.i_glob), self.n_u)
                          for i, edges in enumerate(mesh.hole_edges[:design.n_channels])]
         self.terms += self.channels

@@ -30,6 +30,8 @@ class SectionSettings:
     min_step: float = 50.0              # Pa: smallest step (sharp turns of the path need it)
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
+    ring_bending: bool = False          # the rings' own bending stiffness (E I / pitch): without it a compressed
+                                        # ring wrinkles at the element scale (the held section at low pressure)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
     contact_resolution: float = 250.0   # Pa: how finely that pressure is located
     local_radius: float = 5000.0        # Pa: a command this close to a solved one starts from it
@@ -43,11 +45,13 @@ class SectionSettings:
                                            # None: no contact, the ramp stops when the walls touch
 
     def key(self) -> dict:
-        """The settings as they enter cache keys; an unset lumen_fill is left out, so results of
-        the empty-lumen rung keep the keys they had before the option existed."""
+        """The settings as they enter cache keys; an unset lumen_fill and ring_bending are left out, so
+        results without them keep the keys they had before the options existed."""
         out = asdict(self)
         if out["lumen_fill"] is None:
             del out["lumen_fill"]
+        if not out["ring_bending"]:
+            del out["ring_bending"]
         return out
 
     def resolved_mesh_size(self, design: Design) -> float:
@@ -91,6 +95,7 @@ def discretise(design: Design, settings: SectionSettings) -> DiscretisedSection:
     mesh_hash = hashlib.sha256(np.ascontiguousarray(mesh.nodes).tobytes()
                                + np.ascontiguousarray(mesh.triangles).tobytes()).hexdigest()[:16]
     problem = SectionProblem(design, mesh, hoop_tension_only=settings.hoop_tension_only,
+                             ring_bending=settings.ring_bending,
                              end_cap_only=settings.pressure_load == "end_cap",
                              lumen_fill=fill, contact_distance=settings.contact_distance)
     return DiscretisedSection(mesh=mesh, mesh_hash=mesh_hash, problem=problem)
