@@ -297,6 +297,16 @@ def test_allocate_tip_recovers_forward_pressures(three):
     assert math.atan2(pos[0], pos[2]) == pytest.approx(math.atan2(0.002, 0.02), rel=1e-9)  # on the bearing
 
 
+def test_a_tip_beyond_reach_on_a_held_bend_is_reported_not_reached_without_a_fault():
+    """A target far ahead of three_sector_5mm's tip (found by the node's fuzz test): the bend the
+    aim asks for is held at a limit, so the tip stops turning with the angle; the aim stops there
+    and says the tip is not reached (the secant step divided by zero before)."""
+    allocator = Allocator(make_model("surrogate", load_design(THREE_SECTOR_5MM), build=False), max_pressure=30000.0)
+    res = allocator.allocate_tip([0.0003244990130282306, 0.0, 0.23782701794564565])
+    assert not res.extras["tip_reachable"] and res.extras["tip_error_m"] > 0.1
+    assert np.all(np.isfinite(res.pressures)) and res.pressures.max() <= allocator.max_pressure
+
+
 def test_bad_requests_raise(three):
     allocator = Allocator(make_model("closed_form", three))
     with pytest.raises(AllocationError):

@@ -81,6 +81,8 @@ class BendTargets:
             if abs(miss) <= 1e-12 or result.saturated or angle == 0.0:
                 break
             slope = 0.5 if previous is None or previous[0] == angle else (miss - previous[1]) / (angle - previous[0])
+            if not slope > 0.0:   # the tip no longer turns with the angle (the bend is held at a limit)
+                break
             previous = (angle, miss)
             angle = max(angle - miss / slope, 0.0)   # an arc's tip bearing is half its angle
             miss, result, pos = off_bearing(angle)
