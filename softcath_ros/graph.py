@@ -183,6 +183,9 @@ def wait_output(proc: subprocess.Popen, mark: str, timeout_s: float = 60.0) -> s
     return text.decode(errors="replace")
 
 
+READY_BACKLOG = 256   # READY samples a ReadyWatch keeps between two polls (more than any graph's nodes)
+
+
 class ReadyWatch:
     """The nodes on ``domain`` that said they spin (``topics.READY``), by process id: a small rclpy
     node of its own context. ``poll(timeout_s)`` takes what arrived; ``close()`` ends it."""
@@ -214,7 +217,10 @@ class ReadyWatch:
             except (ValueError, KeyError, TypeError):
                 pass
 
-        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        # every node's one latched sample is kept until taken: with a depth of 1 a sample arriving
+        # before the previous one was taken replaced it, and that node never counted as ready
+        qos = QoSProfile(depth=READY_BACKLOG, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.node.create_subscription(String, topics.READY, on_ready, qos)
 
     def poll(self, timeout_s: float) -> None:

@@ -86,3 +86,42 @@ def test_the_least_recently_leased_domain_is_leased_first(tmp_path, monkeypatch)
         assert first.domain == 226 and last_leased(226) > now - 10
     with lease_domain((lo, hi)) as second:
         assert second.domain != 226
+
+
+@pytest.mark.ros
+def test_a_ready_watch_keeps_every_nodes_announcement_that_arrives_between_two_polls():
+    """Several nodes' latched READY samples arriving before the watch takes one are all counted
+    (with a depth of 1 each replaced the one before, and a node of the lab graph never counted as
+    ready under load)."""
+    import json
+    import time
+
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    from domains import private_domain
+    from softcath_ros.graph import ReadyWatch
+
+    domain = private_domain()
+    watch = ReadyWatch(domain)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    try:
+        nodes = [rclpy.create_node(f"announcer_{i}", context=context) for i in range(5)]
+        pubs = [n.create_publisher(String, topics.READY, qos) for n in nodes]
+        end = time.monotonic() + 60
+        while any(p.get_subscription_count() < 1 for p in pubs):
+            assert time.monotonic() < end, "the watch was not discovered"
+            time.sleep(0.05)
+        for i, pub in enumerate(pubs):
+            pub.publish(String(data=json.dumps({"node": f"/announcer_{i}", "pid": 1000 + i})))
+        time.sleep(1.0)   # every sample arrives before the watch takes any
+        end = time.monotonic() + 30
+        while len(watch.ready) < 5 and time.monotonic() < end:
+            watch.poll(0.1)
+        assert sorted(watch.ready) == [1000, 1001, 1002, 1003, 1004]
+    finally:
+        watch.close()
+        rclpy.try_shutdown(context=context)
