@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..continuation import OUTSIDE_MODEL
 from ..errors import ModelError
@@ -243,6 +242,9 @@ class TabulatedLaw:
         if b - a < 4:
             raise LawRangeError(f"{self.source}: at p = {pressure / PA_PER_BAR:.4f} bar fewer than 4 curvatures "
                                 "of the table are valid")
+        # imported here: scipy.interpolate costs every node that imports the rod (the simulated rig) 0.5 s
+        from scipy.interpolate import CubicSpline
+
         ks = self.table.curvatures[a:b]
         spline = CubicSpline(ks, m[a:b] + extra_stiffness * ks, extrapolate=True)
         stretch = CubicSpline(ks, lam[a:b], extrapolate=True)
