@@ -54,7 +54,7 @@ ELSEWHERE = [
     (("docs/tracker.md",), "softcath track ", "test_tracker.py::test_the_documented_commands_run_as_written"),
     (("docs/lab.md",), "softcath track ", "test_lab_doc.py::test_the_camera_lines_run_as_written"),
     (("docs/steering.md",), "softcath steer-sim --trajectory step",
-     "test_steer_nodes.py::test_steer_sim_step_settles_over_dds"),
+     "test_steer_nodes.py::test_steer_sim_step_line_runs_over_dds_and_beats_open_loop"),
     (("docs/lab.md", "docs/rig.md"), "softcath characterise --rig ros",
      "test_lab_doc.py::test_the_first_recording_line_runs_as_written_and_drives_every_managed_node"),
 ]

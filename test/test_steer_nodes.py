@@ -1,7 +1,7 @@
 """Steering over DDS, every node its own process on a private domain (few, short runs):
-a step settles on the target and holds it (softcath steer-sim on its defaults: three_sector_5mm, the
-surrogate, the design's steering range; its settling
-time against the 1 s target is measured by benchmarks/steering.py, not here, where the machine
+docs/steering.md's step line runs (softcath steer-sim on its defaults: three_sector_5mm, the
+surrogate, the design's steering range) and its closed loop beats open loop (how fast a step
+settles, against the 1 s target, is benchmarks/steering.py's measure, not here, where the machine
 may be busy);
 killing the tracker's publisher (sim_bench_node) makes steer_node fall back to open loop and
 say so on /diagnostics; the watchdog vents when the targets stop."""
