@@ -153,7 +153,7 @@ class Allocator(PairInverse, BendTargets):
         reach = answered_limit(model, self.max_pressure)
         if reach <= 0.05 * self.max_pressure:
             raise ModelError(f"allocation needs model '{model.name}' at max_pressure {self.max_pressure:g} Pa on "
-                             "each channel alone, but it did not converge ({single.message}); allocate with a "
+                             f"each channel alone, but it did not converge ({single.message}); allocate with a "
                              "lower max_pressure inside the rung's range")
         said = (f"model '{model.name}' answers each channel alone only up to {reach:.0f} Pa "
                 f"(not {self.max_pressure:g} Pa): allocating up to {reach:.0f} Pa")

@@ -21,9 +21,8 @@ from .prediction import angle_per_length
 
 # pressures on each channel's ray (0, max_pressure] sampled to find where |k| stops growing
 PEAK_SAMPLES = 64
-# the peak is refined by golden section to this fraction of max_pressure
+# the peak is refined to this fraction of max_pressure
 PEAK_XTOL = 1e-4
-_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 def answered_limit(model, max_pressure: float, iterations: int = 16) -> float:
@@ -54,20 +53,15 @@ def _bend(model, channel: int, pressures, rest) -> np.ndarray:
 
 
 def _peak_between(model, channel: int, lo: float, hi: float, rest, xtol: float) -> float:
-    """Pressure (Pa) in [lo, hi] where ``channel`` alone bends most (golden section: |k| rises then
-    falls there)."""
-    a, b = lo + (1 - _GOLDEN) * (hi - lo), lo + _GOLDEN * (hi - lo)
-    fa, fb = _bend(model, channel, [a, b], rest)
-    while hi - lo > xtol:
-        if fa >= fb:
-            hi, b, fb = b, a, fa
-            a = lo + (1 - _GOLDEN) * (hi - lo)
-            fa = _bend(model, channel, [a], rest)[0]
-        else:
-            lo, a, fa = a, b, fb
-            b = lo + _GOLDEN * (hi - lo)
-            fb = _bend(model, channel, [b], rest)[0]
-    return a if fa >= fb else b
+    """Pressure (Pa) in [lo, hi] where ``channel`` alone bends most (|k| rises then falls there):
+    scipy's bounded scalar minimiser on -|k| (an unanswered pressure counts as no bend)."""
+    from scipy.optimize import minimize_scalar
+
+    def less_bend(p):
+        bend = _bend(model, channel, [p], rest)[0]
+        return -bend if math.isfinite(bend) else 0.0
+
+    return float(minimize_scalar(less_bend, bounds=(lo, hi), method="bounded", options={"xatol": xtol}).x)
 
 
 def peak_limit(model, max_pressure: float, rest) -> tuple[float, int, float] | None:
