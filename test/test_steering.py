@@ -156,6 +156,29 @@ def test_fallback_on_stale_measurements_and_resume():
     assert states[0] == "open_loop" and states[-1] == "closed_loop"
 
 
+def test_late_measurement_is_compared_with_the_target_of_its_stamp():
+    """A target moving round the axis, measured exactly where it was 50 ms earlier: the tip is on
+    its path, so the integral stays near zero (compared with the newest target it would wind up
+    a tangential lead of speed x latency)."""
+    ctrl = _controller(mode="integral")
+    theta, hz, latency = 0.15, 0.2, 0.05
+
+    def target(t):
+        return _tip_of_bend(theta, 2 * math.pi * hz * t)
+
+    times = [i * 0.005 for i in range(600)]          # 3 s at 200 Hz, samples at 100 Hz
+    late = round(latency / 0.005)
+    for i, t in enumerate(times):
+        ctrl.set_target(target(t), t)
+        if i % 2 == 0 and i >= late:
+            assert ctrl.on_measurement(target(times[i - late]), times[i - late], t) == "accepted"
+        out = ctrl.step(t)
+    assert out.state == "closed_loop"
+    lag = theta * 2 * math.pi * hz * latency           # rad: what the newest target would have read
+    assert math.hypot(*out.integral) < 0.02 * lag
+    assert np.allclose(ctrl.target_bend_at(2.9), bend_of_tip(target(2.9), ctrl.cap))
+
+
 def test_watchdog_vents_when_targets_stop():
     ctrl = _controller(mode="integral", command_timeout=0.3)
     ctrl.set_target(_tip_of_bend(0.15, -math.pi / 2), 0.0)

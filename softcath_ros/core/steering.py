@@ -205,6 +205,7 @@ class SteeringController:
         self.latency: float | None = None   # s, smoothed age of the accepted measurements on arrival
         self._p_est = np.zeros(n)
         self._history: deque = deque()    # (time, estimated actuator pressures)
+        self._targets: deque = deque()    # (time taken up, target bend): the target in force at a stamp
         self._t_prev: float | None = None
         self._pressures = np.zeros(n)       # last allocation, Pa
         self._alloc_time: float | None = None
@@ -234,6 +235,21 @@ class SteeringController:
         if theta > 1e-4:   # below, the direction is noise: keep the frame
             self._frame = (self.target_bend[0] / theta, self.target_bend[1] / theta)
         self.watchdog.feed(arrived)
+        h = self._targets
+        while h and h[-1][0] >= now:      # a target replaced within one instant (or a clock step back)
+            h.pop()
+        h.append((now, self.target_bend))
+        while len(h) > 1 and now - h[1][0] > self.params.measurement_timeout:
+            h.popleft()                   # keep the one in force at the oldest acceptable stamp
+
+    def target_bend_at(self, stamp: float) -> np.ndarray:
+        """The target bend (rad) in force at ``stamp``: a measurement taken then is compared with it,
+        not with the newest target, or a target moving at v would read as a lead of v x latency."""
+        h = self._targets
+        if not h:
+            return self.target_bend
+        i = bisect_right(h, stamp, key=lambda e: e[0]) - 1
+        return h[max(i, 0)][1]
 
     def on_measurement(self, tip, stamp: float, now: float) -> str:
         """A measured tip position (m) taken at ``stamp``; returns "accepted" or why it was rejected."""
@@ -269,7 +285,7 @@ class SteeringController:
         age = now - stamp
         self.latency = age if self.latency is None else 0.9 * self.latency + 0.1 * age
         if self.closed and not self.saturated:
-            local = self.integral_local + self.integral_gain() * dt * self._to_local(self.target_bend - bend)
+            local = self.integral_local + self.integral_gain() * dt * self._to_local(self.target_bend_at(stamp) - bend)
             norm = math.hypot(*local)
             self.integral_local = local * (prm.max_integral / norm) if norm > prm.max_integral else local
         return "accepted"
