@@ -12,6 +12,7 @@ from softcath_ros.core.continuation import (LIMIT_POINT, NUMERICAL_FAILURE, OUTS
 from softcath_ros.core.errors import ModelError
 from softcath_ros.core.model_selection import select_model
 from softcath_ros.core.scene import scene_from_dict
+from softcath_ros.resources import checkout_root
 
 CASE = ladder.Case("1ch 40mm", "length", "implemented_5mm", 0.040, (1.0,), (10000.0, 20000.0, 30000.0, 40000.0))
 
@@ -208,3 +209,74 @@ def test_a_rungs_boundary_ends_where_its_answers_end():
                      "first_failure": ""}, "surrogate")
     assert ladder.run_rung(case, "surrogate", {}, False) == fresh
     assert cache.load_json("ladder", ladder.LADDER_VERSION, key, "surrogate") == fresh
+
+
+SECTOR = {c.name: c for c in ladder.CASES if c.design == "three_sector_5mm"}
+
+
+def _sweep_rows(name):
+    import json
+
+    return json.loads((checkout_root() / "benchmarks" / "results" / f"{name}.json").read_text())["results"]
+
+
+def test_the_fan_design_is_measured_on_one_channel_and_an_equal_pair_at_two_lengths():
+    assert {(c.length, c.direction) for c in SECTOR.values()} == {
+        (0.040, (1.0, 0.0, 0.0)), (0.040, (0.0, 1.0, 1.0)), (0.020, (1.0, 0.0, 0.0)), (0.020, (0.0, 1.0, 1.0))}
+    assert all(c.family == "direction" for c in SECTOR.values())
+    # fe3d where a committed sweep exists (20 mm), of the design at the case's length as it is now
+    assert [c.name for c in SECTOR.values() if c.fe3d_sweep] == ["sector one channel 20mm", "sector pair equal 20mm"]
+    assert all(c.fe3d_sweep[1] == c.sample.content_hash() for c in SECTOR.values() if c.fe3d_sweep)
+
+
+@pytest.mark.skipif(checkout_root() is None, reason="the committed fe3d sweeps (source checkout only)")
+def test_a_committed_fe3d_sweep_stands_as_the_cases_fe3d(monkeypatch):
+    """The one-fan sweep reached 0.1458 bar (interrupted): fe3d converged at the ladder's 0.05 and 0.10 bar
+    with the sweep's R_C, and nowhere above; the sweep stops there as interrupted, not as a failure. In
+    run_case those points have fe3d as reference (no tip error: the sweep records no tip), the section
+    rung's own error there is its error against fe3d, and the points above have the section rung."""
+    case = SECTOR["sector one channel 20mm"]
+    fe3d = ladder.committed_fe3d(case)
+    by_bar = {round(r["pressure_bar"], 3): r for r in _sweep_rows("fe3d_sector_ch0_20mm")}
+    conv = [p["converged"] for p in fe3d["predictions"]]
+    assert conv == [True, True] + [False] * 8
+    assert [p["radius_of_curvature_m"] for p in fe3d["predictions"][:2]] == [
+        by_bar[b]["radius_l_over_theta_mm"] * 1e-3 for b in (0.05, 0.1)]
+    assert fe3d["boundary_pa"] == 10000.0 and fe3d["stop_reason"] == ladder.SWEEP_INTERRUPTED
+    assert "interrupted after p = 0.1458 bar" in fe3d["first_failure"]
+    # the section rung on the same points: its rows as run_rung records them (fake, fast)
+    section = {**fe3d, "rung": "section", "boundary_pa": 27500.0, "stop_reason": "", "fails_beyond": False,
+               "predictions": [_pred(p, 0.9 * (0.0744 if i == 0 else 0.0243 if i == 1 else 0.01))
+                               | {"pressures_pa": [p, 0.0, 0.0]} for i, p in enumerate(case.magnitudes_pa)]}
+    monkeypatch.setattr(ladder, "run_rung", lambda *a, **k: section)
+    rows, label = ladder.run_case(case, [ladder.FE3D, ("section D/20", "section", {}, True)], say=lambda *a, **k: None)
+    assert label == "fe3d mesh 1.4, 1.2 mm layers / section D/20"
+    sec = _of(rows, "section D/20")
+    assert [r["reference"] for r in sec[:3]] == ["fe3d mesh 1.4, 1.2 mm layers"] * 2 + ["section D/20"]
+    assert sec[0]["rc_rel_error"] == pytest.approx(abs(0.9 * 0.0744 / fe3d["predictions"][0]["radius_of_curvature_m"] - 1))
+    assert sec[0]["tip_error_mm"] is None and sec[0]["direction_error_deg"] == pytest.approx(0.0, abs=1e-9)
+    # without fe3d (--no-fe3d) the sweep is not read: the section rung is the reference everywhere
+    rows, label = ladder.run_case(case, [ladder.FE3D, ("section D/20", "section", {}, True)], fe3d=False,
+                                  say=lambda *a, **k: None)
+    assert label == "section D/20"
+
+
+@pytest.mark.skipif(checkout_root() is None, reason="the committed fe3d sweeps (source checkout only)")
+def test_a_committed_sweep_that_is_not_the_case_is_refused():
+    """Another length, other channels, or the design changed since the sweep: refused in one line."""
+    pair = SECTOR["sector pair equal 20mm"]
+    assert [p["converged"] for p in ladder.committed_fe3d(pair)["predictions"]][:2] == [True, False]
+    for wrong, match in ((dataclasses.replace(pair, direction=(1.0, 1.0, 0.0)), "is not this case"),
+                         (dataclasses.replace(pair, length=0.04, fe3d_sweep=(pair.fe3d_sweep[0],
+                          pair.sample.with_length(0.04).content_hash())), "is not this case"),
+                         (dataclasses.replace(pair, fe3d_sweep=(pair.fe3d_sweep[0], "0" * 16)), "changed since")):
+        with pytest.raises(ModelError, match=match) as exc:
+            ladder.committed_fe3d(wrong)
+        assert "\n" not in str(exc.value)
+
+
+def test_a_reference_without_a_tip_gives_no_tip_error():
+    p, r = _pred(10000.0, 0.1), {**_pred(10000.0, 0.11), "tip_position_m": None}
+    e = ladder.errors(p, r)
+    assert e["tip_error_mm"] is None and e["rc_rel_error"] == pytest.approx(abs(0.1 / 0.11 - 1))
+    assert ladder.errors(p, _pred(10000.0, 0.11))["tip_error_mm"] > 0

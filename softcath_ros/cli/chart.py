@@ -254,12 +254,17 @@ def draw_lengths(rows: list[dict], path: str) -> str:
     return _save(plt, fig, path)
 
 
+def _case_design(rows: list[dict], case: str) -> str:
+    r = next(r for r in rows if r["case"] == case)
+    return f"{r['design']}, {float(r['length_m']) * 1e3:g} mm"
+
+
 def draw_directions(rows: list[dict], path: str) -> str:
     """R_C, tip and bending-direction error (worst over pressures) against the commanded direction."""
     plt = _pyplot()
     colours = _colours(rows)
     cases = list(dict.fromkeys(r["case"] for r in rows))
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    fig, axes = plt.subplots(3, 1, figsize=(max(12, 2.4 * len(cases)), 13), sharex=True)
     keys = (("rc_rel_error", 100, "R_C error [%]"), ("tip_error_mm", 1, "tip position error [mm]"),
             ("direction_error_deg", 1, "bending-direction error [deg]"))
     for s in dict.fromkeys(r["setting"] for r in rows):
@@ -273,17 +278,19 @@ def draw_directions(rows: list[dict], path: str) -> str:
                     ys.append(w * scale)
             if xs:
                 ax.plot(xs, ys, _style(s), color=colours[s], label=s)
-    labels = [f"{c}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})\nref. "
+    labels = [f"{c}\n{_case_design(rows, c)}\n(p = {next(r['direction'] for r in rows if r['case'] == c)})\nref. "
               + "\n+ ".join(dict.fromkeys(r["reference"] for r in rows if r["case"] == c and r["reference"]))
               for c in cases]
+    axes[-1].set_xticks(range(len(cases)), labels, fontsize=7)
     for ax, (_, _, name) in zip(axes, keys):
-        ax.set_xticks(range(len(cases)), labels, fontsize=7)
         ax.set_yscale("log")
-        ax.set_ylabel(f"worst {name} over the case's pressures")
+        ax.set_ylabel(f"worst {name}\nover the case's pressures")
     axes[2].set_ylim(bottom=1e-3)   # the one-channel direction is exact to ~1e-13 deg for every rung
     refs = sorted({r["reference"] for r in rows if r["reference"]})
     pressures = sorted({r["pressure_pa"] / PA_PER_BAR for r in rows})
-    _legend_right(axes[-1], *axes[0].get_legend_handles_labels(), fontsize=7)
-    fig.suptitle(f"3-channel design: error against bending direction, {', '.join(f'{p:g}' for p in pressures)} bar "
+    _legend_right(axes[0], *axes[0].get_legend_handles_labels(), fontsize=7)
+    designs = ", ".join(dict.fromkeys(r["design"] for r in rows))
+    fig.suptitle(f"3-channel designs ({designs}): error against bending direction,\n"
+                 f"{', '.join(f'{p:g}' for p in pressures)} bar "
                  f"(largest channel); reference: {'/'.join(refs)}", fontsize=10)
     return _save(plt, fig, path)

@@ -32,6 +32,10 @@ def register(sub) -> None:
     p.add_argument("--no-cache", action="store_true", help="recompute every cached result (= --refresh, all rungs)")
     p.add_argument("--cases", nargs="+", default=None, metavar="CASE",
                    help=f"a subset of: {', '.join(repr(c.name) for c in CASES)}")
+    p.add_argument("--keep", default=None, metavar="RESULTS.json",
+                   help="the rows of the cases not run now from results written before (STEM.json of --results): "
+                        "the envelope and the rows cover both, each case as it was measured (with --cases: "
+                        "re-measure some cases, keep the others' fe3d hours)")
     p.add_argument("--settings", nargs="+", default=None, metavar="LABEL",
                    help="a subset of the rung settings (labels as in the output); the reference must be among them")
     p.set_defaults(func=run)
@@ -62,29 +66,68 @@ def run(args) -> int:
     if args.results and not Path(args.results).parent.is_dir():
         raise SoftcathError(f"--results {args.results}: folder {Path(args.results).parent} does not exist")
     cases = [known_cases[c] for c in args.cases] if args.cases else CASES
+    kept, kept_meta = kept_rows(args.keep, known_cases, {c.name for c in cases}) if args.keep else ({}, {})
     settings = [known_settings[s] for s in args.settings] if args.settings else SETTINGS
     refresh = ("all",) if args.no_cache else () if args.refresh is None else tuple(args.refresh or ["all"])
     load_before = os.getloadavg()
     rows, references = [], {}
-    for case in cases:
+    for case in CASES:   # the rows in the ladder's order, whether measured now or kept
+        if case.name in kept:
+            rows += kept[case.name]
+            references[case.name] = kept_meta["references"].get(case.name, "")
+            print(f"case {case.name}: kept from {args.keep} (measured {kept_meta['measured'][case.name]['date']})")
+            continue
+        if case not in cases:
+            continue
         print(f"case {case.name} ({case.design}, {case.length * 1e3:g} mm, direction {case.direction}):", flush=True)
         case_rows, references[case.name] = run_case(case, settings, fe3d=not args.no_fe3d,
                                                     fe3d_three_channel=args.fe3d_three_channel, refresh=refresh)
         print(f"  reference: {references[case.name]}")
         rows += case_rows
+    done = [c for c in CASES if c in cases or c.name in kept]
     write_envelope(rows, out)
     report(rows)
     if args.results:
         stem = Path(args.results)
-        meta = {"cases": [dataclasses.asdict(c) for c in cases], "references": references,
+        now = {k: v for k, v in machine_meta(load_before).items() if k in ("git_commit", "date")}
+        meta = {"cases": [dataclasses.asdict(c) for c in done], "references": references,
+                "settings": [s[0] for s in settings],   # of the cases measured now
                 "note": "R_C = l / theta. Reference per point (column reference): fe3d where it converged, "
                         "else section D/20 (lumen contact); 3-channel cases: fe3d with --fe3d-three-channel "
-                        "(half body on a mirror plane) or where cached", **machine_meta(load_before)}
+                        "(half body on a mirror plane) or where cached; a case naming a committed fe3d sweep "
+                        "(fe3d_sweep): that sweep's points as fe3d (no tip recorded)", **machine_meta(load_before),
+                # per case the commit and date it was measured at (a kept case: as its file recorded it)
+                "measured": {c.name: kept_meta["measured"][c.name] if c.name in kept else now for c in done},
+                **({"kept": {"from": Path(args.keep).name, "cases": list(kept)}} if kept else {})}
         stem.with_suffix(".json").write_text(json_output.dumps({"meta": meta, "results": rows}, indent=2))
         with open(stem.with_suffix(".csv"), "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader()
             w.writerows(rows)
         print(f"wrote {stem}.{{csv,json}}")
-    print(f"wrote {out}" + ("" if len(cases) == len(CASES) else " (from a subset of the cases)"))
+    print(f"wrote {out}" + ("" if len(done) == len(CASES) else " (from a subset of the cases)"))
     return 0
+
+
+def kept_rows(path: str, known_cases: dict, running: set) -> tuple[dict, dict]:
+    """``--keep``: per case not run now, its rows from a results file written before (in its order),
+    and from that file's meta its reference and when it was measured (the file's ``measured`` entry,
+    else the file's commit and date); a case of the file no longer in the ladder is refused."""
+    import json
+
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text())
+        rows, meta = doc["results"], doc["meta"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SoftcathError(f"--keep {path}: not results written by --results ({type(exc).__name__}: {exc})") from None
+    unknown = sorted({r.get("case") for r in rows} - set(known_cases), key=str)
+    if unknown:
+        raise SoftcathError(f"--keep {path}: case(s) {unknown} are not ladder cases; known: {list(known_cases)}")
+    kept = {}
+    for r in rows:
+        if r["case"] not in running:
+            kept.setdefault(r["case"], []).append(r)
+    written = {"git_commit": meta.get("git_commit", "?"), "date": meta.get("date", "?")}
+    return kept, {"references": meta.get("references", {}),
+                  "measured": {c: (meta.get("measured") or {}).get(c, written) for c in kept}}

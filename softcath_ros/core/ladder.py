@@ -11,6 +11,10 @@ Cases (``CASES``), 0.05..0.5 bar in steps of 0.05 bar (the design limit, max_pre
   body for the third; being slow there (minutes per case), it runs on these cases only when asked
   for (``fe3d_three_channel``); a case it was run on before (in the cache, same solver version and
   options) uses that result.
+- family ``direction`` on the fan design (three_sector_5mm, the 2-DOF default): one channel and an
+  equal pair at 40 mm (its length; reference: the section rung) and at 20 mm, where fe3d is the
+  committed sweep the case names (``Case.fe3d_sweep``, read by ``committed_fe3d``, never solved:
+  fe3d on this design takes minutes per point; it reached 0.125 bar on one channel, 0.05 bar on the pair).
 
 The reference is chosen per point (the row's ``reference``): fe3d at its default mesh (mesh_size
 1.0, threads=1) where it converged at that pressure, else the section rung with lumen contact at
@@ -31,6 +35,7 @@ one measured again.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 import statistics
@@ -57,6 +62,9 @@ class Case:
     length: float             # m
     direction: tuple          # channel pressures per unit of the largest (the case's ray)
     magnitudes_pa: tuple      # the largest channel pressure at each point
+    # a committed fe3d sweep standing as the case's fe3d (committed_fe3d): (its name in
+    # benchmarks/results, the content hash of the design at the case's length it ran on)
+    fe3d_sweep: tuple = ()
 
     @property
     def pressures(self) -> np.ndarray:
@@ -76,6 +84,12 @@ CASES = [
     Case("3ch one channel", "direction", "three_channel_5mm", 0.040, (1.0, 0.0, 0.0), PRESSURES_PA),
     Case("3ch pair equal", "direction", "three_channel_5mm", 0.040, (1.0, 1.0, 0.0), PRESSURES_PA),
     Case("3ch pair 2:1", "direction", "three_channel_5mm", 0.040, (1.0, 0.5, 0.0), PRESSURES_PA),
+    Case("sector one channel", "direction", "three_sector_5mm", 0.040, (1.0, 0.0, 0.0), PRESSURES_PA),
+    Case("sector pair equal", "direction", "three_sector_5mm", 0.040, (0.0, 1.0, 1.0), PRESSURES_PA),
+    Case("sector one channel 20mm", "direction", "three_sector_5mm", 0.020, (1.0, 0.0, 0.0), PRESSURES_PA,
+         ("fe3d_sector_ch0_20mm", "6abc807f699478e3")),
+    Case("sector pair equal 20mm", "direction", "three_sector_5mm", 0.020, (0.0, 1.0, 1.0), PRESSURES_PA,
+         ("fe3d_sector_pair_20mm", "6abc807f699478e3")),
 ]
 FE3D = ("fe3d mesh 1.4, 1.2 mm layers", "fe3d", {"threads": 1}, True)   # the rung's default mesh and element
 # (label, rung, options, is a solver: timed as a cold sweep)
@@ -149,6 +163,68 @@ def run_rung(case: Case, rung: str, options: dict, solver: bool, refresh: bool =
            "predictions": [p.to_json() for p in preds], "contact_boundary_pa": contact_boundary(case, rung, options)}
     cache.save_json("ladder", LADDER_VERSION, key_parts, out, rung)
     return out
+
+
+SWEEP_INTERRUPTED = "sweep interrupted"   # a committed fe3d sweep's stop: measured no further, not a failure
+
+
+def committed_fe3d(case: Case) -> dict | None:
+    """fe3d's result on a case read from the committed sweep it names (``Case.fe3d_sweep``: written by
+    benchmarks/fe3d_sweep.py into benchmarks/results, so None outside a source checkout), in
+    ``run_rung``'s format. The sweep must be the case: the design it names at the case's length with
+    the content hash pinned in the case (a design changed since is refused), the case's channels at
+    equal pressure, the half body at the rung's default mesh (``FE3D``). A case point the sweep did not
+    reach (or that did not converge) is not converged, its message the sweep's; no tip (the sweep does
+    not record it)."""
+    from ..resources import checkout_root
+    from .models.fe3d import DEFAULT_LAYER_H, DEFAULT_MESH_SIZE
+
+    name, design_hash = case.fe3d_sweep
+    root = checkout_root()
+    if root is None:
+        return None
+    path = root / "benchmarks" / "results" / f"{name}.json"
+    if not path.is_file():
+        raise ModelError(f"case {case.name}: committed fe3d sweep {path} is missing")
+    doc = json.loads(path.read_text())
+    meta, rows = doc["meta"], doc["results"]
+    channels = meta["channel"] if isinstance(meta["channel"], list) else [meta["channel"]]
+    want = [i for i, v in enumerate(case.direction) if v]
+    if case.sample.content_hash() != design_hash:
+        raise ModelError(f"case {case.name}: design {case.design} changed since fe3d sweep {name} (content hash "
+                         f"{case.sample.content_hash()}, the sweep's {design_hash}): run fe3d on it again")
+    if (meta["design"] != case.design or abs(meta["length_m"] - case.length) > 1e-12 or sorted(channels) != want
+            or any(case.direction[i] != 1.0 for i in want) or not meta["half_model"]
+            or meta["mesh_size"] != DEFAULT_MESH_SIZE or meta["layer_h"] != DEFAULT_LAYER_H):
+        raise ModelError(f"case {case.name}: fe3d sweep {name} is not this case (design {meta['design']}, "
+                         f"{meta['length_m'] * 1e3:g} mm, channels {channels}, mesh {meta['mesh_size']}, "
+                         f"layers {meta['layer_h']} m, half {meta['half_model']})")
+    at = {round(r["pressure_bar"] * PA_PER_BAR, 3): r for r in rows}
+    preds, reached_s = [], 0.0
+    for mag, pressures in zip(case.magnitudes_pa, case.pressures):
+        r = at.get(round(float(mag), 3))
+        pred = {"pressures_pa": pressures.tolist(), "converged": bool(r and r["converged"])}
+        if pred["converged"]:
+            k, ky = r["curvature_per_m"], r["curvature_y_per_m"]
+            if abs(abs(ky) - k) > 1e-9 * max(k, 1.0):   # the half body about x = 0 bends in the y-z plane
+                raise ModelError(f"case {case.name}: fe3d sweep {name} bends off the y-z plane at {r['pressure_bar']} bar")
+            pred.update(curvature_per_m=[0.0, ky], radius_of_curvature_m=r["radius_l_over_theta_mm"] * 1e-3,
+                        centreline_radius_m=1.0 / k, tip_position_m=None)
+            reached_s = r["time_s"]
+        else:
+            pred.update(reason=meta["message"], curvature_per_m=None, radius_of_curvature_m=None,
+                        centreline_radius_m=None, tip_position_m=None)
+        preds.append(pred)
+    ok = [p["converged"] for p in preds]
+    n_ok = ok.index(False) if not all(ok) else len(ok)
+    return {"record": RECORD, "rung": "fe3d", "options": {**FE3D[2], "half": True}, "s_per_eval": reached_s / n_ok if n_ok else None,
+            "boundary_pa": float(case.magnitudes_pa[n_ok - 1]) if n_ok else 0.0,
+            "stop_reason": "" if all(ok) else stop_reason(meta["stop_reason"]) or SWEEP_INTERRUPTED,
+            "capabilities": list(rung_info("fe3d").models), "fails_beyond": not all(ok),
+            "first_failure": "" if all(ok) else f"{name}: {meta['message']}"[:300],
+            "loadavg_1min": [meta["load_average_before"][0], meta["load_average_after"][0]],
+            "predictions": preds, "contact_boundary_pa": None,
+            "source": {"sweep": name, "git_commit": meta["git_commit"], "date": meta["date"]}}
 
 
 def _solver_options(rung: str, options: dict) -> dict:
@@ -271,8 +347,9 @@ def errors(p: dict, r: dict) -> dict:
         return {"rc_rel_error": None, "tip_error_mm": None, "direction_error_deg": None}
     kp, kr = p["curvature_per_m"], r["curvature_per_m"]
     d = math.atan2(kp[1], kp[0]) - math.atan2(kr[1], kr[0])
+    tips = (p["tip_position_m"], r["tip_position_m"])   # None: not recorded (a committed fe3d sweep's)
     return {"rc_rel_error": abs(p["radius_of_curvature_m"] / r["radius_of_curvature_m"] - 1.0),
-            "tip_error_mm": 1e3 * float(np.linalg.norm(np.subtract(p["tip_position_m"], r["tip_position_m"]))),
+            "tip_error_mm": None if None in tips else 1e3 * float(np.linalg.norm(np.subtract(*tips))),
             "direction_error_deg": abs(math.degrees((d + math.pi) % (2 * math.pi) - math.pi))}
 
 
@@ -297,6 +374,16 @@ def run_case(case: Case, settings=SETTINGS, fe3d: bool = True, fe3d_three_channe
     for label, rung, options, solver in settings:
         if rung not in RUNGS:
             say(f"  {label}: rung '{rung}' is not registered in core/models RUNGS: skipped")
+            continue
+        if rung == "fe3d" and case.fe3d_sweep:   # read from the committed sweep, never solved here
+            try:
+                committed = committed_fe3d(case) if fe3d else None
+            except ModelError as exc:
+                say(f"  {label}: not available ({exc})")
+                continue
+            if committed is not None:
+                results[label] = committed
+                say(f"  {label:28s} from the committed sweep {case.fe3d_sweep[0]}")
             continue
         if rung == "fe3d":
             options = fe3d_options(case, options)
