@@ -66,6 +66,10 @@ def main() -> int:
                              "tip_error_rms_mm": m["tip_error_rms_m"] * 1e3,
                              "steady_state_error_mm": m["steady_state_error_m"] * 1e3,
                              "settling_time_s": m["settling_time_s"],
+                             **{f"{part}_error_{stat}_mm": (m[f"{part}_error_{stat}_m"] * 1e3 if kind == "circle"
+                                                            else None)
+                                for part, stat in (("radial", "rms"), ("tangential", "rms"), ("tangential", "mean"),
+                                                   ("axial", "rms"))},
                              "controller_core_fraction": m["controller_core_fraction"],
                              "final_gain": m["final_gain"], "wall_s": time.perf_counter() - t0})
                 print(json.dumps(rows[-1]), flush=True)

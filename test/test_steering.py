@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from softcath_ros.bench.sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
-from softcath_ros.bench.steering_sim import SteeringScenario, build, run_metrics, simulate, steering_rig_params
+from softcath_ros.bench.steering_sim import (SteeringScenario, build, metrics, run_metrics, simulate,
+                                             steering_rig_params)
 from softcath_ros.core.allocation import Allocator
 from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose_single
@@ -83,6 +84,46 @@ def test_saturation_along_the_target_direction_and_within_max_pressure():
     assert max(out.pressures) == pytest.approx(DESIGN.max_pressure)
     b = ctrl.model_bend(out.pressures)
     assert math.degrees(abs(math.atan2(b[1], b[0]) - phi)) < 0.5
+
+
+def test_saturation_with_an_adapted_gain_below_one_keeps_limit_and_direction():
+    """The actuator bends as the model at half the pressure: the model's inverse is limited to half
+    of max_pressure, so the pressures sent (the model's doubled) reach max_pressure without a
+    channel clipping off the target's direction."""
+    ctrl = _controller(mode="adaptive")
+    ctrl.gain = 0.5                           # as adapted (kept in open loop, as after a fallback)
+    phi = math.radians(70.0)
+    for i in range(400):
+        ctrl.set_target(_tip_of_bend(1.2, phi), i * 0.005)   # far beyond reach
+        out = ctrl.step(i * 0.005)
+        assert np.all(out.pressures <= DESIGN.max_pressure) and np.all(out.pressures >= 0.0)
+    assert out.saturated and max(out.pressures) == pytest.approx(DESIGN.max_pressure)
+    b = ctrl.model_bend(0.5 * out.pressures)
+    assert math.degrees(abs(math.atan2(b[1], b[0]) - phi)) < 0.5
+
+
+def test_adapted_pressure_gain_is_the_shift_and_scale_on_a_nonlinear_rung():
+    """three_sector_5mm on its shipped surrogate (nonlinear in pressure), the rig 25% shifted and
+    20% stiffer: the truth bends as the model at (1 - 0.25) / 1.2 of the pressure, and the adapted
+    gain finds it, so the 0.2 Hz circle is followed within 0.3 mm (50 ms latency, 20% dropped)."""
+    scenario = SteeringScenario(model="surrogate", truth="surrogate", controller=SteeringParams(mode="adaptive"))
+    run = simulate(scenario, "circle", 6.0, build(scenario))
+    assert run.gain[-1] == pytest.approx(0.75 / 1.2, rel=0.02)
+    assert run_metrics(run, 6.0)["steady_state_error_m"] < 0.3e-3
+
+
+def test_circle_error_splits_into_radial_tangential_and_axial_parts():
+    """A tip 0.05 rad behind the target on a 10 mm circle and 0.2 mm too high: a lag (negative
+    tangential mean), the chord's small radial part, the axial offset."""
+    t = np.linspace(0.0, 10.0, 2001)
+    a, lag, r = 2 * math.pi * 0.2 * t, 0.05, 0.01
+    target = np.column_stack([r * np.cos(a), r * np.sin(a), np.full_like(t, 0.03)])
+    tip = np.column_stack([r * np.cos(a - lag), r * np.sin(a - lag), np.full_like(t, 0.0302)])
+    m = metrics(t, target, tip, "circle", 10.0)
+    assert m["tangential_error_mean_m"] == pytest.approx(-r * math.sin(lag), rel=1e-9)
+    assert m["tangential_error_rms_m"] == pytest.approx(r * math.sin(lag), rel=1e-9)
+    assert m["radial_error_rms_m"] == pytest.approx(r * (1 - math.cos(lag)), rel=1e-9)
+    assert m["axial_error_rms_m"] == pytest.approx(2e-4, rel=1e-9)
 
 
 def test_rate_limit_on_every_step():

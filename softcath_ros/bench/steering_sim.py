@@ -162,14 +162,28 @@ def metrics(t, target, tip, kind: str, duration: float, switch_times=None) -> di
     Steps: steady state = the largest over the holds of the mean error in each hold's last
     quarter; settling = the largest over the steps of the time until the error stays within
     0.5 mm for the rest of the hold (inf if it never does). Circle: steady state = RMS error
-    over the second half of the run (after the start-up transient); settling is not defined.
+    over the second half of the run (after the start-up transient); settling is not defined;
+    that error split about the target's direction from the axis (in the base's x-y plane):
+    radial (RMS), tangential (RMS, and its mean: positive = ahead of the target, negative =
+    lagging it) and axial (z, RMS).
     """
     t = np.asarray(t, dtype=float)
-    err = np.linalg.norm(np.asarray(tip) - np.asarray(target), axis=1)
+    diff = np.asarray(tip, dtype=float) - np.asarray(target, dtype=float)
+    err = np.linalg.norm(diff, axis=1)
     out = {"tip_error_rms_m": float(np.sqrt(np.mean(err ** 2))), "tip_error_max_m": float(err.max())}
     if kind == "circle":
         late = t >= 0.5 * duration
-        out.update(steady_state_error_m=float(np.sqrt(np.mean(err[late] ** 2))), settling_time_s=None)
+        d, tg = diff[late], np.asarray(target, dtype=float)[late]
+        u = tg[:, :2] / np.maximum(np.linalg.norm(tg[:, :2], axis=1), 1e-300)[:, None]
+        radial = d[:, 0] * u[:, 0] + d[:, 1] * u[:, 1]
+        tangential = d[:, 1] * u[:, 0] - d[:, 0] * u[:, 1]   # along the path's sense (counter-clockwise)
+
+        def rms(x):
+            return float(np.sqrt(np.mean(x ** 2)))
+
+        out.update(steady_state_error_m=rms(err[late]), settling_time_s=None, radial_error_rms_m=rms(radial),
+                   tangential_error_rms_m=rms(tangential), tangential_error_mean_m=float(tangential.mean()),
+                   axial_error_rms_m=rms(d[:, 2]))
         return out
     edges = list(switch_times) + [duration]
     steady, settling = [], []

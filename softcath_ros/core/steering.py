@@ -7,8 +7,9 @@ core/kinematics, independent of the arc's length, so of the axial stretch). A ti
 into a bend error through that inverse, which is the model's kinematic Jacobian inverted
 exactly instead of linearised.
 
-    command = (target_bend + integral) / gain      (bend vector, rad)
-    pressures = Allocator.allocate_bend(command)   (the model's inverse, minimum pressure)
+    command = target_bend + integral               (bend vector, rad)
+    pressures = Allocator(command) / gain          (the model's minimum-pressure inverse, then
+                                                    the adapted pressure gain; 1 unless adaptive)
 
 - Feed-forward: the Allocator on the model rung (core/allocation.py), with a lead of
   ``lead_time`` seconds on its pressures (p + lead_time dp/dt) that cancels the known
@@ -20,11 +21,14 @@ exactly instead of linearised.
   actuator's lag): gain <= delay_margin / delay, so a slower tracker slows the loop instead of
   making it ring.
 - Mode ``adaptive``: the same integral, plus a recursive least-squares estimate (with
-  forgetting) of the bending gain: measured bend = gain x the model's bend at the pressures
-  the actuator had when the sample was taken (the controller's own first-order estimate of
-  them, looked up at the sample's stamp, so latency is accounted for). On a rung linear in
-  pressure a pressure shift s and a material scale m are one gain (1 - s) / m; on the others
-  the gain absorbs most of them and the integral the rest. docs/steering.md compares the modes.
+  forgetting; Gauss-Newton, the model being nonlinear) of the pressure gain: measured bend =
+  the model's bend at gain x the pressures the actuator had when the sample was taken (the
+  controller's own first-order estimate of them, looked up at the sample's stamp, so latency
+  is accounted for). A pressure shift s and a material scale m are exactly that one gain
+  (1 - s) / m on every rung that answers for pressures alone, so the feed-forward is right in
+  every direction and the integral only takes what is left. The allocator's limit is lowered
+  to gain x max_pressure (gain < 1), so the pressures sent stay within max_pressure and a
+  saturated command keeps its direction. docs/steering.md compares the modes.
 - Mode ``open_loop``: feed-forward only (measurements are checked and counted, never used).
 
 Safety (stricter than allocation_node, same pieces): every pressure within [0, max_pressure]
@@ -76,7 +80,8 @@ class SteeringParams:
     integral_gain: float = 10.0         # 1/s, on the bend error (upper bound: see delay_margin)
     delay_margin: float = 1.0           # integral gain <= this / (measurement age + plant_time_constant)
     forgetting: float = 0.98            # RLS forgetting factor per accepted measurement
-    gain_bounds: tuple = (0.2, 5.0)     # the adapted gain stays within these
+    gain_bounds: tuple = (0.2, 5.0)     # the adapted pressure gain stays within these
+    gain_resolution: float = 0.01       # relative change of the adapted gain that re-limits the allocator
     lead_time: float = 0.096            # s, lag cancelled on the feed-forward (regulator 80 ms + actuator 16 ms)
     max_lead_step: float = 2000.0       # Pa: a larger change between two allocations is a step (no lead)
     plant_time_constant: float = 0.096  # s, first-order estimate of the actuator's pressure (adaptive regressor)
@@ -182,6 +187,8 @@ class SteeringController:
         self.allocator = allocator
         self.params = params or SteeringParams()
         self.max_pressure = allocator.max_pressure
+        self._alloc = allocator           # the inverse in use: limited to gain x max_pressure (gain < 1)
+        self._alloc_gain = 1.0            # the pressure gain that inverse and the pressures sent use
         # the arc's reference length (the channelled part) and the straight cap beyond it
         self.arc_length, self.cap = arc_and_cap(allocator.model, allocator.design.length)
         n = allocator.n_channels
@@ -192,9 +199,8 @@ class SteeringController:
         self.target_bend = np.zeros(2)
         self._frame = (1.0, 0.0)           # (cos, sin) of the target's direction
         self.integral_local = np.zeros(2)  # rad, the integral in the target's frame (radial, tangential)
-        self.gain = 1.0
-        self._sxx = 1e-6    # RLS sums (rad^2): the ratio is the gain; a tiny prior avoids 0/0
-        self._sxy = 1e-6
+        self.gain = 1.0     # adapted pressure gain: the actuator bends as the model at gain x pressure
+        self._info = 1e-6   # RLS information (rad^2 per unit gain^2); a tiny prior avoids 0/0
         self.state = "waiting"
         self.reason = "no target yet"
         self.closed = False               # feedback in use
@@ -315,19 +321,23 @@ class SteeringController:
         return min(prm.integral_gain, prm.delay_margin / delay) if delay > 0 else prm.integral_gain
 
     def _adapt(self, measured_bend: np.ndarray, stamp: float) -> None:
-        """One RLS step on measured = gain x model bend at the estimated pressures at ``stamp``."""
+        """One recursive Gauss-Newton step (RLS on the model linearised in the gain) on
+        measured = model bend at gain x the estimated actuator pressures at ``stamp``."""
         h = self._history
         if not h:
             return
-        i = bisect_right([t for t, _ in h], stamp) - 1
-        phi = self.model_bend(h[max(i, 0)][1])
-        if not np.all(np.isfinite(phi)):
+        i = bisect_right(h, stamp, key=lambda e: e[0]) - 1
+        pressures = h[max(i, 0)][1]
+        if not np.any(pressures > 0):
+            return                                   # at rest the bend says nothing about the gain
+        g, dg = self.gain, 1e-3 * self.gain
+        predicted = self.model_bend(g * pressures)
+        slope = (self.model_bend((g + dg) * pressures) - predicted) / dg   # rad per unit gain
+        if not (np.all(np.isfinite(predicted)) and np.all(np.isfinite(slope))):
             return
-        lam = self.params.forgetting
-        self._sxx = lam * self._sxx + float(phi @ phi)
-        self._sxy = lam * self._sxy + float(phi @ measured_bend)
+        self._info = self.params.forgetting * self._info + float(slope @ slope)
         lo, hi = self.params.gain_bounds
-        self.gain = min(max(self._sxy / self._sxx, lo), hi)
+        self.gain = min(max(g + float(slope @ (measured_bend - predicted)) / self._info, lo), hi)
 
     # ------------------------------------------------------------------ output
 
@@ -362,16 +372,17 @@ class SteeringController:
                                          f"{prm.measurement_timeout:g} s)" if age > prm.measurement_timeout
                             else "re-acquiring the measurement")
 
-        # The integral is in measured-bend units, divided by the gain like the target: the loop's
-        # bandwidth is then integral_gain whatever the plant's gain (in adaptive mode).
-        command = (self.target_bend + self.integral) / self.gain
+        # The pressure gain maps the whole command (target and integral) onto the actuator: the
+        # loop's bandwidth is then integral_gain whatever the plant's gain (in adaptive mode).
+        command = self.target_bend + self.integral
         if self._alloc_time is None or now - self._alloc_time >= prm.allocation_period - 1e-9:
             self._reallocate(command, now)
         return self._emit(np.clip(self._pressures + self._lead, 0.0, self.max_pressure), dt, now)
 
     def _reallocate(self, command: np.ndarray, now: float) -> None:
-        """New pressures for the bend ``command`` (one inverse through the model)."""
+        """New pressures for the bend ``command`` (one inverse through the model, then the gain)."""
         prm = self.params
+        self._follow_gain()
         result = self._allocate(command)
         u = self.target_bend / max(math.hypot(*self.target_bend), 1e-300)
         self.saturated = bool(result.saturated)
@@ -380,8 +391,9 @@ class SteeringController:
             result = self._allocate(u * math.hypot(*command))
             edge = np.asarray(result.achieved_curvature, dtype=float) * self.arc_length * result.axial_stretch
             if self.closed:
-                self.integral = edge * self.gain - self.target_bend
-        pressures = np.asarray(result.pressures, dtype=float)
+                self.integral = edge - self.target_bend
+        # the allocator's limit is _alloc_gain x max_pressure when that gain is below 1: within max_pressure
+        pressures = np.minimum(np.asarray(result.pressures, dtype=float) / self._alloc_gain, self.max_pressure)
         self._stretch = float(result.axial_stretch)
         step = pressures - self._pressures
         if prm.lead_time > 0 and self._alloc_time is not None and now > self._alloc_time and \
@@ -391,11 +403,27 @@ class SteeringController:
             self._lead = np.zeros_like(pressures)   # a step: the rate limiter shapes it, no lead
         self._pressures, self._alloc_time = pressures, now
 
+    def _follow_gain(self) -> None:
+        """Take up the adapted gain once it moved by ``gain_resolution``: the pressures sent are the
+        model's divided by it, so below 1 the model's inverse is limited to gain x max_pressure
+        (a new allocator: about a millisecond, only while the gain moves)."""
+        g = self.gain
+        if abs(g - self._alloc_gain) <= self.params.gain_resolution * self._alloc_gain:
+            return
+        if g >= 1.0:
+            alloc = self.allocator
+        else:
+            try:
+                alloc = Allocator(self.allocator.model, max_pressure=g * self.max_pressure)
+            except SoftcathError:    # a limit too low to allocate at: keep the last one (the pressures
+                return               # sent are clamped to max_pressure all the same)
+        self._alloc, self._alloc_gain = alloc, g
+
     def _allocate(self, bend):
         """Pressures for a bend vector (rad): its curvature on the last axial stretch (the integral
         absorbs the small change of stretch), one allocator call."""
         b = np.asarray(bend, dtype=float)
-        res = self.allocator.allocate(b / (self.arc_length * self._stretch))
+        res = self._alloc.allocate(b / (self.arc_length * self._stretch))
         if not res.converged or not res.reachable:
             raise SteeringError(f"allocation failed for bend {b.tolist()} rad: {res.message}")
         return res
