@@ -319,3 +319,19 @@ def test_optimise_refuses_a_rung_without_stretch(tmp_path, capsys):
         "softcath study: error: rung closed_form reports no principal stretch, which the optimiser's stretch limit "
         "needs: use --model section"]
     assert not any(tmp_path.iterdir())
+
+
+def test_a_studys_rung_error_is_not_claimed_where_the_rung_is_its_own_reference():
+    """A study on the fan design quotes the section rung's error from the shipped envelope: at 20 mm and
+    0.05 bar against fe3d (the committed sweep), 6.3 %; at 40 mm and 0.14 bar only the section rung itself
+    is the reference, so no error is claimed there (not 0 %)."""
+    from softcath_ros.core.studies.output import rung_accuracy
+
+    low = rung_accuracy("section", "three_sector_5mm", {}, 5000.0, 0.02)
+    assert low["measured_on"] == "three_sector_5mm" and 0.06 < low["error_rc_rel_at_pressure_and_length"] < 0.07
+    high = rung_accuracy("section", "three_sector_5mm", {}, 14000.0, 0.04)
+    assert high["error_rc_rel_at_pressure"] is None and "error_rc_rel_at_pressure_and_length" not in high
+    assert "at 0.15 bar not measured ('section D/20' is the reference there)" in high["note"]
+    surrogate = rung_accuracy("surrogate", "three_sector_5mm", {}, 14000.0, 0.04)
+    assert "(against section D/20)" in surrogate["note"] and surrogate["error_rc_rel_at_pressure"] < 0.01
+    assert "(against" not in rung_accuracy("section", "implemented_5mm", {}, 15000.0, 0.04)["note"]

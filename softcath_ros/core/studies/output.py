@@ -12,13 +12,16 @@ from ..units import PA_PER_BAR
 from .context import StudyContext, StudyResult
 
 
-def _at_pressure(entry: dict, pressure: float | None):
-    """The entry's R_C error at the measured pressure nearest ``pressure`` (None if not recorded)."""
+def _at_pressure(entry: dict, pressure: float | None, own: str | None = None):
+    """The entry's R_C error at the measured pressure nearest ``pressure`` and the reference there (None
+    if not recorded); the error None where that reference is ``own`` (the rung's own setting: nothing
+    measured)."""
     table = entry.get("error_rc_rel_by_pressure_pa") or []
     if pressure is None or not table:
         return None
     p, err = min(table, key=lambda pe: abs(pe[0] - pressure))
-    return p, err
+    ref = dict(entry.get("reference_by_pressure_pa") or []).get(p)
+    return p, None if ref == own else err, ref
 
 
 def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | None = None,
@@ -51,16 +54,21 @@ def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | 
         note = (f"max relative R_C error {m['error_rc_rel_max']:.1%} against {ref} on {measured_on} "
                 f"over {lo / PA_PER_BAR:g}..{hi / PA_PER_BAR:g} bar (ladder chart setting '{entry.get('setting')}')")
     out = {}
-    at = _at_pressure(m, pressure)
-    if at is not None and ref != entry.get("setting"):
+    own = entry.get("setting")
+    at = _at_pressure(m, pressure, own)
+    if at is not None and ref != own and at[1] is None:   # e.g. a design fe3d reached only at low pressure
+        out["error_rc_rel_at_pressure"] = None
+        note += f"; at {at[0] / PA_PER_BAR:g} bar not measured ('{own}' is the reference there)"
+    elif at is not None and ref != own:
         out["error_rc_rel_at_pressure"] = at[1]
-        note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}"
+        note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}" + (f" (against {at[2]})" if at[2] and set(at[2].split(" / ")) != set(ref.split(" + ")) else "")
         by_length = m.get("by_length") or {}
         key = next((k for k in by_length if length is not None and abs(float(k) - length) < 1e-9), None)
-        at_l = _at_pressure(by_length[key], pressure) if key is not None else None
+        at_l = _at_pressure(by_length[key], pressure, own) if key is not None else None
         if at_l is not None:
             out["error_rc_rel_at_pressure_and_length"] = at_l[1]
-            note += f" over all measured lengths, {at_l[1]:.1%} at the design's {length * 1e3:g} mm"
+            note += (f" over all measured lengths, {'not measured' if at_l[1] is None else f'{at_l[1]:.1%}'} "
+                     f"at the design's {length * 1e3:g} mm")
     if options:
         note += f"; this study ran it with options {options}"
     if measured_on != design_name:
