@@ -253,7 +253,8 @@ def test_a_committed_fe3d_sweep_stands_as_the_cases_fe3d(monkeypatch):
     assert label == "fe3d mesh 1.4, 1.2 mm layers / section D/20"
     sec = _of(rows, "section D/20")
     assert [r["reference"] for r in sec[:3]] == ["fe3d mesh 1.4, 1.2 mm layers"] * 2 + ["section D/20"]
-    assert sec[0]["rc_rel_error"] == pytest.approx(abs(0.9 * 0.0744 / fe3d["predictions"][0]["radius_of_curvature_m"] - 1))
+    fe3d_rc = fe3d["predictions"][0]["radius_of_curvature_m"]
+    assert sec[0]["rc_rel_error"] == pytest.approx(abs(0.9 * 0.0744 / fe3d_rc - 1))
     assert sec[0]["tip_error_mm"] is None and sec[0]["direction_error_deg"] == pytest.approx(0.0, abs=1e-9)
     # without fe3d (--no-fe3d) the sweep is not read: the section rung is the reference everywhere
     rows, label = ladder.run_case(case, [ladder.FE3D, ("section D/20", "section", {}, True)], fe3d=False,

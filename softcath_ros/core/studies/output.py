@@ -61,7 +61,8 @@ def rung_accuracy(rung: str, design_name: str, options: dict, pressure: float | 
         note += f"; at {at[0] / PA_PER_BAR:g} bar not measured ('{own}' is the reference there)"
     elif at is not None and ref != own:
         out["error_rc_rel_at_pressure"] = at[1]
-        note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}" + (f" (against {at[2]})" if at[2] and set(at[2].split(" / ")) != set(ref.split(" + ")) else "")
+        other = at[2] and set(at[2].split(" / ")) != set(ref.split(" + "))   # a reference of its own there
+        note += f"; at {at[0] / PA_PER_BAR:g} bar {at[1]:.1%}" + (f" (against {at[2]})" if other else "")
         by_length = m.get("by_length") or {}
         key = next((k for k in by_length if length is not None and abs(float(k) - length) < 1e-9), None)
         at_l = _at_pressure(by_length[key], pressure, own) if key is not None else None
