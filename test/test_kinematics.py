@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from softcath_ros.core.kinematics import backbone_poses, bending_angle, curvature_for_tip, tip_pose
+from softcath_ros.core.kinematics import (backbone_poses, bend_for_tip_single, bending_angle, curvature_for_tip,
+                                          tip_pose, tip_pose_single)
 
 L = 0.04
 
@@ -177,3 +178,20 @@ def test_inverse_with_a_cap_on_a_batch_and_off_the_workspace():
     assert not curvature_for_tip(np.array([0.0, 0.0, -0.01]), L, cap=CAP).reachable
     short = curvature_for_tip(np.array([0.002, 0.0, 0.01]), L - CAP, cap=CAP)
     assert not short.reachable and short.arc_length < L - CAP
+
+
+@pytest.mark.parametrize("cap", [0.0, 0.001, 0.005])
+def test_bend_for_tip_single_is_curvature_for_tip(cap):
+    """The plain-float inverse (the steering controller's, per target and sample) gives what the
+    array one gives: bends up to 4.5 rad (past the base plane), noisy tips, and no arc at all."""
+    rng = np.random.default_rng(4)
+    for i in range(300):
+        theta, phi = rng.uniform(0.0, 4.5), rng.uniform(-np.pi, np.pi)
+        k = theta / 0.039
+        tip = np.array(tip_pose_single(k * np.cos(phi), k * np.sin(phi), 0.039, cap)[0])
+        tip = tip + rng.normal(0.0, 1e-4, 3) * (i % 2)
+        inv = curvature_for_tip(tip, 1.0, cap=cap)
+        assert np.allclose(bend_for_tip_single(*tip, cap), [*inv.curvature, inv.arc_length], rtol=1e-12, atol=0)
+    for tip in ([0.0, 0.0, 0.04], [0.0, 0.0, -0.01], [0.0, 0.0, 0.0]):
+        inv = curvature_for_tip(np.array(tip), 1.0, cap=cap)
+        assert bend_for_tip_single(*tip, cap) == (0.0, 0.0, float(inv.arc_length))

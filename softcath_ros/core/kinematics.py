@@ -196,6 +196,40 @@ def tip_pose_single(kx: float, ky: float, arc_length: float, cap: float = 0.0):
             (-ky * sg, kx * sg, 0.0, math.cos(half)))
 
 
+def bend_for_tip_single(x: float, y: float, z: float, cap: float = 0.0) -> tuple[float, float, float]:
+    """``curvature_for_tip`` for one tip with plain floats: (kx, ky, arc length) of the arc that,
+    continued by a straight ``cap`` (m) along its end tangent, ends at (x, y, z) (m); arc length
+    inf where no arc from the base ends there. The same fixed-point iteration without numpy's
+    per-call overhead (tens of times faster for one tip), for a controller that inverts every
+    target and sample."""
+
+    def arc_through(px, py, pz):
+        r2 = px * px + py * py + pz * pz
+        if r2 <= 0:
+            return 0.0, 0.0, math.inf
+        rho = math.hypot(px, py)
+        if rho > 1e-12 * math.sqrt(r2):
+            arc = 2.0 * math.atan2(rho, pz) * r2 / (2.0 * rho)
+        else:
+            arc = pz if pz > 0 else math.inf
+        return 2.0 * px / r2, 2.0 * py / r2, arc
+
+    kx, ky, arc = arc_through(x, y, z)
+    if cap != 0:
+        for _ in range(100):
+            if not math.isfinite(arc):
+                break
+            theta = math.hypot(kx, ky) * arc
+            ksf = arc * _sinc_scalar(theta)   # the end tangent: (kx ksf, ky ksf, cos theta)
+            nkx, nky, narc = arc_through(x - cap * kx * ksf, y - cap * ky * ksf, z - cap * math.cos(theta))
+            done = (abs(narc - arc) <= 1e-14 * abs(arc) and abs(nkx - kx) <= 1e-14 * abs(kx) + 1e-300
+                    and abs(nky - ky) <= 1e-14 * abs(ky) + 1e-300)
+            kx, ky, arc = nkx, nky, narc
+            if done:
+                break
+    return kx, ky, arc
+
+
 def planar_backbone_poses(points, n_points: int):
     """Poses at ``n_points`` equally spaced (by arc length) along a solved planar backbone.
 

@@ -57,7 +57,7 @@ import numpy as np
 from .allocation import Allocator
 from .command_shaping import CommandWatchdog, RateLimiter
 from .errors import SoftcathError
-from .kinematics import curvature_for_tip
+from .kinematics import bend_for_tip_single
 from .prediction import arc_and_cap
 
 MODES = ("integral", "adaptive", "open_loop")
@@ -152,11 +152,11 @@ def steering_allocator(rung, design, max_pressure: float | None = None) -> Alloc
 def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
     """Bend vector theta (cos phi, sin phi), rad, of the body whose arc from the base, continued by a
     straight ``cap`` (m) along its end tangent, ends at ``tip`` (m)."""
-    p = np.asarray(tip, dtype=float)
-    if math.hypot(p[0], p[1]) == 0.0:
+    x, y, z = (float(v) for v in np.asarray(tip, dtype=float).ravel())
+    if math.hypot(x, y) == 0.0:
         return np.zeros(2)
-    inv = curvature_for_tip(p, 1.0, cap=cap)
-    return np.asarray(inv.curvature, dtype=float) * float(inv.arc_length)
+    kx, ky, arc = bend_for_tip_single(x, y, z, float(cap))
+    return np.array([kx * arc, ky * arc])
 
 
 @dataclass
