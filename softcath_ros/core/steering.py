@@ -167,7 +167,7 @@ class SteeringStep:
     state: str              # one of STATES
     reason: str             # why open loop / vented / waiting ("" when closed loop)
     saturated: bool         # the command lay beyond the reachable set
-    gain: float             # adapted bending gain (1 unless adaptive)
+    gain: float             # adapted pressure gain (1 unless adaptive)
     integral: np.ndarray    # (2,) rad
 
 
