@@ -285,14 +285,14 @@ def test_cache_keys_hold_the_contact_and_fill_settings(implemented_design):
     from softcath_ros.core.cache import key_of
     from softcath_ros.core.models.section import SectionModel, SectionSettings
 
-    # an unset lumen fill and ring bending are left out of the key; the contact's barrier distance is in it
+    # an unset lumen fill is left out of the key; the contact's barrier distance and the rings' bending are in it
     model = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8)
-    before = {k: v for k, v in asdict(model.settings).items() if k not in ("lumen_fill", "ring_bending")}
-    assert model.settings.key() == before and before["contact_distance"] == 0.01
+    before = {k: v for k, v in asdict(model.settings).items() if k != "lumen_fill"}
+    assert model.settings.key() == before and before["contact_distance"] == 0.01 and before["ring_bending"]
     parts = {"design": implemented_design.content_hash(), "settings": before,
              "mesh_nodes": model.mesh.n_nodes, "mesh": model.mesh_hash, "pressures": [[0.0]]}
     assert model.cache_key(np.zeros((1, 1))) == key_of(SectionModel.solver_version, parts)
-    for other in ({"lumen_fill": 0.01}, {"contact_distance": 0.02}, {"contact_distance": None}, {"ring_bending": True}):
+    for other in ({"lumen_fill": 0.01}, {"contact_distance": 0.02}, {"contact_distance": None}, {"ring_bending": False}):
         changed = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 8, **other)
         assert changed.cache_key(np.zeros((1, 1))) != model.cache_key(np.zeros((1, 1)))
     assert SectionSettings(lumen_fill=0.02).key()["lumen_fill"] == 0.02

@@ -52,7 +52,7 @@ _CACHED_ARRAYS = ("curvature", "axial_stretch", "converged", "message", "channel
 
 class SectionModel(PathContinuation, StableStates, BendModel):
     name = "section"
-    solver_version = "section-7"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states; 7: Triangle mesher)
+    solver_version = "section-8"   # bump when the discretisation or the solver changes an answer (4-5: 3-fold mesh, best-fit frame; 6: saddles left for stable states; 7: Triangle mesher; 8: the rings' bending on, the factor's pattern kept across contact changes)
     info = RungInfo(
         summary="2.5D finite-strain FE of the cross-section: the long-actuator limit",
         models=("free_bending", "device_stiffness"),

@@ -30,7 +30,7 @@ class SectionSettings:
     min_step: float = 50.0              # Pa: smallest step (sharp turns of the path need it)
     adaptive: bool = True               # False: fixed steps of initial_step, no cutting
     hoop_tension_only: bool = False     # rings carry compression too (as the reference FE's solid rings)
-    ring_bending: bool = False          # the rings' own bending stiffness (E I / pitch): without it a compressed
+    ring_bending: bool = True           # the rings' own bending stiffness (E I / pitch): without it a compressed
                                         # ring wrinkles at the element scale (the held section at low pressure)
     min_hole_gap: float = 0.05          # stop when opposite walls of a hole come closer (x its diameter)
     contact_resolution: float = 250.0   # Pa: how finely that pressure is located
@@ -45,13 +45,11 @@ class SectionSettings:
                                            # None: no contact, the ramp stops when the walls touch
 
     def key(self) -> dict:
-        """The settings as they enter cache keys; an unset lumen_fill and ring_bending are left out, so
-        results without them keep the keys they had before the options existed."""
+        """The settings as they enter cache keys; an unset lumen_fill is left out, so results without
+        a fill keep the keys they had before the option existed."""
         out = asdict(self)
         if out["lumen_fill"] is None:
             del out["lumen_fill"]
-        if not out["ring_bending"]:
-            del out["ring_bending"]
         return out
 
     def resolved_mesh_size(self, design: Design) -> float:

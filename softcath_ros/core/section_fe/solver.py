@@ -18,6 +18,7 @@ from .problem import SectionProblem
 ARMIJO = 1e-4               # sufficient decrease of the potential, as a fraction of the slope
 MIN_DESCENT_STEP = 1 / 64   # the descent test stops cutting here (admissibility does not)
 ROUND_OFF = 1e-11           # potential differences below this (relative) are round-off
+UNION_SLACK = 0.1           # the factorised pattern may keep this fraction more entries than the tangent's non-zeros
 ESCAPE_STEP = 1e-2          # the stable minimiser's step off a saddle (largest non-dimensional entry)
 
 
@@ -42,14 +43,23 @@ class LinearSolver:
 
     def _upper(self, K):
         """K's upper triangle without its zero entries (diagonal kept) as CSC arrays, and whether
-        its pattern is the one last factorised (then the symbolic factor is reused)."""
+        its pattern is the one last factorised (then the symbolic factor is reused).
+
+        The entries kept are those of the last factorised pattern as well, as long as they are at
+        most UNION_SLACK more than K's own: contact pairs entering and leaving the barrier's range
+        then reuse one symbolic analysis instead of redoing it at almost every iteration."""
         n = K.shape[0]
         rows = np.repeat(np.arange(n), np.diff(K.indptr))
         keep = (K.indices <= rows) & ((K.data != 0) | (K.indices == rows))
         last = self._pattern
-        same = (last is not None and len(last[2]) == len(keep) and np.array_equal(last[2], keep)
-                and (last[0] is K.indptr and last[1] is K.indices
-                     or np.array_equal(last[0], K.indptr) and np.array_equal(last[1], K.indices)))
+        same_arrays = last is not None and len(last[2]) == len(keep) and (
+            last[0] is K.indptr and last[1] is K.indices
+            or np.array_equal(last[0], K.indptr) and np.array_equal(last[1], K.indices))
+        same = False
+        if same_arrays:
+            union = keep | last[2]
+            if np.count_nonzero(union) <= (1 + UNION_SLACK) * np.count_nonzero(keep):
+                keep, same = union, np.array_equal(union, last[2])
         if not same:
             self._pattern = (K.indptr, K.indices, keep)
         # K symmetric: the CSR arrays of its lower triangle are the CSC arrays of its upper one.
