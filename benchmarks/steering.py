@@ -3,7 +3,7 @@
 Core-only simulation (bench/steering_sim.py, no DDS) of the 40 mm three_sector_5mm design
 (the steering default; ``--design`` for another),
 controller and rig truth on the section-rung surrogate (the table shipped for the design, the
-controller's inverse limited to the design's steering range, core/steering.steering_range, or
+controller's inverse limited to the design's steering range, core/steering_range.steering_range, or
 ``--max-pressure``), the rig 25% pressure-shifted with material scale 1.2,
 a 10 Hz actuator behind the 80 ms regulator, a 100 Hz tip tracker with 0.1 mm noise, 20% of the
 samples dropped, latency 50 ms and 150 ms; trajectories: three steps, and a 0.2 Hz circle.
@@ -43,7 +43,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="50 ms latency only, no DDS run")
     ap.add_argument("--design", default=SteeringScenario.design, help="design name or file (the core runs)")
     ap.add_argument("--max-pressure", type=float, default=None,
-                    help="the steering range, Pa (default the design's: core/steering.steering_range)")
+                    help="the steering range, Pa (default the design's: core/steering_range.steering_range)")
     ap.add_argument("--name", default="steering", help="results stem under benchmarks/results/")
     args = ap.parse_args()
     built = build(SteeringScenario(design=args.design, model=RUNG, truth=RUNG, max_pressure=args.max_pressure))

@@ -127,7 +127,7 @@ def test_steer_node_defaults_to_the_surrogate_on_its_shipped_table(monkeypatch):
     """In-process: with its defaults steer_node steers three_sector_5mm, its feed-forward the surrogate
     read from the table shipped for the design (none is built at start-up), limited to the design's
     steering range (below 0.3 bar: the allocator's limit, not a new design)."""
-    from softcath_ros.core.steering import STEERING_MAX_PRESSURE, steering_range
+    from softcath_ros.core.steering_range import STEERING_MAX_PRESSURE, steering_range
     from softcath_ros.nodes.steer_node import SteerNode
 
     def no_build(model):

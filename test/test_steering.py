@@ -15,9 +15,9 @@ from softcath_ros.core.design import load_design
 from softcath_ros.core.kinematics import tip_pose_single
 from softcath_ros.core.models import make_model
 from softcath_ros.core.prediction import arc_and_cap
-from softcath_ros.core.steering import (STEERING_MAX_BEND_DEG, STEERING_MAX_PRESSURE, SteeringController,
-                                        SteeringError, SteeringParams, bend_of_tip, steering_allocator,
-                                        steering_design, steering_model, steering_range)
+from softcath_ros.core.steering import SteeringController, SteeringError, SteeringParams, bend_of_tip
+from softcath_ros.core.steering_range import (STEERING_MAX_BEND_DEG, STEERING_MAX_PRESSURE, steering_allocator,
+                                              steering_design, steering_model, steering_range)
 
 DESIGN = steering_design(load_design("three_channel_5mm"), STEERING_MAX_PRESSURE)
 

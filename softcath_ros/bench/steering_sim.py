@@ -17,8 +17,8 @@ import numpy as np
 
 from ..core.allocation import Allocator
 from ..core.design import load_design
-from ..core.steering import (SteeringController, SteeringParams, steering_allocator, steering_design,
-                             steering_model, steering_range)
+from ..core.steering import SteeringController, SteeringParams
+from ..core.steering_range import steering_allocator, steering_design, steering_model, steering_range
 from .sim_rig import RigParams, SimulatedRig, TipTracker, TrackerParams, truth_model
 
 TRAJECTORIES = ("step", "circle")
@@ -106,7 +106,7 @@ class SteeringRun:
 def build(scenario: SteeringScenario):
     """(controller's allocator, truth model, design with the steering limit) for ``scenario``; both
     rungs on the design as shipped (a surrogate reads its shipped table). No ``max_pressure``: the
-    steering range on the controller's rung (core/steering.steering_range)."""
+    steering range on the controller's rung (core/steering_range.steering_range)."""
     shipped = load_design(scenario.design)
     model = steering_model(scenario.model, shipped)
     limit = steering_range(model) if scenario.max_pressure is None else scenario.max_pressure

@@ -70,7 +70,8 @@ def run(args) -> int:
 
     from ..bench.steering_sim import SteeringScenario, run_metrics, simulate, steering_rig_params
     from ..bench.sim_rig import TrackerParams
-    from ..core.steering import SteeringParams, steering_model, steering_range
+    from ..core.steering import SteeringParams
+    from ..core.steering_range import steering_model, steering_range
     from ..graph import NodeGraph, stop_process
 
     if not (0 < args.duration <= MAX_DURATION_S):

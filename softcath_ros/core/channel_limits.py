@@ -8,7 +8,7 @@ Two limits below the design's (or a requested) max_pressure, each said in one li
   e.g. a sector channel whose wall balloons): beyond it more pressure bends less, so a request
   there has two answers or none and allocating past it is never right.
 
-And one a caller may choose (steering's range, core/steering.py): ``bend_limit``, the smallest
+And one a caller may choose (steering's range, core/steering_range.py): ``bend_limit``, the smallest
 pressure at which one channel alone turns the tip a given angle away from the base's axis.
 """
 from __future__ import annotations

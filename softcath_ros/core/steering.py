@@ -32,7 +32,7 @@ exactly instead of linearised.
 - Mode ``open_loop``: feed-forward only (measurements are checked and counted, never used).
 
 Safety (stricter than allocation_node, same pieces): every pressure within [0, max_pressure]
-(the allocator's limit, by default the design's steering range: ``steering_range``; clamped
+(the allocator's limit, by default the design's steering range: ``steering_range.steering_range``; clamped
 again at the end), rate limited (RateLimiter), the command
 watchdog vents (ramped) when no target comes within ``command_timeout``. A measurement older
 than ``measurement_timeout`` on arrival, out of order, non-finite, or farther from the last
@@ -59,19 +59,10 @@ from .command_shaping import CommandWatchdog, RateLimiter
 from .errors import SoftcathError
 from .kinematics import bend_for_tip_single
 from .prediction import arc_and_cap
+from .steering_range import SteeringError
 
 MODES = ("integral", "adaptive", "open_loop")
-# The top of every design's steering range: above it one channel of three_channel_5mm balloons towards
-# lumen contact on the section rung (it bends 61 degrees at 0.3 bar, over 9 rad at 0.5 bar).
-STEERING_MAX_PRESSURE = 3.0e4   # Pa
-# A steered tip stays in the hemisphere in front of its base: one channel alone at the steering limit
-# turns the tip at most this far from the base's axis (a softer body gets a lower limit, not a wrap).
-STEERING_MAX_BEND_DEG = 90.0
 STATES = ("waiting", "closed_loop", "open_loop", "vented")
-
-
-class SteeringError(SoftcathError):
-    """A steering request or setting the controller cannot use."""
 
 
 @dataclass
@@ -108,45 +99,6 @@ class SteeringParams:
         lo, hi = self.gain_bounds
         if not 0 < lo <= 1 <= hi:
             raise SteeringError(f"steering gain_bounds {self.gain_bounds} must satisfy 0 < low <= 1 <= high")
-
-
-def steering_design(design, max_pressure: float):
-    """``design`` with its pressure limit lowered to ``max_pressure`` (Pa; never raised)."""
-    from dataclasses import replace
-
-    if not max_pressure > 0:
-        raise SteeringError(f"max_pressure {max_pressure} Pa must be positive")
-    return replace(design, max_pressure=min(float(max_pressure), float(design.max_pressure)))
-
-
-def steering_model(rung: str, design):
-    """``rung`` on ``design`` as shipped: a surrogate reads the table shipped for it (a lowered limit
-    would be another design, whose table would be built at start-up)."""
-    from .calibration_file import build_model
-
-    return build_model(rung, design)
-
-
-def steering_range(model) -> float:
-    """The default steering limit (Pa) on ``model`` (a rung on its design as shipped): the lowest of
-    STEERING_MAX_PRESSURE (0.3 bar), the design's max_pressure, and the pressure at which any channel
-    alone turns the tip STEERING_MAX_BEND_DEG (90 degrees) from the base's axis, so a steered tip stays
-    in the hemisphere in front of its base (channel_limits.bend_limit, on the rung the controller
-    inverts). three_channel_5mm keeps 0.3 bar (61 degrees there); three_sector_5mm, about ten times
-    as soft, stops where its 40 mm body would otherwise wrap back towards its shaft."""
-    from .channel_limits import bend_limit
-
-    top = min(STEERING_MAX_PRESSURE, float(model.design.max_pressure))
-    reached = bend_limit(model, min(top, float(model.pressure_range[1])), math.radians(STEERING_MAX_BEND_DEG))
-    return top if reached is None else reached[0]
-
-
-def steering_allocator(rung, design, max_pressure: float | None = None) -> Allocator:
-    """The feed-forward: ``rung`` (a name, built by ``steering_model``, or that model) on ``design``,
-    its inverse limited to ``max_pressure`` (Pa, never above the design's; None: ``steering_range``)."""
-    model = steering_model(rung, design) if isinstance(rung, str) else rung
-    limit = steering_range(model) if max_pressure is None else steering_design(design, max_pressure).max_pressure
-    return Allocator(model, max_pressure=limit)
 
 
 def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
@@ -453,6 +405,5 @@ class SteeringController:
         self.state, self.reason = state, reason
 
 
-__all__ = ["MODES", "STEERING_MAX_BEND_DEG", "STEERING_MAX_PRESSURE", "steering_allocator", "steering_design",
-           "steering_model", "steering_range", "STATES", "MeasurementCounters", "SteeringController", "SteeringError", "SteeringParams",
+__all__ = ["MODES", "STATES", "MeasurementCounters", "SteeringController", "SteeringError", "SteeringParams",
            "SteeringStep", "bend_of_tip"]

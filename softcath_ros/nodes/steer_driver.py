@@ -34,7 +34,7 @@ from ..bench.sim_rig import RigParams, truth_model
 from ..bench.steering_sim import TRAJECTORIES, metrics, targets_for
 from ..core.design import load_design
 from ..core.errors import SoftcathError
-from ..core.steering import steering_design, steering_model, steering_range
+from ..core.steering_range import steering_design, steering_model, steering_range
 from ..recording import BagWriter
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos

@@ -18,7 +18,7 @@ newest; the watchdog counts from its arrival, and one older than ``command_timeo
 
 Parameters: design, model (default surrogate: the shipped table), mode (integral | adaptive | open_loop), the SteeringParams fields,
 publish_rate (Hz), frame_id, max_tip_distance (m), diagnostics_period (s), executor;
-max_pressure (Pa, read-only, default the design's steering range on the rung, core.steering.steering_range:
+max_pressure (Pa, read-only, default the design's steering range on the rung, core.steering_range.steering_range:
 0.3 bar, lower where one channel alone would turn the tip past 90 degrees; never above the design's).
 Time is the node's ROS clock, which the tracker's stamps are compared with.
 """
@@ -42,8 +42,8 @@ from ..core.design import load_design
 from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
-from ..core.steering import (MODES, SteeringController, SteeringError, SteeringParams, steering_allocator,
-                             steering_design, steering_model, steering_range)
+from ..core.steering import MODES, SteeringController, SteeringError, SteeringParams
+from ..core.steering_range import steering_allocator, steering_design, steering_model, steering_range
 from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
