@@ -76,6 +76,36 @@ def test_contact_term_gradient_and_hessian_match_finite_differences(implemented_
     assert wall.energy(crossed, None) == np.inf and wall.min_gap(crossed) < 0
 
 
+def _brute_force_active(wall, x):
+    """What ``WallContact._active`` stands for, over every pair: the pairs within the barrier's range,
+    or None where the wall polygon crosses itself."""
+    from softcath_ros.core.section_fe.terms.contact import WINDOW, segments_cross
+
+    P = wall._points(x)
+    if np.any(segments_cross(P, wall.cross_i, wall.cross_j)):
+        return None
+    s, t = line_distance2(*wall._pair_points(P), derivatives=False)
+    return np.flatnonzero((s < wall.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW))
+
+
+@pytest.mark.parametrize("squeeze", [1.0, 0.2, 0.03, 0.012, 0.005, -0.3])
+def test_the_contact_broad_phase_finds_exactly_the_pairs_every_pair_would(implemented_design, squeeze):
+    """The broad phase (segment midpoints in a k-d tree) keeps the same pairs, in the same order, as
+    testing every vertex against every segment, from a round lumen to one squeezed flat within the
+    barrier's range and one whose halves have passed through each other (inadmissible)."""
+    problem = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 12).problem
+    x, wall = _squeezed(problem, squeeze)
+    got, want = wall._active(x), _brute_force_active(wall, x)
+    if want is None:
+        assert squeeze < 0 and got is None
+        return
+    np.testing.assert_array_equal(got[1], want)
+    if squeeze in (1.0, 0.2):
+        assert len(want) == 0             # open: nothing within range
+    if squeeze in (0.012, 0.005):
+        assert len(want) > 0              # squeezed flat: the walls within the barrier's range
+
+
 def test_flat_wall_pressed_on_a_rigid_wall_balances_the_load_at_the_hand_solution_gap():
     """A long slit: its bottom wall is rigid, its top wall (free vertically) carries a line load
     q per unit length. Far from the ends the gap d is uniform and solves

@@ -34,6 +34,7 @@ class LinearSolver:
     def __init__(self):
         self._ldl = None
         self._pattern = None          # (indptr, indices, kept mask) of the factorised matrix
+        self._triangle = None         # (row of each entry, upper-triangle mask, diagonal mask) of that pattern
         self._shifted = None          # the factor of shifted tangents (solve_positive_definite)
         try:
             import qdldl  # noqa: F401
@@ -49,12 +50,15 @@ class LinearSolver:
         most UNION_SLACK more than K's own: contact pairs entering and leaving the barrier's range
         then reuse one symbolic analysis instead of redoing it at almost every iteration."""
         n = K.shape[0]
-        rows = np.repeat(np.arange(n), np.diff(K.indptr))
-        keep = (K.indices <= rows) & ((K.data != 0) | (K.indices == rows))
         last = self._pattern
-        same_arrays = last is not None and len(last[2]) == len(keep) and (
+        same_arrays = last is not None and len(last[2]) == len(K.indices) and (
             last[0] is K.indptr and last[1] is K.indices
             or np.array_equal(last[0], K.indptr) and np.array_equal(last[1], K.indices))
+        if not same_arrays or self._triangle is None:
+            rows = np.repeat(np.arange(n), np.diff(K.indptr))
+            self._triangle = (rows, K.indices <= rows, K.indices == rows)
+        rows, upper, diagonal = self._triangle
+        keep = upper & ((K.data != 0) | diagonal)
         same = False
         if same_arrays:
             union = keep | last[2]

@@ -27,6 +27,7 @@ d_hat^3 puts that gap at a fixed fraction of d_hat for a given contact pressure 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from . import INADMISSIBLE, Contribution
 
@@ -135,6 +136,8 @@ class WallContact:
         off = (sj - vi) % m                                  # segment j runs from vertex j to j + 1
         keep = (off >= 1) & (off <= m - 2)                   # every segment not incident to vertex i
         self.pv, self.ps = vi[keep], sj[keep]
+        self._pair_of = np.full((m, m), -1, dtype=np.int64)  # (vertex, segment) -> index into pv, ps
+        self._pair_of[self.pv, self.ps] = np.arange(len(self.pv))
         # segment pairs for the crossing test: neither the same nor neighbours
         si, sk = np.triu_indices(m, k=2)
         far = (sk - si) <= m - 2
@@ -158,16 +161,37 @@ class WallContact:
             return -1.0
         return float(point_segment_distance(*self._pair_points(P)).min())
 
+    def _candidates(self, P):
+        """A broad phase (exact: a superset of what it stands for, in the full lists' order):
+        (segment pairs that may cross, vertex-segment pairs that may be within the barrier's range),
+        from the segments' midpoints. Two segments cross only if their midpoints are within the
+        longest segment's length; a vertex within d_hat of a segment's line, its foot inside the
+        window, lies within d_hat + (1/2 + WINDOW) x that length of the segment's midpoint."""
+        m = self.m
+        Q = np.roll(P, -1, axis=0)
+        mid = 0.5 * (P + Q)
+        longest = float(np.max(np.linalg.norm(Q - P, axis=1)))
+        tree = cKDTree(mid)
+        pairs = tree.query_pairs(longest * (1 + 1e-9), output_type="ndarray")
+        i, k = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
+        keep = (k - i >= 2) & (k - i <= m - 2)
+        crossing = (i[keep], k[keep])
+        reach = (self.d_hat + (0.5 + WINDOW) * longest) * (1 + 1e-9)
+        near = cKDTree(P).sparse_distance_matrix(tree, reach, output_type="ndarray")
+        pair = self._pair_of[near["i"], near["j"]]
+        return crossing, np.sort(pair[pair >= 0])
+
     def _active(self, x):
         """(wall points, the pairs within the barrier's range) or None if inadmissible."""
         P = self._points(x)
-        if np.any(segments_cross(P, self.cross_i, self.cross_j)):
+        crossing, candidates = self._candidates(P)
+        if np.any(segments_cross(P, *crossing)):
             return None
-        s, t = line_distance2(*self._pair_points(P), derivatives=False)
+        s, t = line_distance2(*self._pair_points(P, candidates), derivatives=False)
         near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
         if np.any(s[near] <= 0):
             return None
-        return P, np.flatnonzero(near)
+        return P, candidates[near]
 
     def energy(self, x, pressures) -> float:
         got = self._active(x)
