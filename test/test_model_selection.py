@@ -276,8 +276,9 @@ def test_the_fan_design_is_judged_at_its_length_against_fe3d_where_the_committed
     rung, 20 mm against the committed fe3d sweeps to 0.125 / 0.05 bar, else the section rung). At 40 mm
     the body reaches its shaft from 0.1875 bar on one fan: a scene to 0.15 bar at 5 % gets the surrogate,
     one to 0.2 bar is refused by every answering rung's range. At 20 mm the surrogate and the section
-    rung are 6.2-6.3 % off fe3d at 0.05 bar on one fan: a 5 % scene there gets nothing (fe3d too slow),
-    a 10 % scene gets the surrogate."""
+    rung (section-8) are 4.1 % / 4.5 % off fe3d at 0.05 / 0.10 bar on one fan (6.2-6.3 % on section-7,
+    before the rings' bending): a 5 % scene there gets the surrogate, a 4 % scene nothing (fe3d too
+    slow)."""
     from softcath_ros.core.model_selection import measured_envelope
 
     env = load_envelope()
@@ -293,7 +294,7 @@ def test_the_fan_design_is_judged_at_its_length_against_fe3d_where_the_committed
     short = dict(design="three_sector_5mm", length=0.02, pressure_range=[0.0, 10000.0], required_rate=100.0)
     at_20 = measured_envelope(env["rungs"]["surrogate"], scene(**short, required_accuracy=0.05))
     assert at_20["reference_by_pressure_pa"][0] == [5000.0, "fe3d mesh 1.4, 1.2 mm layers"]
-    assert 0.05 < at_20["error_rc_rel_by_pressure_pa"][0][1] < 0.10
-    with pytest.raises(ModelError, match="surrogate: measured R_C error 6.22% exceeds"):
-        select_model(scene(**short, required_accuracy=0.05), env)
-    assert select_model(scene(**short, required_accuracy=0.10), env).rung == "surrogate"
+    assert 0.03 < at_20["error_rc_rel_by_pressure_pa"][0][1] < 0.05
+    assert select_model(scene(**short, required_accuracy=0.05), env).rung == "surrogate"
+    with pytest.raises(ModelError, match=r"surrogate: measured R_C error 4\.\d\d% exceeds"):
+        select_model(scene(**short, required_accuracy=0.04), env)
