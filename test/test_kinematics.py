@@ -195,3 +195,17 @@ def test_bend_for_tip_single_is_curvature_for_tip(cap):
     for tip in ([0.0, 0.0, 0.04], [0.0, 0.0, -0.01], [0.0, 0.0, 0.0]):
         inv = curvature_for_tip(np.array(tip), 1.0, cap=cap)
         assert bend_for_tip_single(*tip, cap) == (0.0, 0.0, float(inv.arc_length))
+
+
+@pytest.mark.parametrize("cap", [0.0, 0.001])
+def test_one_curvatures_backbone_is_the_batch_paths(cap):
+    """``backbone_poses`` of one curvature (the model node's path, its own 1-D formulas) equals the
+    batch path's, to round-off, from straight and tiny curvatures to a body bent past a full turn."""
+    rng = np.random.default_rng(5)
+    ks = [np.zeros(2), np.array([1e-12, 0.0]), np.array([0.0, -3e-9])]
+    ks += [rng.normal(size=2) * 10 ** rng.uniform(-3, 2.7) for _ in range(100)]
+    for k in ks:
+        p1, q1 = backbone_poses(k, 0.04, 20, cap)
+        p2, q2 = backbone_poses(k[None], np.array([0.04]), 20, np.array([cap]))
+        np.testing.assert_allclose(p1, p2[0], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(q1, q2[0], rtol=0, atol=1e-14)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -83,6 +84,8 @@ def backbone_poses(curvature, arc_length, n_points: int, cap=0.0):
     """
     if n_points < 2:
         raise ValueError(f"n_points = {n_points}: a backbone needs at least base and tip (2)")
+    if np.shape(curvature) == (2,) and np.ndim(arc_length) == 0 and np.ndim(cap) == 0:
+        return _single_backbone(float(curvature[0]), float(curvature[1]), float(arc_length), float(cap), n_points)
     k = np.asarray(curvature, dtype=float)[..., None, :]
     arc = np.asarray(arc_length, dtype=float)[..., None]
     fractions = np.linspace(0.0, 1.0, n_points)
@@ -93,6 +96,42 @@ def backbone_poses(curvature, arc_length, n_points: int, cap=0.0):
     if np.any(beyond > 0):
         pos = pos + beyond[..., None] * arc_tangent(k, on_arc)
     return pos, quat
+
+
+@lru_cache(maxsize=8)
+def _fractions(n_points: int) -> np.ndarray:
+    out = np.linspace(0.0, 1.0, n_points)
+    out.flags.writeable = False
+    return out
+
+
+def _sinc_of(t: np.ndarray) -> np.ndarray:
+    """sin(t)/t of a 1-D array, 1 at 0."""
+    return np.divide(np.sin(t), t, out=np.ones_like(t), where=t != 0.0)
+
+
+def _single_backbone(kx: float, ky: float, arc: float, cap: float, n_points: int):
+    """``backbone_poses`` for one curvature (the node's hot path: the same formulas on 1-D arrays,
+    without the batch path's broadcasting; equal to it to round-off)."""
+    s = (arc + cap) * _fractions(n_points)
+    on_arc = np.minimum(s, arc)
+    half = (0.5 * math.hypot(kx, ky)) * on_arc
+    g = 0.5 * on_arc * _sinc_of(half)                  # s sin(t/2)/t
+    position = np.empty((n_points, 3))
+    s2f2 = 2.0 * g * g                                  # s^2 (1 - cos t)/t^2
+    position[:, 0] = kx * s2f2
+    position[:, 1] = ky * s2f2
+    position[:, 2] = on_arc * _sinc_of(2.0 * half)
+    quat = np.zeros((n_points, 4))
+    quat[:, 0] = -ky * g
+    quat[:, 1] = kx * g
+    quat[:, 3] = np.cos(half)
+    if cap > 0.0:
+        theta = math.hypot(kx, ky) * arc
+        ksf = arc * (math.sin(theta) / theta if theta != 0.0 else 1.0)
+        beyond = s - on_arc
+        position += beyond[:, None] * np.array([kx * ksf, ky * ksf, math.cos(theta)])
+    return position, quat
 
 
 def bending_angle(curvature, length):
