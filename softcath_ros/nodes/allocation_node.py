@@ -42,7 +42,7 @@ from ..core.design import load_design
 from ..core.model_selection import require_live_rung
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import check_pressure_command
-from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
+from .diagnostics import DiagnosticsReporter, InputCounters, ThrottledLog, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
 from .executors import EXECUTORS, take_waiting
@@ -55,6 +55,7 @@ RCLError = _rclpy.RCLError
 class AllocationNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self._log = ThrottledLog(self.get_logger(), 1.0)
         p = partial(declare, self)
         design_name = p("design", "three_sector_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung used for the inverse")
@@ -140,7 +141,7 @@ class AllocationNode(Node):
         c = self.counters
         c.rejected += 1
         c.last_reason = reason
-        self.get_logger().warning(f"rejected command ({c.rejected} so far): {reason}", throttle_duration_sec=1.0)
+        self._log.warning("rejected", f"rejected command ({c.rejected} so far): {reason}")
 
     @property
     def vented(self) -> bool:
@@ -204,7 +205,7 @@ class AllocationNode(Node):
             if not result.converged:
                 self.counters.model_failed += 1
                 self.counters.last_reason = result.message
-                self.get_logger().warning(result.message, throttle_duration_sec=1.0)
+                self._log.warning("model_failed", result.message)
                 return
         was_vented = self.stream.vented
         if not self.stream.command(result.pressures, arrived):   # went stale while it was allocated

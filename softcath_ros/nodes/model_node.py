@@ -58,7 +58,7 @@ from ..core.prediction import arc_and_cap, body_reach, state_backbone
 from ..core.calibration_file import build_model, load_calibration
 from ..core.pressure_command import POLICIES, check_pressure_command
 from .cdr import HOST_IS_LITTLE_ENDIAN, PoseArrayBuffer, PoseStampedBuffer
-from .diagnostics import DiagnosticsReporter, InputCounters
+from .diagnostics import DiagnosticsReporter, InputCounters, ThrottledLog
 from .parameters import declare, refuse_unknown_parameters
 from .qos import RELIABILITIES, stream_qos
 from .executors import EXECUTORS, take_waiting
@@ -77,6 +77,7 @@ class ModelNode(Node):
     def __init__(self, **node_options):
         """``node_options`` go to rclpy's Node (e.g. ``context`` for in-process tests)."""
         super().__init__(topics.MODEL_NODE, **node_options)
+        self._log = ThrottledLog(self.get_logger(), WARN_THROTTLE_S)
         prm = self._declare_parameters()
         self._load_model(prm.design, prm.model, prm.scene, prm.calibration, prm.n_points)
         self.counters = InputCounters(extra={"design": self.design.name, "model": self.model.name,
@@ -331,11 +332,10 @@ class ModelNode(Node):
             c.last_reason = check.reason
             if check.status == "rejected":
                 c.rejected += 1
-                self.get_logger().warning(f"command rejected: {check.reason}", throttle_duration_sec=WARN_THROTTLE_S)
+                self._log.warning("rejected", f"command rejected: {check.reason}")
                 return
             c.clamped += 1
-            self.get_logger().warning(f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}",
-                                   throttle_duration_sec=WARN_THROTTLE_S)
+            self._log.warning("clamped", f"command clamped into [0, {self.max_pressure:g}] Pa: {check.reason}")
         key = check.pressures.tobytes()
         if key == self._answered_key:    # an unchanged command: the same pose, no model call
             positions, quats, angle = self._answered_pose
@@ -376,7 +376,7 @@ class ModelNode(Node):
     def _model_failed(self, reason: str) -> None:
         self.counters.model_failed += 1
         self.counters.last_reason = reason
-        self.get_logger().warning(reason, throttle_duration_sec=WARN_THROTTLE_S)
+        self._log.warning("model_failed", reason)
 
     def _publish_serialized(self, stamp_ns: int, positions: np.ndarray, quats: np.ndarray) -> None:
         tip, backbone = self._tip_buf, self._bb_buf

@@ -29,6 +29,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..recording import BagWriter, OfferedQos, RecordingError, adapt_request_to_offers
+from .diagnostics import ThrottledLog
 
 _REL = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DUR = {"transient_local": DurabilityPolicy.TRANSIENT_LOCAL, "volatile": DurabilityPolicy.VOLATILE}
@@ -69,6 +70,7 @@ class TopicRecorder:
         self.depth = depth
         self.message_info = message_info
         self._error: str | None = None
+        self._log = ThrottledLog(node.get_logger(), 5.0)
         self.poll()
         self._timer = node.create_timer(poll_period, self.poll)
         self._flush_timer = node.create_timer(0.2, self._flush_if_due)
@@ -96,8 +98,7 @@ class TopicRecorder:
                 continue
             types = {i.topic_type for i in infos}
             if len(types) > 1:
-                self.node.get_logger().warning(f"{topic}: publishers disagree on the type {sorted(types)}; not recorded",
-                                            throttle_duration_sec=5.0)
+                self._log.warning(topic, f"{topic}: publishers disagree on the type {sorted(types)}; not recorded")
                 continue
             type_name = types.pop()
             offers = [offered_qos(i.qos_profile) for i in infos]

@@ -37,7 +37,7 @@ from ..bench.hardware.regulator import Regulator
 from ..core.design import load_design
 from ..core.errors import SoftcathError
 from .device_node import DeviceNode
-from .diagnostics import diagnostic_status, publish_statuses
+from .diagnostics import ThrottledLog, diagnostic_status, publish_statuses
 from .parameters import declare
 from .executors import take_waiting
 from .runtime import run_node
@@ -49,6 +49,7 @@ class RegulatorNode(DeviceNode):
 
     def __init__(self, **node_options):
         super().__init__(topics.REGULATOR_NODE, **node_options)
+        self._log = ThrottledLog(self.get_logger(), 2.0)
         p = partial(declare, self)
         design = load_design(p("design", "implemented_5mm", "design file or shipped design name (channels, max_pressure)"))
         self.n = design.n_channels
@@ -129,8 +130,7 @@ class RegulatorNode(DeviceNode):
             return
         status = self.core.command(list(msg.data), arrived)
         if status in ("rejected", "clamped"):
-            self.get_logger().warning(f"pressure command {status}: {self.core.counters.last_command_problem}",
-                                      throttle_duration_sec=2.0)
+            self._log.warning(status, f"pressure command {status}: {self.core.counters.last_command_problem}")
 
     def tick(self) -> None:
         readings = self.core.tick()

@@ -35,7 +35,7 @@ from ..core.command_shaping import CommandWatchdog
 from ..core.design import load_design
 from ..core.model_selection import require_live_rung
 from ..core.errors import SoftcathError
-from .diagnostics import diagnostic_status, publish_statuses
+from .diagnostics import ThrottledLog, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .executors import take_waiting
 from .runtime import run_node
@@ -56,6 +56,7 @@ class SimBenchNode(Node):
 
     def __init__(self, **node_options):
         super().__init__(topics.SIM_BENCH_NODE, **node_options)
+        self._log = ThrottledLog(self.get_logger(), 2.0)
         p = partial(declare, self)
         design_name = p("design", "implemented_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung that stands for the true actuator (default: the section rung's table)")
@@ -162,8 +163,8 @@ class SimBenchNode(Node):
         p = np.asarray(msg.data, dtype=float)
         if p.shape != self.command.shape or not np.all(np.isfinite(p)):
             self.rejected += 1
-            self.get_logger().warning(f"rejected pressure command {list(msg.data)} (need "
-                                   f"{self.command.size} finite values)", throttle_duration_sec=2.0)
+            self._log.warning("rejected", f"rejected pressure command {list(msg.data)} (need "
+                                          f"{self.command.size} finite values)")
             return
         self.command = p  # the regulator clamps to [0, max_pressure]
         self.watchdog.feed(arrived)

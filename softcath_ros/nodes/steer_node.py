@@ -44,7 +44,7 @@ from ..core.errors import SoftcathError
 from ..core.pressure_command import check_pressure_command
 from ..core.steering import MODES, SteeringController, SteeringError, SteeringParams
 from ..core.steering_range import steering_allocator, steering_design, steering_model, steering_range
-from .diagnostics import DiagnosticsReporter, InputCounters, diagnostic_status, publish_statuses
+from .diagnostics import DiagnosticsReporter, InputCounters, ThrottledLog, diagnostic_status, publish_statuses
 from .parameters import declare, refuse_unknown_parameters
 from .qos import stream_qos
 from .executors import EXECUTORS, take_waiting
@@ -71,6 +71,7 @@ _DESCRIPTIONS = {
 class SteerNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self._log = ThrottledLog(self.get_logger(), 1.0)
         p = partial(declare, self)
         design_name = p("design", "three_sector_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung of the feed-forward (surrogate: the shipped table)")
@@ -149,8 +150,7 @@ class SteerNode(Node):
     def _reject(self, reason: str) -> None:
         self.counters.rejected += 1
         self.counters.last_reason = reason
-        self.get_logger().warning(f"rejected target ({self.counters.rejected} so far): {reason}",
-                                  throttle_duration_sec=1.0)
+        self._log.warning("rejected", f"rejected target ({self.counters.rejected} so far): {reason}")
 
     def _on_measured(self, msg: PoseStamped) -> None:
         if msg.header.frame_id != self.frame_id:
@@ -168,7 +168,7 @@ class SteerNode(Node):
             self.failed += 1
             self.counters.model_failed += 1
             self.counters.last_reason = str(exc)
-            self.get_logger().error(f"{exc}; ramping to zero", throttle_duration_sec=1.0)
+            self._log.error("model_failed", f"{exc}; ramping to zero")
             values = self.ctrl.limiter.step(np.zeros_like(self.ctrl.limiter.output), 1.0 / 200.0)
             state, reason = "vented", str(exc)
         check = check_pressure_command(values, self.design.n_channels, self.max_pressure, out_of_range="clamp")
