@@ -17,7 +17,7 @@ from ..section_fe.moment import MomentTable, moment_curvature
 from ..section_fe.settings import SectionSettings, discretise
 from .law import TabulatedLaw
 
-LAW_VERSION = "section-moment-3"   # bump when the table's computation changes (2: lumen contact; 3: stable held states only)
+LAW_VERSION = "section-moment-4"   # bump when the table's computation changes (2: lumen contact; 3: stable held states only; 4: the held minimiser's 200 iterations)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,9 @@ from .settings import SectionSettings
 from .solver import LinearSolver, newton
 
 
-STABLE_ITERATIONS = 60   # the held section's minimiser (where Newton reaches a saddle, or stalls on a snap)
+STABLE_ITERATIONS = 200  # the held section's minimiser (where Newton reaches a saddle, or stalls on a snap): 60
+                         # ended implemented_5mm's D/20 bent-back branch at 0.325 bar inside the lumen's fold,
+                         # before the moment's peak, so the rod knew no base capacity there
 
 
 @dataclass
