@@ -323,12 +323,12 @@ def test_optimise_refuses_a_rung_without_stretch(tmp_path, capsys):
 
 def test_a_studys_rung_error_is_not_claimed_where_the_rung_is_its_own_reference():
     """A study on the fan design quotes the section rung's error from the shipped envelope: at 20 mm and
-    0.05 bar against fe3d (the committed sweep), 6.3 %; at 40 mm and 0.14 bar only the section rung itself
+    0.05 bar against fe3d (the committed sweep), 4.2 % (section-8; 6.3 % on section-7); at 40 mm and 0.14 bar only the section rung itself
     is the reference, so no error is claimed there (not 0 %)."""
     from softcath_ros.core.studies.output import rung_accuracy
 
     low = rung_accuracy("section", "three_sector_5mm", {}, 5000.0, 0.02)
-    assert low["measured_on"] == "three_sector_5mm" and 0.06 < low["error_rc_rel_at_pressure_and_length"] < 0.07
+    assert low["measured_on"] == "three_sector_5mm" and 0.035 < low["error_rc_rel_at_pressure_and_length"] < 0.05
     high = rung_accuracy("section", "three_sector_5mm", {}, 14000.0, 0.04)
     assert high["error_rc_rel_at_pressure"] is None and "error_rc_rel_at_pressure_and_length" not in high
     assert "at 0.15 bar not measured ('section D/20' is the reference there)" in high["note"]

@@ -59,8 +59,7 @@ class AllocationNode(Node):
         p = partial(declare, self)
         design_name = p("design", "three_sector_5mm", "design file or shipped design name")
         model_name = p("model", "surrogate", "model rung used for the inverse")
-        calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung "
-                                                "('' = none)")
+        calibration_file = p("calibration", "", "calibration file from `softcath calibrate`, applied to the rung ('' = none)")
         self.max_rate = p("max_pressure_rate", 2.0e5, "largest change of any channel's pressure, Pa/s",
                           minimum=1.0, maximum=1e9)
         self.timeout = p("command_timeout", 0.5, "no command for this long (s): vent, ramped",
