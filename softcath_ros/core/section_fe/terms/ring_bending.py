@@ -13,18 +13,6 @@ import numpy as np
 from . import Contribution
 
 
-def outline_order(edges: np.ndarray) -> np.ndarray:
-    """The nodes of a closed chain of quadratic edges (start, mid, end) in order: s0, m0, s1, m1, ..."""
-    nxt = {int(e[0]): i for i, e in enumerate(edges)}
-    order, i = [], 0
-    for _ in range(len(edges)):
-        order += [int(edges[i, 0]), int(edges[i, 1])]
-        i = nxt[int(edges[i, 2])]
-    if i != 0:
-        raise ValueError("the outer edges do not form one closed chain")
-    return np.array(order)
-
-
 def _turning(P):
     """Turning angle at the middle of each node triplet P (b,3,2), and a, b (the two sides)."""
     a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 1]
@@ -49,7 +37,7 @@ _SIGNS_B = np.kron(np.outer([0.0, -1.0, 1.0], [0.0, -1.0, 1.0]), np.ones((2, 2))
 class RingBending:
     def __init__(self, X, outer_edges: np.ndarray, stiffness: float, dofs_of, n_u: int):
         """``stiffness`` B / (c_ref R^3); ``dofs_of(triplets)``: their global unknowns (b,9)."""
-        ring = outline_order(outer_edges)
+        ring = outer_edges[:, :2].ravel()      # corner and midside nodes in order (the mesher's closed chain)
         self.triplets = np.stack([np.roll(ring, 1), ring, np.roll(ring, -1)], -1)    # (b,3)
         self.X, self.n_u = X, n_u
         self.dofs = dofs_of(self.triplets)
