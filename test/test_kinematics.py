@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from softcath_ros.core.kinematics import (backbone_poses, bend_for_tip_single, bending_angle, curvature_for_tip,
-                                          tip_pose, tip_pose_single)
+from softcath_ros.core.kinematics import (backbone_poses, bending_angle, curvature_for_tip, tip_pose,
+                                          tip_pose_single)
 
 L = 0.04
 
@@ -181,20 +181,36 @@ def test_inverse_with_a_cap_on_a_batch_and_off_the_workspace():
 
 
 @pytest.mark.parametrize("cap", [0.0, 0.001, 0.005])
-def test_bend_for_tip_single_is_curvature_for_tip(cap):
-    """The plain-float inverse (the steering controller's, per target and sample) gives what the
-    array one gives: bends up to 4.5 rad (past the base plane), noisy tips, and no arc at all."""
+def test_one_tip_inverse_is_the_batch_inverse(cap):
+    """One tip (the steering controller's, per target and sample: plain floats) gives what the array
+    form gives for it as a batch of one and among others: bends up to 4.5 rad (past the base plane),
+    noisy tips, and no arc at all."""
     rng = np.random.default_rng(4)
+    tips = []
     for i in range(300):
         theta, phi = rng.uniform(0.0, 4.5), rng.uniform(-np.pi, np.pi)
         k = theta / 0.039
         tip = np.array(tip_pose_single(k * np.cos(phi), k * np.sin(phi), 0.039, cap)[0])
-        tip = tip + rng.normal(0.0, 1e-4, 3) * (i % 2)
-        inv = curvature_for_tip(tip, 1.0, cap=cap)
-        assert np.allclose(bend_for_tip_single(*tip, cap), [*inv.curvature, inv.arc_length], rtol=1e-12, atol=0)
-    for tip in ([0.0, 0.0, 0.04], [0.0, 0.0, -0.01], [0.0, 0.0, 0.0]):
-        inv = curvature_for_tip(np.array(tip), 1.0, cap=cap)
-        assert bend_for_tip_single(*tip, cap) == (0.0, 0.0, float(inv.arc_length))
+        tips.append(tip + rng.normal(0.0, 1e-4, 3) * (i % 2))
+    tips += [np.array(t) for t in ([0.0, 0.0, 0.04], [0.0, 0.0, -0.01], [0.0, 0.0, 0.0])]
+    whole = curvature_for_tip(np.array(tips), 0.039, cap=cap)
+
+    def row(inv, j):   # (kx, ky, arc length, reachable) of tip j
+        return [*np.reshape(inv.curvature, (-1, 2))[j], np.ravel(inv.arc_length)[j], bool(np.ravel(inv.reachable)[j])]
+
+    for i, tip in enumerate(tips):
+        one = curvature_for_tip(tip, 0.039, cap=cap)
+        assert one.curvature.shape == (2,) and np.ndim(one.arc_length) == 0 and np.ndim(one.reachable) == 0
+        for batch, j in ((curvature_for_tip(tip[None], 0.039, cap=cap), 0), (whole, i)):
+            assert row(one, 0)[3] == row(batch, j)[3]
+            if np.isfinite(row(batch, j)[2]):
+                assert np.allclose(row(one, 0)[:3], row(batch, j)[:3], rtol=1e-12, atol=0)
+            else:
+                assert row(one, 0)[:3] == row(batch, j)[:3]
+    assert 0 < whole.reachable.sum() < len(tips)
+    # without a length, reachable says only that an arc ends there
+    assert curvature_for_tip(tips[0], cap=cap).reachable and not curvature_for_tip(tips[-2], cap=cap).reachable
+    np.testing.assert_array_equal(curvature_for_tip(np.array(tips), cap=cap).reachable, np.isfinite(whole.arc_length))
 
 
 @pytest.mark.parametrize("cap", [0.0, 0.001])

@@ -182,7 +182,7 @@ def _arc_through(p):
     return np.where(r2[..., None] > 0, k, 0.0), arc
 
 
-def curvature_for_tip(tip, length, rtol: float = 1e-3, cap=0.0) -> TipInverse:
+def curvature_for_tip(tip, length=None, rtol: float = 1e-3, cap=0.0) -> TipInverse:
     """Inverse kinematics: the constant-curvature arc whose end, continued by a straight ``cap``
     (m) along its end tangent, is ``tip`` (m).
 
@@ -191,9 +191,17 @@ def curvature_for_tip(tip, length, rtol: float = 1e-3, cap=0.0) -> TipInverse:
     tip - cap t(theta), found by fixed-point iteration (a contraction: the cap is short against
     the arc). That arc's length must equal ``length`` (within ``rtol``) for the point to be
     reachable; otherwise the result says ``reachable = False`` and gives the arc length the point
-    would need.
+    would need (arc length inf: no arc from the base ends there). Without ``length``, reachable
+    says only that an arc ends there.
+
+    One tip (shape (3,), scalar cap and length) runs on plain floats, tens of times faster than the
+    array form, for a controller that inverts every target and sample; the answers are the same.
     """
     p = np.asarray(tip, dtype=float)
+    if p.shape == (3,) and np.ndim(cap) == 0 and np.ndim(length) == 0:
+        kx, ky, arc = _one_tip_inverse(float(p[0]), float(p[1]), float(p[2]), float(cap))
+        reachable = math.isfinite(arc) and (length is None or abs(arc - length) <= rtol * length)
+        return TipInverse(curvature=np.array([kx, ky]), arc_length=np.float64(arc), reachable=np.bool_(reachable))
     cap = np.asarray(cap, dtype=float)
     k, arc = _arc_through(p)
     if np.any(cap != 0):
@@ -209,38 +217,16 @@ def curvature_for_tip(tip, length, rtol: float = 1e-3, cap=0.0) -> TipInverse:
             k, arc = k_new, arc_new
             if done:
                 break
-    reachable = np.isfinite(arc) & (np.abs(arc - length) <= rtol * np.asarray(length))
+    reachable = np.isfinite(arc)
+    if length is not None:
+        reachable &= np.abs(arc - length) <= rtol * np.asarray(length)
     return TipInverse(curvature=k, arc_length=arc, reachable=reachable)
 
 
-def _sinc_scalar(t: float) -> float:
-    # Taylor below 1e-4: the error term t^4/120 is below double precision there.
-    return 1.0 - t * t / 6.0 if abs(t) < 1e-4 else math.sin(t) / t
-
-
-def tip_pose_single(kx: float, ky: float, arc_length: float, cap: float = 0.0):
-    """``tip_pose`` for one backbone with plain floats: ((x, y, z), (qx, qy, qz, qw)).
-
-    Same formulas without numpy's per-call overhead (about 10x faster for one pose),
-    for nodes that answer one command at a time.
-    """
-    s = arc_length
-    theta = math.hypot(kx, ky) * s
-    half = 0.5 * theta
-    sinc_half = _sinc_scalar(half)
-    s2f2 = s * s * 0.5 * sinc_half * sinc_half
-    sg = s * 0.5 * sinc_half
-    ksf = cap * s * _sinc_scalar(theta)   # the cap along the end tangent
-    return ((kx * (s2f2 + ksf), ky * (s2f2 + ksf), s * _sinc_scalar(theta) + cap * math.cos(theta)),
-            (-ky * sg, kx * sg, 0.0, math.cos(half)))
-
-
-def bend_for_tip_single(x: float, y: float, z: float, cap: float = 0.0) -> tuple[float, float, float]:
-    """``curvature_for_tip`` for one tip with plain floats: (kx, ky, arc length) of the arc that,
-    continued by a straight ``cap`` (m) along its end tangent, ends at (x, y, z) (m); arc length
-    inf where no arc from the base ends there. The same fixed-point iteration without numpy's
-    per-call overhead (tens of times faster for one tip), for a controller that inverts every
-    target and sample."""
+def _one_tip_inverse(x: float, y: float, z: float, cap: float = 0.0) -> tuple[float, float, float]:
+    """``curvature_for_tip``'s arc for one tip on plain floats: (kx, ky, arc length) of the arc that,
+    continued by a straight ``cap`` (m) along its end tangent, ends at (x, y, z) (m); arc length inf
+    where no arc from the base ends there. ``_arc_through`` and the array iteration, per float."""
 
     def arc_through(px, py, pz):
         r2 = px * px + py * py + pz * pz
@@ -267,6 +253,28 @@ def bend_for_tip_single(x: float, y: float, z: float, cap: float = 0.0) -> tuple
             if done:
                 break
     return kx, ky, arc
+
+
+def _sinc_scalar(t: float) -> float:
+    # Taylor below 1e-4: the error term t^4/120 is below double precision there.
+    return 1.0 - t * t / 6.0 if abs(t) < 1e-4 else math.sin(t) / t
+
+
+def tip_pose_single(kx: float, ky: float, arc_length: float, cap: float = 0.0):
+    """``tip_pose`` for one backbone with plain floats: ((x, y, z), (qx, qy, qz, qw)).
+
+    Same formulas without numpy's per-call overhead (about 10x faster for one pose),
+    for nodes that answer one command at a time.
+    """
+    s = arc_length
+    theta = math.hypot(kx, ky) * s
+    half = 0.5 * theta
+    sinc_half = _sinc_scalar(half)
+    s2f2 = s * s * 0.5 * sinc_half * sinc_half
+    sg = s * 0.5 * sinc_half
+    ksf = cap * s * _sinc_scalar(theta)   # the cap along the end tangent
+    return ((kx * (s2f2 + ksf), ky * (s2f2 + ksf), s * _sinc_scalar(theta) + cap * math.cos(theta)),
+            (-ky * sg, kx * sg, 0.0, math.cos(half)))
 
 
 def planar_backbone_poses(points, n_points: int):

@@ -57,7 +57,7 @@ import numpy as np
 from .allocation import Allocator
 from .command_shaping import CommandWatchdog, RateLimiter
 from .errors import SoftcathError
-from .kinematics import bend_for_tip_single
+from .kinematics import curvature_for_tip
 from .prediction import arc_and_cap
 from .steering_range import SteeringError
 
@@ -107,8 +107,8 @@ def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
     x, y, z = (float(v) for v in np.asarray(tip, dtype=float).ravel())
     if math.hypot(x, y) == 0.0:
         return np.zeros(2)
-    kx, ky, arc = bend_for_tip_single(x, y, z, float(cap))
-    return np.array([kx * arc, ky * arc])
+    inv = curvature_for_tip((x, y, z), cap=float(cap))
+    return inv.curvature * inv.arc_length
 
 
 @dataclass

@@ -46,7 +46,7 @@ class SweepPoint:
         needs the sample's unstretched length l (``print_table``)."""
         from ..core.kinematics import backbone_bend_angle, curvature_for_tip
 
-        inv = curvature_for_tip(np.array(self.tip_position_m), 1.0, cap=cap)
+        inv = curvature_for_tip(np.array(self.tip_position_m), cap=cap)
         kappa = float(np.hypot(*inv.curvature))
         quats = self.backbone_orientation_xyzw if len(self.backbone_orientation_xyzw) >= 2 else \
             [[0.0, 0.0, 0.0, 1.0], self.tip_orientation_xyzw]
