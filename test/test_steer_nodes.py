@@ -145,3 +145,42 @@ def test_steer_node_defaults_to_the_surrogate_on_its_shipped_table(monkeypatch):
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_steer_driver_builds_the_truths_rung_once_when_given_its_pressure_limit(monkeypatch, tmp_path):
+    """In-process: `softcath steer-sim` passes max_pressure, so the driver builds only the truth it plays
+    (one surrogate, one table read), not a second rung for a default it does not use; without the
+    parameter the default is still the design's steering range on the truth's rung as shipped."""
+    from rclpy.parameter import Parameter
+
+    from softcath_ros.core.design import load_design
+    from softcath_ros.core.models.surrogate import SurrogateModel
+    from softcath_ros.core.steering_range import steering_model, steering_range
+    from softcath_ros.nodes.steer_driver import SteerDriver
+
+    built = []
+    make = SurrogateModel.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(self)
+        make(self, *args, **kwargs)
+
+    monkeypatch.setattr(SurrogateModel, "__init__", counted)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=private_domain())
+    try:
+        for given, builds in ((25000.0, 1), (None, 2)):
+            built.clear()
+            params = [Parameter("output", value=str(tmp_path / f"run_{builds}"))]
+            params += [] if given is None else [Parameter("max_pressure", value=given)]
+            node = SteerDriver(context=context, parameter_overrides=params)
+            try:
+                assert len(built) == builds, [m.origin for m in built]
+                want = given if given is not None else steering_range(steering_model("surrogate", load_design(
+                    "three_sector_5mm")))
+                assert node.get_parameter("max_pressure").value == want
+            finally:
+                node.writer.close()
+                node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -4,7 +4,8 @@ Each parameter has a type (its default's), a description, an optional range or s
 and a finite check; ranges go into the ParameterDescriptor, so `ros2 param describe` shows them.
 Parameters read once at start-up are read-only: a run-time ``set_parameters`` is refused instead
 of reporting success and being ignored. A float parameter also accepts an integer
-(``-p max_pressure:=40000``). Anything wrong is one ``SoftcathError`` line at start-up.
+(``-p max_pressure:=40000``). A default that costs work is computed only when needed.
+Anything wrong is one ``SoftcathError`` line at start-up.
 """
 from __future__ import annotations
 
@@ -18,7 +19,11 @@ from ..core.errors import SoftcathError
 
 def declare(node, name: str, default, description: str, *, minimum=None, maximum=None, choices=None,
             read_only: bool = True, ignore_override: bool = False):
-    """Declare ``name`` on ``node`` and return its checked value (float parameters as float)."""
+    """Declare ``name`` on ``node`` and return its checked value (float parameters as float).
+    ``default`` may be a function giving a float, called only when the parameter is not given: a
+    default that costs a model built for it."""
+    if callable(default):
+        default = 0.0 if name in _given(node) and not ignore_override else float(default())
     numeric = isinstance(default, float)
     desc = ParameterDescriptor(description=description, read_only=read_only, dynamic_typing=numeric)
     if choices is not None:
@@ -47,6 +52,11 @@ def declare(node, name: str, default, description: str, *, minimum=None, maximum
     return value
 
 
+def _given(node) -> dict:
+    """The parameters set for ``node`` by ``-p`` or a params file, by name."""
+    return node._parameter_overrides   # rclpy keeps them only there: no public getter exists
+
+
 def _describe_range(desc: ParameterDescriptor, numeric: bool, minimum, maximum) -> None:
     """The range in the descriptor, for tools (set after the check: rclpy would otherwise refuse
     an out-of-range value with its own multi-line message)."""
@@ -70,8 +80,7 @@ def refuse_unknown_parameters(node, params_files: list[str] | None = None, later
     from .command_line import started_params_files
 
     declared = set(node.list_parameters([], 0).names) | set(later)
-    # rclpy keeps the -p / params-file values only in Node._parameter_overrides: no public getter exists
-    unknown = sorted(set(node._parameter_overrides) - declared)
+    unknown = sorted(set(_given(node)) - declared)
     name = node.get_fully_qualified_name()
     if unknown:
         hints = [f"'{u}'" + (f" (did you mean '{close[0]}'?)" if (close := difflib.get_close_matches(u, declared, 1))

@@ -55,7 +55,7 @@ class SteerDriver(Node):
         truth = p("truth", "surrogate", "rung the simulated rig plays (for targets on its workspace)")
         shift = p("pressure_shift", 0.25, "the rig's pressure shift", minimum=0.0, maximum=0.99)
         scale = p("material_scale", 1.2, "the rig's material scale", minimum=0.05, maximum=20.0)
-        max_pressure = p("max_pressure", steering_range(steering_model(truth, design)),
+        max_pressure = p("max_pressure", lambda: steering_range(steering_model(truth, design)),
                          "the controller's pressure limit, Pa (default the design's steering range on the truth's rung)",
                          minimum=1.0)
         self.kind = p("trajectory", "step", f"one of {TRAJECTORIES}", choices=TRAJECTORIES)
