@@ -308,6 +308,39 @@ def test_optimise_names_the_best_feasible_candidate_and_writes_its_design_file_a
     assert (tmp_path / "optimise.png").stat().st_size > 0
 
 
+def test_the_walls_verdict_measures_the_wall_between_fans_as_the_design_validation_does():
+    """Three fans whose inner corners are 0.51 mm apart (a chord at the inner arc: on the 0.5 mm minimum,
+    within the verdict's 0.02 mm) but whose fillets round those corners away: the silicone between them
+    is 0.55 mm at its thinnest, so the fans are not as large as the walls allow. The verdict quotes the
+    true minimum distance between the outlines, the design validation's measure."""
+    import math
+
+    import yaml
+
+    from softcath_ros.core.design import design_from_dict
+    from softcath_ros.core.studies.optimise import _walls_verdict
+    from softcath_ros.core.studies.variation import channel_wall_of
+    from softcath_ros.resources import find
+
+    data = yaml.safe_load(find("design", "optimised_2dof_5mm").read_text())
+    span = 120.0 - 2.0 * math.degrees(math.asin(0.51e-3 / (2.0 * data["channels"][0]["inner_radius"])))
+
+    def fans(fillet):
+        for c in data["channels"]:
+            c["span"], c["fillet"] = span, fillet
+        return design_from_dict(data)
+
+    sharp, round_ended = fans(0.0), fans(1e-4)
+    assert channel_wall_of(sharp) == pytest.approx(0.51e-3, abs=1e-9)        # the chord, corners unrounded
+    assert _walls_verdict(sharp, 3, True).endswith(": holds")
+    between = channel_wall_of(round_ended)
+    assert 0.54e-3 < between < 0.55e-3
+    verdict = _walls_verdict(round_ended, 3, True)
+    assert verdict.endswith("does not hold") and f"{between * 1e3:.2f} mm of silicone between them" in verdict
+    a, b = round_ended.section.channels[:2]     # the outlines' distance, on polygons within 1 nm of them
+    assert between == pytest.approx(a.outline.polygon(1e-9).distance(b.outline.polygon(1e-9)), abs=1e-7)
+
+
 def test_optimise_refuses_a_rung_without_stretch(tmp_path, capsys):
     """The optimiser's stretch limit needs the principal stretch: a rung that reports none (the closed
     form) is refused in one line before any candidate is solved, not a TypeError mid-search."""

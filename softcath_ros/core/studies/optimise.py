@@ -46,7 +46,7 @@ from ..options import Option
 from .context import StudyContext, StudyResult
 from .plotting import pyplot, save, where
 from .runner import run_cases
-from .variation import area_ratio, make_variant, min_wall_of, tidy
+from .variation import area_ratio, channel_wall_of, make_variant, min_wall_of, tidy
 
 # 3 is the fewest fans that steer in every direction, and what the allocation and the surrogate's
 # pair tables serve; 4 or more on request (--counts)
@@ -332,11 +332,10 @@ def _walls_verdict(opt_design: Design, count: int, walls_at_min: bool) -> str:
         return "the optimum keeps every wall above the minimum (the strain or convergence limit binds)"
     shape = opt_design.channels[0].shape
     if count > 1 and shape.kind == "sector":
-        inner, gap = shape.inner_radius, math.radians(360.0 / count - shape.span)
-        between = 2.0 * inner * math.sin(0.5 * gap)   # at the inner arc, before the fillets
+        between = channel_wall_of(opt_design)   # the validation's true minimum distance, fillets and all
         if between > opt_design.min_wall_thickness + 2e-5:
             return (f"its outer and lumen walls sit on the minimum, but its fans span {shape.span:.1f} of "
-                    f"{360.0 / count:g} deg, {between * 1e3:.2f} mm of silicone between them at the lumen wall "
+                    f"{360.0 / count:g} deg, {between * 1e3:.2f} mm of silicone between them at the thinnest "
                     "(the stretch limit binds): does not hold")
     return "the optimum's thinnest wall sits on the minimum: holds"
 

@@ -13,6 +13,7 @@ fabrication limit instead, and the row says whether the baseline's own minimum h
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -57,6 +58,14 @@ def min_wall_of(design: Design) -> float:
     """The thinnest silicone wall of a design (m): the true minimum distance between its real
     outlines, holes to the outer surface and to each other (core/geometry)."""
     return design.section.thinnest_wall().thickness
+
+
+def channel_wall_of(design: Design) -> float:
+    """The thinnest silicone wall between two of a design's channels (m; inf with one channel):
+    the true minimum distance between their outlines, as the design validation measures it."""
+    section = design.section
+    return min((section.wall_between(a, b, locate=False).thickness
+                for a, b in itertools.combinations(section.channels, 2)), default=math.inf)
 
 
 def stacked_layout(outer_diameter: float, lumen_diameter: float, outer_wall: float, middle_wall: float,
