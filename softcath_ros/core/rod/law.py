@@ -36,6 +36,7 @@ class LawSlice:
     _stretch: object
     source: str
     _linear_root: float | None = None   # free curvature of a linear law
+    peak: tuple[float, float] | None = None   # (M, kappa): the bent-back peak interpolated between grid columns
 
     def moment(self, kappa):
         return self._moment(kappa)
@@ -81,7 +82,11 @@ class LawSlice:
         largest |M| on the table's negative side if |M| falls by more than ``drop`` (relative)
         beyond it; otherwise, if |M| is still rising where the table ends, the first peak (before a
         dip), which the section is known to pass: a lower bound of its capacity. None when there is
-        no peak before the table ends, when |M| falls from kappa = 0 on, or for a linear law."""
+        no peak before the table ends, when |M| falls from kappa = 0 on, or for a linear law. A slice
+        between two grid pressures whose columns both peak has that peak interpolated (``peak``,
+        ``TabulatedLaw``): it is the limit, even where the slice's range ends before |M| falls much."""
+        if self.peak is not None:
+            return self.peak
         if not np.isfinite(self.kappa_lo):
             return None
         k = np.linspace(min(0.0, self.kappa_hi), self.kappa_lo, n)
@@ -181,7 +186,17 @@ class LinearLaw:
 class TabulatedLaw:
     """M(kappa, p) from a ``MomentTable`` (section rung): local cubic interpolation in p (4 grid
     pressures, linear where a neighbour is missing), a cubic spline in kappa over the curvatures
-    valid at that pressure. No extrapolation: outside the table it refuses."""
+    valid at that pressure. No extrapolation: outside the table it refuses.
+
+    Bent back (kappa < 0) between grid pressures p_j < p < p_j+1 whose columns both peak
+    (``LawSlice.limit_moment_if_peaked`` on each column) every column n is read at the same fraction
+    of its own peak's curvature, M_n(kappa kappa_pk,n / kappa_pk(p)), with kappa_pk(p) linear between
+    the two columns' peaks: the peak (the moment the base hinge carries) moves continuously from one
+    column's to the next one's and its moment is interpolated between theirs. Read at the same
+    curvature, a column whose peak lies beyond where its neighbour's table ends (across the lumen's
+    fold: -120 1/m at 0.30 bar, -45 at 0.325 bar on implemented_5mm D/20) leaves the pressures in
+    between without a peak. Where either column has no peak (|M| still rising where its table ends,
+    or falling from kappa = 0) none is invented: the columns are read at the same curvature."""
 
     def __init__(self, table, source: str = "section law"):
         self.table = table
@@ -199,6 +214,8 @@ class TabulatedLaw:
         self._i0 = i0
         self._last = last
         self.pressure_range = (float(ps[0]), float(ps[last]))
+        self._splines: dict[int, tuple] = {}        # grid column -> (curvatures, moment, stretch splines)
+        self._peaks: dict[tuple, float] = {}        # (grid column, extra stiffness) -> its peak's curvature
 
     @staticmethod
     def _block(valid: np.ndarray, i0: int) -> tuple[int, int]:
@@ -213,21 +230,67 @@ class TabulatedLaw:
             hi += 1
         return lo, hi
 
-    def _interp_p(self, values: np.ndarray, p: float) -> np.ndarray:
-        """values (K, P) -> (K,) at pressure p: cubic Lagrange on 4 neighbours, else linear."""
+    def _column(self, j: int) -> tuple:
+        """Grid column j: its valid curvatures and cubic splines of M and lambda on them."""
+        if j not in self._splines:
+            from scipy.interpolate import CubicSpline
+
+            m, lam = self.table.moment[:, j], self.table.stretch[:, j]
+            a, b = self._block(np.isfinite(m) & np.isfinite(lam), self._i0)
+            ks = self.table.curvatures[a:b]
+            self._splines[j] = (ks, CubicSpline(ks, m[a:b]), CubicSpline(ks, lam[a:b]))
+        return self._splines[j]
+
+    def _peak(self, j: int, extra_stiffness: float) -> float:
+        """The curvature of grid column j's bent-back peak (with ``extra_stiffness``), NaN without one:
+        as ``at`` finds it on its grid pressure."""
+        key = (j, float(extra_stiffness))
+        if key not in self._peaks:
+            ks, ms, ls = self._column(j)
+            extra = float(extra_stiffness)
+
+            def moment(k):
+                return ms(k) + extra * np.asarray(k)
+
+            limit = LawSlice(float(self.table.pressures[j]), float(ks[0]), float(ks[-1]), moment, None, ls,
+                             self.source).limit_moment_if_peaked()
+            self._peaks[key] = math.nan if limit is None else limit[1]
+        return self._peaks[key]
+
+    def _weights(self, p: float):
+        """(j, t, lo, w): p between grid pressures j and j + 1 at fraction t; the cubic Lagrange
+        weights w on the 4 grid pressures from lo (None where a neighbour is missing)."""
         ps = self.table.pressures[:self._last + 1]
         j = int(np.clip(np.searchsorted(ps, p, side="right") - 1, 0, len(ps) - 2))
         t = (p - ps[j]) / (ps[j + 1] - ps[j])
-        if t < 1e-9 or t > 1 - 1e-9:     # on a grid pressure: its own column (its own kappa range)
-            return values[:, j + int(round(t))].copy()
-        lin = (1 - t) * values[:, j] + t * values[:, j + 1]
-        lo, hi = j - 1, j + 2
-        if lo < 0 or hi >= len(ps):
-            return lin
-        x = ps[lo:hi + 1]
+        lo = j - 1
+        if lo < 0 or j + 2 >= len(ps):
+            return j, t, lo, None
+        x = ps[lo:lo + 4]
         w = np.array([np.prod([(p - x[m]) / (x[n] - x[m]) for m in range(4) if m != n]) for n in range(4)])
-        cub = values[:, lo:hi + 1] @ w
+        return j, t, lo, w
+
+    @staticmethod
+    def _combine(column, j: int, t: float, lo: int, w) -> np.ndarray:
+        """Cubic over the 4 columns where all are finite, else linear between j and j + 1."""
+        lin = (1 - t) * column(j) + t * column(j + 1)
+        if w is None:
+            return lin
+        cub = np.column_stack([column(n) for n in range(lo, lo + 4)]) @ w
         return np.where(np.isfinite(cub), cub, lin)
+
+    def _bent_back(self, kappa: np.ndarray, p: float, k_peak: float, extra_stiffness: float, which: int):
+        """M (``which`` 1) or lambda (2) at the bent-back curvatures ``kappa``, each column read at the same
+        fraction of its peak's curvature as kappa is of ``k_peak`` (NaN beyond a column's table or peak)."""
+        def column(n: int) -> np.ndarray:
+            scale = self._peak(n, extra_stiffness) / k_peak
+            if not np.isfinite(scale):
+                return np.full(len(kappa), np.nan)
+            col = self._column(n)
+            k = kappa * scale
+            return np.where(k >= col[0][0] * (1 + 1e-9), col[which](k), np.nan)
+
+        return self._combine(column, *self._weights(p))
 
     def at(self, pressure: float, extra_stiffness: float = 0.0) -> LawSlice:
         lo_p, hi_p = self.pressure_range
@@ -236,16 +299,38 @@ class TabulatedLaw:
                 f"{self.source}: p = {pressure / PA_PER_BAR:.4f} bar is outside the moment-curvature table "
                 f"({lo_p / PA_PER_BAR:.4f}..{hi_p / PA_PER_BAR:.4f} bar; beyond it the held section does not "
                 "converge)")
-        m = self._interp_p(self.table.moment, pressure)
-        lam = self._interp_p(self.table.stretch, pressure)
-        a, b = self._block(np.isfinite(m) & np.isfinite(lam), self._i0)
+        ks = self.table.curvatures
+        j, t, lo, w = self._weights(pressure)
+        if t < 1e-9 or t > 1 - 1e-9:     # on a grid pressure: its own column (its own kappa range)
+            n = j + int(round(t))
+            m, lam = self.table.moment[:, n].copy(), self.table.stretch[:, n].copy()
+            k_peak = math.nan
+        else:
+            m = self._combine(lambda n: self.table.moment[:, n], j, t, lo, w)
+            lam = self._combine(lambda n: self.table.stretch[:, n], j, t, lo, w)
+            k_peak = (1 - t) * self._peak(j, extra_stiffness) + t * self._peak(j + 1, extra_stiffness)
+        if np.isfinite(k_peak):
+            # bent back at the fraction of the peak; to where the first of the two columns ends there
+            k_end = max(self._column(n)[0][0] * k_peak / self._peak(n, extra_stiffness) for n in (j, j + 1))
+            neg = ks[(ks < 0) & (ks > k_end + 0.25 * (ks[1] - ks[0]))]
+            ks = np.concatenate([[k_end], neg, ks[ks >= 0]])
+            m = np.concatenate([self._bent_back(ks[:len(neg) + 1], pressure, k_peak, extra_stiffness, 1),
+                                m[self.table.curvatures >= 0]])
+            lam = np.concatenate([self._bent_back(ks[:len(neg) + 1], pressure, k_peak, extra_stiffness, 2),
+                                  lam[self.table.curvatures >= 0]])
+        i0 = int(np.flatnonzero(ks == 0)[0])
+        a, b = self._block(np.isfinite(m) & np.isfinite(lam), i0)
         if b - a < 4:
             raise LawRangeError(f"{self.source}: at p = {pressure / PA_PER_BAR:.4f} bar fewer than 4 curvatures "
                                 "of the table are valid")
         # imported here: scipy.interpolate costs every node that imports the rod (the simulated rig) 0.5 s
         from scipy.interpolate import CubicSpline
 
-        ks = self.table.curvatures[a:b]
+        ks = ks[a:b]
         spline = CubicSpline(ks, m[a:b] + extra_stiffness * ks, extrapolate=True)
         stretch = CubicSpline(ks, lam[a:b], extrapolate=True)
-        return LawSlice(pressure, float(ks[0]), float(ks[-1]), spline, spline.derivative(), stretch, self.source)
+        peak = None
+        if np.isfinite(k_peak) and ks[0] <= k_peak:
+            peak = (float(spline(k_peak)), float(k_peak))
+        return LawSlice(pressure, float(ks[0]), float(ks[-1]), spline, spline.derivative(), stretch, self.source,
+                        peak=peak)

@@ -17,7 +17,9 @@ from ..section_fe.moment import MomentTable, moment_curvature
 from ..section_fe.settings import SectionSettings, discretise
 from .law import TabulatedLaw
 
-LAW_VERSION = "section-moment-4"   # bump when the table's computation changes (2: lumen contact; 3: stable held states only; 4: the held minimiser's 200 iterations)
+# bump when the law changes (2: lumen contact; 3: stable held states only; 4: the held minimiser's 200
+# iterations; 5: between grid pressures bent back each column is read at the fraction of its peak)
+LAW_VERSION = "section-moment-5"
 
 
 @dataclass(frozen=True)
