@@ -171,9 +171,10 @@ def check_rows_match_design(rows, design) -> None:
                             f"design '{design.name}' has {design.n_channels}: name the design it recorded")
 
 
-def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[SampleRow]:
+def rows_from_recording(path, topics: dict[str, str] | None = None, skipped: list | None = None) -> list[SampleRow]:
     """Sample rows of a bench recording: the stamped rig topics, or (a recording without them)
-    the deprecated unstamped ones; ``topics`` overrides names (keys as DEFAULT_TOPICS)."""
+    the deprecated unstamped ones; ``topics`` overrides names (keys as DEFAULT_TOPICS). The sample
+    markers left out because a reading was stale are appended to ``skipped``."""
     from .. import topics as names
     from ..recording.reader import iter_messages, read_metadata, recording_topics
 
@@ -215,7 +216,7 @@ def rows_from_recording(path, topics: dict[str, str] | None = None) -> list[Samp
     except ValueError:
         stale_after = DEFAULT_STALE_AFTER_S
     return rows_from_events(events, {k: v for k, v in streams.items() if v or k != "pressure_measured"},
-                            stale_after=stale_after)
+                            stale_after=stale_after, skipped=skipped)
 
 
 def summarise(rows: list[SampleRow], angle_resolution: float = math.radians(1.0)) -> list[StepStats]:
