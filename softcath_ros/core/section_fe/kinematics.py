@@ -35,6 +35,7 @@ class ElementRule:
         D0[..., 2, 1:12:2] = self.dNdX[..., 0]
         D0[..., 3, 1:12:2] = self.dNdX[..., 1]
         self.D0 = D0
+        self.D = D0.copy()   # strain_rows' result: D0 with the row of F33 written in at each call
 
 
 @dataclass
@@ -72,14 +73,17 @@ def kinematics(rule: ElementRule, x, n_u: int) -> Kinematics:
 
 
 def strain_rows(rule: ElementRule, kin: Kinematics) -> np.ndarray:
-    """da/d(local unknowns) (e,q,5,15): the constant in-plane rows plus the row of F33."""
+    """da/d(local unknowns) (e,q,5,15): the constant in-plane rows plus the row of F33.
+
+    The array is the rule's own buffer (rows 0-3 never change, row 4 is rewritten whole), so it
+    holds only until the next call on the same rule: a term uses it within its assembly."""
     lam, kx, ky = kin.globals
-    return f33_rows(rule.D0, rule.N, kin.xq, lam, kx, ky)
+    return f33_rows(rule.D, rule.N, kin.xq, lam, kx, ky)
 
 
-def f33_rows(D0, N, xq, lam, kx, ky):
-    """D0 with the row of F33 = lam (1 - k.x) filled in (e,q,5,15)."""
-    D = D0.copy()
+def f33_rows(D, N, xq, lam, kx, ky):
+    """Write the row of F33 = lam (1 - k.x) into D (e,q,5,15), whose rows 0-3 are the in-plane
+    ones, and return it."""
     D[..., 4, 0:12:2] = -lam * kx * N
     D[..., 4, 1:12:2] = -lam * ky * N
     D[..., 4, 12] = 1 - kx * xq[..., 0] - ky * xq[..., 1]
@@ -105,17 +109,24 @@ def add_f33_hessian(H, s, N, xq, lam, kx, ky):
     H[:, 14, 12] -= sy
 
 
+def jacobian_gradient(a, det2, f33):
+    """dJ/da (..., 5) for J = det F = det2 f33."""
+    return np.stack([a[..., 3] * f33, -a[..., 2] * f33, -a[..., 1] * f33, a[..., 0] * f33, det2], -1)
+
+
+def add_jacobian_hessian(M, c, a, f33):
+    """M += c d2J/da2 (M (..., 5, 5), c (...)): d2J/da2 has eight non-zero entries, written in place."""
+    for (i, j), value in (((0, 3), c * f33), ((1, 2), -c * f33), ((0, 4), c * a[..., 3]),
+                          ((3, 4), c * a[..., 0]), ((1, 4), -c * a[..., 2]), ((2, 4), -c * a[..., 1])):
+        M[..., i, j] += value
+        M[..., j, i] += value
+
+
 def jacobian_derivatives(a, det2, f33):
     """dJ/da (..., 5) and d2J/da2 (..., 5, 5) for J = det F = det2 f33."""
-    Ja = np.stack([a[..., 3] * f33, -a[..., 2] * f33, -a[..., 1] * f33, a[..., 0] * f33, det2], -1)
     Jaa = np.zeros(a.shape + (5,))
-    Jaa[..., 0, 3] = Jaa[..., 3, 0] = f33
-    Jaa[..., 1, 2] = Jaa[..., 2, 1] = -f33
-    Jaa[..., 0, 4] = Jaa[..., 4, 0] = a[..., 3]
-    Jaa[..., 3, 4] = Jaa[..., 4, 3] = a[..., 0]
-    Jaa[..., 1, 4] = Jaa[..., 4, 1] = -a[..., 2]
-    Jaa[..., 2, 4] = Jaa[..., 4, 2] = -a[..., 1]
-    return Ja, Jaa
+    add_jacobian_hessian(Jaa, np.ones(a.shape[:-1]), a, f33)
+    return jacobian_gradient(a, det2, f33), Jaa
 
 
 def block_dofs(nodes, i_glob) -> np.ndarray:

@@ -14,7 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...energy import isochoric_i1, yeoh, yeoh_derivatives
-from ..kinematics import ElementRule, add_f33_hessian, jacobian_derivatives, kinematics, strain_rows
+from ..kinematics import (ElementRule, add_f33_hessian, add_jacobian_hessian, jacobian_gradient, kinematics,
+                          strain_rows)
 from . import INADMISSIBLE, Contribution
 
 
@@ -53,7 +54,7 @@ class SiliconeBody:
         a = kin.entries()                                     # (e,q,5)
         D = strain_rows(rule, kin)                            # (e,q,5,15)
         J = det2 * f33
-        Ja, Jaa = jacobian_derivatives(a, det2, f33)
+        Ja = jacobian_gradient(a, det2, f33)
         I1 = np.einsum("eqk,eqk->eq", a, a)
         # isochoric invariant Ib = J^(-2/3) I1 and its derivatives in a:
         #   dIb/da = 2 j23 a - 2/3 j53 I1 Ja,
@@ -86,11 +87,10 @@ class SiliconeBody:
         c_aj = dA * (W2 * ca * cj - W1 * (4.0 / 3.0) * j53)
         c_jj = dA * (W2 * cj * cj + W1 * (10.0 / 9.0) * j53 * I1 / J)
         c_hess = dA * (W1 * cj + p_e[:, None])
-        aJ = a[..., :, None] * Ja[..., None, :]
-        Maa = (c_aa[..., None, None] * (a[..., :, None] * a[..., None, :])
-               + c_aj[..., None, None] * (aJ + np.swapaxes(aJ, -1, -2))
-               + c_jj[..., None, None] * (Ja[..., :, None] * Ja[..., None, :])
-               + c_hess[..., None, None] * Jaa)
+        # c_aa a a^T + c_aj (a Ja^T + Ja a^T) + c_jj Ja Ja^T, as two outer products
+        Maa = ((c_aa[..., None] * a + c_aj[..., None] * Ja)[..., :, None] * a[..., None, :]
+               + (c_aj[..., None] * a + c_jj[..., None] * Ja)[..., :, None] * Ja[..., None, :])
+        add_jacobian_hessian(Maa, c_hess, a, f33)
         Maa[..., range(5), range(5)] += c_eye[..., None]
         Pa = Pw + p_e[:, None, None] * Ga
         Dr = D.reshape(ne, nq * 5, 15)
