@@ -771,6 +771,74 @@ def test_a_failed_ramp_names_its_stop_by_the_smallest_eigenvalue(lam_before, lam
         assert "only a mesh study tells" in text
 
 
+@pytest.mark.parametrize("without, past, reason", [
+    (0.022, 5.9e-8, "numerical failure"),      # the contact's making: the silicone positive, pairs past the log range
+    (0.022, 0.0, "unstable equilibrium"),      # every pair within the barrier's log range: the saddle stands
+    (-0.010, 5.9e-8, "unstable equilibrium"),  # a saddle of the silicone itself
+])
+def test_a_saddle_of_the_contact_term_alone_is_not_named_an_unstable_equilibrium(without, past, reason):
+    """_name_the_stop on a state in contact whose smallest eigenvalue is negative (-0.269 x 2 c1, the
+    1-DOF optimum's at 0.1041 bar): when the tangent without the contact term is positive definite and
+    some pairs are past the barrier's log range, the saddle is the contact's continuation's, and the
+    stop stays a numerical failure that says so; otherwise it is an unstable equilibrium."""
+    from types import SimpleNamespace
+
+    from softcath_ros.core.continuation import RampResult
+    from softcath_ros.core.fe3d.ramp import _name_the_stop
+    from softcath_ros.core.fe3d.stability import ContactSplit
+
+    class Problem:
+        contact = SimpleNamespace(update=lambda: True)
+        load = SimpleNamespace(Set=lambda v: None)
+
+        def set_state(self, s):
+            self.state = s
+
+        def stability(self, k=1):
+            lam = {1: 0.0242, 2: -0.269}[int(self.state[0])]
+            return SimpleNamespace(smallest=lam, load_share=0.01, where="silicone element at x = 0.84")
+
+        def contact_split(self):
+            return ContactSplit(without_contact=without, past_log_range_m2=past)
+
+    result = RampResult(points=[], converged=False, message="", last_load=10406.25,
+                        last_state=np.array([2.0]), previous=(10156.25, np.array([1.0])))
+    s, why, text = _name_the_stop(Problem(), result, 1e-3)
+    assert why == reason
+    assert "-0.269 x 2 c1" in text and f"without the lumen contact's term {without:.3g}" in text
+    assert ("of the lumen contact's making" in text) == (reason == "numerical failure")
+
+
+def test_contact_split_removes_exactly_the_contact_terms_tangent(short_design):
+    """contact_split on the coarse 10 mm body with its lumen squeezed to a slit (det F = eps): the tangent
+    less the contact term's is the tangent of the same state without contact (so its smallest eigenvalue
+    is that problem's), and pairs count as past the barrier's log range only below XI_MIN d_hat."""
+    import ngsolve as ng
+    from scipy.sparse.linalg import eigsh
+
+    from softcath_ros.core.fe3d.stability import _csr, condensed_matrices
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, **PLAIN_P2).problem
+    bare = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=None, **PLAIN_P2).problem
+    assert pb.contact_split() is None and bare.contact_split() is None   # no pair held / no contact
+    yc = short_design.lumen.center[1]
+    squeeze = {0.005: False, 0.0001: True}   # slit d_hat / 4 wide: within the log range; d_hat / 200: past it
+    for eps, past in squeeze.items():
+        for p in (pb, bare):
+            p.u.Set(ng.CF((0.0, -(1.0 - eps) * (ng.y - yc), 0.0)))
+        pb.contact.update()
+        split = pb.contact_split()
+        assert (split.past_log_range_m2 > 0.0) is past
+        K, M, idx = condensed_matrices(pb)
+        Kc = _csr(pb.contact.tangent_matrix(), idx)
+        K0, _, idx0 = condensed_matrices(bare)
+        assert np.array_equal(idx, idx0) and abs(Kc).max() > 0.0
+        assert abs(K - Kc - K0).max() <= 1e-12 * abs(K0).max()   # (roundoff of K's entries)
+        mu = 2.0 * short_design.material.c1
+        low = eigsh(K0.tocsc(), k=1, M=M, sigma=-mu, which="LM", return_eigenvectors=False)[0] / mu
+        assert split.without_contact == pytest.approx(low, rel=1e-6, abs=1e-9)
+
+
 def test_a_failed_predicted_step_is_retried_from_the_last_state_unless_switched_off():
     """continuation.ramp: a corrector failing on the predicted guess gets a second try from the last
     converged state (it may rescue a step the predictor overshot); retry_from_last=False cuts at once."""

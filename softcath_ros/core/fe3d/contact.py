@@ -222,6 +222,20 @@ class LumenContact:
         self.force_form.Apply(self.problem.gf.vec, out)
         return float(np.linalg.norm(out.FV().NumPy()[free]))
 
+    def tangent_matrix(self):
+        """The contact term's own tangent (NGSolve matrix over all unknowns) at the current state on
+        the pairs of the last update: the part of the problem's tangent the contact adds."""
+        self.force_boundary.Update(self.problem.u, self.force_form, self.intorder, self.maxdist, other=self.boundary)
+        self.force_form.AssembleLinearization(self.problem.gf.vec)
+        return self.force_form.mat
+
+    def past_log_range_area(self) -> float:
+        """Wall area (m^2, of the model) of the pairs of the last update whose gap is below XI_MIN
+        d_hat, where the barrier is its Taylor continuation (a device to push an overshooting
+        iterate back), not the log-barrier it models contact with."""
+        self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+        return self.check_form.Energy(self.problem.gf.vec)
+
     def overlap_area(self) -> float:
         """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat
         (the pairs of the last update with backtrack_on_overlap on)."""

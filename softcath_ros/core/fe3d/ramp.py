@@ -71,21 +71,39 @@ SINGULAR_BELOW = 1e-3
 SINGULAR_WITHIN = 0.01
 
 
+def _contact_made(split, threshold: float) -> bool:
+    """Whether a state's singular or negative eigenvalue is the lumen contact's making, not the body's:
+    without the contact term the tangent is positive definite (smallest at least ``threshold``) while
+    some of the held pairs are past the barrier's log range, where its energy is the Taylor
+    continuation that pushes an overshooting iterate back, not the barrier that models contact. On
+    the 1-DOF optimum at 20 mm (0.1041 bar) such a mode lay in 12 elements at the lumen wall and the
+    energy along it was nonconvex only within 0.3 um, a hundredth of d_hat (docs/models/fe3d.md)."""
+    return split is not None and split.past_log_range_m2 > 0.0 and split.without_contact >= threshold
+
+
+def _split_text(split) -> str:
+    return (f"without the lumen contact's term {split.without_contact:.3g}, with "
+            f"{split.past_log_range_m2 * 1e6:.2g} mm^2 of its pairs past the barrier's log range")
+
+
 def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float = SINGULAR_WITHIN):
     """(Stability, stop reason, message tail) at the ramp's last converged state: UNSTABLE when its
     smallest eigenvalue is negative, LIMIT_POINT when it is singular (see SINGULAR_BELOW), else
-    NUMERICAL_FAILURE. The problem is left at that state."""
+    NUMERICAL_FAILURE; a negative or singular eigenvalue of the contact's making (``_contact_made``)
+    leaves it a NUMERICAL_FAILURE. The problem is left at that state."""
     def at(load, state):
         problem.set_state(state)
         problem.load.Set(load)
         if problem.contact is not None:
             problem.contact.update()   # that state's pairs, not the failed attempt's
-        return problem.stability(k=1)
+        st = problem.stability(k=1)
+        split = problem.contact_split() if problem.contact is not None and st.smallest < threshold else None
+        return st, split
 
     try:
-        s = at(result.last_load, result.last_state)
+        s, split = at(result.last_load, result.last_state)
         before = result.previous
-        lam0 = at(*before).smallest if before is not None and before[0] < result.last_load else None
+        s0, split0 = at(*before) if before is not None and before[0] < result.last_load else (None, None)
     except Exception as exc:  # noqa: BLE001 - the failure stays named as it was
         problem.set_state(result.last_state)
         problem.load.Set(result.last_load)
@@ -93,18 +111,25 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
     problem.set_state(result.last_state)
     problem.load.Set(result.last_load)
     lam = s.smallest
+    lam0 = s0.smallest if s0 is not None else None
     zero = None   # the load where the eigenvalue's line through the last two states reaches 0
     trend = ""
     if lam0 is not None:
         slope = (lam - lam0) / (result.last_load - before[0])
         if slope < 0.0:
             zero = result.last_load - lam / slope
-        trend = f", {lam0:.3g} at {describe_pressure(before[0])}" + (
+        trend = f", {lam0:.3g} at {describe_pressure(before[0])}" + (f" ({_split_text(split0)})" if split0 else "") + (
             f": zero by {describe_pressure(zero)} on their line" if zero is not None else ": not falling")
     near = zero is not None and zero - result.last_load <= within * result.last_load
     reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold or near else NUMERICAL_FAILURE
     kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation of this mesh's equations; "
                                           "only a mesh study tells a physical one from a discretisation mode"}.get(reason, "not singular")
+    if lam < threshold and _contact_made(split, threshold):
+        reason = NUMERICAL_FAILURE
+        kind = (f"{'a saddle' if lam < 0.0 else 'singular'} of the lumen contact's making, not the body's: "
+                f"{_split_text(split)}")
+    elif split is not None:
+        kind = f"{kind}; {_split_text(split)}"
     return s, reason, (f"; the condensed tangent's smallest eigenvalue at the last converged state is "
                        f"{lam:.3g} x 2 c1{trend} ({kind}; load share of its mode {s.load_share:.2g}), "
                        f"its mode largest at the {s.where}")

@@ -317,3 +317,10 @@ class Fe3dProblem(Fe3dNewton):
         from .stability import stability
 
         return stability(self, k)
+
+    def contact_split(self):
+        """The smallest eigenvalue without the lumen contact's term and the pairs past the barrier's
+        log range, at the current state (core/fe3d/stability.py ``contact_split``); None without pairs."""
+        from .stability import contact_split
+
+        return contact_split(self)

@@ -145,6 +145,33 @@ def stability(problem, k: int = 3, near: float = 0.5e-3, tol: float = 1e-10) -> 
                      lumen_share=share, load_share=float(load_share), extent=extent)
 
 
+@dataclass
+class ContactSplit:
+    """What the lumen contact's term adds to a state's stability (``contact_split``)."""
+    without_contact: float       # the smallest eigenvalue / 2 c1 of the condensed tangent less the contact term's
+    past_log_range_m2: float     # wall area of the held pairs past the barrier's log range (gap < XI_MIN d_hat)
+
+
+def contact_split(problem, tol: float = 1e-10) -> ContactSplit | None:
+    """At the current state on the held contact pairs: the smallest eigenvalue (algebraically, shift-invert
+    at -LOWEST_SHIFT x 2 c1 as in ``lowest_and_nearest_zero``) of K less the contact term's own tangent
+    (the silicone and the pressures alone; the contact acts on the wall's coupling unknowns only, so
+    the condensation is unchanged), and the wall area of the pairs past the barrier's log range.
+    None without contact or with no pair held (the walls far apart: the term adds nothing)."""
+    from scipy.sparse.linalg import eigsh
+
+    contact = problem.contact
+    if contact is None or contact.pairs_idle:
+        return None
+    K, M, idx = condensed_matrices(problem)
+    Kc = _csr(contact.tangent_matrix(), idx)
+    mu = 2.0 * problem.design.material.c1
+    v0 = np.random.default_rng(0).standard_normal(len(idx))
+    low = eigsh((K - Kc).tocsc(), k=1, M=M, sigma=-LOWEST_SHIFT * mu, which="LM", tol=tol, v0=v0,
+                return_eigenvectors=False)
+    return ContactSplit(without_contact=float(low[0]) / mu, past_log_range_m2=contact.past_log_range_area())
+
+
 def lowest_and_nearest_zero(K, M, k: int, inverse_k, shift: float, tol: float = 1e-10):
     """(lam, vec) of K v = lam M v (scipy sparse K symmetric, M positive definite): the ``k``
     eigenpairs nearest zero (shift-invert with ``inverse_k``, K's inverse as a LinearOperator),
