@@ -110,6 +110,38 @@ def test_three_channel_from_section_measures_its_error_and_refuses_common_pressu
     assert not st.converged and "common to all three channels" in st.message
 
 
+def test_refinement_spends_the_ray_budget_on_the_worst_misses_first():
+    """Three middle rays missed the table by 2x, 1.5x and 140x the tolerance (the last next to the
+    equal pair, where a fan design's direction swings fastest); room for two new rays: both go round
+    the worst miss, not to the first intervals in t."""
+    from softcath_ros.core.models.surrogate_tabulate import rays_with_room
+
+    split = []
+    for t, lo, hi, score in ((0.0625, 0.0, 0.125, 2.0), (0.1875, 0.125, 0.25, 1.5), (0.4375, 0.375, 0.5, 140.0)):
+        split += [(0, 0.5 * (lo + t), lo, t, score), (0, 0.5 * (t + hi), t, hi, score)]
+    chosen = rays_with_room(split, {0: 2})
+    assert sorted(item[1] for item in chosen) == [0.40625, 0.46875]
+    assert len(rays_with_room(split, {0: 10})) == 6
+    # intervals narrower than the limit are not split again, whatever their miss
+    assert rays_with_room([(0, 0.5, 0.499, 0.501, 1e9)], {0: 5}) == []
+
+
+def test_the_table_is_also_held_out_beside_its_last_worst_miss():
+    """After refinement, the error is measured where the finished table is least sure: the middles
+    of the two intervals beside the ray of the last round that missed most (not an earlier round's)."""
+    from types import SimpleNamespace
+
+    from softcath_ros.core.models.surrogate_tabulate import _beside_worst_miss
+
+    settings = SimpleNamespace(ray_tolerance=0.005, ray_direction_tolerance=0.2)
+    rays = {0: SimpleNamespace(t=[0.0, 0.25, 0.5, 0.125, 0.375, 0.4375])}
+    log = [{"round": 1, "pair": 0, "t": 0.125, "rc_miss": 0.5, "direction_miss_deg": 40.0},
+           {"round": 2, "pair": 0, "t": 0.375, "rc_miss": 0.004, "direction_miss_deg": 0.1},
+           {"round": 2, "pair": 0, "t": 0.4375, "rc_miss": 0.001, "direction_miss_deg": 3.0}]
+    assert _beside_worst_miss(log, rays, settings) == [(0, 0.40625), (0, 0.46875)]
+    assert _beside_worst_miss([], rays, settings) == []
+
+
 def test_rotated_pairs_refuse_a_non_symmetric_design(tmp_path):
     d = load_design("three_channel_5mm")
     ch = list(d.channels)

@@ -56,6 +56,7 @@ def _summary(model) -> dict:
 
 def _line(model) -> str:
     parts = [f"{k} R_C {b['rc_rel_max']:.2%}, direction {b['direction_deg_max']:.2f} deg"
+             + (f" (worst at {' / '.join(f'{p:g}' for p in b['worst_at_bar'])} bar)" if b.get("worst_at_bar") else "")
              for k, b in model.error_bound.items() if "rc_rel_max" in b and k != "common_mode"]
     cm = model.error_bound.get("common_mode", {})
     if "max_common_pressure_pa" in cm:

@@ -10,7 +10,7 @@ import numpy as np
 from ..design import Design
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-4"
+SURROGATE_VERSION = "surrogate-5"
 ROTATION_COS = np.cos(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))   # channel r's pair turned by r * 120 deg
 ROTATION_SIN = np.sin(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))
 
@@ -21,7 +21,7 @@ class SurrogateSettings:
     source_options: dict = field(default_factory=dict)  # its options (mesh_size, ...): part of the key
     pressure_step: float = 2000.0       # Pa between table points along a ray (3 channels: in a + b)
     initial_rays: int = 5               # 3 channels: rays over half a pair (t in [0, 1/2]) before refinement
-    max_rays: int = 13                  # 3 channels: most rays over half a pair
+    max_rays: int = 21                  # 3 channels: most rays over half a pair (the worst misses refined first)
     ray_tolerance: float = 0.005        # split between rays where the table misses the middle ray by more
                                         # than this in R_C (relative) ...
     ray_direction_tolerance: float = 0.2    # ... or by more than this in direction (degrees)
