@@ -104,10 +104,10 @@ class SteeringParams:
 def bend_of_tip(tip, cap: float = 0.0) -> np.ndarray:
     """Bend vector theta (cos phi, sin phi), rad, of the body whose arc from the base, continued by a
     straight ``cap`` (m) along its end tangent, ends at ``tip`` (m)."""
-    x, y, z = (float(v) for v in np.asarray(tip, dtype=float).ravel())
-    if math.hypot(x, y) == 0.0:
+    p = np.asarray(tip, dtype=float).ravel()
+    if p[0] == 0.0 and p[1] == 0.0:
         return np.zeros(2)
-    inv = curvature_for_tip((x, y, z), cap=float(cap))
+    inv = curvature_for_tip(p, cap=float(cap))
     return inv.curvature * inv.arc_length
 
 

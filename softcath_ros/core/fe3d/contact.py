@@ -209,7 +209,7 @@ class LumenContact:
             return False
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         if self.backtrack_on_overlap:
-            self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
+            self._held_pairs_to(self.check, self.check_form)
         self.pairs_idle = far
         self.searches += 1
         return True
@@ -217,7 +217,7 @@ class LumenContact:
     def force_norm(self, free) -> float:
         """Euclidean norm over the ``free`` unknowns of the contact's nodal forces (N) on the pairs of
         the last update."""
-        self.force_boundary.Update(self.problem.u, self.force_form, self.intorder, self.maxdist, other=self.boundary)
+        self._held_pairs_to(self.force_boundary, self.force_form)
         out = self.problem.gf.vec.CreateVector()
         self.force_form.Apply(self.problem.gf.vec, out)
         return float(np.linalg.norm(out.FV().NumPy()[free]))
@@ -225,7 +225,7 @@ class LumenContact:
     def tangent_matrix(self):
         """The contact term's own tangent (NGSolve matrix over all unknowns) at the current state on
         the pairs of the last update: the part of the problem's tangent the contact adds."""
-        self.force_boundary.Update(self.problem.u, self.force_form, self.intorder, self.maxdist, other=self.boundary)
+        self._held_pairs_to(self.force_boundary, self.force_form)
         self.force_form.AssembleLinearization(self.problem.gf.vec)
         return self.force_form.mat
 
@@ -233,8 +233,13 @@ class LumenContact:
         """Wall area (m^2, of the model) of the pairs of the last update whose gap is below XI_MIN
         d_hat, where the barrier is its Taylor continuation (a device to push an overshooting
         iterate back), not the log-barrier it models contact with."""
-        self.check.Update(self.problem.u, self.check_form, self.intorder, self.maxdist, other=self.boundary)
-        return self.check_form.Energy(self.problem.gf.vec)
+        self._held_pairs_to(self.check, self.check_form)
+        return self.overlap_area()
+
+    def _held_pairs_to(self, boundary, form) -> None:
+        """Give ``boundary`` (a ContactBoundary on the wall, its energy in ``form``) the pairs of the
+        last update, without a search of its own."""
+        boundary.Update(self.problem.u, form, self.intorder, self.maxdist, other=self.boundary)
 
     def overlap_area(self) -> float:
         """Wall area (m^2, of the model) of the current pairs whose gap is below XI_MIN d_hat
@@ -250,7 +255,7 @@ class LumenContact:
         self.pairs_idle = False   # (not known: the next update searches)
         raw: dict = {}
         for kind, what, cb, form in self._census_forms():
-            cb.Update(self.problem.u, form, self.intorder, self.maxdist, other=self.boundary)
+            self._held_pairs_to(cb, form)
             raw.setdefault(kind, {})[what] = form.Energy(self.problem.gf.vec)
         out = {}
         for kind, v in raw.items():

@@ -187,7 +187,7 @@ def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, s
                 else:
                     miss_rc = miss_dir = float("inf")
                 refine_log.append({"round": k, "pair": r, "t": t, "rc_miss": miss_rc, "direction_miss_deg": miss_dir})
-                score = max(miss_rc / s.ray_tolerance, miss_dir / s.ray_direction_tolerance)
+                score = _miss_score(s, miss_rc, miss_dir)
                 if score > 1.0:
                     split += [(r, 0.5 * (lo + t), lo, t, score), (r, 0.5 * (t + hi), t, hi, score)]
         for item in rounds[k]:
@@ -206,6 +206,11 @@ def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, s
     return refine_log
 
 
+def _miss_score(s, miss_rc: float, miss_dir: float) -> float:
+    """A middle ray's miss of the table as a multiple of the refinement's tolerance (> 1: split)."""
+    return max(miss_rc / s.ray_tolerance, miss_dir / s.ray_direction_tolerance)
+
+
 def _beside_worst_miss(refine_log: list, rays: dict, s) -> list:
     """(pair, t) at the middles of the final intervals on either side of the ray that missed the
     table most in the last refinement round (none without refinement)."""
@@ -213,7 +218,7 @@ def _beside_worst_miss(refine_log: list, rays: dict, s) -> list:
         return []
     last = refine_log[-1]["round"]
     worst = max((e for e in refine_log if e["round"] == last),
-                key=lambda e: max(e["rc_miss"] / s.ray_tolerance, e["direction_miss_deg"] / s.ray_direction_tolerance))
+                key=lambda e: _miss_score(s, e["rc_miss"], e["direction_miss_deg"]))
     ts = sorted(rays[worst["pair"]].t)
     i = ts.index(worst["t"])
     return [(worst["pair"], 0.5 * (ts[j] + ts[j + 1])) for j in (i - 1, i) if 0 <= j < len(ts) - 1]
