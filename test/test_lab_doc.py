@@ -6,6 +6,7 @@ test_docs_commands.py; `softcath track` and `softcath characterise --rig ros` ru
 import shlex
 import subprocess
 import sys
+from contextlib import ExitStack
 from pathlib import Path
 
 import pytest
@@ -114,17 +115,20 @@ def test_the_first_recording_line_runs_as_written_and_drives_every_managed_node(
     manual = ["-p", "autostart:=false"]
     [regulator] = [line for line in lab_lines("regulator_node") if "backend:=sim" in line]
     [characterise] = [line for line in lab_lines("softcath characterise") if "--rig" in line]
+    node_lines = (regulator, *lab_lines("scale_node"), *lab_lines("tracker_node"))
+    logs = [tmp_path / f"{line[0]}.log" for line in node_lines]   # each node's own log, shown on a failure
     try:
-        with NodeGraph() as graph:
+        with NodeGraph() as graph, ExitStack() as files:
             procs = [graph.start(line[0], extra_ros_args=[b for a in line[2:] for b in devices.get(a, [a])] + manual,
-                                 cwd=ROOT, stdout=subprocess.DEVNULL)
-                     for line in (regulator, *lab_lines("scale_node"), *lab_lines("tracker_node"))]
+                                 cwd=ROOT, stdout=files.enter_context(log.open("w")))
+                     for line, log in zip(node_lines, logs)]
             graph.wait_ready(*procs, timeout_s=120)
             run = subprocess.run([str(Path(sys.executable).parent / "softcath"), *characterise[1:]], env=graph.env,
                                  cwd=tmp_path, capture_output=True, text=True, timeout=350)
     finally:
         scale.close()
-    assert run.returncode == 0, run.stdout + run.stderr
+    assert run.returncode == 0, run.stdout + run.stderr + "".join(
+        f"\n--- {log.name}\n" + "\n".join(log.read_text().splitlines()[-15:]) for log in logs)
     for node in (topics.REGULATOR_NODE, topics.SCALE_NODE, topics.TRACKER_NODE, topics.BENCH_NODE):
         for transition in ("configure", "activate"):
             assert f"[characterise] {transition} /{node}" in run.stdout, run.stdout

@@ -9,7 +9,7 @@ import pytest
 
 from softcath_ros import topics
 from softcath_ros.bench.analysis import rows_from_events, rows_from_recording
-from softcath_ros.bench.rig_contract import FollowCheck, RigMonitor, follow_test_command
+from softcath_ros.bench.rig_contract import FollowCheck, RigMonitor, follow_test_command, with_driver_reports
 from softcath_ros.core.errors import SoftcathError
 
 
@@ -227,3 +227,11 @@ def test_wait_for_rig_waits_its_bounded_time_then_names_what_is_missing_in_one_l
         wait_for_rig(lambda: {"/a": "no publisher", "/b": "nothing subscribes"}, 2.0, lambda: clock[0], sleep)
     assert clock[0] == pytest.approx(2.0, abs=0.11) and err.value.exit_code == 3
     assert str(err.value) == "no rig after 2 s: /a: no publisher; /b: nothing subscribes"
+
+
+def test_a_problem_topic_carries_what_its_driver_reports():
+    problems = {"/w": "no message yet", "/a": "no publisher"}
+    reports = {"scale": "ERROR serial:/dev/x: no valid reading for 0.42 s", "other": "WARN 2 line(s) refused"}
+    out = with_driver_reports(problems, {"/w": ["scale"], "/a": []}.__getitem__, reports)
+    assert out == {"/w": "no message yet (scale reports ERROR serial:/dev/x: no valid reading for 0.42 s)",
+                   "/a": "no publisher"}

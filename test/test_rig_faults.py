@@ -226,6 +226,33 @@ def test_a_protocol_on_the_angle_bench_alone_needs_no_scale(tmp_path, procs):
     assert f"{topics.BENCH_WRENCH}: no publisher" in err and topics.BENCH_BEND_ANGLE not in err, err
 
 
+@pytest.mark.timeout(180)
+def test_no_rig_says_what_a_silent_driver_reports(tmp_path, procs):
+    """The scale's board goes silent: scale_node latches ERROR and publishes no force; bench_node's
+    "no rig" line names the silent topic and what scale_node says on /diagnostics."""
+    pytest.importorskip("serial", reason="the hardware extra (pyserial)")
+    from hardware_emulators import SerialScaleEmulator
+
+    env = private_env()
+    board = SerialScaleEmulator(load=0.1).start()
+    try:
+        _start(procs, ["sim_bench_node", "--ros-args", "-r", f"{topics.BENCH_WRENCH}:=/hidden{topics.BENCH_WRENCH}"], env)
+        scale = _start(procs, ["scale_node", "--ros-args", "-p", f"port:={board.port}"], env)
+        wait_output(scale, "configured", timeout_s=60)
+        board.mode = "dead"
+        wait_output(scale, "no valid reading", timeout_s=60)
+        bench = _start(procs, ["bench_node", "--ros-args", "-p", "protocol:=quick", "-p", f"output_dir:={tmp_path}",
+                               "-p", "wait_timeout:=10.0", "-p", "name:=silent_scale"], env)
+        out = bench.communicate(timeout=90)[0]
+    finally:
+        board.close()
+    assert bench.returncode == 3, out
+    line = [x for x in out.splitlines() if "no rig after" in x][-1]
+    assert f"{topics.BENCH_WRENCH}: no message" in line, line
+    assert f"{topics.SCALE_NODE} reports ERROR serial:{board.port}: no valid reading" in line, line
+    assert "Traceback" not in out, out
+
+
 def _short_direction_protocol(tmp_path) -> Path:
     """The shipped three_channel_directions, cut to one direction and one trial."""
     from softcath_ros.core.yaml_io import load_yaml_file

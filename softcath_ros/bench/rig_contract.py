@@ -7,7 +7,8 @@ arrivals of the rig's topics.
   reason. bench_node uses only readings that are alive, before the first step and during the run.
 - ``graph_problems`` / ``wait_for_rig``: what the ROS graph lacks for a run (a rig topic with no
   publisher, nothing listening to the command); bench_node's configure waits a bounded time for it
-  to be empty and fails with ``NoRig`` (exit code 3) naming each missing topic.
+  to be empty and fails with ``NoRig`` (exit code 3) naming each missing topic;
+  ``with_driver_reports`` adds what the topic's driver reports on /diagnostics when it is not OK.
 - ``FollowCheck``: before the first step, the pressure source must follow a small test command:
   a baseline at zero command, then the test pressures; it passes once every commanded channel
   has risen by ``fraction`` of its test pressure above the baseline, fails after ``timeout`` s.
@@ -57,6 +58,18 @@ def wait_for_rig(problems: Callable[[], dict[str, str]], timeout_s: float, clock
         if clock() >= end:
             raise NoRig(f"no rig after {timeout_s:g} s: " + "; ".join(f"{t}: {why}" for t, why in found.items()))
         sleep(period_s)
+
+
+def with_driver_reports(problems: dict[str, str], publishers_of: Callable[[str], list[str]],
+                        reports: dict[str, str]) -> dict[str, str]:
+    """``problems`` with the /diagnostics report of each problem topic's publisher that is not OK
+    (``reports``: node name -> "ERROR <message>"): a driver that latched an error says there why its
+    topic is silent, and the "no rig" line should say it too."""
+    out = {}
+    for topic, why in problems.items():
+        said = [f"{node} reports {reports[node]}" for node in publishers_of(topic) if node in reports]
+        out[topic] = why + (f" ({'; '.join(said)})" if said else "")
+    return out
 
 
 class RigMonitor:

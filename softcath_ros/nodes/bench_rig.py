@@ -8,13 +8,16 @@ import math
 from functools import partial
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from .. import topics
-from ..bench.rig_contract import RigMonitor, graph_problems
+from ..bench.rig_contract import RigMonitor, graph_problems, with_driver_reports
+
+LEVEL_NAMES = {1: "WARN", 2: "ERROR", 3: "STALE"}    # diagnostic_msgs/DiagnosticStatus levels
 
 
 def _stamp_s(header) -> float:
@@ -50,6 +53,8 @@ class RigWatch:
             self.create_subscription(Float64, t, partial(self.on_legacy, t), 10)
         if self.by_direction:
             self.create_subscription(Float64MultiArray, topics.PRESSURE_CMD, self.on_allocator_command, 10)
+        self.driver_reports: dict[str, str] = {}     # node -> its last /diagnostics report that is not OK
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics, 10)
         self.rig_info: dict | None = None
         self.create_subscription(String, topics.BENCH_RIG, self.on_rig,
                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -92,6 +97,14 @@ class RigWatch:
         chans = [topics.pressure_measured_topic(c) for c in range(self.design.n_channels)]
         return self.channel_pressures.copy() if all(self.contract.alive(c, t, clock) for c in chans) else None
 
+    def on_diagnostics(self, msg):
+        for status in msg.status:
+            level = status.level[0] if isinstance(status.level, bytes) else int(status.level)
+            if level in LEVEL_NAMES:
+                self.driver_reports[status.name] = f"{LEVEL_NAMES[level]} {status.message}"
+            else:
+                self.driver_reports.pop(status.name, None)
+
     def on_rig(self, msg):
         try:
             self.rig_info = json.loads(msg.data)
@@ -124,6 +137,8 @@ class RigWatch:
             why = None if topic in out else monitor.problem(topic, t, clock)
             if why:
                 out[topic] = why
+        if out and self.driver_reports:
+            out = with_driver_reports(out, self.publisher_nodes, self.driver_reports)
         if not out and self.monitor is None:
             self.monitor = monitor
             if monitor is self.legacy:
@@ -132,6 +147,9 @@ class RigWatch:
                     "accepted for this release (freshness by arrival time only); publish the stamped "
                     "topics of docs/rig.md")
         return out
+
+    def publisher_nodes(self, topic: str) -> list[str]:
+        return [i.node_name for i in self.get_publishers_info_by_topic(topic)]
 
     def other_commanders(self) -> list[str]:
         """Nodes publishing /softcath/pressure_cmd that should not: besides this node (per channel)
