@@ -270,7 +270,7 @@ def test_the_register_map_scales_and_checks():
 
 
 # -- the scale ----------------------------------------------------------------------------------------------
-def test_the_scale_publishes_the_newest_force_tares_and_errs_when_silent():
+def test_the_scale_publishes_the_newest_force_tares_errs_while_silent_and_recovers():
     clock, dev = FakeClock(), FakeDevice(1)
     forces = iter([[Reading(0, 0.01)]] + [[Reading(0, 0.02), Reading(0, 0.03)]] * 10)
     dev.answer = lambda: next(forces, [])
@@ -284,7 +284,12 @@ def test_the_scale_publishes_the_newest_force_tares_and_errs_when_silent():
     while scale.state == "active":
         clock.t += 0.01
         scale.tick()
-    assert scale.state == "error" and "no valid reading" in scale.reason
+    assert scale.state == "error" and "no valid reading" in scale.reason and scale.silences == 1
+    clock.t += 0.01
+    assert scale.tick() is None and scale.state == "error"          # still silent: nothing published
+    dev.answer = lambda: [Reading(0, 0.04)]                          # the board speaks again
+    clock.t += 0.01
+    assert scale.tick() == Reading(0, 0.04) and scale.state == "active" and scale.silences == 1
 
 
 def test_the_scale_refuses_to_configure_on_lies():

@@ -148,7 +148,7 @@ def test_regulator_node_lifecycle_on_a_modbus_device():
 
 
 @pytest.mark.timeout(300)
-def test_scale_node_publishes_the_force_and_tares():
+def test_scale_node_publishes_the_force_tares_errs_while_silent_and_recovers():
     emu = SerialScaleEmulator(load=0.3).start()
     try:
         with NodeGraph() as graph:
@@ -172,6 +172,11 @@ def test_scale_node_publishes_the_force_and_tares():
                                      and listener.status["level"] == DiagnosticStatus.ERROR)
                 assert int(listener.status["refused"]) >= 1
                 assert all(f.wrench.force.z == f.wrench.force.z for f in forces)     # no NaN published
+                seen = len(forces)
+                emu.mode = "ok"                                    # speaks again: forces, WARN counting it
+                assert listener.spin(30.0, until=lambda: len(forces) > seen and listener.status["level"]
+                                     == DiagnosticStatus.WARN and listener.status["silences"] == "1")
+                assert "1 silence(s), the last: serial:" in listener.status["message"]
             finally:
                 listener.close()
             assert graph.stop()["scale_node"] == 0

@@ -134,6 +134,9 @@ class DeviceNode(LifecycleNode):
         if self.core.state == "error" and was != "error":
             self.get_logger().error(self.core.reason)
             self.diagnostics()                      # at once, not at the next 1 Hz report
+        elif was == "error" and self.core.state == "active":   # (a core that does not latch: the scale)
+            self.get_logger().warning("valid readings again")
+            self.diagnostics()
 
     def level_and_message(self, problems: list[str]) -> tuple[int, str]:
         """/diagnostics level and message: ERROR when configure failed or the core is in error,

@@ -8,7 +8,8 @@ bench/hardware/protocol.py: ``F <newtons>`` lines, host ``TARE``) as the rig con
   it refuses (malformed, NaN, beyond ``max_force``) is counted on /diagnostics, never published;
 - a message on /softcath/bench/tare (std_msgs/Empty) sends ``TARE``: the board zeroes at the
   present load;
-- no valid reading for ``silence_timeout`` (0.4 s): ERROR on /diagnostics at once.
+- no valid reading for ``silence_timeout`` (0.4 s): ERROR on /diagnostics at once, until valid
+  readings come again (then WARN with the count of silences: the core's docstring says why).
 """
 from __future__ import annotations
 
@@ -68,11 +69,13 @@ class ScaleNode(DeviceNode):
         s = self.core
         level, message = self.level_and_message([] if s is None else [
             s.counters.refused and f"{s.counters.refused} line(s) refused, last {s.counters.last_refused}",
-            s.counters.device_errors and f"device error: {s.counters.last_device_error}"])
+            s.counters.device_errors and f"device error: {s.counters.last_device_error}",
+            s.silences and f"{s.silences} silence(s), the last: {s.last_silence}"])
         values = [("state", self.state_name), ("port", self.port)]
         if s is not None:
             values += [("readings", s.counters.readings), ("refused", s.counters.refused),
-                       ("device_errors", s.counters.device_errors), ("tares", s.tares)]
+                       ("device_errors", s.counters.device_errors), ("tares", s.tares),
+                       ("silences", s.silences)]
         publish_statuses(self, self.pub_diag, diagnostic_status(level, topics.SCALE_NODE, message, values,
                                                                 hardware_id=f"serial:{self.port}"))
 

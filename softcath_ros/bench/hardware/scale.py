@@ -4,7 +4,9 @@ configure: open the device and one valid ``F`` reading must come within ``check_
 active: each ``tick()`` returns the newest valid force (N) since the last tick; refused lines
 (malformed, NaN, beyond the cell's capacity) are counted, never returned; ``tare()`` sends ``TARE``
 (the board zeroes its reading at the present load); no valid reading for ``silence_timeout``:
-``error`` (until deactivated).
+``error``, until valid readings come again (counted in ``silences``). A scale commands nothing, so
+unlike the regulator (which vents) it need not latch: a host or board that stalls for a moment must
+not end a run whose readings resume; bench_node judges each reading's freshness itself.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ class Scale:
         self.counters = Counters()
         self.last_answer = -math.inf
         self.tares = 0
+        self.silences, self.last_silence = 0, ""    # how often the board fell silent, and the last time's reason
 
     def configure(self, sleep) -> bool:
         try:
@@ -69,11 +72,14 @@ class Scale:
         if readings:
             self.last_answer = now
             self.counters.superseded += len(readings) - 1
+            if self.state == "error":          # the board speaks again
+                self.state, self.reason = "active", ""
         if self.state == "active" and now - self.last_answer > self.silence_timeout:
             fault = getattr(self.device, "fault", "")
             self.state = "error"
             self.reason = (f"{self.device.name}: no valid reading for {now - self.last_answer:.2f} s"
                            + (f" ({fault})" if fault else ""))
+            self.silences, self.last_silence = self.silences + 1, self.reason
         return readings[-1] if readings and self.state == "active" else None
 
     def _take(self) -> list[Reading]:
