@@ -63,8 +63,8 @@ def wait_for_rig(problems: Callable[[], dict[str, str]], timeout_s: float, clock
 def with_driver_reports(problems: dict[str, str], publishers_of: Callable[[str], list[str]],
                         reports: dict[str, str]) -> dict[str, str]:
     """``problems`` with the /diagnostics report of each problem topic's publisher that is not OK
-    (``reports``: node name -> "ERROR <message>"): a driver that latched an error says there why its
-    topic is silent, and the "no rig" line should say it too."""
+    (``reports``: node name -> "ERROR <message>"): a driver in error says there why its topic is
+    silent, and the "no rig" line should say it too."""
     out = {}
     for topic, why in problems.items():
         said = [f"{node} reports {reports[node]}" for node in publishers_of(topic) if node in reports]
