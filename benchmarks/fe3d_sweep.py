@@ -85,8 +85,9 @@ def main(argv=None) -> int:
                     help=f"condensed interior bubbles of this order added to P2 (default {DEFAULT_INTERIOR_ORDER}; "
                          "'none': plain P2)")
     ap.add_argument("--debug", action="store_true", help="the solver's per-iteration log on stderr")
-    ap.add_argument("--stall", type=int, default=None,
-                    help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations")
+    ap.add_argument("--stall", default=None,
+                    help="NewtonSettings.stall_iterations: fail a solve whose |du.r| has not fallen tenfold in N iterations "
+                         f"(default: the model's, {NewtonSettings.stall_iterations}; 'none': never)")
     ap.add_argument("--max-step", type=pressure_option("--max-step"), default=None,
                     help="StepControl.max_step, with its unit (the adaptive ramp's largest step; default 0.025bar)")
     ap.add_argument("--no-retry", action="store_true",
@@ -118,8 +119,14 @@ def main(argv=None) -> int:
         if not 0 < args.max_step <= args.to:
             ap.error(f"--max-step {args.max_step / PA_PER_BAR:g} bar: must be positive and at most --to ({args.to / PA_PER_BAR:g} bar)")
         control = dataclasses.replace(control or default_step_control(), max_step=args.max_step)
-    if args.stall is not None and args.stall < 1:
-        ap.error(f"--stall {args.stall}: must be at least 1 iteration")
+    stall = {}
+    if args.stall is not None:
+        try:
+            stall = {"stall_iterations": None if args.stall.lower() == "none" else int(args.stall)}
+        except ValueError:
+            ap.error(f"--stall {args.stall}: a number of iterations or 'none'")
+        if stall["stall_iterations"] is not None and stall["stall_iterations"] < 1:
+            ap.error(f"--stall {args.stall}: must be at least 1 iteration")
     contact = {} if args.contact_distance is None else {
         "contact_distance": None if args.contact_distance.lower() == "none" else float(args.contact_distance)}
     try:
@@ -140,7 +147,7 @@ def main(argv=None) -> int:
         if not (math.isfinite(args.curvature_safety) and 0.1 <= args.curvature_safety <= 10):
             ap.error(f"--curvature-safety {args.curvature_safety}: a number in [0.1, 10]")
         mesh = dataclasses.replace(mesh, curvature_safety=args.curvature_safety)
-    newton = NewtonSettings(threads=args.threads, stall_iterations=args.stall,
+    newton = NewtonSettings(threads=args.threads, **stall,
                             **({} if args.energy_tol is None else {"energy_tol": args.energy_tol}))
     if args.debug:
         fe3d_solver_log()

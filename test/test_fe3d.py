@@ -839,6 +839,102 @@ def test_contact_split_removes_exactly_the_contact_terms_tangent(short_design):
         assert split.without_contact == pytest.approx(low, rel=1e-6, abs=1e-9)
 
 
+def test_a_partner_far_off_the_normal_line_raises_the_barriers_argument():
+    """lateral_xi: a partner within OFF_LOW d_hat of the primary's normal line leaves xi as it is; farther
+    off, xi rises (C2 at OFF_LOW) until from OFF_HIGH on a pair at most d_hat behind the primary is beyond
+    the barrier's range. So a pair found nearly in the primary's tangent plane, 4.8 d_hat off its normal
+    line with a gap of -0.01 d_hat (where the 1-DOF optimum's wall turns round a fold), adds no energy and
+    does not count as past the log range; as a window weighing the barrier it kept 0.5 % of the
+    barrier's continuation there, which made the tangent indefinite."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.contact import OFF_HIGH, OFF_LOW, XI_MIN, barrier_cf, lateral_xi
+
+    mesh = ng.Mesh(ng.unit_square.GenerateMesh(maxh=0.5))
+    xi_p, off_p = ng.Parameter(0.0), ng.Parameter(0.0)
+    arg, energy = lateral_xi(xi_p, off_p), barrier_cf(lateral_xi(xi_p, off_p))
+
+    def at(cf, xi, offset):
+        xi_p.Set(xi)
+        off_p.Set(offset * offset)
+        return cf(mesh(0.5, 0.5))
+
+    for xi in (-0.5, 0.01, 0.3):
+        for offset in (0.0, 1.0, OFF_LOW):
+            assert at(arg, xi, offset) == xi
+        assert at(arg, xi, 0.5 * (OFF_LOW + OFF_HIGH)) > xi
+    for xi in (-1.0, -0.5, 0.0, 0.5):
+        for offset in (OFF_HIGH, 6.0, 10.0):
+            assert at(arg, xi, offset) >= 1.0 and at(energy, xi, offset) == 0.0
+    # C2 where the offset starts to count: the argument's slope and curvature in the offset vanish there
+    h = 1e-4
+    f = [at(arg, 0.2, OFF_LOW + k * h) for k in (-1, 0, 1)]
+    assert abs(f[2] - f[0]) / (2 * h) < 1e-6 and abs(f[2] - 2 * f[1] + f[0]) / h ** 2 < 1e-3
+    assert at(arg, -0.01, 4.8) > 1.0 and at(energy, -0.01, 4.8) == 0.0 and at(arg, -0.01, 4.8) > XI_MIN
+
+
+def _slit(pb, design, eps):
+    """The lumen of ``pb`` squeezed to a slit (u_y = -(1 - eps)(y - y_c)), its pairs searched."""
+    import ngsolve as ng
+
+    yc = design.lumen.center[1]
+    pb.u.Set(ng.CF((0.0, -(1.0 - eps) * (ng.y - yc), 0.0)))
+    pb.contact.update()
+
+
+def test_held_contact_pairs_stay_current_while_the_wall_sections_keep_their_shape(short_design):
+    """LumenContact.pairs_current: no pairs held, none are current; after a search they are, and stay so
+    when the body moves as a rigid body (a turn about x, the bending plane's normal, and a shift: the
+    bending carries the wall far but leaves its sections' shape); the sections deformed by more than
+    settle_move (SETTLE_MOVE d_hat) make them stale. Newton searches the pairs again only then, so held
+    pairs are not swapped for a neighbouring state's at every iteration (which kept the 1-DOF optimum's
+    Newton from converging at 0.108 bar)."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.contact import SETTLE_MOVE
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, **PLAIN_P2).problem
+    c = pb.contact
+    assert not c.pairs_current()
+    yc, eps = short_design.lumen.center[1], 0.005
+    _slit(pb, short_design, eps)
+    assert c.settle_move == SETTLE_MOVE * c.d_hat and c.pairs_current()
+    a = 0.05   # rad
+    y1, z1 = -(1.0 - eps) * (ng.y - yc) + ng.y, ng.z     # the slit's deformed y, z; then turned about x, shifted
+    pb.u.Set(ng.CF((0.0, math.cos(a) * y1 - math.sin(a) * z1 + 2e-4 - ng.y,
+                    math.sin(a) * y1 + math.cos(a) * z1 - 3e-4 - ng.z)))
+    assert c.pairs_current()
+    # the slit opened by more than settle_move at its widest
+    radius = 0.5 * short_design.lumen.diameter
+    extra = 3.0 * c.settle_move / radius
+    pb.u.Set(ng.CF((0.0, -(1.0 - eps - extra) * (ng.y - yc), 0.0)))
+    assert not c.pairs_current()
+    c.update()
+    assert c.pairs_current()
+
+
+def test_in_contact_a_step_that_raises_the_energy_is_shortened_not_counted_as_an_overshoot(short_design):
+    """NewtonSettings.descent_in_contact: with the lumen walls in contact, a descent step far from
+    convergence is halved while it raises the condensed energy, and such a cut is named for that (the
+    Newton loop does not count it toward cut_iterations). Here the full step turns the squeezed lumen
+    into one stretched twice as far the other way (higher energy), half of it leaves the lumen half
+    open (lower). Without the setting the full step is taken."""
+    from softcath_ros.core.fe3d.newton import RAISES_ENERGY
+
+    for on in (True, False):
+        pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02,
+                       newton=NewtonSettings(threads=1, descent_in_contact=on), **PLAIN_P2).problem
+        pb.set_direction(np.array([1.0]))
+        _slit(pb, short_design, 0.005)
+        assert not pb.contact.pairs_idle
+        base = pb.get_state()
+        pb.du.FV().NumPy()[:] = 3.0 * base    # base - du = -2 x the squeeze
+        alpha, cut = pb._step_length(base, 1, slope=1.0)
+        assert (alpha, cut) == ((0.5, RAISES_ENERGY) if on else (1.0, ""))
+        if on:   # the state is the shortened step's, with Newton's own q
+            assert np.allclose(pb.get_state(), base - 0.5 * 3.0 * base)
+
+
 def test_a_failed_predicted_step_is_retried_from_the_last_state_unless_switched_off():
     """continuation.ramp: a corrector failing on the predicted guess gets a second try from the last
     converged state (it may rescue a step the predictor overshot); retry_from_last=False cuts at once."""

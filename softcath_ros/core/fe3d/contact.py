@@ -18,6 +18,8 @@ and the energy per reference area of the wall is
 
     W_c = c1 kappa d_hat beta(g / d_hat),   beta(xi) = -(xi^2 - 1)^2 ln(xi^2) for 0 < xi < 1, 0 beyond,
 
+(times windows, and with xi raised for a partner far off the primary's normal line: lateral_xi),
+
 the section rung's barrier b(s) = -(s - s_hat)^2 ln(s / s_hat) on s = g^2
 (core/section_fe/terms/contact.py), C2 at xi = 1. Its traction is about 2 kappa c1 / xi, so
 at a contact pressure p_c the gap is about 2 kappa d_hat c1 / p_c: a fixed fraction of d_hat,
@@ -30,6 +32,7 @@ traction is the sum of both sides' terms.
 """
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -37,13 +40,23 @@ import numpy as np
 from ..section_fe.terms.contact import KAPPA_SCALE, barrier
 from .holes import hole_size
 
+log = logging.getLogger(__name__)
+
 # energy scale (units c1 d_hat per reference area): gap ~ 2 KAPPA d_hat c1 / p_c, the section rung's
 KAPPA = KAPPA_SCALE
 # below xi = g / d_hat = XI_MIN the barrier is continued quadratically (C2)
 XI_MIN = 0.02
-# a pair counts fully when its partner lies within OFF_LOW d_hat of the primary's normal line
-# (its offset along the wall, |sep - g n|), not at all beyond OFF_HIGH d_hat (C2 in between)
+# a pair counts fully when its partner lies within OFF_LOW d_hat of the primary's normal line (its
+# offset o along the wall, |sep - g n|); beyond, LATERAL t^3, t = (o^2 - OFF_LOW^2) / (OFF_HIGH^2 -
+# OFF_LOW^2), is added to xi (C2), so from OFF_HIGH d_hat on a pair at most d_hat behind the
+# primary lies beyond the barrier's range (lateral_xi)
 OFF_LOW, OFF_HIGH = 2.0, 5.0
+LATERAL = 2.0
+# the held pairs are the state's own while the wall's sections have moved by at most SETTLE_MOVE d_hat
+# in their planes since the pairs were searched (LumenContact.pairs_current): half the crossing the
+# gap check tolerates; on the 1-DOF optimum a fresh search at a converged state in contact moved the
+# wall by 2-4.5 um (0.07-0.15 d_hat) and its tip angle by 4e-5 of itself, however often repeated
+SETTLE_MOVE = 0.25
 # and when it lies in front of the primary or at most BEHIND_HIGH d_hat behind it, not at all
 # beyond BEHIND_LOW d_hat behind it (through the silicone, where the wall creases)
 BEHIND_LOW, BEHIND_HIGH = -2.0, -1.0
@@ -87,6 +100,16 @@ def barrier_cf(xi):
     return ng.IfPos(xi - 1.0, 0.0, ng.IfPos(xi - XI_MIN, log_part, taylor))
 
 
+def lateral_xi(xi, offset2):
+    """The barrier's argument for a pair of normal gap xi d_hat whose partner lies sqrt(offset2) d_hat
+    off the primary's normal line: xi while that offset is at most OFF_LOW, then xi + LATERAL t^3
+    (C2; t as at LATERAL), as a CoefficientFunction."""
+    import ngsolve as ng
+
+    t = ng.IfPos(offset2 - OFF_LOW ** 2, (offset2 - OFF_LOW ** 2) / (OFF_HIGH ** 2 - OFF_LOW ** 2), 0.0)
+    return xi + LATERAL * t * t * t
+
+
 def smooth_step_cf(t):
     """S(t) = 6t^5 - 15t^4 + 10t^3 on [0, 1], 0 below, 1 above (C2), as a CoefficientFunction."""
     import ngsolve as ng
@@ -123,6 +146,10 @@ class LumenContact:
         # the pairs count as settled when a search at convergence leaves a residual force below
         # this fraction of the pressure load (Fe3dProblem._contact_pairs_settled)
         self.settle_force = 1e-3
+        # the held pairs count as the current state's (no search before a Newton iteration or at
+        # convergence) while no sampled point of the wall's sections has moved by more than this (m)
+        # in its section's plane since they were searched (pairs_current)
+        self.settle_move = SETTLE_MOVE * self.d_hat
         # backtrack from a Newton step that adds to overlap_area(): off, since on the coarse
         # 10 mm body it stopped the ramp at the same pressure (0.2439 bar) and cost time
         self.backtrack_on_overlap = False
@@ -148,22 +175,27 @@ class LumenContact:
         # counted with their negative gap, made the energy jump by orders of magnitude when the
         # search added or dropped them (fe3d-3). Walls that really pass through each other are
         # caught by the geometric check instead (min_gap)
+        # The offset does not weigh the barrier but adds to its argument (lateral_xi): a weight let a
+        # pair found nearly in the primary's tangent plane (offset 4.8 d_hat, gap -0.01 d_hat: the
+        # wall turning round a fold) keep a sliver of the barrier's large value there, which moved
+        # with the offset: 0.059 mm^2 of such pairs past the log range made the tangent indefinite
+        # on the 1-DOF optimum at 0.1041 bar (docs/models/fe3d.md, "Where it fails")
         offset2 = (sep * sep - gap * gap) / (self.d_hat * self.d_hat)
-        weight = smooth_step_cf((OFF_HIGH ** 2 - offset2) / (OFF_HIGH ** 2 - OFF_LOW ** 2))
-        weight = weight * smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
+        xi = lateral_xi(gap / self.d_hat, offset2)
+        weight = smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
         # and the two points must be apart on the reference wall: a neighbour along the wall
         # is not a contact partner (the section rung's exclusion of incident segments)
         ref = ng.Norm(X.Other() - X) / hole_size(lumen)
         weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
         scale = problem.design.material.c1 * KAPPA * self.d_hat
         # compiled: the same values, several times faster to assemble
-        energy = (scale * weight * barrier_cf(gap / self.d_hat)).Compile()
+        energy = (scale * weight * barrier_cf(xi)).Compile()
         self.boundary.AddEnergy(energy)
         paired = ng.IfPos(weight - 1e-12, 1.0, 0.0)   # the pairs the energy counts at all
         # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
         # Newton can backtrack from a step that adds to it (backtrack_on_overlap)
         self.check = ng.ContactBoundary(wall, wall, volume=False)
-        self.check.AddEnergy(paired * ng.IfPos(XI_MIN * self.d_hat - gap, 1.0, 0.0))
+        self.check.AddEnergy(paired * ng.IfPos(XI_MIN - xi, 1.0, 0.0))
         self.check_form = ng.BilinearForm(problem.fes)
         # the contact energy alone on the same pairs: its gradient is the wall's contact force
         self.force_boundary = ng.ContactBoundary(wall, wall, volume=False)
@@ -175,19 +207,20 @@ class LumenContact:
         # True while the pairs held count nothing: none searched yet, or the last search was made
         # with the walls far apart (then skipping a search changes no energy, gradient or tangent)
         self.pairs_idle = True
+        self._searched_wall = None   # the wall's sampled points (wall_points) at the last search
         self.searches = self.skipped = 0
-        self._wall, self._gap, self._ref, self._paired = wall, gap, ref, paired
+        self._wall, self._gap, self._xi, self._ref, self._paired = wall, gap, xi, ref, paired
         self._census = None   # pair_census's forms, built on its first call (diagnosis only)
 
     def _census_forms(self) -> list:
-        """The census's forms: for "in_range" (counted by the energy's windows, gap below d_hat)
-        and "behind" (partner beyond BEHIND_LOW d_hat behind the primary, apart on the wall: the
-        energy ignores them) the area (m^2) and area-weighted x, y, z and gap."""
+        """The census's forms: for "in_range" (counted by the energy: in its windows, the barrier's
+        argument below 1) and "behind" (partner beyond BEHIND_LOW d_hat behind the primary, apart on
+        the wall: the energy ignores them) the area (m^2) and area-weighted x, y, z and gap."""
         if self._census is None:
             import ngsolve as ng
 
             one = ng.IfPos(self._ref - NEAR_HIGH, 1.0, 0.0)
-            kinds = {"in_range": self._paired * ng.IfPos(self.d_hat - self._gap, 1.0, 0.0),
+            kinds = {"in_range": self._paired * ng.IfPos(1.0 - self._xi, 1.0, 0.0),
                      "behind": one * ng.IfPos(BEHIND_LOW * self.d_hat - self._gap, 1.0, 0.0)}
             self._census = []
             for kind, mask in kinds.items():
@@ -212,7 +245,17 @@ class LumenContact:
             self._held_pairs_to(self.check, self.check_form)
         self.pairs_idle = far
         self.searches += 1
+        self._searched_wall = self.wall_points()
         return True
+
+    def pairs_current(self) -> bool:
+        """Whether the held pairs were searched where every sampled point of the lumen wall lay within
+        ``settle_move`` of where it is now: the current state's pairs to within that motion."""
+        if self._searched_wall is None:
+            return False
+        moved = float(np.max(np.linalg.norm(self.wall_points() - self._searched_wall, axis=-1)))
+        log.debug("the lumen wall moved %.3g um since the pairs were searched", moved * 1e6)
+        return moved <= self.settle_move
 
     def force_norm(self, free) -> float:
         """Euclidean norm over the ``free`` unknowns of the contact's nodal forces (N) on the pairs of
@@ -247,12 +290,13 @@ class LumenContact:
         return self.check_form.Energy(self.problem.gf.vec)
 
     def pair_census(self) -> dict:
-        """The pairs of a fresh search at the current state: for "in_range" (counted by the
-        energy's windows, gap below d_hat) and "behind" (partner more than 2 d_hat behind the
-        primary, ignored by the energy) the model's wall area (m^2), its centroid (m) and mean
-        gap (m)."""
+        """The pairs of a fresh search at the current state: for "in_range" (counted by the energy:
+        in its windows, the barrier's argument below 1) and "behind" (partner more than 2 d_hat
+        behind the primary, ignored by the energy) the model's wall area (m^2), its centroid (m)
+        and mean gap (m)."""
         self.boundary.Update(self.problem.u, self.problem.a, self.intorder, self.maxdist, keep_pairs=True)
         self.pairs_idle = False   # (not known: the next update searches)
+        self._searched_wall = None
         raw: dict = {}
         for kind, what, cb, form in self._census_forms():
             self._held_pairs_to(cb, form)
@@ -262,6 +306,10 @@ class LumenContact:
             a = v["area"]
             out[kind] = {"area_m2": a, **({k: v[k] / a for k in ("x", "y", "z", "gap")} if a > 0 else {})}
         return out
+
+    def wall_points(self) -> np.ndarray:
+        """The lumen wall's sampled section rings in their own planes (m), (levels, m, 2): ``section_rings``."""
+        return np.asarray(section_rings(self.problem, self._sampling))
 
     def min_gap(self) -> float:
         """The smallest distance (m) between two wall points of one section that are not
@@ -322,10 +370,11 @@ def _closed_ring(problem, cur: np.ndarray) -> np.ndarray:
     return cur
 
 
-def min_wall_gap(problem, sampling: WallSampling) -> float:
-    """See LumenContact.min_gap. Each deformed section ring is projected onto the plane normal
-    to the deformed axis there; crossings are found with the section rung's polygon test."""
-    best = math.inf
+def section_rings(problem, sampling: WallSampling) -> list:
+    """Each deformed section ring of the lumen wall (closed by its mirror image on the half model) in
+    the plane normal to the deformed axis there, about its centroid: (m, 2) in-plane coordinates, m,
+    per mesh level. The body's bending moves them only through the section's own deformation."""
+    out = []
     for rings in sampling.deformed(problem):
         cur, above, below = (_closed_ring(problem, r) for r in rings)
         centre = cur.mean(axis=0)
@@ -336,9 +385,14 @@ def min_wall_gap(problem, sampling: WallSampling) -> float:
         e1 = np.array([1.0, 0.0, 0.0]) - axis[0] * axis
         e1 /= np.linalg.norm(e1)
         e2 = np.cross(axis, e1)
-        P = (cur - centre) @ np.column_stack([e1, e2])          # in-plane coordinates
-        best = min(best, polygon_gap(P, 2 * SAMPLES))
-    return best
+        out.append((cur - centre) @ np.column_stack([e1, e2]))
+    return out
+
+
+def min_wall_gap(problem, sampling: WallSampling) -> float:
+    """See LumenContact.min_gap. Each section ring (``section_rings``) is tested for crossings with
+    the section rung's polygon test."""
+    return min((polygon_gap(P, 2 * SAMPLES) for P in section_rings(problem, sampling)), default=math.inf)
 
 
 def polygon_gap(P: np.ndarray, skip: int) -> float:

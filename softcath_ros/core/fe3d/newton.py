@@ -48,12 +48,17 @@ class NewtonSettings:
     # factorisation at every iteration.
     reuse_ratio: float | None = 0.25
     reuse_age: int = 8
+    # with the lumen walls in contact, halve a descent step far from convergence while it raises the
+    # condensed energy: there the pairing's energy is nonconvex and full steps wandered
+    descent_in_contact: bool = True
 
 
 # a Newton iteration on a reused factorisation costs about a quarter of one that factorises (the
 # 20 mm default body: 0.16-0.21 s against 0.76-0.86 s): the weight of such iterations in a solve's
 # effort, by which the ramp sizes its steps
 REUSED_ITERATION_COST = 0.25
+# why a step was shortened to descend (NewtonSettings.descent_in_contact)
+RAISES_ENERGY = "raises the energy"
 # on a reused factorisation |du.r| only estimates the energy error: a solve ends there at this
 # fraction of the tolerance
 REUSED_TOLERANCE = 0.1
@@ -202,7 +207,7 @@ class Fe3dNewton:
                 self._check_stall(s, it)
                 t_it = time.perf_counter()
                 if self.contact is not None and it > 1 and s.searches == 0 and \
-                        s.work >= self.contact.search_above * s.tol:
+                        s.work >= self.contact.search_above * s.tol and not self.contact.pairs_current():
                     # far from convergence the pairs of an earlier iterate are stale (the walls slide):
                     # fixed, they make the energy so nonconvex that full Newton steps cycle. After a
                     # search at convergence the pairs are fresh and stay fixed: searched again at every
@@ -222,11 +227,12 @@ class Fe3dNewton:
                         s.work, s.budget = self._shifted_iteration(base, it, s.budget)
                         continue
                     self.sigma = 0.0   # Newton recovered
-                alpha, full_cut = self._step_length(base, it)
+                alpha, full_cut = self._step_length(base, it, slope)
                 if alpha is None:   # every length rejected: the shifted tangent's step instead
                     s.work, s.budget = self._shifted_iteration(base, it, s.budget)
                     continue
-                s.cuts_in_row = s.cuts_in_row + 1 if alpha < 1.0 else 0
+                # (a step shortened to descend is no overshoot past recovery)
+                s.cuts_in_row = s.cuts_in_row + 1 if alpha < 1.0 and full_cut != RAISES_ENERGY else 0
                 if st.cut_iterations is not None and s.cuts_in_row >= st.cut_iterations:
                     self.set_state(base)
                     self.gf.vec.data -= self.du   # the full step again, to say where it fails
@@ -292,15 +298,23 @@ class Fe3dNewton:
         self.last_effort += 1.0 if fresh else REUSED_ITERATION_COST
         return base, slope, fresh
 
-    def _step_length(self, base: np.ndarray, it: int) -> tuple[float | None, str]:
+    def _step_length(self, base: np.ndarray, it: int, slope: float) -> tuple[float | None, str]:
         """Take base - alpha du with alpha halved from 1 while the state is not admissible: an
         inverted element, a step through the other wall, which jumps over the barrier (it acts only
-        at the pairs' points), or (``contact.backtrack_on_overlap``) a growing overlap of the walls.
+        at the pairs' points), or (``contact.backtrack_on_overlap``) a growing overlap of the walls;
+        with the walls in contact (NewtonSettings.descent_in_contact) also while a descent step far
+        from convergence (``slope`` = du.r at least ``contact.search_above`` x the tolerance; nearer,
+        round-off and Newton's q off its optimum for u outweigh the decrease) raises the condensed energy.
         Returns (alpha, why the full step was cut, "" if not); alpha None below ``min_step`` with the
         shifted tangent on; without it that raises NewtonFailure."""
         st = self.newton_settings
         backtrack = self.contact is not None and self.contact.backtrack_on_overlap
         overlap0 = self.contact.overlap_area() if backtrack else 0.0
+        e0 = None
+        if st.descent_in_contact and self.contact is not None and not self.contact.pairs_idle and \
+                slope >= self.contact.search_above * st.energy_tol * self.energy_scale:
+            self.set_state(base)
+            e0 = self._condensed_energy()
         alpha, full_cut = 1.0, ""
         while True:
             self.gf.vec.data = base
@@ -309,6 +323,12 @@ class Fe3dNewton:
             if not cut and backtrack and self.contact.overlap_area() > overlap0 * (1.0 + 1e-9):
                 # no step into the barrier's continuation (the walls' overlap must not grow)
                 cut = "pushes paired walls past the barrier's log range"
+            if not cut and e0 is not None:
+                e = self._condensed_energy()
+                self.gf.vec.data = base   # Newton's own q again (the energy set q's optimum for u)
+                self.gf.vec.data -= alpha * self.du
+                if not (math.isfinite(e) and e <= e0 + 1e-12 * abs(e0)):
+                    cut = RAISES_ENERGY
             if not cut:
                 return alpha, full_cut
             if alpha == 1.0:
@@ -321,12 +341,13 @@ class Fe3dNewton:
                 raise NewtonFailure(f"line search failed: every step length is rejected; the shortest {why}", it)
 
     def _converged(self, s: "_Solve", it: int) -> bool:
-        """At a converged iterate: with contact, search the pairs again (``_contact_pairs_settled``);
-        when they move, iterate on with the new ones (a fresh budget; False), and check the wall
-        does not pass through itself (NewtonFailure). True: the solve is done."""
+        """At a converged iterate: with contact, unless the held pairs are current
+        (``LumenContact.pairs_current``), search them again (``_contact_pairs_settled``); when they
+        move, iterate on with the new ones (a fresh budget; False), and check the wall does not pass
+        through itself (NewtonFailure). True: the solve is done."""
         if self.contact is None:
             return True
-        if self.contact.settle and not self._contact_pairs_settled():
+        if self.contact.settle and not self.contact.pairs_current() and not self._contact_pairs_settled():
             # converged for the old pairs: iterate on with the new ones
             s.searches += 1
             if s.searches > self.contact.max_searches:
