@@ -355,3 +355,95 @@ def test_the_pair_tables_symmetry_is_found_from_the_outlines_never_from_the_chan
     d = fans.to_dict()
     d["name"], d["channels"] = "fans_clockwise", [d["channels"][i] for i in (0, 2, 1)]   # turn maps 0 -> 2
     assert pair_mirror_angle(design_from_dict(d)) is None
+
+
+def _fan_stand_in(design, common_gain: float = 0.0, turn_deg: float = 40.0):
+    """A stand-in source for a fan design, cheap to solve: for a pair (a, b) of a 3-fold symmetric
+    section the bend is a·u0 + b·u1 (u1 = u0 mirrored) turned with the pressure ratio by up to 40
+    degrees near the equal pair (none for one channel alone), from a sum of 0.5 bar on (there the turn is too steep for a few
+    rays); a common pressure m adds stretch and raises the bend by common_gain * m / 1 bar. Solves a
+    ray of commands as the section rung would."""
+    from softcath_ros.core.models.surrogate_build import reflection
+    from softcath_ros.core.models.surrogate_settings import ROTATION_COS, ROTATION_SIN, pair_mirror_angle
+
+    refl = reflection(design)
+    al = pair_mirror_angle(design) - np.radians(60.0)    # channel 1's bend is channel 0's turned by 120 deg
+    u0 = 20.0 * np.array([np.cos(al), np.sin(al)]) / 1e5        # 1/m per Pa
+    u1 = refl @ u0
+
+    def answer(p: np.ndarray) -> np.ndarray:
+        m = p.min(1)
+        q = p - m[:, None]
+        zero = q.argmin(1)
+        r = (zero + 1) % 3
+        rows = np.arange(len(p))
+        a, b = q[rows, r], q[rows, (zero + 2) % 3]
+        s = a + b
+        ratio = np.divide(a - b, s, out=np.zeros_like(s), where=s > 0)
+        gate = np.clip((s - 0.5e5) / 0.3e5, 0.0, 1.0)
+        turn = np.radians(turn_deg) * np.tanh(8.0 * ratio) * (1.0 - ratio ** 2) * gate ** 2 * (3.0 - 2.0 * gate)
+        k0 = a[:, None] * u0 + b[:, None] * u1
+        k0 = np.column_stack([np.cos(turn) * k0[:, 0] - np.sin(turn) * k0[:, 1],
+                              np.sin(turn) * k0[:, 0] + np.cos(turn) * k0[:, 1]])
+        c, sn = ROTATION_COS[r], ROTATION_SIN[r]
+        k = np.column_stack([c * k0[:, 0] - sn * k0[:, 1], sn * k0[:, 0] + c * k0[:, 1]])
+        k = k * (1.0 + common_gain * m / 1e5)[:, None]
+        return np.column_stack([k, 1.0 + 0.1 * s / 1e5 + 0.05 * m / 1e5])
+
+    def solve_ray(design_, source, options, commands):
+        return {"values": answer(np.asarray(commands, dtype=float)), "n_ok": len(commands), "message": "",
+                "last": None}
+
+    return answer, solve_ray
+
+
+def test_check_rays_with_a_large_common_part_stop_where_they_are_off_with_the_same_limit(tmp_path, monkeypatch):
+    """The common-mode check rays with 20 % and 2 % common parts are first solved to a few commands;
+    when one of those is already off the tolerance the rest of the ray (larger common pressures)
+    cannot change the answered limit or its error, so it is not solved: the same bound as from
+    whole rays, from fewer source commands. When all are within (a pure-stretch source), whole rays."""
+    from softcath_ros.core.models import surrogate_build, surrogate_tabulate
+
+    d = load_design("three_channel_5mm")
+    settings = dict(pressure_step=5000.0, max_rays=9, fine_points=101, shipped=False, workers=1)
+    monkeypatch.setattr(surrogate_build, "solve_ray", _fan_stand_in(d, common_gain=20.0)[1])
+    cut = make_model("surrogate", d, cache=tmp_path / "cut", **settings)
+    monkeypatch.setattr(surrogate_tabulate, "CHECK_FIRST", 10 ** 6)
+    whole = make_model("surrogate", d, cache=tmp_path / "whole", **settings)
+    c, w = cut.error_bound["common_mode"], whole.error_bound["common_mode"]
+    assert 0 < c["max_common_pressure_pa"] == w["max_common_pressure_pa"] < d.max_pressure
+    for key in ("points", "rc_rel_max", "direction_deg_max", "worst_at_bar"):
+        assert c[key] == w[key]
+    assert c["checked_points"] < w["checked_points"]
+    assert cut.meta["source_evaluations"] < whole.meta["source_evaluations"]
+    monkeypatch.setattr(surrogate_tabulate, "CHECK_FIRST", 6)
+    monkeypatch.setattr(surrogate_build, "solve_ray", _fan_stand_in(d, turn_deg=0.0)[1])
+    exact = make_model("surrogate", d, cache=tmp_path / "exact", **settings)
+    n = int(d.max_pressure / 5000.0)
+    assert exact.error_bound["common_mode"]["checked_points"] == 3 * n
+    assert exact.meta["max_common_pressure"] == d.max_pressure
+
+
+def test_build_pool_keeps_its_processes_busy_with_the_rays_a_round_waits_for_first():
+    """No more rays in the processes than workers; a ray a later round waits for (priority 0) leaves
+    the queue before independent ones (held-out, checks) queued earlier, which fill the processes
+    while a round's last rays finish; every ray is answered once."""
+    from tqdm import tqdm
+
+    from softcath_ros.core.models.surrogate_build import RayPool
+
+    d = load_design("three_channel_5mm")
+    cmds = np.array([[0.0, 0.0, 0.0], [1000.0, 500.0, 0.0]])
+    with tqdm(total=0, disable=True) as bar:
+        pool = RayPool(d, "closed_form", {}, 2, bar)
+        try:
+            for i in range(4):
+                pool.submit(("held", i), cmds, priority=2)
+            pool.submit(("ray", 1), cmds, priority=0)
+            assert len(pool.pending) == 2 and len(pool.queued) == 3
+            assert pool.queued[0][2] == ("ray", 1)
+            got = dict(pool.results())
+        finally:
+            pool.close()
+    assert sorted(map(str, got)) == sorted(map(str, [("held", i) for i in range(4)] + [("ray", 1)]))
+    assert all(r["n_ok"] == 2 for r in got.values())

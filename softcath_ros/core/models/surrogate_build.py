@@ -21,6 +21,7 @@ the table's error; the surrogate stores it.
 """
 from __future__ import annotations
 
+import heapq
 import math
 import multiprocessing
 import os
@@ -71,14 +72,20 @@ def solve_ray(design: Design, source: str, source_options: dict, commands: np.nd
 class RayPool:
     """Rays solved on ``workers`` processes (1: in this process), with a progress bar over rays.
 
-    ``submit(tag, commands)`` queues a ray; ``results()`` yields (tag, result) as rays finish.
+    ``submit(tag, commands, priority)`` queues a ray; ``results()`` yields (tag, result) as rays
+    finish. At most ``workers`` rays are in the processes at a time, the lowest ``priority`` first:
+    rays that later rays wait for (a refinement round) go before independent ones, which fill the
+    processes while the last rays of a round finish (no idle tail between rounds).
     Fork is used when this process has no other threads (quick start), spawn otherwise (a ROS
     node's executor threads must not be forked)."""
 
     def __init__(self, design: Design, source: str, source_options: dict, workers: int, bar):
         self.design, self.source, self.options = design, source, dict(source_options)
         self.bar = bar
+        self.workers = workers
         self.pending: dict = {}
+        self.order = 0
+        self.queued: list = []      # heap of (priority, order, tag, commands) not yet in a process
         self.done: list = []
         self.pool = None
         if workers > 1:
@@ -88,28 +95,39 @@ class RayPool:
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
                                             initializer=_quiet_worker)
 
-    def submit(self, tag, commands: np.ndarray) -> None:
+    def submit(self, tag, commands: np.ndarray, priority: int = 0) -> None:
         self.bar.total = (self.bar.total or 0) + 1
         self.bar.refresh()
         if self.pool is None:
             self.done.append((tag, solve_ray(self.design, self.source, self.options, commands)))
             self.bar.update(1)
         else:
+            self.order += 1
+            heapq.heappush(self.queued, (priority, self.order, tag, commands))
+            self._feed()
+
+    def _feed(self) -> None:
+        while self.queued and len(self.pending) < self.workers:
+            _, _, tag, commands = heapq.heappop(self.queued)
             self.pending[self.pool.submit(solve_ray, self.design, self.source, self.options, commands)] = tag
 
     def results(self):
         """Finished rays as they come, until none is pending."""
-        while self.done or self.pending:
+        while self.done or self.pending or self.queued:
             while self.done:
                 yield self.done.pop(0)
+            self._feed()
             if self.pending:
                 finished, _ = wait(list(self.pending), return_when=FIRST_COMPLETED)
                 for f in finished:
                     tag = self.pending.pop(f)
                     self.bar.update(1)
+                    self._feed()
                     yield tag, f.result()
 
     def close(self, cancel: bool = False) -> None:
+        if cancel:
+            self.queued.clear()
         if self.pool is not None:
             self.pool.shutdown(wait=True, cancel_futures=cancel)
 
@@ -125,14 +143,18 @@ def reflection(design: Design) -> np.ndarray:
     return np.array([[math.cos(2 * al), math.sin(2 * al)], [math.sin(2 * al), -math.cos(2 * al)]])
 
 
-def pair_commands(n_channels: int, pair: int, t: float, sums: np.ndarray, pmax: float) -> np.ndarray:
+def pair_commands(n_channels: int, pair: int, t: float, sums: np.ndarray, pmax: float,
+                  beyond: bool = True) -> np.ndarray:
     """Commands on the ray t of a pair: channel pair at (1 - t) m, channel pair + 1 at t m, for the
-    sums m whose channel pressures stay within pmax, and the next one (so the table covers the
-    commands up to pmax itself; the source is asked slightly beyond it, the surrogate never answers
-    beyond it)."""
+    sums m whose channel pressures stay within pmax, and (``beyond``) the next one (so the table
+    covers the commands up to pmax itself; the source is asked slightly beyond it, the surrogate
+    never answers beyond it, so held-out rays stop at pmax)."""
     w = np.zeros(n_channels)
     w[pair], w[(pair + 1) % n_channels] = 1.0 - t, t
-    n = int(np.searchsorted(sums * w.max(), pmax * (1 - 1e-12))) + 1
+    if beyond:
+        n = int(np.searchsorted(sums * w.max(), pmax * (1 - 1e-12))) + 1
+    else:
+        n = int(np.searchsorted(sums * w.max(), pmax * (1 + 1e-12), side="right"))
     return sums[:n, None] * w[None, :]
 
 

@@ -78,6 +78,12 @@ def _one_channel(model, pool) -> tuple[dict, dict]:
     return model.table, meta
 
 
+# pool priorities: refinement rays (later rounds wait for them) first, then the held-out rays
+# beside the worst miss, then rays nothing waits for (they fill the processes between rounds)
+_ROUND, _BESIDE, _INDEPENDENT = 0, 1, 2
+CHECK_FIRST = 6     # commands (from rest) a check ray with a large common part is first solved to
+
+
 def _three_channel(model, pool) -> tuple[dict, dict]:
     from .surrogate_build import PairRays, mirrored, pair_commands, pair_surface, reflection
 
@@ -85,6 +91,7 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     pmax = d.max_pressure
     n_step = max(int(math.ceil(pmax / s.pressure_step)), 4)
     sums = np.linspace(0.0, 2.0 * pmax, 2 * n_step + 1)      # a + b along a pair's ray
+    mids = sums[:-1] + 0.5 * (sums[1] - sums[0])            # held out: sums between the table's
     mags = np.linspace(0.0, pmax, n_step + 1)                # the largest channel pressure
     pairs = (0,) if model.rotated else (0, 1, 2)
     half = 0.5 if model.rotated else 1.0
@@ -94,19 +101,23 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     n0 = s.initial_rays if model.rotated else 2 * s.initial_rays - 1
     rounds = {0: [(r, float(t)) for r in pairs for t in np.linspace(0.0, half, n0)]}
     for r, t in rounds[0]:
-        pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax))
-    # held out: every pair, t off the table's rays, sums between the table's
+        pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax), _ROUND)
+    # held out: every pair, t off the table's rays, sums between the table's (up to max_pressure)
     held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
     for i, (r, t) in enumerate(held):
-        pool.submit(("held", i), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
-    pool.submit(("common",), np.repeat(mags[:, None], 3, 1))
+        pool.submit(("held", i), pair_commands(3, r, t, mids, pmax, beyond=False), _INDEPENDENT)
+    pool.submit(("common",), np.repeat(mags[:, None], 3, 1), _INDEPENDENT)
     # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
-    # (a vented channel that has not yet reached zero is the usual case)
-    checks = []
+    # (a vented channel that has not yet reached zero is the usual case). A check ray is off beyond
+    # its first command off the tolerance (a larger common pressure), so those with a large common
+    # part are first solved to CHECK_FIRST commands only, and to the end only if all were within.
+    checks, cut = [], []
     for i in range(s.common_rays):
         w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
         checks.append(np.roll(w, i % 3))
-        pool.submit(("check", i), mags[:, None] * checks[-1][None, :])
+        cut.append(i < s.common_rays - 1 and len(mags) > CHECK_FIRST)
+        pool.submit(("check", i), mags[:CHECK_FIRST if cut[-1] else len(mags), None] * checks[-1][None, :],
+                    _INDEPENDENT)
 
     def surface(r):
         arrays = rays[r].arrays()
@@ -118,7 +129,7 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     # finished table is least sure (random rays rarely land in a narrow steep band)
     for r, t in _beside_worst_miss(refine_log, rays, s):
         held.append((r, t))
-        pool.submit(("held", len(held) - 1), pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax))
+        pool.submit(("held", len(held) - 1), pair_commands(3, r, t, mids, pmax, beyond=False), _BESIDE)
     for tag, res in pool.results():
         results[tag] = res
     # the table
@@ -131,21 +142,29 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
              "common_p": mags[:n_cm], "common_stretch": cm["values"][:n_cm, 2]}
     max_common = float(mags[n_cm - 1]) if n_cm else 0.0
     model.use_table(table, {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": max_common})
-    bound, n_held = _held_out_bound(model, results, held, sums, pmax)
-    limit, cbound = _common_mode_bound(model, results, checks, mags, max_common)
+    bound, n_held = _held_out_bound(model, results, held, mids, pmax)
+    limit, cbound, full = _common_mode_bound(model, results, checks, mags, max_common)
+    again = [i for i, c in enumerate(cut) if c and full[i] and results[("check", i)]["n_ok"] == CHECK_FIRST]
+    if again:    # every command of a shortened check ray was within: the whole ray, from rest
+        for i in again:
+            pool.submit(("check", i), mags[:, None] * checks[i][None, :], _ROUND)
+        for tag, res in pool.results():
+            results[tag] = res
+        limit, cbound, _ = _common_mode_bound(model, results, checks, mags, max_common)
     failures = [res["message"] for tag, res in sorted(results.items(), key=lambda x: str(x[0]))
                 if tag[0] in ("ray", "common") and res["message"]]
     failures += [m for r in pairs for m in rays[r].messages]
     reach_bar = {f"{r}:{t:.4f}": None if c else float(sums[n - 1] / PA_PER_BAR) if n else 0.0
                  for r, a in zip(pairs, arrs) for t, n, c in zip(a[0], a[2], a[3])}
     n_rays = sum(len(a[0]) for a in arrs)
+    n_checked = sum(len(results[("check", i)]["values"]) for i in range(len(checks)))
     meta = {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": limit,
             "max_common_table_pressure": max_common,
             "source_failure": "; ".join(dict.fromkeys(failures[:3])),
-            "source_rays": int(n_rays + len(held) + 1 + len(checks)), "table_rays": int(n_rays),
+            "source_rays": int(n_rays + len(held) + 1 + len(checks) + len(again)), "table_rays": int(n_rays),
             "source_evaluations": int(sum(len(pair_commands(3, r, t, sums, pmax))
                                           for r, a in zip(pairs, arrs) for t in a[0])
-                                      + n_held + len(mags) * (1 + len(checks))),
+                                      + n_held + len(mags) + n_checked),
             "ray_reach_sum_bar": reach_bar, "refinement": refine_log,
             "error_bound": {"pair": bound, "common_mode": cbound},
             "common_checks_direction": [w.round(4).tolist() for w in checks],
@@ -202,7 +221,7 @@ def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, s
         if nxt:
             rounds[k + 1], waiting[k + 1] = nxt, len(nxt)
             for r, t, _, _, _ in nxt:
-                pool.submit(("ray", k + 1, r, t), pair_commands(3, r, t, sums, pmax))
+                pool.submit(("ray", k + 1, r, t), pair_commands(3, r, t, sums, pmax), _ROUND)
     return refine_log
 
 
@@ -238,33 +257,32 @@ def rays_with_room(split: list, room: dict, narrowest: float = 1.0 / 256) -> lis
     return chosen
 
 
-def _held_out_bound(model, results: dict, held: list, sums, pmax: float) -> tuple[dict, int]:
-    """The table's error at the held-out pair rays (sums between the table's), and how many
-    commands that measured."""
+def _held_out_bound(model, results: dict, held: list, mids, pmax: float) -> tuple[dict, int]:
+    """The table's error at the held-out pair rays (at the sums ``mids`` between the table's, up to
+    max_pressure), and how many commands that measured."""
     from .surrogate_build import pair_commands
 
     cmds, vals = [], []
     for i, (r, t) in enumerate(held):
         h = results[("held", i)]
-        c = pair_commands(3, r, t, sums[:-1] + 0.5 * (sums[1] - sums[0]), pmax)[:h["n_ok"]]
-        cmds.append(c[1:] if len(c) and not c[0].any() else c)
-        vals.append(h["values"][:h["n_ok"]][len(c) - len(cmds[-1]):])
+        cmds.append(pair_commands(3, r, t, mids, pmax, beyond=False)[:h["n_ok"]])
+        vals.append(h["values"][:h["n_ok"]])
     cmds, vals = np.vstack(cmds), np.vstack(vals)
-    inside = cmds.max(1) <= pmax                     # the rays were solved one step beyond max_pressure
-    cmds, vals = cmds[inside], vals[inside]
     return table_errors(model.evaluate(cmds), vals, cmds), len(cmds)
 
 
-def _common_mode_bound(model, results: dict, checks: list, mags, max_common: float) -> tuple[float, dict]:
+def _common_mode_bound(model, results: dict, checks: list, mags, max_common: float) -> tuple[float, dict, list]:
     """Commands with all three channels > 0: the error of treating the common part as pure
-    stretch, and the common pressure up to which it stayed within the tolerances (Pa)."""
+    stretch, the common pressure up to which it stayed within the tolerances (Pa), and per check
+    ray whether every command on it was."""
     s = model.settings
-    cc, cv = [], []
+    cc, cv, ray = [], [], []
     for i, w in enumerate(checks):
         h = results[("check", i)]
         cc.append(mags[1:h["n_ok"], None] * w[None, :])
         cv.append(h["values"][1:h["n_ok"]])
-    cc, cv = np.vstack(cc), np.vstack(cv)
+        ray += [i] * len(cc[-1])
+    cc, cv, ray = np.vstack(cc), np.vstack(cv), np.array(ray, dtype=int)
     mine = model.evaluate(cc)
     use = mine.converged
     rc = rc_error(mine.curvature[use], cv[use, :2])
@@ -283,7 +301,8 @@ def _common_mode_bound(model, results: dict, checks: list, mags, max_common: flo
                    "direction_deg_max_checked": float(dr.max()) if dr.size else None,
                    "max_common_pressure_pa": limit, "tolerance_rc_rel": s.common_tolerance,
                    "tolerance_direction_deg": s.common_direction_tolerance})
-    return limit, cbound
+    full = [not bad[ray[use] == i].any() for i in range(len(checks))]
+    return limit, cbound, full
 
 
 def table_errors(mine: BendState, ref: np.ndarray, pressures: np.ndarray, within=None) -> dict:
