@@ -788,7 +788,7 @@ def test_a_saddle_of_the_contact_term_alone_is_not_named_an_unstable_equilibrium
     from softcath_ros.core.fe3d.stability import ContactSplit
 
     class Problem:
-        contact = SimpleNamespace(update=lambda: True)
+        contact = SimpleNamespace(update=lambda: True, mirror_crossing=lambda: 0.0, d_hat=3e-5)
         load = SimpleNamespace(Set=lambda v: None)
 
         def set_state(self, s):
@@ -807,6 +807,51 @@ def test_a_saddle_of_the_contact_term_alone_is_not_named_an_unstable_equilibrium
     assert why == reason
     assert "-0.269 x 2 c1" in text and f"without the lumen contact's term {without:.3g}" in text
     assert ("of the lumen contact's making" in text) == (reason == "numerical failure")
+
+
+def test_a_half_wall_past_its_mirror_plane_is_measured_and_named_at_a_stop(short_design):
+    """LumenContact.mirror_crossing: how far the half model's lumen wall lies past its mirror plane x = 0
+    (through its mirror image, where the half model has no contact term; the fan design's equal pair
+    stopped so with no contact pair held): 0 at rest and on the full body; with every point moved to
+    -x / 2, half the wall's largest x. A failed ramp's stop message says so when it is past by more than
+    MIRROR_SAID d_hat (here a stand-in problem at 38 um, the equal pair's at 0.05 bar), and not at 0."""
+    from types import SimpleNamespace
+
+    import ngsolve as ng
+
+    from softcath_ros.core.continuation import RampResult
+    from softcath_ros.core.fe3d.measure import lumen_wall_nodes
+    from softcath_ros.core.fe3d.ramp import _name_the_stop
+
+    half = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, **PLAIN_P2).problem
+    full = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, half=False,
+                     **PLAIN_P2).problem
+    assert half.half and not full.half
+    assert half.contact.mirror_crossing() < 1e-12
+    x_max = float(np.max(lumen_wall_nodes(half)[0][:, 0]))
+    for pb in (half, full):
+        pb.u.Set(ng.CF((-1.5 * ng.x, 0.0, 0.0)))
+    assert half.contact.mirror_crossing() == pytest.approx(0.5 * x_max, rel=1e-6)
+    assert full.contact.mirror_crossing() == 0.0   # (no mirror plane)
+
+    for past in (38e-6, 0.0):
+        class Problem:
+            contact = SimpleNamespace(update=lambda: True, mirror_crossing=lambda: past, d_hat=3e-5)
+            load = SimpleNamespace(Set=lambda v: None)
+
+            def set_state(self, s):
+                self.state = s
+
+            def stability(self, k=1):
+                return SimpleNamespace(smallest=0.018, load_share=0.02, where="silicone element at x = 0.31")
+
+        result = RampResult(points=[], converged=False, message="", last_load=6015.0,
+                            last_state=np.array([2.0]), previous=(5970.0, np.array([1.0])))
+        _, why, text = _name_the_stop(Problem(), result, 1e-3)
+        assert why == "numerical failure"
+        said = "its lumen wall lies 38.0 um past the half body's mirror plane, through its mirror image, where the " \
+               "half model has no contact term"
+        assert (said in text) == (past > 0.0), text
 
 
 def test_contact_split_removes_exactly_the_contact_terms_tangent(short_design):
