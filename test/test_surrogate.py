@@ -397,6 +397,53 @@ def _fan_stand_in(design, common_gain: float = 0.0, turn_deg: float = 40.0):
     return answer, solve_ray
 
 
+def test_a_fan_table_refuses_where_its_own_check_missed_and_bounds_what_it_answers(tmp_path, monkeypatch, capsys):
+    """Near the equal pair above 0.6 bar the stand-in's bend turns 80 degrees over a few percent of
+    the pressure ratio; 9 rays cannot follow it. The table refuses there (one line, saying why; the
+    allocator's read-out too), answers the same ratio at low pressure and other ratios at high
+    pressure, what it answers on a dense grid of pair commands within the answer tolerances (what
+    it refuses is off by far more), and `softcath surrogate check` lists the refused region."""
+    from softcath_ros.cli import main
+    from softcath_ros.core.models import surrogate_build
+
+    d = load_design("three_channel_5mm")
+    truth, stand_in = _fan_stand_in(d)
+    monkeypatch.setattr(surrogate_build, "solve_ray", stand_in)
+    settings = dict(pressure_step=5000.0, max_rays=9, fine_points=101)
+    m = make_model("surrogate", d, cache=tmp_path, shipped=False, workers=1, **settings)
+    regions = m.meta["refused_regions"]
+    assert regions and all(g["t"][0] >= 0.25 and g["from_sum_bar"] >= 0.5 for g in regions)
+    for p in ([0.45e5, 0.44e5, 0.0], [0.0, 0.44e5, 0.45e5], [0.43e5, 0.0, 0.45e5]):
+        st = m.evaluate(np.array([p]))
+        assert not st.converged[0] and np.isnan(st.curvature).all()
+        assert "could not refine it further" in st.message and "\n" not in st.message
+    assert m.pair_jacobian(0, 1, 0.45e5, 0.44e5) is None
+    fine = np.array([[0.2e5, 0.19e5, 0.0], [0.45e5, 0.1e5, 0.0], [0.0, 0.05e5, 0.48e5]])
+    assert m.evaluate(fine).converged.all()
+    a, b = np.meshgrid(np.linspace(0.0, 0.5e5, 61), np.linspace(0.0, 0.5e5, 61))
+    grid = np.column_stack([a.ravel(), b.ravel(), np.zeros(a.size)])[1:]
+    got = m.evaluate(grid)
+    ref = truth(grid)
+    ok = got.converged
+    assert 0 < (~ok).sum() < 0.5 * len(grid)
+    # answered: within the tolerances (measured on the held-out rays at the intervals' middles, so a
+    # little more off the middles); refused: off by far more
+    assert rc_error(got.curvature[ok], ref[ok, :2]).max() <= m.settings.answer_tolerance
+    assert direction_error_deg(got.curvature[ok], ref[ok, :2]).max() <= 1.5 * m.settings.answer_direction_tolerance
+    bound = m.error_bound["pair"]
+    assert bound["direction_deg_max"] <= m.settings.answer_direction_tolerance and bound["refused"] > 0
+    # the check names the refused region; a simulated rig's truth answers there too
+    out = tmp_path / "table.npz"
+    m.write(out)
+    opts = [x for k, v in settings.items() for x in ("--option", f"{k}={v}")]
+    assert main(["surrogate", "check", "three_channel_5mm", "--table", str(out), *opts]) == 0
+    assert "refuses pair commands" in capsys.readouterr().out
+    rig = make_model("surrogate", d, table=out, answer_unresolved=True, **settings)
+    wrong = rig.evaluate(grid[~ok])
+    assert wrong.converged.all()
+    assert direction_error_deg(wrong.curvature, ref[~ok, :2]).max() > 3 * m.settings.answer_direction_tolerance
+
+
 def test_check_rays_with_a_large_common_part_stop_where_they_are_off_with_the_same_limit(tmp_path, monkeypatch):
     """The common-mode check rays with 20 % and 2 % common parts are first solved to a few commands;
     when one of those is already off the tolerance the rest of the ray (larger common pressures)

@@ -83,7 +83,8 @@ class RigReading:
 def truth_model(rung: str, design, params: RigParams, **options):
     """The rung that plays the true actuator: ``design`` with its material scaled by
     ``params.material_scale`` (``options`` go to the rung; a surrogate also answers commands with
-    all three channels pressurised beyond its measured common-mode limit, as a rig would). A rung
+    all three channels pressurised beyond its measured common-mode limit, and pair commands where
+    its build could not refine the table, as a rig would). A rung
     that answers for pressures alone reads the design's own answers at p / m (exact: every modulus
     scales by m), so no table is built for the scaled design; one that takes loads is built on the
     scaled design."""
@@ -91,7 +92,7 @@ def truth_model(rung: str, design, params: RigParams, **options):
     from .calibration import scaled_design
 
     if rung == "surrogate":   # a rig answers every pressure: all three channels pressurised too (approximately)
-        options = {"answer_common": True, **options}
+        options = {"answer_common": True, "answer_unresolved": True, **options}
     m = params.material_scale
     if m != 1.0 and pressure_only(rung):
         return CalibratedModel(make_model(rung, design, **options), 0.0, material_scale=m)

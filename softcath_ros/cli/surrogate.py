@@ -51,7 +51,7 @@ def _summary(model) -> dict:
             "table": str(model.table_path) if model.table_path else None, "key": model.key,
             "source": model.settings.source, "source_version": model.meta.get("source_version"),
             "pressure_range_pa": list(model.pressure_range), "build_seconds": model.meta.get("build_seconds"),
-            "error_bound": model.error_bound}
+            "error_bound": model.error_bound, "refused_regions": model.meta.get("refused_regions", [])}
 
 
 def _line(model) -> str:
@@ -61,6 +61,9 @@ def _line(model) -> str:
     cm = model.error_bound.get("common_mode", {})
     if "max_common_pressure_pa" in cm:
         parts.append(f"common pressure answered up to {cm['max_common_pressure_pa'] / 1e5:.3f} bar")
+    refused = model.refused_regions() if model.kind == "three_channel" else []
+    if refused:
+        parts.append("refuses pair commands at " + "; ".join(refused))
     return (f"{model.design.name}: {model.origin} table {model.table_path} (0..{model.pressure_range[1] / 1e5:.3f} "
             f"bar); max error against {model.settings.source}: " + "; ".join(parts))
 

@@ -75,6 +75,9 @@ class SurrogateModel(SurrogateTableStore, BendModel):
             "max_rays": "3 channels: most rays over half a pair",
             "ray_tolerance": "relative R_C miss at a middle ray above which rays are added",
             "ray_direction_tolerance": "direction miss (degrees) at a middle ray above which rays are added",
+            "answer_tolerance": "relative R_C miss at a middle ray that could not be refined above which "
+                                "pair commands beside it are refused",
+            "answer_direction_tolerance": "the same in direction (degrees)",
             "held_out_rays": "3 channels: rays used only to measure the error",
             "fine_points": "3 channels: resampled points per axis (bilinear read-out)",
             "common_rays": "rays with all three pressures > 0 that measure the common-mode error",
@@ -89,22 +92,26 @@ class SurrogateModel(SurrogateTableStore, BendModel):
             Option("rebuild", "bool", "build the table even if the cache or the package holds it"),
             Option("build", "bool", "False: refuse (one line, saying why) instead of building a missing table"),
             Option("answer_common", "bool", "answer commands whose common pressure is beyond the measured limit too "
-                   "(as pure stretch, off by more than common_tolerance there): a simulated rig's truth")))
+                   "(as pure stretch, off by more than common_tolerance there): a simulated rig's truth"),
+            Option("answer_unresolved", "bool", "answer pair commands where the build measured the table off "
+                   "beyond answer_tolerance and could not refine it too: a simulated rig's truth")))
 
     def __init__(self, design: Design, source: str = "section", source_options: dict | None = None,
                  cache: bool | str | Path = True, progress: bool = False, rebuild: bool = False,
                  table: str | Path = "", shipped: bool = True, workers: int | None = None, build: bool = True,
-                 answer_common: bool = False, **table_settings):
+                 answer_common: bool = False, answer_unresolved: bool = False, **table_settings):
         """``source``: the rung to tabulate; ``source_options``: its options (mesh_size, ...).
         ``cache``: True (the project cache), a cache root directory, or False (build every time).
         ``table``: a table file to use (must be current). ``shipped``: use the package's table.
         ``workers``: build processes. ``progress``: tqdm bars while building. ``build``: False refuses
         (ModelError) instead of building a table it does not find current. ``answer_common``: answer
         commands with all three channels pressurised beyond the measured common-mode limit too (to
-        the end of the equal-pressure table; not part of the table's key).
+        the end of the equal-pressure table; not part of the table's key). ``answer_unresolved``: answer
+        pair commands in the regions the build refuses (``meta['refused_regions']``) too.
         ``table_settings``: ``SurrogateSettings`` fields."""
         super().__init__(design)
         self.answer_common = bool(answer_common)
+        self.answer_unresolved = bool(answer_unresolved)
         try:
             self.settings = SurrogateSettings(source=source, source_options=dict(source_options or {}),
                                               **table_settings)
@@ -182,6 +189,21 @@ class SurrogateModel(SurrogateTableStore, BendModel):
         return 0.0, float(self.meta["max_pressure"])
 
 
+    def refused_regions(self) -> list[str]:
+        """The pair commands the table refuses because a held-out check found it off there after
+        its build could refine no further, one phrase per region (``softcath surrogate check``)."""
+        out = []
+        for g in sorted(self.meta.get("refused_regions", []), key=lambda g: (g["pair"], g["t"][0], g["from_sum_bar"])):
+            lo, hi = g["t"]
+            where = (f"every pair (a, b), b / (a + b) in [{lo:.4g}, {hi:.4g}] or [{1 - hi:.4g}, {1 - lo:.4g}]"
+                     if self.meta["rotated"] else f"channels {g['pair']}, {(g['pair'] + 1) % 3} (a, b), "
+                     f"b / (a + b) in [{lo:.4g}, {hi:.4g}]")
+            sums = (f"a + b from {g['from_sum_bar']:.3g} bar" if g["to_sum_bar"] is None
+                    else f"a + b {g['from_sum_bar']:.3g}-{g['to_sum_bar']:.3g} bar")
+            out.append(f"{where}, {sums} (held out there it missed by up to {g['rc_miss']:.1%} in R_C, "
+                       f"{g['direction_miss_deg']:.2g} deg)")
+        return out
+
     # ------------------------------------------------------------------ read-out
     def use_table(self, table: dict, meta: dict) -> None:
         """Answer from ``table`` (while building: the table so far, to measure its error)."""
@@ -203,9 +225,10 @@ class SurrogateModel(SurrogateTableStore, BendModel):
             self._coeffs = t["coeffs"]
         else:
             if "fine_table" not in t:
-                tab, t["fine_ok"] = self._fine_tables()
+                tab, t["fine_ok"], t["fine_resolved"] = self._fine_tables()
                 t["fine_table"] = tab.astype(np.float32)   # half the file; 6e-8 relative, far below the error
-            tab, self._cell_ok = t["fine_table"].astype(np.float64), t["fine_ok"]
+            tab, self._cell_reached = t["fine_table"].astype(np.float64), t["fine_ok"]
+            self._cell_ok = self._cell_reached if self.answer_unresolved else self._cell_reached & t["fine_resolved"]
             self._nf = self.settings.fine_points - 1
             self._hf = self._pmax / self._nf
             self._flat = np.ascontiguousarray(tab.reshape(-1, 3))
@@ -217,9 +240,10 @@ class SurrogateModel(SurrogateTableStore, BendModel):
             self._stretch0 = float(np.interp(0.0, self._cp, self._cs)) if len(self._cp) else 1.0
             self._rot = [(float(c), float(s)) for c, s in zip(ROTATION_COS, ROTATION_SIN)]
 
-    def _fine_tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), and
-        which of its cells lie where the source converged on both bracketing rays."""
+    def _fine_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rays resampled onto the fine (a, b) grid of each pair table (one when rotated), which
+        of its cells lie where the source converged on both bracketing rays, and which lie outside
+        the refused regions (``_unresolved``)."""
         from .surrogate_build import mirrored, pair_surface, reflection
 
         t = self.table
@@ -227,7 +251,7 @@ class SurrogateModel(SurrogateTableStore, BendModel):
         a, b = np.meshgrid(fine, fine, indexing="ij")
         m = a + b
         tq = np.divide(b, m, out=np.zeros_like(m), where=m > 0)
-        tabs, oks = [], []
+        tabs, oks, resolved = [], [], []
         for r in ((0,) if self.meta["rotated"] else (0, 1, 2)):
             sel = t["ray_pair"] == r
             rays = (t["ray_t"][sel], t["ray_values"][sel], t["ray_reach"][sel], t["ray_complete"][sel])
@@ -237,7 +261,29 @@ class SurrogateModel(SurrogateTableStore, BendModel):
             tabs.append(ev(tq.ravel(), m.ravel()).reshape(*m.shape, 3))
             node = reachable(tq, m)
             oks.append(node[:-1, :-1] & node[1:, :-1] & node[:-1, 1:] & node[1:, 1:])
-        return np.stack(tabs), np.stack(oks)
+            resolved.append(~self._unresolved(r, a, b))
+        return np.stack(tabs), np.stack(oks), np.stack(resolved)
+
+    def _unresolved(self, r: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Cells of pair table r's fine grid (nodes at channel pressures ``a``, ``b``) that touch a
+        refused region: a corner or the middle at a ray t = b / (a + b) in its interval (or in the
+        mirror image, when rotated) and a sum a + b in its band."""
+        t = self.table
+        out = np.zeros((a.shape[0] - 1, a.shape[1] - 1), dtype=bool)
+        corners = [(slice(None, -1), slice(None, -1)), (slice(1, None), slice(None, -1)),
+                   (slice(None, -1), slice(1, None)), (slice(1, None), slice(1, None))]
+        ma, mb = (sum(g[c] for c in corners) / 4.0 for g in (a, b))
+        points = [(a[c], b[c]) for c in corners] + [(ma, mb)]
+        for pair, (lo, hi), (m0, m1) in zip(t.get("refused_pair", ()), t.get("refused_t", ()), t.get("refused_sums", ())):
+            if pair != r:
+                continue
+            spans = [(lo, hi), (1.0 - hi, 1.0 - lo)] if self.meta["rotated"] else [(lo, hi)]
+            for pa, pb in points:
+                m = pa + pb
+                tq = np.divide(pb, m, out=np.zeros_like(m), where=m > 0)
+                for u, v in spans:
+                    out |= (tq >= u - 1e-12) & (tq <= v + 1e-12) & (m >= m0) & (m <= m1)
+        return out
 
     def _refusal(self, p: np.ndarray, why: str) -> str:
         msg = (f"surrogate: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p)} bar {why} "
@@ -274,6 +320,11 @@ class SurrogateModel(SurrogateTableStore, BendModel):
                           f"bar, beyond which treating it as pure stretch was measured off the source by more than "
                           f"{s.common_tolerance:.1%} in R_C or {s.common_direction_tolerance:g} degrees, so the "
                           "surrogate does not answer it")
+            elif first.size and inside[first[0]] and self._unresolved_cell(pressures[first[0]]):
+                s = self.settings
+                reason = (f"lies where the build measured the table off its source by more than {s.answer_tolerance:.1%} "
+                          f"in R_C or {s.answer_direction_tolerance:g} degrees and could not refine it further "
+                          "(softcath surrogate check lists the refused regions), so the surrogate does not answer it")
         if not ok.all():
             k = np.where(ok[:, None], k, np.nan)
             lam = np.where(ok, lam, np.nan)
@@ -298,6 +349,16 @@ class SurrogateModel(SurrogateTableStore, BendModel):
         c = self._coeffs[:, j]                      # (4, 3): highest power first
         y = ((c[0] * x + c[1]) * x + c[2]) * x + c[3]
         return BendState(curvature=y[None, :2], axial_stretch=y[None, 2], converged=np.ones(1, dtype=bool))
+
+    def _unresolved_cell(self, p: np.ndarray) -> bool:
+        """The command ``p`` (3,) lies in a cell the source reached but a refused region covers."""
+        q = p - p.min()
+        zero = int(q.argmin())
+        r = (zero + 1) % 3
+        a, b = (min(max(float(q[c]), 0.0), self._pmax) for c in (r, (zero + 2) % 3))
+        ia, ib = (min(int(x / self._hf), self._nf - 1) for x in (a, b))
+        cell = (0 if self._rotated else r, ia, ib)
+        return bool(self._cell_reached[cell] and not self._cell_ok[cell])
 
     def _three(self, p: np.ndarray, inside: np.ndarray):
         m = p.min(1)

@@ -10,7 +10,7 @@ import numpy as np
 from ..design import Design
 
 # Bump when the table layout or the way it is built changes.
-SURROGATE_VERSION = "surrogate-5"
+SURROGATE_VERSION = "surrogate-6"
 ROTATION_COS = np.cos(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))   # channel r's pair turned by r * 120 deg
 ROTATION_SIN = np.sin(np.array([0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0]))
 
@@ -25,6 +25,9 @@ class SurrogateSettings:
     ray_tolerance: float = 0.005        # split between rays where the table misses the middle ray by more
                                         # than this in R_C (relative) ...
     ray_direction_tolerance: float = 0.2    # ... or by more than this in direction (degrees)
+    answer_tolerance: float = 0.02      # pair commands are refused where a middle ray the build could not
+                                        # refine further missed the table by more than this in R_C ...
+    answer_direction_tolerance: float = 0.5   # ... or this in direction (degrees), from the sum it first did
     held_out_rays: int = 3              # 3 channels: rays used only to measure the error, one per pair
                                         # in turn (1 channel: always one)
     fine_points: int = 321              # 3 channels: resampled points per axis (bilinear read-out)

@@ -126,8 +126,9 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     results: dict = {}
     refine_log = _refine_rays(pool, s, rays, rounds, results, sums, pmax, surface)
     # held out too: the middles of the two intervals beside the last round's worst miss, where the
-    # finished table is least sure (random rays rarely land in a narrow steep band)
-    for r, t in _beside_worst_miss(refine_log, rays, s):
+    # finished table is least sure (random rays rarely land in a narrow steep band), and of every
+    # interval left unsplit beside a middle ray that missed by more than the answer tolerances
+    for r, t in dict.fromkeys(_beside_worst_miss(refine_log, rays, s) + _suspect_middles(refine_log, rays, s)):
         held.append((r, t))
         pool.submit(("held", len(held) - 1), pair_commands(3, r, t, mids, pmax, beyond=False), _BESIDE)
     for tag, res in pool.results():
@@ -141,7 +142,18 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
              "ray_reach": np.concatenate([a[2] for a in arrs]), "ray_complete": np.concatenate([a[3] for a in arrs]),
              "common_p": mags[:n_cm], "common_stretch": cm["values"][:n_cm, 2]}
     max_common = float(mags[n_cm - 1]) if n_cm else 0.0
-    model.use_table(table, {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": max_common})
+    answer = {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": max_common}
+    model.use_table(table, answer)
+    refused = _refused_intervals(model, results, held, mids, rays)
+    table.update({"refused_pair": np.array([g["pair"] for g in refused], dtype=int),
+                  "refused_t": np.array([g["t"] for g in refused], dtype=float).reshape(-1, 2),
+                  "refused_sums": np.array([[g["from_sum_bar"] * PA_PER_BAR, np.inf if g["to_sum_bar"] is None
+                                             else g["to_sum_bar"] * PA_PER_BAR] for g in refused],
+                                           dtype=float).reshape(-1, 2)})
+    if refused:     # resampled again, without the refused cells
+        for key in ("fine_table", "fine_ok", "fine_resolved"):
+            table.pop(key, None)
+        model.use_table(table, answer)
     bound, n_held = _held_out_bound(model, results, held, mids, pmax)
     limit, cbound, full = _common_mode_bound(model, results, checks, mags, max_common)
     again = [i for i, c in enumerate(cut) if c and full[i] and results[("check", i)]["n_ok"] == CHECK_FIRST]
@@ -158,6 +170,7 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
                  for r, a in zip(pairs, arrs) for t, n, c in zip(a[0], a[2], a[3])}
     n_rays = sum(len(a[0]) for a in arrs)
     n_checked = sum(len(results[("check", i)]["values"]) for i in range(len(checks)))
+    bound["refused_regions"] = len(refused)
     meta = {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": limit,
             "max_common_table_pressure": max_common,
             "source_failure": "; ".join(dict.fromkeys(failures[:3])),
@@ -165,11 +178,28 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
             "source_evaluations": int(sum(len(pair_commands(3, r, t, sums, pmax))
                                           for r, a in zip(pairs, arrs) for t in a[0])
                                       + n_held + len(mags) + n_checked),
-            "ray_reach_sum_bar": reach_bar, "refinement": refine_log,
+            "ray_reach_sum_bar": reach_bar, "refinement": refine_log, "refused_regions": refused,
             "error_bound": {"pair": bound, "common_mode": cbound},
             "common_checks_direction": [w.round(4).tolist() for w in checks],
             "common_curvature_max_per_m": float(np.nanmax(np.abs(cm["values"][:n_cm, :2]))) if n_cm else 0.0}
     return table, meta
+
+
+def _ray_misses(s, surf, t: float, got: dict, sums, pmax: float) -> dict:
+    """How a solved middle ray ``got`` misses the table without it (``surf``: its surface and
+    reach) at the commands the surrogate answers (up to max_pressure, where both bracketing rays
+    reached), and whether by more than the answer tolerances."""
+    n = got["n_ok"]
+    ev, reachable = surf
+    m = sums[1:n]
+    inside = reachable(np.full(len(m), t), m) & (m * max(t, 1.0 - t) <= pmax * (1 + 1e-12))
+    if not inside.any():
+        return {"rc_miss": float("inf"), "direction_miss_deg": float("inf"), "beyond_answer": False}
+    want = ev(np.full(int(inside.sum()), t), m[inside])
+    rc = float(np.nanmax(rc_error(want[:, :2], got["values"][1:n][inside, :2])))
+    dr = float(np.nanmax(direction_error_deg(want[:, :2], got["values"][1:n][inside, :2])))
+    return {"rc_miss": rc, "direction_miss_deg": dr,
+            "beyond_answer": rc > s.answer_tolerance or dr > s.answer_direction_tolerance}
 
 
 def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, surface) -> list:
@@ -194,19 +224,10 @@ def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, s
         if k > 0:
             surf = {r: surface(r) for r in pairs}
             for r, t, lo, hi, _ in rounds[k]:
-                got = results[("ray", k, r, t)]
-                n = got["n_ok"]
-                ev, reachable = surf[r]
-                m = sums[1:n]
-                inside = reachable(np.full(len(m), t), m)
-                if inside.any():
-                    want = ev(np.full(int(inside.sum()), t), m[inside])
-                    miss_rc = float(np.nanmax(rc_error(want[:, :2], got["values"][1:n][inside, :2])))
-                    miss_dir = float(np.nanmax(direction_error_deg(want[:, :2], got["values"][1:n][inside, :2])))
-                else:
-                    miss_rc = miss_dir = float("inf")
-                refine_log.append({"round": k, "pair": r, "t": t, "rc_miss": miss_rc, "direction_miss_deg": miss_dir})
-                score = _miss_score(s, miss_rc, miss_dir)
+                entry = {"round": k, "pair": r, "t": t, "lo": lo, "hi": hi,
+                         **_ray_misses(s, surf[r], t, results[("ray", k, r, t)], sums, pmax)}
+                refine_log.append(entry)
+                score = _miss_score(s, entry["rc_miss"], entry["direction_miss_deg"])
                 if score > 1.0:
                     split += [(r, 0.5 * (lo + t), lo, t, score), (r, 0.5 * (t + hi), t, hi, score)]
         for item in rounds[k]:
@@ -228,6 +249,52 @@ def _refine_rays(pool, s, rays: dict, rounds: dict, results: dict, sums, pmax, s
 def _miss_score(s, miss_rc: float, miss_dir: float) -> float:
     """A middle ray's miss of the table as a multiple of the refinement's tolerance (> 1: split)."""
     return max(miss_rc / s.ray_tolerance, miss_dir / s.ray_direction_tolerance)
+
+
+def _suspect_middles(refine_log: list, rays: dict, s) -> list:
+    """(pair, t) at the middles of the final intervals beside a middle ray that missed the table by
+    more than the answer tolerances and were not split again (out of rays or too narrow)."""
+    out = []
+    for e in refine_log:
+        if e.get("beyond_answer"):
+            ts = rays[e["pair"]].t
+            out += [(e["pair"], 0.5 * (lo + hi)) for lo, hi in ((e["lo"], e["t"]), (e["t"], e["hi"]))
+                    if not any(lo < x < hi for x in ts)]
+    return out
+
+
+def _refused_intervals(model, results: dict, held: list, mids, rays: dict) -> list:
+    """The bands of the finished table the held-out rays found off the source by more than the answer
+    tolerances: the interval between the table's rays around the held-out ray, over the sums from
+    the one before each run of such commands to the one after it (to the end when the run reaches
+    the ray's last answer). The table cannot be refined there: the build is done."""
+    s = model.settings
+    step = float(mids[1] - mids[0])
+    regions: dict = {}
+    for i, (r, t) in enumerate(held):
+        cmds, vals = _held_commands(results, i, r, t, mids, model.design.max_pressure)
+        mine = model.evaluate(cmds)
+        use = mine.converged & np.isfinite(vals).all(1)
+        rc, dr = np.zeros(len(cmds)), np.zeros(len(cmds))
+        rc[use] = rc_error(mine.curvature[use], vals[use, :2])
+        dr[use] = direction_error_deg(mine.curvature[use], vals[use, :2])
+        off = (rc > s.answer_tolerance) | (dr > s.answer_direction_tolerance)
+        if not off.any():
+            continue
+        pair, tt = (0, min(t, 1.0 - t)) if model.rotated else (r, t)
+        ts = np.sort(rays[pair].t)
+        j = int(np.clip(np.searchsorted(ts, tt), 1, len(ts) - 1))
+        m = cmds.sum(1)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], off.astype(int), [0]])))
+        for first, end in zip(edges[::2], edges[1::2]):      # runs of commands off: [first, end)
+            band = (max(m[first] - step, 0.0), m[end] + 1.0 if end < len(m) else np.inf)
+            key = (pair, float(ts[j - 1]), float(ts[j]), band)
+            regions[key] = {"pair": pair, "t": [key[1], key[2]], "from_sum_bar": band[0] / PA_PER_BAR,
+                            "to_sum_bar": band[1] / PA_PER_BAR if np.isfinite(band[1]) else None,
+                            "rc_miss": float(rc[first:end].max()), "direction_miss_deg": float(dr[first:end].max()),
+                            "tolerance_rc_rel": s.answer_tolerance,
+                            "tolerance_direction_deg": s.answer_direction_tolerance}
+    return list(regions.values())
 
 
 def _beside_worst_miss(refine_log: list, rays: dict, s) -> list:
@@ -257,16 +324,19 @@ def rays_with_room(split: list, room: dict, narrowest: float = 1.0 / 256) -> lis
     return chosen
 
 
-def _held_out_bound(model, results: dict, held: list, mids, pmax: float) -> tuple[dict, int]:
-    """The table's error at the held-out pair rays (at the sums ``mids`` between the table's, up to
-    max_pressure), and how many commands that measured."""
+def _held_commands(results: dict, i: int, r: int, t: float, mids, pmax: float) -> tuple[np.ndarray, np.ndarray]:
+    """Held-out ray i's commands (pair r, ray t, at the sums ``mids``) the source answered, and its answers."""
     from .surrogate_build import pair_commands
 
-    cmds, vals = [], []
-    for i, (r, t) in enumerate(held):
-        h = results[("held", i)]
-        cmds.append(pair_commands(3, r, t, mids, pmax, beyond=False)[:h["n_ok"]])
-        vals.append(h["values"][:h["n_ok"]])
+    h = results[("held", i)]
+    c = pair_commands(3, r, t, mids, pmax, beyond=False)[:h["n_ok"]]
+    return c, h["values"][:h["n_ok"]]
+
+
+def _held_out_bound(model, results: dict, held: list, mids, pmax: float) -> tuple[dict, int]:
+    """The table's error at the held-out pair rays (at the sums ``mids`` between the table's), and
+    how many commands that measured."""
+    cmds, vals = zip(*(_held_commands(results, i, r, t, mids, pmax) for i, (r, t) in enumerate(held)))
     cmds, vals = np.vstack(cmds), np.vstack(vals)
     return table_errors(model.evaluate(cmds), vals, cmds), len(cmds)
 
