@@ -188,7 +188,6 @@ class SurrogateModel(SurrogateTableStore, BendModel):
         command in a cell where the source converged)."""
         return 0.0, float(self.meta["max_pressure"])
 
-
     def refused_regions(self) -> list[str]:
         """The pair commands the table refuses because a held-out check found it off there after
         its build could refine no further, one phrase per region (``softcath surrogate check``)."""
@@ -285,15 +284,18 @@ class SurrogateModel(SurrogateTableStore, BendModel):
                     out |= (tq >= u - 1e-12) & (tq <= v + 1e-12) & (m >= m0) & (m <= m1)
         return out
 
-    def _refusal(self, p: np.ndarray, why: str) -> str:
+    def _refusal(self, p: np.ndarray, why: str, where_source_failed: bool = True) -> str:
+        """The refusal's line; ``where_source_failed``: add where the build's source stopped (the reason
+        is the table's range, not a region the table holds but does not answer)."""
         msg = (f"surrogate: command p = {', '.join(f'{v / PA_PER_BAR:.4f}' for v in p)} bar {why} "
                f"(built from '{self.settings.source}' over 0..{self._pmax / PA_PER_BAR:.4f} bar")
-        fail = self.meta.get("source_failure")
+        fail = self.meta.get("source_failure") if where_source_failed else None
         return msg + (f"; the source failed beyond: {fail})" if fail else ")")
 
     def _evaluate_batch(self, pressures: np.ndarray) -> BendState:
         n = pressures.shape[0]
         inside = (pressures >= 0.0).all(1) & (pressures <= self._pmax).all(1)
+        out_of_range = True      # the refusal's reason is the table's range (else a region it does not answer)
         if self.kind == "one_channel":
             if n == 1 and inside[0]:  # one command (model_node): the spline's polynomial in plain floats
                 return self._one_command(float(pressures[0, 0]))
@@ -320,16 +322,18 @@ class SurrogateModel(SurrogateTableStore, BendModel):
                           f"bar, beyond which treating it as pure stretch was measured off the source by more than "
                           f"{s.common_tolerance:.1%} in R_C or {s.common_direction_tolerance:g} degrees, so the "
                           "surrogate does not answer it")
+                out_of_range = False
             elif first.size and inside[first[0]] and self._unresolved_cell(pressures[first[0]]):
                 s = self.settings
                 reason = (f"lies where the build measured the table off its source by more than {s.answer_tolerance:.1%} "
                           f"in R_C or {s.answer_direction_tolerance:g} degrees and could not refine it further "
                           "(softcath surrogate check lists the refused regions), so the surrogate does not answer it")
+                out_of_range = False
         if not ok.all():
             k = np.where(ok[:, None], k, np.nan)
             lam = np.where(ok, lam, np.nan)
             bad = np.flatnonzero(~ok)
-            msg = self._refusal(pressures[bad[0]], reason)
+            msg = self._refusal(pressures[bad[0]], reason, out_of_range)
             if len(bad) > 1:
                 msg += f" and {len(bad) - 1} more command(s)"
         else:
