@@ -811,8 +811,8 @@ def test_a_saddle_of_the_contact_term_alone_is_not_named_an_unstable_equilibrium
 
 def test_a_half_wall_past_its_mirror_plane_is_measured_and_named_at_a_stop(short_design):
     """LumenContact.mirror_crossing: how far the half model's lumen wall lies past its mirror plane x = 0
-    (through its mirror image, where the half model has no contact term; the fan design's equal pair
-    stopped so with no contact pair held): 0 at rest and on the full body; with every point moved to
+    (through its mirror image; at fe3d-11, without the mirror term, the fan design's equal pair stopped so
+    with no contact pair held): 0 at rest and on the full body; with every point moved to
     -x / 2, half the wall's largest x. A failed ramp's stop message says so when it is past by more than
     MIRROR_SAID d_hat (here a stand-in problem at 38 um, the equal pair's at 0.05 bar), and not at 0."""
     from types import SimpleNamespace
@@ -849,9 +849,71 @@ def test_a_half_wall_past_its_mirror_plane_is_measured_and_named_at_a_stop(short
                             last_state=np.array([2.0]), previous=(5970.0, np.array([1.0])))
         _, why, text = _name_the_stop(Problem(), result, 1e-3)
         assert why == "numerical failure"
-        said = "its lumen wall lies 38.0 um past the half body's mirror plane, through its mirror image, where the " \
-               "half model has no contact term"
+        said = "its lumen wall lies 38.0 um past the half body's mirror plane, through its mirror image"
         assert (said in text) == (past > 0.0), text
+
+
+def test_the_half_wall_is_held_off_its_mirror_image_but_not_where_it_meets_the_plane(short_design):
+    """The mirror term (mirror_energy_cf) on the coarse 10 mm half body: nothing at rest (the wall far
+    from its image); with the wall pulled to within d_hat of the plane, and past it, a positive energy
+    whose gradient (checked by finite differences) pushes the wall back to x > 0, rising as the wall
+    closes on its image; nothing from wall points that start on or beside the plane (held there by the
+    symmetry condition, gap 0 by construction) however close to it they are. It is in the problem's
+    energy; the full body has none."""
+    import ngsolve as ng
+
+    from softcath_ros.core.fe3d.contact import NEAR_LOW
+    from softcath_ros.core.fe3d.holes import hole_size
+
+    pb = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, **PLAIN_P2).problem
+    full = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=0.02, half=False,
+                     **PLAIN_P2).problem
+    assert pb.half and pb.contact.mirror_form is not None and full.contact.mirror_form is None
+    assert full.contact.mirror_energy() == 0.0
+    d_hat, r = pb.contact.d_hat, hole_size(short_design.lumen)
+    wall = pb.mesh.Boundaries("lumen")
+    back = ng.GridFunction(pb.fes)
+    back.components[0].Set(ng.CF((ng.x, 0.0, 0.0)))   # a motion back to the body's side
+    bare = Fe3dModel(short_design, mesh=COARSE, cache=False, threads=1, contact_distance=None, **PLAIN_P2).problem
+
+    def gradient_along_back():
+        g = pb.gf.vec.CreateVector()
+        pb.contact.mirror_form.Apply(pb.gf.vec, g)
+        return float(np.dot(g.FV().NumPy(), back.vec.FV().NumPy()))
+
+    def energy_at(shift):
+        saved = pb.gf.vec.CreateVector()
+        saved.data = pb.gf.vec
+        pb.gf.vec.data += shift * back.vec
+        e = pb.contact.mirror_energy()
+        pb.gf.vec.data = saved
+        return e
+
+    assert pb.contact.mirror_energy() == 0.0 and gradient_along_back() == 0.0   # at rest
+    energies = []
+    for pulled in (0.995, 1.2):   # u_x = -pulled x: the wall at 0.01 x from its image, then past the plane
+        pb.u.Set(ng.CF((-pulled * ng.x, 0.0, 0.0)))
+        e, slope = pb.contact.mirror_energy(), gradient_along_back()
+        assert e > 0.0 and slope < 0.0   # held off: moving back to x > 0 lowers it
+        h = 1e-4
+        assert (energy_at(h) - energy_at(-h)) / (2 * h) == pytest.approx(slope, rel=1e-3)
+        energies.append(e)
+    assert energies[1] > energies[0]
+    # the problem's energy holds it (no pair searched yet: the pair term adds nothing): the body moved
+    # rigidly by 0.3 lumen radii to -x, so the silicone stores nothing
+    for p in (pb, bare):
+        p.u.Set(ng.CF((-0.3 * r, 0.0, 0.0)))
+    e = pb.contact.mirror_energy()
+    assert e > 0.0 and pb.a.Energy(pb.gf.vec) - bare.a.Energy(bare.gf.vec) == pytest.approx(e, rel=1e-9)
+
+    # the wall beside the plane (starting within NEAR_LOW / 2 lumen radii of it) pulled onto it, the rest
+    # left where it is: area within d_hat of its image, and no energy
+    c = 0.5 * NEAR_LOW * r
+    pb.u.Set(ng.CF((ng.IfPos(c - ng.x, -ng.x * (1.0 - ng.x / c) ** 2, 0.0), 0.0, 0.0)))
+    near = ng.Integrate(ng.IfPos(d_hat - 2.0 * (ng.x + pb.u[0]), 1.0, 0.0), pb.mesh, ng.BND, definedon=wall,
+                        order=6)
+    assert near > 0.0
+    assert pb.contact.mirror_energy() == 0.0 and gradient_along_back() == 0.0
 
 
 def test_contact_split_removes_exactly_the_contact_terms_tangent(short_design):

@@ -118,6 +118,25 @@ def smooth_step_cf(t):
     return c * c * c * (10.0 - 15.0 * c + 6.0 * c * c)
 
 
+def mirror_energy_cf(problem, u, d_hat: float):
+    """The half body's lumen wall against its mirror image across x = 0, per reference area of the wall:
+    the pair term's barrier on the gap g = 2 (X + u)_x from a wall point to its own image (the body lies
+    at x > 0), c1 KAPPA d_hat beta(g / d_hat). The wall meets the plane, where the symmetry condition
+    holds it with g = 0 by construction: like a neighbour along the wall, a point within NEAR_LOW lumen
+    radii of its image in the reference state is no partner of it (NEAR_HIGH on: fully)."""
+    import ngsolve as ng
+
+    gap = 2.0 * (ng.x + u[0])
+    ref = 2.0 * ng.x / hole_size(problem.design.lumen)
+    weight = smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+    return problem.design.material.c1 * KAPPA * d_hat * weight * barrier_cf(gap / d_hat)
+
+
+# the mirror term's quadrature order on the lumen wall above the default (2 x the element order, 4):
+# INTORDER, the pair term's
+MIRROR_BONUS_ORDER = INTORDER - 4
+
+
 class LumenContact:
     """The lumen wall's self-contact term added to a problem's BilinearForm."""
 
@@ -201,6 +220,16 @@ class LumenContact:
         self.force_boundary = ng.ContactBoundary(wall, wall, volume=False)
         self.force_boundary.AddEnergy(energy)
         self.force_form = ng.BilinearForm(problem.fes)
+        # the half body's wall against its own mirror image (mirror_energy_cf), in the problem's energy
+        # and in the contact's own forms (force_norm, tangent_matrix); mirror_form holds it alone
+        self.mirror_form = None
+        if problem.half:
+            mirror = ng.Variation(mirror_energy_cf(problem, u, self.d_hat).Compile()
+                                  * ng.ds(definedon=wall, bonus_intorder=MIRROR_BONUS_ORDER))
+            problem.a += mirror
+            self.force_form += mirror
+            self.mirror_form = ng.BilinearForm(problem.fes)
+            self.mirror_form += mirror
         self._sampling = wall_sampling(problem)
         self._gap_of = None   # (state, min_gap there): the last state asked about
         self.far = FAR * self.d_hat
@@ -311,10 +340,14 @@ class LumenContact:
         """The lumen wall's sampled section rings in their own planes (m), (levels, m, 2): ``section_rings``."""
         return np.asarray(section_rings(self.problem, self._sampling))
 
+    def mirror_energy(self) -> float:
+        """The mirror term's energy (J, of the model) at the current state (mirror_energy_cf); 0 on the full body."""
+        return 0.0 if self.mirror_form is None else self.mirror_form.Energy(self.problem.gf.vec)
+
     def mirror_crossing(self) -> float:
         """How far (m) the half model's lumen wall lies past its mirror plane x = 0 at its deepest sampled
-        point: there it passes its mirror image, against which the half model has no contact term (the
-        fan design's equal pair: 38 um at 0.05 bar, where min_gap reads -6.6 um). 0 on the full body."""
+        point: there it passes its mirror image (through the mirror term's barrier; at fe3d-11, without it,
+        the fan design's equal pair lay 38 um past at 0.05 bar, where min_gap read -6.6 um). 0 on the full body."""
         if not self.problem.half:
             return 0.0
         return max(0.0, max(float(-np.min(rings[0][:, 0])) for rings in self._sampling.deformed(self.problem)))

@@ -137,14 +137,13 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
 
 def _mirror_text(problem: Fe3dProblem) -> str:
     """The half model's lumen wall past its mirror plane at the current state, as a message tail ("" when
-    it is not past it by MIRROR_SAID d_hat): contact there is not modelled (LumenContact.mirror_crossing)."""
+    it is not past it by MIRROR_SAID d_hat): through the mirror term's barrier (LumenContact.mirror_crossing)."""
     if problem.contact is None:
         return ""
     past = problem.contact.mirror_crossing()
     if past <= MIRROR_SAID * problem.contact.d_hat:
         return ""
-    return (f"; its lumen wall lies {past * 1e6:.1f} um past the half body's mirror plane, through its mirror "
-            "image, where the half model has no contact term")
+    return f"; its lumen wall lies {past * 1e6:.1f} um past the half body's mirror plane, through its mirror image"
 
 
 # d_hat: how far past the half body's mirror plane the lumen wall must lie for a stop to say so
