@@ -102,22 +102,7 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     rounds = {0: [(r, float(t)) for r in pairs for t in np.linspace(0.0, half, n0)]}
     for r, t in rounds[0]:
         pool.submit(("ray", 0, r, t), pair_commands(3, r, t, sums, pmax), _ROUND)
-    # held out: every pair, t off the table's rays, sums between the table's (up to max_pressure)
-    held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
-    for i, (r, t) in enumerate(held):
-        pool.submit(("held", i), pair_commands(3, r, t, mids, pmax, beyond=False), _INDEPENDENT)
-    pool.submit(("common",), np.repeat(mags[:, None], 3, 1), _INDEPENDENT)
-    # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
-    # (a vented channel that has not yet reached zero is the usual case). A check ray is off beyond
-    # its first command off the tolerance (a larger common pressure), so those with a large common
-    # part are first solved to CHECK_FIRST commands only, and to the end only if all were within.
-    checks, cut = [], []
-    for i in range(s.common_rays):
-        w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
-        checks.append(np.roll(w, i % 3))
-        cut.append(i < s.common_rays - 1 and len(mags) > CHECK_FIRST)
-        pool.submit(("check", i), mags[:CHECK_FIRST if cut[-1] else len(mags), None] * checks[-1][None, :],
-                    _INDEPENDENT)
+    held, checks, cut = _submit_independent_rays(pool, s, rng, mids, mags, pmax)
 
     def surface(r):
         arrays = rays[r].arrays()
@@ -145,15 +130,7 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
     answer = {"max_pressure": float(pmax), "rotated": model.rotated, "max_common_pressure": max_common}
     model.use_table(table, answer)
     refused = _refused_intervals(model, results, held, mids, rays)
-    table.update({"refused_pair": np.array([g["pair"] for g in refused], dtype=int),
-                  "refused_t": np.array([g["t"] for g in refused], dtype=float).reshape(-1, 2),
-                  "refused_sums": np.array([[g["from_sum_bar"] * PA_PER_BAR, np.inf if g["to_sum_bar"] is None
-                                             else g["to_sum_bar"] * PA_PER_BAR] for g in refused],
-                                           dtype=float).reshape(-1, 2)})
-    if refused:     # resampled again, without the refused cells
-        for key in ("fine_table", "fine_ok", "fine_resolved"):
-            table.pop(key, None)
-        model.use_table(table, answer)
+    _refuse(model, table, answer, refused)
     bound, n_held = _held_out_bound(model, results, held, mids, pmax)
     limit, cbound, full = _common_mode_bound(model, results, checks, mags, max_common)
     again = [i for i, c in enumerate(cut) if c and full[i] and results[("check", i)]["n_ok"] == CHECK_FIRST]
@@ -183,6 +160,43 @@ def _three_channel(model, pool) -> tuple[dict, dict]:
             "common_checks_direction": [w.round(4).tolist() for w in checks],
             "common_curvature_max_per_m": float(np.nanmax(np.abs(cm["values"][:n_cm, :2]))) if n_cm else 0.0}
     return table, meta
+
+
+def _submit_independent_rays(pool, s, rng, mids, mags, pmax: float) -> tuple[list, list, list]:
+    """The rays no refinement round waits for: held-out rays (every pair, t off the table's rays,
+    sums between the table's, up to max_pressure), the common ray, and the common-mode check rays.
+    Returns (held rays as (pair, t), check directions, whether each check ray was cut short)."""
+    from .surrogate_build import pair_commands
+
+    held = [(i % 3, float(rng.uniform(0.03, 0.97))) for i in range(s.held_out_rays)]
+    for i, (r, t) in enumerate(held):
+        pool.submit(("held", i), pair_commands(3, r, t, mids, pmax, beyond=False), _INDEPENDENT)
+    pool.submit(("common",), np.repeat(mags[:, None], 3, 1), _INDEPENDENT)
+    # all three > 0: a pair command plus a common part of 20%, 2%, 0.2% ... of the larger channel
+    # (a vented channel that has not yet reached zero is the usual case). A check ray is off beyond
+    # its first command off the tolerance (a larger common pressure), so those with a large common
+    # part are first solved to CHECK_FIRST commands only, and to the end only if all were within.
+    checks, cut = [], []
+    for i in range(s.common_rays):
+        w = np.array([1.0, rng.uniform(0.2, 1.0), 0.2 / 10 ** i])
+        checks.append(np.roll(w, i % 3))
+        cut.append(i < s.common_rays - 1 and len(mags) > CHECK_FIRST)
+        pool.submit(("check", i), mags[:CHECK_FIRST if cut[-1] else len(mags), None] * checks[-1][None, :],
+                    _INDEPENDENT)
+    return held, checks, cut
+
+
+def _refuse(model, table: dict, answer: dict, refused: list) -> None:
+    """Store the ``refused`` regions in ``table`` and, if any, resample the model's table without them."""
+    table.update({"refused_pair": np.array([g["pair"] for g in refused], dtype=int),
+                  "refused_t": np.array([g["t"] for g in refused], dtype=float).reshape(-1, 2),
+                  "refused_sums": np.array([[g["from_sum_bar"] * PA_PER_BAR, np.inf if g["to_sum_bar"] is None
+                                             else g["to_sum_bar"] * PA_PER_BAR] for g in refused],
+                                           dtype=float).reshape(-1, 2)})
+    if refused:
+        for key in ("fine_table", "fine_ok", "fine_resolved"):
+            table.pop(key, None)
+        model.use_table(table, answer)
 
 
 def _ray_misses(s, surf, t: float, got: dict, sums, pmax: float) -> dict:
