@@ -46,7 +46,7 @@ from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.measure import lumen_wall_stretch, measure, outer_surface_stretch  # noqa: E402
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control, run_ramp  # noqa: E402
-from softcath_ros.core.fe3d.newton import NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.newton_settings import NewtonSettings  # noqa: E402
 from softcath_ros.core.fe3d.solver import Fe3dProblem  # noqa: E402
 from softcath_ros.core.units import PA_PER_BAR  # noqa: E402
 

@@ -41,7 +41,7 @@ from harness import (fe3d_solver_log, pressure_option, save_figure, signals_held
 
 from softcath_ros.core.design import load_design  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
-from softcath_ros.core.fe3d.newton import NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.newton_settings import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import DesignError, ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import (DEFAULT_CONTACT_DISTANCE, DEFAULT_CONTACT_INTORDER,  # noqa: E402

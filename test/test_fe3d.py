@@ -20,7 +20,7 @@ pytest.importorskip("ngsolve", reason="fe3d needs the 'fe' extra (scripts/test.s
 
 from softcath_ros.core.fe3d.mesh import MeshSettings  # noqa: E402
 from softcath_ros.core.fe3d.ramp import default_step_control  # noqa: E402
-from softcath_ros.core.fe3d.newton import NewtonSettings  # noqa: E402
+from softcath_ros.core.fe3d.newton_settings import NewtonSettings  # noqa: E402
 from softcath_ros.core.models import make_model  # noqa: E402
 from softcath_ros.core.errors import ModelError  # noqa: E402
 from softcath_ros.core.models.fe3d import Fe3dModel  # noqa: E402
@@ -327,7 +327,7 @@ def _polygon_gap_all_pairs(P, skip):
 def test_polygon_gap_equals_the_all_pairs_check(seed, squeeze, m, skip):
     """The lumen wall's gap check (a k-d tree on the segments) gives exactly the all-pairs answer on
     wiggly rings squeezed towards a slit (squeeze 1) and past it, where the two walls cross."""
-    from softcath_ros.core.fe3d.contact import polygon_gap
+    from softcath_ros.core.fe3d.wall_gap import polygon_gap
 
     rng = np.random.default_rng(seed)
     t = np.sort(rng.uniform(0, 2 * np.pi, m))
@@ -341,7 +341,7 @@ def test_lumen_gap_check_reads_each_state_once_and_as_located_point_by_point(sho
     """The gap check's wall points, located in the mesh once, deform as the displacement evaluated
     ring by ring at freshly located points; min_gap answers for the state it is asked at (the
     memo of the last state is dropped when the state changes: bending narrows the lumen)."""
-    from softcath_ros.core.fe3d.contact import min_wall_gap
+    from softcath_ros.core.fe3d.wall_gap import min_wall_gap
     from softcath_ros.core.fe3d.measure import _evaluate
 
     from softcath_ros.core.fe3d.ramp import run_ramp

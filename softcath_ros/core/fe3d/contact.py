@@ -33,12 +33,12 @@ traction is the sum of both sides' terms.
 from __future__ import annotations
 
 import logging
-import math
 
 import numpy as np
 
 from ..section_fe.terms.contact import KAPPA_SCALE, barrier
 from .holes import hole_size
+from .wall_gap import min_wall_gap, section_rings, wall_sampling
 
 log = logging.getLogger(__name__)
 
@@ -73,10 +73,6 @@ FAR = 6.0
 # at these points. 6 since fe3d-10 (8 before): the same R_C to a small fraction of a percent for a
 # cheaper pair search (the measurements: docs/models/fe3d.md, "Newton and the ramp")
 INTORDER = 6
-# wall points per mesh edge of the lumen wall in the geometric gap check: its chords cut the
-# curved wall, most at a shoulder folded tight; at the 20 mm default mesh's 0.2397 bar state
-# 4 per edge read a crossing of 6.5 um, 8 / 16 / 32 read 5.2 / 0.85 / 0.82 um (0.1 s per check at 16)
-SAMPLES = 16
 
 
 def _barrier_parts(xi: float):
@@ -132,6 +128,50 @@ def mirror_energy_cf(problem, u, d_hat: float):
     return problem.design.material.c1 * KAPPA * d_hat * weight * barrier_cf(gap / d_hat)
 
 
+def pair_energy_cf(problem, u, d_hat: float):
+    """The lumen wall's pair term per reference area of the primary, for ``ContactBoundary``: (its
+    compiled energy c1 KAPPA d_hat beta(xi) times the windows, the windows' weight, the normal gap
+    (m), the barrier's argument xi, the two points' reference distance in lumen radii), as
+    CoefficientFunctions of the trial function ``u`` and its value at the partner (``Other``)."""
+    import ngsolve as ng
+
+    X = ng.CF((ng.x, ng.y, ng.z))
+    sep = X.Other() + u.Other() - X - u
+    # the primary's deformed normal from the trial function (so it is differentiated too):
+    # Nanson, n ~ cof(F) N, N the reference normal (out of the silicone, into the lumen)
+    fs = ng.Id(3) + ng.Grad(u).Trace()
+    cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
+    normal = cof_n / ng.Norm(cof_n)
+    gap = sep * normal
+    # a pair across the lumen has its partner near the primary's normal line, in front of it.
+    # Windows in lengths (d_hat), not in the angle: with the pairs fixed between searches the
+    # walls slide by microns, and a window on the angle (fe3d-4: cos 0.3 -> 0.7) switched a
+    # pair off once it had slid by about its gap, a few microns, which made the fixed
+    # pairing's energy so nonconvex that full Newton steps cycled (docs/models/fe3d.md,
+    # "Where it fails"). The offset window drops a neighbour on a sharply curved wall (a
+    # shoulder), found at the shared edge nearly in the tangent plane; the behind window a wall
+    # point behind the primary (through the silicone, found where the wall creases): such pairs,
+    # counted with their negative gap, made the energy jump by orders of magnitude when the
+    # search added or dropped them (fe3d-3). Walls that really pass through each other are
+    # caught by the geometric check instead (min_gap)
+    # The offset does not weigh the barrier but adds to its argument (lateral_xi): a weight let a
+    # pair found nearly in the primary's tangent plane (offset 4.8 d_hat, gap -0.01 d_hat: the
+    # wall turning round a fold) keep a sliver of the barrier's large value there, which moved
+    # with the offset: 0.059 mm^2 of such pairs past the log range made the tangent indefinite
+    # on the 1-DOF optimum at 0.1041 bar (docs/models/fe3d.md, "Where it fails")
+    offset2 = (sep * sep - gap * gap) / (d_hat * d_hat)
+    xi = lateral_xi(gap / d_hat, offset2)
+    weight = smooth_step_cf((gap / d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
+    # and the two points must be apart on the reference wall: a neighbour along the wall
+    # is not a contact partner (the section rung's exclusion of incident segments)
+    ref = ng.Norm(X.Other() - X) / hole_size(problem.design.lumen)
+    weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+    scale = problem.design.material.c1 * KAPPA * d_hat
+    # compiled: the same values, several times faster to assemble
+    energy = (scale * weight * barrier_cf(xi)).Compile()
+    return energy, weight, gap, xi, ref
+
+
 # the mirror term's quadrature order on the lumen wall above the default (2 x the element order, 4):
 # INTORDER, the pair term's
 MIRROR_BONUS_ORDER = INTORDER - 4
@@ -175,40 +215,7 @@ class LumenContact:
         wall = mesh.Boundaries("lumen")
         self.boundary = ng.ContactBoundary(wall, wall, volume=False)
         u, _ = problem.fes.TrialFunction()
-        X = ng.CF((ng.x, ng.y, ng.z))
-        sep = X.Other() + u.Other() - X - u
-        # the primary's deformed normal from the trial function (so it is differentiated too):
-        # Nanson, n ~ cof(F) N, N the reference normal (out of the silicone, into the lumen)
-        fs = ng.Id(3) + ng.Grad(u).Trace()
-        cof_n = ng.Cof(fs) * ng.specialcf.normal(3)
-        normal = cof_n / ng.Norm(cof_n)
-        gap = sep * normal
-        # a pair across the lumen has its partner near the primary's normal line, in front of it.
-        # Windows in lengths (d_hat), not in the angle: with the pairs fixed between searches the
-        # walls slide by microns, and a window on the angle (fe3d-4: cos 0.3 -> 0.7) switched a
-        # pair off once it had slid by about its gap, a few microns, which made the fixed
-        # pairing's energy so nonconvex that full Newton steps cycled (docs/models/fe3d.md,
-        # "Where it fails"). The offset window drops a neighbour on a sharply curved wall (a
-        # shoulder), found at the shared edge nearly in the tangent plane; the behind window a wall
-        # point behind the primary (through the silicone, found where the wall creases): such pairs,
-        # counted with their negative gap, made the energy jump by orders of magnitude when the
-        # search added or dropped them (fe3d-3). Walls that really pass through each other are
-        # caught by the geometric check instead (min_gap)
-        # The offset does not weigh the barrier but adds to its argument (lateral_xi): a weight let a
-        # pair found nearly in the primary's tangent plane (offset 4.8 d_hat, gap -0.01 d_hat: the
-        # wall turning round a fold) keep a sliver of the barrier's large value there, which moved
-        # with the offset: 0.059 mm^2 of such pairs past the log range made the tangent indefinite
-        # on the 1-DOF optimum at 0.1041 bar (docs/models/fe3d.md, "Where it fails")
-        offset2 = (sep * sep - gap * gap) / (self.d_hat * self.d_hat)
-        xi = lateral_xi(gap / self.d_hat, offset2)
-        weight = smooth_step_cf((gap / self.d_hat - BEHIND_LOW) / (BEHIND_HIGH - BEHIND_LOW))
-        # and the two points must be apart on the reference wall: a neighbour along the wall
-        # is not a contact partner (the section rung's exclusion of incident segments)
-        ref = ng.Norm(X.Other() - X) / hole_size(lumen)
-        weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
-        scale = problem.design.material.c1 * KAPPA * self.d_hat
-        # compiled: the same values, several times faster to assemble
-        energy = (scale * weight * barrier_cf(xi)).Compile()
+        energy, weight, gap, xi, ref = pair_energy_cf(problem, u, self.d_hat)
         self.boundary.AddEnergy(energy)
         paired = ng.IfPos(weight - 1e-12, 1.0, 0.0)   # the pairs the energy counts at all
         # the same pairs measuring the wall area (m^2) past the barrier's log range (xi < XI_MIN);
@@ -361,121 +368,3 @@ class LumenContact:
             # (a Newton step's admissibility check and the next iteration's search ask at one state)
             self._gap_of = (state.copy(), min_wall_gap(self.problem, self._sampling))
         return self._gap_of[1]
-
-
-class WallSampling:
-    """Reference points of the lumen wall for the geometric gap check: ``ring`` (n, 2), SAMPLES
-    points per wall edge of the section in order around the lumen (the half model's half wall,
-    mirrored later), ``levels`` the mesh levels' z (m), and per level three rings stacked in
-    ``ref`` (m): at the level and a quarter layer above and below it (the deformed axis there). The
-    points are located in the mesh once (``located``): locating them cost ten times evaluating
-    the displacement there."""
-
-    def __init__(self, ring: np.ndarray, levels: np.ndarray, length: float):
-        self.ring, self.levels = ring, np.asarray(levels, dtype=float)
-        dz = 0.25 * (self.levels[1] - self.levels[0]) if len(self.levels) > 1 else 1e-4
-        zs = np.column_stack([self.levels, np.minimum(self.levels + dz, length), np.maximum(self.levels - dz, 0.0)])
-        n = len(ring)
-        self.ref = np.column_stack([np.tile(ring, (zs.size, 1)), np.repeat(zs.ravel(), n)])
-        self.located = None
-
-    def deformed(self, problem) -> np.ndarray:
-        """(levels, 3, n, 3): the deformed points (m) of the rings at, above and below each level."""
-        if self.located is None:
-            self.located = problem.mesh(self.ref[:, 0], self.ref[:, 1], self.ref[:, 2])
-        cur = self.ref + np.asarray(problem.u(self.located)).reshape(len(self.ref), 3)
-        return cur.reshape(len(self.levels), 3, len(self.ring), 3)
-
-
-def wall_sampling(problem) -> WallSampling:
-    """The lumen wall's WallSampling for ``problem``."""
-    from .measure import lumen_wall_nodes
-
-    pts, levels = lumen_wall_nodes(problem)
-    closed = not problem.half
-    nxt = np.roll(pts, -1, axis=0) if closed else pts[1:]
-    start = pts if closed else pts[:-1]
-    t = np.arange(SAMPLES) / SAMPLES
-    ring = (start[:, None, :] * (1 - t)[None, :, None] + nxt[:, None, :] * t[None, :, None]).reshape(-1, 2)
-    if not closed:
-        ring = np.vstack([ring, pts[-1:]])
-    return WallSampling(ring, levels, problem.design.length)
-
-
-def _closed_ring(problem, cur: np.ndarray) -> np.ndarray:
-    """A deformed ring (n, 3) closed by its mirror image on the half model."""
-    if problem.half:
-        back = cur[::-1].copy()
-        back[:, 0] *= -1.0
-        cur = np.vstack([cur, back[1:-1]])
-    return cur
-
-
-def section_rings(problem, sampling: WallSampling) -> list:
-    """Each deformed section ring of the lumen wall (closed by its mirror image on the half model) in
-    the plane normal to the deformed axis there, about its centroid: (m, 2) in-plane coordinates, m,
-    per mesh level. The body's bending moves them only through the section's own deformation."""
-    out = []
-    for rings in sampling.deformed(problem):
-        cur, above, below = (_closed_ring(problem, r) for r in rings)
-        centre = cur.mean(axis=0)
-        # the deformed section's plane: normal to the body's deformed axis there (a best-fit
-        # plane would tilt out of a closed slit, whose points are nearly on one curve)
-        axis = (above - below).mean(axis=0)
-        axis /= np.linalg.norm(axis)
-        e1 = np.array([1.0, 0.0, 0.0]) - axis[0] * axis
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(axis, e1)
-        out.append((cur - centre) @ np.column_stack([e1, e2]))
-    return out
-
-
-def min_wall_gap(problem, sampling: WallSampling) -> float:
-    """See LumenContact.min_gap. Each section ring (``section_rings``) is tested for crossings with
-    the section rung's polygon test."""
-    return min((polygon_gap(P, 2 * SAMPLES) for P in section_rings(problem, sampling)), default=math.inf)
-
-
-def polygon_gap(P: np.ndarray, skip: int) -> float:
-    """A closed polygon's (P: (m, 2), segment k from vertex k to k + 1) smallest distance from a
-    vertex to a segment at least ``skip`` segments away along it, or, when two segments at least 2
-    apart properly cross, minus the largest crossing depth (per crossing pair the smallest distance
-    of an end point of one to the other). Exact, as the all-pairs test, but only pairs of segments
-    near each other are tested (a k-d tree on the segments' midpoints): a segment within r of a
-    point has its midpoint within r + half the longest segment."""
-    from scipy.spatial import cKDTree
-
-    from ..section_fe.terms.contact import point_segment_distance, segments_cross
-
-    m = len(P)
-    nxt = np.roll(P, -1, axis=0)
-    half = 0.5 * float(np.max(np.linalg.norm(nxt - P, axis=1)))
-    tree = cKDTree(0.5 * (P + nxt))
-    # crossings: segments whose midpoints lie within the two half lengths of each other
-    pairs = tree.query_pairs(2.0 * half * (1.0 + 1e-9) + 1e-300, output_type="ndarray")
-    if len(pairs):
-        i, k = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-        apart = (k - i >= 2) & (k - i <= m - 2)
-        i, k = i[apart], k[apart]
-        crossing = segments_cross(P, i, k)
-        if np.any(crossing):
-            i, k = i[crossing], k[crossing]
-            a, b, c, e = P[i], P[(i + 1) % m], P[k], P[(k + 1) % m]
-            depth = np.min(np.stack([point_segment_distance(a, c, e), point_segment_distance(b, c, e),
-                                     point_segment_distance(c, a, b), point_segment_distance(e, a, b)]), axis=0)
-            return -max(float(np.max(depth)), 1e-15)
-    # distances: grow the radius r until some allowed pair lies within it (then none beyond can be nearer)
-    vertices = cKDTree(P)
-    span = float(np.max(np.ptp(P, axis=0))) if m else 0.0
-    r = max(4.0 * half, span / 16.0)
-    while True:
-        near = vertices.sparse_distance_matrix(tree, r + half, output_type="ndarray")
-        vi, sj = near["i"].astype(np.intp), near["j"].astype(np.intp)
-        off = (sj - vi) % m
-        keep = (off >= skip) & (off <= m - skip - 1)
-        d = point_segment_distance(P[vi[keep]], P[sj[keep]], P[(sj[keep] + 1) % m]) if keep.any() else np.empty(0)
-        if len(d) and float(np.min(d)) <= r:
-            return float(np.min(d))
-        if r > 2.0 * span + 4.0 * half:
-            return float(np.min(d)) if len(d) else math.inf
-        r *= 2.0

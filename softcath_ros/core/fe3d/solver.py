@@ -40,7 +40,8 @@ from ..energy import isochoric_i1, neo_hookean, yeoh
 from .contact import INTORDER, LumenContact
 from .holes import hole_size
 from .mesh import MeshSettings, PrismMesh, build_mesh
-from .newton import Fe3dNewton, NewtonSettings
+from .newton import Fe3dNewton
+from .newton_settings import NewtonSettings
 
 
 def check_element(pressure_order, interior_order) -> None:

@@ -147,7 +147,7 @@ class Fe3dModel(BendModel):
                              f"(or pip install ngsolve) ({exc})") from None
         from ..fe3d.symmetry import can_use_half_model
         from ..fe3d.ramp import default_step_control
-        from ..fe3d.newton import NewtonSettings
+        from ..fe3d.newton_settings import NewtonSettings
         from ..fe3d.solver import check_element
 
         self.mesh_settings = mesh if mesh is not None else mesh_settings(mesh_size, layer_h, design.outer_diameter)
