@@ -114,6 +114,13 @@ def smooth_step_cf(t):
     return c * c * c * (10.0 - 15.0 * c + 6.0 * c * c)
 
 
+def near_window(ref):
+    """0 for two wall points within NEAR_LOW lumen radii of each other in the reference state (``ref``,
+    in lumen radii: neighbours along the wall, or a point and its image on the mirror plane), 1 from
+    NEAR_HIGH on (C2 between), as a CoefficientFunction."""
+    return smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+
+
 def mirror_energy_cf(problem, u, d_hat: float):
     """The half body's lumen wall against its mirror image across x = 0, per reference area of the wall:
     the pair term's barrier on the gap g = 2 (X + u)_x from a wall point to its own image (the body lies
@@ -124,7 +131,7 @@ def mirror_energy_cf(problem, u, d_hat: float):
 
     gap = 2.0 * (ng.x + u[0])
     ref = 2.0 * ng.x / hole_size(problem.design.lumen)
-    weight = smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+    weight = near_window(ref)
     return problem.design.material.c1 * KAPPA * d_hat * weight * barrier_cf(gap / d_hat)
 
 
@@ -165,7 +172,7 @@ def pair_energy_cf(problem, u, d_hat: float):
     # and the two points must be apart on the reference wall: a neighbour along the wall
     # is not a contact partner (the section rung's exclusion of incident segments)
     ref = ng.Norm(X.Other() - X) / hole_size(problem.design.lumen)
-    weight = weight * smooth_step_cf((ref - NEAR_LOW) / (NEAR_HIGH - NEAR_LOW))
+    weight = weight * near_window(ref)
     scale = problem.design.material.c1 * KAPPA * d_hat
     # compiled: the same values, several times faster to assemble
     energy = (scale * weight * barrier_cf(xi)).Compile()
