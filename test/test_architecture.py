@@ -135,6 +135,25 @@ def test_rung_capabilities_need_no_rung_and_no_ngsolve():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_a_model_answering_from_a_shipped_table_and_the_simulated_rig_import_no_scipy():
+    """A node's start-up path (model_node's surrogate on its shipped table, sim_bench_node's truth)
+    reads the source rung's RungInfo but builds no rung: scipy (0.3-0.4 s of CPU per node start)
+    stays unloaded until a solve needs it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import numpy as np; from softcath_ros.core.design import load_design; "
+            "from softcath_ros.core.models import make_model; "
+            "from softcath_ros.bench.sim_rig import RigParams, SimulatedRig, truth_model; "
+            "d = load_design('implemented_5mm'); m = make_model('surrogate', d); "
+            "assert m.evaluate(np.array([[20000.0]])).converged[0]; "
+            "rig = SimulatedRig(truth_model('surrogate', d, RigParams()), RigParams()); rig.advance(0.01, np.array([2e4])); "
+            "assert np.isfinite(rig.read().angle); "
+            "loaded = sorted(n for n in sys.modules if n.split('.')[0] == 'scipy'); assert not loaded, loaded[:5]")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-1500:]
+
+
 def test_declared_rung_options_match_the_constructors():
     """Each rung's RungInfo lists exactly the options its constructor takes (more when it passes
     further options on, as the rod to its source rung)."""

@@ -7,7 +7,7 @@ docs/models/section.md (contact)."""
 import numpy as np
 import pytest
 
-import softcath_ros.core.models.section as section_module
+import softcath_ros.core.section_fe.solver as solver_module
 from softcath_ros.core.models import make_model
 from softcath_ros.core.section_fe.terms.contact import WallContact, barrier, line_distance2, window
 
@@ -157,7 +157,7 @@ def test_flat_wall_pressed_on_a_rigid_wall_balances_the_load_at_the_hand_solutio
 def converged_states(monkeypatch):
     """Every converged Newton state of the section rung during a test."""
     states = []
-    original = section_module.newton
+    original = solver_module.newton
 
     def recording(problem, *args, **kwargs):
         corr = original(problem, *args, **kwargs)
@@ -165,7 +165,7 @@ def converged_states(monkeypatch):
             states.append((problem, corr.state))
         return corr
 
-    monkeypatch.setattr(section_module, "newton", recording)
+    monkeypatch.setattr(solver_module, "newton", recording)   # (the rung imports it where it is used)
     return states
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import softcath_ros.core.models.section as section_module
-import softcath_ros.core.models.section_stability as stability_module
+import softcath_ros.core.section_fe.solver as solver_module
 from softcath_ros.core.continuation import UNSTABLE
 from softcath_ros.core.models import make_model
 from softcath_ros.core.section_fe.solver import leave_saddle, unstable_directions
@@ -56,7 +56,7 @@ def test_a_saddle_that_cannot_be_left_is_refused_by_name(implemented_design, mon
         met.append(unstable_directions(problem, x, pressures))
         return None, met[-1]
 
-    monkeypatch.setattr(stability_module, "leave_saddle", cannot_leave)
+    monkeypatch.setattr(solver_module, "leave_saddle", cannot_leave)   # (imported where it is used)
     state = _coarse(implemented_design).evaluate([0.35 * BAR])
     assert not state.converged and np.isnan(state.curvature).all()
     assert f"[stop: {UNSTABLE}]" in state.message and "saddle" in state.message, state.message

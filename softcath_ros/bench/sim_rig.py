@@ -88,8 +88,7 @@ def truth_model(rung: str, design, params: RigParams, **options):
     that answers for pressures alone reads the design's own answers at p / m (exact: every modulus
     scales by m), so no table is built for the scaled design; one that takes loads is built on the
     scaled design."""
-    from ..core.calibration_file import CalibratedModel, pressure_only
-    from .calibration import scaled_design
+    from ..core.calibration_file import CalibratedModel, pressure_only, scaled_design
 
     if rung == "surrogate":   # a rig answers every pressure: all three channels pressurised too (approximately)
         options = {"answer_common": True, "answer_unresolved": True, **options}

@@ -30,7 +30,6 @@ from ..design import Design
 from ..energy import yeoh_convexity_limit
 from ..errors import ModelError
 from ..section_fe.settings import SectionSettings, discretise
-from ..section_fe.solver import LinearSolver, newton
 from ..options import Option
 from .base import BendModel, BendState, RungInfo, SolverDiagnostics, options_of
 from .section_path import PathContinuation, ray_order
@@ -80,6 +79,10 @@ class SectionModel(PathContinuation, StableStates, BendModel):
         """``cache``: False, True (the project cache, core/cache.py) or a cache root directory;
         results of whole batches are kept there under a hash of design, mesh, settings and
         pressures. ``progress``: a tqdm bar per batch. ``settings``: ``SectionSettings`` fields."""
+        # the solver (scipy) is imported where a rung is built, not with this module: a node that
+        # answers from a surrogate table reads this rung's RungInfo but never builds it
+        from ..section_fe.solver import LinearSolver
+
         super().__init__(design)
         try:
             self.settings = SectionSettings(**settings)
@@ -185,6 +188,7 @@ class SectionModel(PathContinuation, StableStates, BendModel):
         """The ramp's corrector at path parameter ``t`` (pressures ``pressure_at(t)``): Newton (a
         stable-only minimiser where saddles are met), with the predictor's step halved while it is
         inadmissible, a minimiser as retry, saddles left, and the validity checks that stop a ramp."""
+        from ..section_fe.solver import newton
         c_ref = self.problem.c_ref
         hole_names = [f"channel {i}" for i in range(self.design.n_channels)] + ["lumen"]
         # where saddles are met (contact, fill), a minimiser that ends only at a stable state

@@ -15,7 +15,6 @@ import numpy as np
 
 from ..continuation import (LIMIT_POINT, NUMERICAL_FAILURE, ArcControl, Correction, RampPoint, RampResult,
                             StepControl, arc_length, ramp, stop_tag)
-from ..section_fe.solver import PathStep, unstable_directions
 from ..units import PA_PER_BAR
 
 # limit points passed by arc length per continuation (snaps), and the largest drop of the pressure
@@ -124,6 +123,8 @@ class PathContinuation:
     def _ramp_through(self, path: CommandPath, corrector, start_state: np.ndarray) -> RampResult:
         """``continuation.ramp`` along ``path`` from ``start_state``; where it stops for no named
         reason (adaptive steps only), up to MAX_SNAPS limit points are passed and it goes on."""
+        from ..section_fe.solver import unstable_directions   # (scipy: not on a node's start-up path)
+
         s = self.settings
         control = StepControl(initial_step=s.initial_step, max_step=s.max_step, min_step=s.min_step,
                               adaptive=s.adaptive, domain_step=s.contact_resolution)
@@ -200,6 +201,8 @@ class PathContinuation:
     def _follow_by_arc_length(self, path: CommandPath, stable: tuple, before: tuple | None):
         """The path followed by arc length from the last stable (load, state) over the limit point:
         (``continuation.arc_length``'s result, the limit's load, a note for messages)."""
+        from ..section_fe.solver import PathStep
+
         s, c_ref, n = self.settings, self.problem.c_ref, self.problem.n
         direction = path.direction_at(stable[0])
         base = path.pressure_at(stable[0]) - stable[0] * direction
@@ -222,6 +225,8 @@ class PathContinuation:
     def _answers(self, pressures: np.ndarray, todo: list[int], points: list[RampPoint]) -> list[tuple]:
         """(index, state, iterations, negative directions) per command the ramp reached; a stable
         answer is remembered as a start for later commands, a saddle never is."""
+        from ..section_fe.solver import unstable_directions
+
         c_ref = self.problem.c_ref
         done = []
         for i, point in zip(todo, points):

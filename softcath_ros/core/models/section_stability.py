@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..continuation import LIMIT_POINT, NUMERICAL_FAILURE, UNSTABLE, Correction, StepControl, ramp
-from ..section_fe.solver import leave_saddle, unstable_directions
 
 # a limit point: the tangent's smallest eigenvalue below this fraction of its value at rest
 LIMIT_RATIO = 0.25
@@ -56,6 +55,8 @@ class StableStates:
     def _escape(self, x: np.ndarray, pressures: np.ndarray):
         """``solver.leave_saddle`` at ``x`` with this rung's settings, a stable state found recorded in
         ``left_saddles``: (its Correction or None, the negative directions at ``x``)."""
+        from ..section_fe.solver import leave_saddle   # (scipy: not on a node's start-up path)
+
         stable, count = leave_saddle(self.problem, x, pressures, tol=self.settings.tol,
                                      max_iterations=ESCAPE_ITERATIONS, linear=self.linear)
         if stable is not None:
@@ -68,6 +69,8 @@ class StableStates:
         with steps of min_step / 64 and compare the tangent's smallest eigenvalue there with its
         value at rest. Near zero (below LIMIT_RATIO of it), the path has reached a limit point or a
         bifurcation that pressure control cannot pass; otherwise it stays a numerical failure."""
+        from ..section_fe.solver import unstable_directions
+
         s = self.settings
         probe = ramp(corrector, result.last_state, [t_probe],
                      StepControl(initial_step=s.min_step / 8, max_step=s.min_step, min_step=s.min_step / 64),
