@@ -81,7 +81,7 @@ class SectionModel(PathContinuation, StableStates, BendModel):
         pressures. ``progress``: a tqdm bar per batch. ``settings``: ``SectionSettings`` fields."""
         # the solver (scipy) is imported where a rung is built, not with this module: a node that
         # answers from a surrogate table reads this rung's RungInfo but never builds it
-        from ..section_fe.solver import LinearSolver
+        from ..section_fe.linear_solver import LinearSolver
 
         super().__init__(design)
         try:

@@ -27,7 +27,8 @@ from ..errors import ModelError
 from ..units import describe_pressure
 from .problem import SectionProblem
 from .settings import SectionSettings
-from .solver import LinearSolver, newton
+from .linear_solver import LinearSolver
+from .solver import newton
 
 
 STABLE_ITERATIONS = 200  # the held section's minimiser (where Newton reaches a saddle, or stalls on a snap): 60

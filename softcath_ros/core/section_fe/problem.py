@@ -34,7 +34,7 @@ from .kinematics import N_GLOBAL, ElementRule, block_dofs, kinematics
 from .mesh import SectionMesh
 from .quadrature import NODAL_POINTS, NODAL_WEIGHTS, TRIANGLE_POINTS, TRIANGLE_WEIGHTS
 from .shape import p2_triangle
-from .terms import Contribution, Term
+from .terms import Contribution, SparseContribution, Term
 from .terms.contact import DeviceContact, WallContact, segments_cross
 from .terms.device import DeviceBending
 from .terms.fibre import Fibre
@@ -217,6 +217,8 @@ class SectionProblem:
         pos = np.empty(len(uniq), dtype=np.int64)
         pos[order] = np.arange(len(uniq))
         self._pos = pos[inv.ravel()]
+        ends = np.cumsum([term.dofs.size * term.dofs.shape[1] for term in self.terms])
+        self._term_pos = np.split(self._pos, ends[:-1])        # each term's blocks' entries
         self._csr_indices = m.indices.copy()
         self._csr_indptr = m.indptr.copy()
         self._nnz = len(uniq)
@@ -398,8 +400,16 @@ class SectionProblem:
             E += c.energy
         grad = np.bincount(self._grad_dofs, weights=np.concatenate([c.gradient.ravel() for c in parts]),
                            minlength=self.n)
-        data = np.bincount(self._pos, weights=np.concatenate([c.hessian.ravel() for c in parts]),
-                           minlength=self._nnz)
+        if any(isinstance(c, SparseContribution) for c in parts):
+            # only the non-zero entries of the mostly-zero blocks (the same sums: a zero adds nothing)
+            sparse = [isinstance(c, SparseContribution) for c in parts]
+            data = np.bincount(
+                np.concatenate([pos[c.keys] if s else pos for c, pos, s in zip(parts, self._term_pos, sparse)]),
+                weights=np.concatenate([c.values if s else c.hessian.ravel() for c, s in zip(parts, sparse)]),
+                minlength=self._nnz)
+        else:
+            data = np.bincount(self._pos, weights=np.concatenate([c.hessian.ravel() for c in parts]),
+                               minlength=self._nnz)
         data[self._pinned_entries] = 0.0
         data[self._pinned_diag] = 1.0
         grad[self.pinned] = 0.0

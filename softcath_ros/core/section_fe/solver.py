@@ -1,7 +1,7 @@
 """Newton's method for the section problem (mixed u-p, element pressures condensed).
 
-Each iteration solves the symmetric tangent system with a sparse LDL^T (``qdldl``, whose
-symbolic analysis is reused since the pattern never changes; SuperLU if qdldl is missing),
+Each iteration solves the symmetric tangent system with a sparse LDL^T (``linear_solver.py``:
+``qdldl``, its symbolic analysis reused while the pattern stays; SuperLU if qdldl is missing),
 then backtracks only to stay admissible (no inverted element, no negative axial stretch).
 Converged when the Newton step is below ``tol`` in every non-dimensional unknown (displacement / R, lambda, k R), or a hundred times that while
 contracting quadratically: the error left is then of the order of the step squared.
@@ -9,133 +9,24 @@ contracting quadratically: the error left is then of the order of the step squar
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..continuation import Correction
+from .linear_solver import LinearSolver
 from .problem import SectionProblem
 
 ARMIJO = 1e-4               # sufficient decrease of the potential, as a fraction of the slope
 MIN_DESCENT_STEP = 1 / 64   # the descent test stops cutting here (admissibility does not)
 ROUND_OFF = 1e-11           # potential differences below this (relative) are round-off
-UNION_SLACK = 0.1           # the factorised pattern may keep this fraction more entries than the tangent's non-zeros
+ENERGY_AGREEMENT = 1e-9    # the energy alone and the assembly's differ by round-off, far below this (relative)
 ESCAPE_STEP = 1e-2          # the stable minimiser's step off a saddle (largest non-dimensional entry)
 
 
-class LinearSolver:
-    """Sparse symmetric solves: a symbolic factor kept while the pattern of non-zeros stays the same,
-    refactored numerically at each call.
-
-    The problem's tangent has a fixed pattern that reserves every pair of wall nodes of a hole for
-    self-contact (``terms/contact.py``), but only the pairs within the barrier's range are non-zero:
-    the entries that are exactly zero are left out of the factor (keeping them triples its fill and
-    costs ten times the time), and the symbolic analysis is redone when that set changes."""
-
-    def __init__(self):
-        self._ldl = None
-        self._pattern = None          # (indptr, indices, kept mask) of the factorised matrix
-        self._triangle = None         # (row of each entry, upper-triangle mask, diagonal mask) of that pattern
-        self._shifted = None          # the factor of shifted tangents (solve_positive_definite)
-        try:
-            import qdldl  # noqa: F401
-            self._have_qdldl = True
-        except ImportError:
-            self._have_qdldl = False
-
-    def _upper(self, K):
-        """K's upper triangle without its zero entries (diagonal kept) as CSC arrays, and whether
-        its pattern is the one last factorised (then the symbolic factor is reused).
-
-        The entries kept are those of the last factorised pattern as well, as long as they are at
-        most UNION_SLACK more than K's own: contact pairs entering and leaving the barrier's range
-        then reuse one symbolic analysis instead of redoing it at almost every iteration."""
-        n = K.shape[0]
-        last = self._pattern
-        same_arrays = last is not None and len(last[2]) == len(K.indices) and (
-            last[0] is K.indptr and last[1] is K.indices
-            or np.array_equal(last[0], K.indptr) and np.array_equal(last[1], K.indices))
-        if not same_arrays or self._triangle is None:
-            rows = np.repeat(np.arange(n), np.diff(K.indptr))
-            self._triangle = (rows, K.indices <= rows, K.indices == rows)
-        rows, upper, diagonal = self._triangle
-        keep = upper & ((K.data != 0) | diagonal)
-        same = False
-        if same_arrays:
-            union = keep | last[2]
-            if np.count_nonzero(union) <= (1 + UNION_SLACK) * np.count_nonzero(keep):
-                keep, same = union, np.array_equal(union, last[2])
-        if not same:
-            self._pattern = (K.indptr, K.indices, keep)
-        # K symmetric: the CSR arrays of its lower triangle are the CSC arrays of its upper one.
-        indptr = np.concatenate([[0], np.cumsum(np.bincount(rows[keep], minlength=n))])
-        return sp.csc_matrix((K.data[keep], K.indices[keep], indptr), shape=K.shape), same
-
-    def solve(self, K, rhs: np.ndarray) -> np.ndarray:
-        """Solve K z = rhs for a symmetric CSR matrix K."""
-        if self._have_qdldl:
-            import qdldl
-
-            upper, same = self._upper(K)
-            if self._ldl is None or not same:
-                self._ldl = qdldl.Solver(upper, upper=True)
-            else:
-                self._ldl.update(upper, upper=True)
-            z = self._ldl.solve(rhs)
-            z += self._ldl.solve(rhs - K @ z)  # one step of iterative refinement (no pivoting)
-            return z
-        # A symmetric ordering without row pivoting keeps SuperLU's factor sparse.
-        K = K.copy()
-        K.eliminate_zeros()
-        return spla.splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                         options={"SymmetricMode": True}).solve(rhs)
-
-    def negative_pivots(self) -> int | None:
-        """The last factorised matrix's negative eigenvalues, counted as the negative pivots of its
-        LDL^T (Sylvester's law of inertia); None without qdldl (SuperLU's LU does not tell)."""
-        if not self._have_qdldl or self._ldl is None:
-            return None
-        return int(np.count_nonzero(self._ldl.factors()[1] < 0))
-
-    def negative_curvature_direction(self) -> np.ndarray:
-        """For the most negative pivot d_j of the last LDL^T = P K P^T, the direction
-        v = P^T L^-T e_j, along which v.K.v = d_j < 0: a way down from a saddle (qdldl only),
-        scaled to a largest entry of one."""
-        L, d, perm = self._ldl.factors()
-        n = len(d)
-        e = np.zeros(n)
-        e[int(np.argmin(d))] = 1.0
-        y = spla.spsolve_triangular((sp.eye(n, format="csr") + L.T).tocsr(), e, lower=False)
-        v = np.empty(n)
-        v[perm] = y
-        return v / np.max(np.abs(v))
-
-    def solve_positive_definite(self, K, rhs: np.ndarray) -> tuple[np.ndarray, float]:
-        """(z, sigma): solve (K + sigma I) z = rhs with a shift sigma just large enough that the
-        LDL^T has no negative pivot (growing threefold from a third of the last one, or from 1e-6
-        of K's largest diagonal entry): the step of a minimiser that may not head for a saddle
-        (qdldl only; a second factor of the same pattern)."""
-        if self._shifted is None:
-            self._shifted = LinearSolver()
-            self._sigma = None
-        diag = np.flatnonzero(np.repeat(np.arange(K.shape[0]), np.diff(K.indptr)) == K.indices)
-        scale = float(np.max(np.abs(K.data[diag])))
-        sigma = 1e-6 * scale if self._sigma is None else max(self._sigma / 3, 1e-9 * scale)
-        for _ in range(24):
-            data = K.data.copy()
-            data[diag] += sigma
-            z = self._shifted.solve(K.__class__((data, K.indices, K.indptr), shape=K.shape), rhs)
-            if self._shifted.negative_pivots() == 0 and np.all(np.isfinite(z)):
-                self._sigma = sigma
-                return z, sigma
-            sigma *= 3
-        return rhs / scale, scale
-
-
-def _minimiser_step(linear: LinearSolver, K, g: np.ndarray, dz: np.ndarray, n: int, tol: float, minimise: bool,
+def _minimiser_step(linear: LinearSolver, K, g: np.ndarray, n: int, tol: float, minimise: bool,
                     stable_only: bool) -> tuple[np.ndarray, int | None, bool]:
-    """Newton's step ``dz`` made a minimiser's: (step, the tangent's negative pivots when
-    ``stable_only`` asks for them, whether the tangent was shifted). The tangent's inertia is needed
-    by the stable-only minimiser at every iteration (else only at the end)."""
+    """Newton's step with the factorised tangent ``K``, made a minimiser's: (step, the tangent's
+    negative pivots when ``stable_only`` asks for them, whether the tangent was shifted). The
+    tangent's inertia is needed by the stable-only minimiser at every iteration (else only at the
+    end); where it is indefinite there, Newton's own step is not needed (not solved for)."""
     negative = linear.negative_pivots() if stable_only else None
     if stable_only and negative:
         # the tangent is indefinite here: a Newton step may head for a saddle, so step with the
@@ -148,6 +39,7 @@ def _minimiser_step(linear: LinearSolver, K, g: np.ndarray, dz: np.ndarray, n: i
             v = linear.negative_curvature_direction()
             dz = dz + ESCAPE_STEP * (v if float(g @ v) <= 0 else -v)
         return dz, negative, True
+    dz = linear.solve_factored(K, -g)
     if minimise and float(g @ dz) >= 0:
         dz = _descent_direction(K, g)
     return dz, negative, False
@@ -181,10 +73,10 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         if constraint is not None:
             g, K = constraint.reduce(x, g, K)
         try:
-            dz = linear.solve(K, -g)
+            linear.factor(K)
         except (RuntimeError, ValueError) as exc:  # singular factor
             return Correction(x, False, it, f"singular tangent ({exc})")
-        dz, negative, shifted = _minimiser_step(linear, K, g, dz, n, tol, minimise, stable_only)
+        dz, negative, shifted = _minimiser_step(linear, K, g, n, tol, minimise, stable_only)
         if constraint is not None:
             dz = constraint.expand(x, dz)
         dx = np.concatenate([dz[:n], problem.pressure_update(dz[:n], aux)])
@@ -195,28 +87,13 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
         # condensed the potential is minimised, and near the contact barrier full steps can
         # overshoot (Newton cycled at the creased lumen shoulders of fine meshes without it).
         slope = float(g @ dz) if line_search else 0.0
-        tolerance = ROUND_OFF * (1.0 + abs(E))
         step = float(np.max(np.abs(dz[:n])))
         # far from convergence the full step is assembled at once (the next iteration needs it);
         # near it only its energy (the step may be the last)
-        full = step >= 100 * tol
-        alpha = 1.0
-        assembled = None
-        for _ in range(12):
-            trial = x + alpha * dx if constraint is None else constraint.project(x + alpha * dx)
-            if full and alpha == 1.0:
-                assembled = problem.assemble(trial, pressures)
-                e_trial = assembled[0]
-            else:
-                e_trial = problem.energy(trial, pressures)
-            if np.isfinite(e_trial) and ((slope >= 0 and not shifted) or alpha <= MIN_DESCENT_STEP
-                                         or e_trial <= E + ARMIJO * alpha * slope + tolerance):
-                break
-            alpha *= 0.5
-        else:
+        searched = _line_search(problem, x, dx, pressures, constraint, E, slope, shifted, step >= 100 * tol)
+        if searched is None:
             return Correction(x, False, it, "every step length inverts an element")
-        if alpha < 1.0:
-            assembled = None
+        alpha, trial, assembled = searched
         x = trial
         # Converged when the step is below tol, or below 100 tol while shrinking 20-fold per
         # iteration (quadratic convergence observed): what is left is then below ~5 tol.
@@ -234,6 +111,36 @@ def newton(problem: SectionProblem, x0: np.ndarray, pressures: np.ndarray, tol: 
                                                  f"(last step {steps[-1]:.2e})")
 
 
+def _line_search(problem: SectionProblem, x, dx, pressures, constraint, E: float, slope: float, shifted: bool,
+                 full: bool):
+    """(step length, trial state, its assembly if made at the full step) of the first of 1, 1/2, ...
+    that is admissible and, where the step must descend (``slope`` < 0, or a ``shifted`` tangent's),
+    meets Armijo's test (down to MIN_DESCENT_STEP); None if all 12 lengths are inadmissible.
+    ``full``: the full step is assembled at once (the next iteration needs it); where Armijo may
+    reject it, its energy is looked at first, so a rejected full step costs no assembly (a trial
+    only rejected that way when its energy is clearly above the bound: the decisions are those the
+    assembly's energy would make)."""
+    tolerance = ROUND_OFF * (1.0 + abs(E))
+    must_descend = not (slope >= 0 and not shifted)
+    alpha = 1.0
+    for _ in range(12):
+        trial = x + alpha * dx if constraint is None else constraint.project(x + alpha * dx)
+        bound = E + ARMIJO * alpha * slope + tolerance
+        assembled = None
+        if full and alpha == 1.0:
+            if must_descend and not problem.energy(trial, pressures) <= bound + ENERGY_AGREEMENT * (1.0 + abs(E)):
+                e_trial = np.inf        # rejected without its assembly
+            else:
+                assembled = problem.assemble(trial, pressures)
+                e_trial = assembled[0]
+        else:
+            e_trial = problem.energy(trial, pressures)
+        if np.isfinite(e_trial) and (not must_descend or alpha <= MIN_DESCENT_STEP or e_trial <= bound):
+            return alpha, trial, assembled if alpha == 1.0 else None
+        alpha *= 0.5
+    return None
+
+
 def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray) -> int:
     """The tangent's negative eigenvalues at ``x`` (pressures / c1), counted as the negative pivots
     of its LDL^T (Sylvester's law of inertia): 0 at a stable equilibrium of the pressure-controlled
@@ -242,7 +149,7 @@ def unstable_directions(problem: SectionProblem, x: np.ndarray, pressures: np.nd
     linear = LinearSolver()
     if not linear._have_qdldl:
         return int(problem.smallest_tangent_eigenvalue(x, pressures) < 0)
-    linear.solve(K, np.zeros(K.shape[0]))
+    linear.factor(K)
     return linear.negative_pivots()
 
 
@@ -317,8 +224,9 @@ class PathStep:
                 return Correction(x0, False, it, "inadmissible predictor on the arc")
             _, b = p.load_vector(x, self.d)
             try:
-                a = self.linear.solve(K, -g)
-                w = self.linear.solve(K, b)
+                self.linear.factor(K)
+                a = self.linear.solve_factored(K, -g)
+                w = self.linear.solve_factored(K, b)
             except (RuntimeError, ValueError) as exc:
                 return Correction(x0, False, it, f"singular tangent ({exc})")
             r = tx @ (x[:n] - x0[:n]) / s + tm * (mu - mu0) - ds
@@ -352,7 +260,7 @@ def leave_saddle(problem: SectionProblem, x: np.ndarray, pressures: np.ndarray, 
     saddle's energy, or when ``x`` has no negative direction (count 0: it is stable itself)."""
     linear = LinearSolver() if linear is None else linear
     E0, _, K, _ = problem.assemble(x, pressures)
-    linear.solve(K, np.zeros(K.shape[0]))
+    linear.factor(K)
     count = linear.negative_pivots()
     if not count:
         return None, count

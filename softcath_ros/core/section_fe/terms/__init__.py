@@ -30,6 +30,27 @@ class Contribution:
     condensation: tuple | None = None
 
 
+class SparseContribution(Contribution):
+    """A one-block term's contribution whose Hessian is mostly zero (wall contact: only the pairs
+    within the barrier's range), given by its non-zero entries: ``keys`` (flat indices into the
+    (size, size) block, unique) and ``values``. The problem scatters only those; ``hessian`` is the
+    dense block, built when asked for."""
+
+    def __init__(self, energy: float, gradient: np.ndarray, keys: np.ndarray, values: np.ndarray, size: int):
+        super().__init__(energy, gradient)
+        self.keys, self.values, self.size = keys, values, size
+
+    @property
+    def hessian(self) -> np.ndarray:
+        H = np.zeros(self.size * self.size)
+        H[self.keys] = self.values
+        return H.reshape(1, self.size, self.size)
+
+    @hessian.setter
+    def hessian(self, value) -> None:      # the dataclass's __init__ sets it to None: built from the entries
+        pass
+
+
 INADMISSIBLE = Contribution(np.inf)
 
 

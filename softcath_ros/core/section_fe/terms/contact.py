@@ -27,9 +27,8 @@ d_hat^3 puts that gap at a fixed fraction of d_hat for a given contact pressure 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from . import INADMISSIBLE, Contribution
+from . import INADMISSIBLE, Contribution, SparseContribution
 
 # kappa = KAPPA_SCALE / d_hat^3 (non-dimensional: lengths / R, energy / (c1 R^2)): at a contact
 # pressure p_c (/ c1) the gap is about 2 KAPPA_SCALE d_hat / p_c.
@@ -106,6 +105,13 @@ def point_segment_distance(p, a, b):
     return np.linalg.norm(v - t[:, None] * e, axis=1)
 
 
+def _squared_distances(A, B):
+    """|a_i - b_j|^2 (len(A), len(B))."""
+    dx = A[:, 0, None] - B[None, :, 0]
+    dy = A[:, 1, None] - B[None, :, 1]
+    return dx * dx + dy * dy
+
+
 def segments_cross(P, i, j):
     """True where polygon segments i and j (vertex k to k + 1) properly intersect."""
     m = len(P)
@@ -129,6 +135,7 @@ class WallContact:
         self.d_hat = float(distance)
         self.s_hat = self.d_hat ** 2
         self.kappa = KAPPA_SCALE / self.d_hat ** 3
+        self._last_active = None                              # (wall points, what _active found there)
         P = X[self.ids]
         seg = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
         self.weight = 0.5 * (seg + np.roll(seg, 1))          # reference wall length per vertex
@@ -142,6 +149,8 @@ class WallContact:
         si, sk = np.triu_indices(m, k=2)
         far = (sk - si) <= m - 2
         self.cross_i, self.cross_j = si[far], sk[far]
+        self._may_cross = np.zeros((m, m), dtype=bool)
+        self._may_cross[self.cross_i, self.cross_j] = True
         d = np.empty(2 * m, dtype=np.int64)
         d[0::2], d[1::2] = 2 * self.ids, 2 * self.ids + 1
         self.dofs = d[None]                                  # one block: every wall coordinate
@@ -166,32 +175,32 @@ class WallContact:
         (segment pairs that may cross, vertex-segment pairs that may be within the barrier's range),
         from the segments' midpoints. Two segments cross only if their midpoints are within the
         longest segment's length; a vertex within d_hat of a segment's line, its foot inside the
-        window, lies within d_hat + (1/2 + WINDOW) x that length of the segment's midpoint."""
-        m = self.m
+        window, lies within d_hat + (1/2 + WINDOW) x that length of the segment's midpoint. A wall
+        has a few hundred vertices at most, so every distance is computed (m^2, faster than a tree)."""
         Q = np.roll(P, -1, axis=0)
         mid = 0.5 * (P + Q)
-        longest = float(np.max(np.linalg.norm(Q - P, axis=1)))
-        tree = cKDTree(mid)
-        pairs = tree.query_pairs(longest * (1 + 1e-9), output_type="ndarray")
-        i, k = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-        keep = (k - i >= 2) & (k - i <= m - 2)
-        crossing = (i[keep], k[keep])
-        reach = (self.d_hat + (0.5 + WINDOW) * longest) * (1 + 1e-9)
-        near = cKDTree(P).sparse_distance_matrix(tree, reach, output_type="ndarray")
-        pair = self._pair_of[near["i"], near["j"]]
-        return crossing, np.sort(pair[pair >= 0])
+        longest2 = float(np.max(np.einsum("ij,ij->i", Q - P, Q - P)))
+        crossing = np.nonzero(self._may_cross & (_squared_distances(mid, mid) <= longest2 * (1 + 1e-9) ** 2))
+        reach = (self.d_hat + (0.5 + WINDOW) * np.sqrt(longest2)) * (1 + 1e-9)
+        pair = self._pair_of[_squared_distances(P, mid) <= reach * reach]     # row-major: in the list's order
+        return crossing, pair[pair >= 0]
 
     def _active(self, x):
-        """(wall points, the pairs within the barrier's range) or None if inadmissible."""
+        """(wall points, the pairs within the barrier's range) or None if inadmissible; the last
+        answer is kept for the same wall points (a trial's energy, then its assembly)."""
         P = self._points(x)
+        last = self._last_active
+        if last is not None and np.array_equal(P, last[0]):
+            return last[1]
         crossing, candidates = self._candidates(P)
-        if np.any(segments_cross(P, *crossing)):
-            return None
-        s, t = line_distance2(*self._pair_points(P, candidates), derivatives=False)
-        near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
-        if np.any(s[near] <= 0):
-            return None
-        return P, candidates[near]
+        got = None
+        if not np.any(segments_cross(P, *crossing)):
+            s, t = line_distance2(*self._pair_points(P, candidates), derivatives=False)
+            near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
+            if not np.any(s[near] <= 0):
+                got = P, candidates[near]
+        self._last_active = (P, got)
+        return got
 
     def energy(self, x, pressures) -> float:
         got = self._active(x)
@@ -208,9 +217,8 @@ class WallContact:
         P, a = got
         m = self.m
         g = np.zeros((1, 2 * m))
-        H = np.zeros((1, 2 * m, 2 * m))
         if not len(a):
-            return Contribution(0.0, g, H)
+            return SparseContribution(0.0, g, np.zeros(0, dtype=np.int64), np.zeros(0), 2 * m)
         s, t, ds, dt, d2s, d2t = line_distance2(*self._pair_points(P, a))
         b, b1, b2 = barrier(s, self.s_hat)
         w, w1, w2 = window(t)
@@ -224,8 +232,10 @@ class WallContact:
         loc = np.empty((len(a), 6), dtype=np.int64)
         loc[:, 0::2], loc[:, 1::2] = 2 * verts, 2 * verts + 1
         np.add.at(g[0], loc, gl)
-        np.add.at(H[0], (loc[:, :, None], loc[:, None, :]), Hl)
-        return Contribution(float(np.sum(k * w * b)), g, H)
+        # the Hessian's non-zero entries, each summed over the pairs in their order (as np.add.at would)
+        keys, inverse = np.unique((loc[:, :, None] * (2 * m) + loc[:, None, :]).ravel(), return_inverse=True)
+        values = np.bincount(inverse.ravel(), weights=Hl.ravel(), minlength=len(keys))
+        return SparseContribution(float(np.sum(k * w * b)), g, keys, values, 2 * m)
 
 
 def _point_in_polygon(c, P) -> bool:
