@@ -55,10 +55,26 @@ def barrier(s, s_hat):
     return b, b1, b2
 
 
+def barrier_value(s, s_hat):
+    """b(s) alone (``barrier``'s first value, the same arithmetic)."""
+    r = s - s_hat
+    return -r * r * np.log(s / s_hat)
+
+
+def _step(u):
+    return u**3 * (10 - 15 * u + 6 * u * u)
+
+
 def smooth_step(u):
     """S(u) = 6u^5 - 15u^4 + 10u^3 on [0, 1] (0 below, 1 above), S', S'': C2."""
     u = np.clip(u, 0.0, 1.0)
-    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2, 60 * u * (1 - u) * (1 - 2 * u)
+    return _step(u), 30 * u * u * (1 - u) ** 2, 60 * u * (1 - u) * (1 - 2 * u)
+
+
+def window_value(t):
+    """w(t) alone (``window``'s first value, the same arithmetic)."""
+    h = 2 * WINDOW
+    return _step(np.clip((t + WINDOW) / h, 0.0, 1.0)) * _step(np.clip((1 + WINDOW - t) / h, 0.0, 1.0))
 
 
 def window(t):
@@ -186,8 +202,9 @@ class WallContact:
         return crossing, pair[pair >= 0]
 
     def _active(self, x):
-        """(wall points, the pairs within the barrier's range) or None if inadmissible; the last
-        answer is kept for the same wall points (a trial's energy, then its assembly)."""
+        """(wall points, the pairs within the barrier's range, their squared distances and feet) or
+        None if inadmissible; the last answer is kept for the same wall points (a trial's energy,
+        then its assembly)."""
         P = self._points(x)
         last = self._last_active
         if last is not None and np.array_equal(P, last[0]):
@@ -198,7 +215,7 @@ class WallContact:
             s, t = line_distance2(*self._pair_points(P, candidates), derivatives=False)
             near = (s < self.s_hat) & (t > -WINDOW) & (t < 1 + WINDOW)
             if not np.any(s[near] <= 0):
-                got = P, candidates[near]
+                got = P, candidates[near], s[near], t[near]
         self._last_active = (P, got)
         return got
 
@@ -206,15 +223,14 @@ class WallContact:
         got = self._active(x)
         if got is None:
             return np.inf
-        P, a = got
-        s, t = line_distance2(*self._pair_points(P, a), derivatives=False)
-        return float(self.kappa * np.sum(self.weight[self.pv[a]] * window(t)[0] * barrier(s, self.s_hat)[0]))
+        P, a, s, t = got
+        return float(self.kappa * np.sum(self.weight[self.pv[a]] * window_value(t) * barrier_value(s, self.s_hat)))
 
     def assemble(self, x, pressures) -> Contribution:
         got = self._active(x)
         if got is None:
             return INADMISSIBLE
-        P, a = got
+        P, a = got[:2]
         m = self.m
         g = np.zeros((1, 2 * m))
         if not len(a):
