@@ -36,6 +36,7 @@ class ElementRule:
         D0[..., 3, 1:12:2] = self.dNdX[..., 1]
         self.D0 = D0
         self.D = D0.copy()   # strain_rows' result: D0 with the row of F33 written in at each call
+        self.last_kinematics = None   # (displacements and globals, their Kinematics): ``kinematics``
 
 
 @dataclass
@@ -60,7 +61,13 @@ class Kinematics:
 
 
 def kinematics(rule: ElementRule, x, n_u: int) -> Kinematics:
-    """F at the sample points of ``rule`` for the state ``x`` = [u (n_u), lambda, kx R, ky R, ...]."""
+    """F at the sample points of ``rule`` for the state ``x`` = [u (n_u), lambda, kx R, ky R, ...];
+    the rule keeps the last one (read-only) for the same displacements and globals (a trial's
+    energy, then its assembly)."""
+    key = x[:n_u + N_GLOBAL]
+    last = rule.last_kinematics
+    if last is not None and np.array_equal(key, last[0]):
+        return last[1]
     u = x[:n_u].reshape(-1, 2)
     lam, kx, ky = x[n_u:n_u + N_GLOBAL]
     ue = u[rule.triangles]                                          # (e,6,2)
@@ -69,7 +76,11 @@ def kinematics(rule: ElementRule, x, n_u: int) -> Kinematics:
     F2[..., 1, 1] += 1.0
     xq = rule.Xq + np.matmul(rule.N, ue)                            # (e,q,2)
     f33 = lam * (1 - kx * xq[..., 0] - ky * xq[..., 1])
-    return Kinematics(F2, f33, xq, (lam, kx, ky))
+    for a in (F2, f33, xq):
+        a.setflags(write=False)
+    kin = Kinematics(F2, f33, xq, (lam, kx, ky))
+    rule.last_kinematics = (key.copy(), kin)
+    return kin
 
 
 def strain_rows(rule: ElementRule, kin: Kinematics) -> np.ndarray:
