@@ -225,8 +225,9 @@ class SectionProblem:
         r_of = np.repeat(np.arange(size), np.diff(self._csr_indptr))
         is_pinned = np.zeros(size, dtype=bool)
         is_pinned[self.pinned] = True
-        self._pinned_entries = is_pinned[r_of] | is_pinned[self._csr_indices]
-        self._pinned_diag = self._pinned_entries & (r_of == self._csr_indices) & is_pinned[r_of]
+        pinned_entries = is_pinned[r_of] | is_pinned[self._csr_indices]
+        self._pinned_entries = np.flatnonzero(pinned_entries)
+        self._pinned_diag = np.flatnonzero(pinned_entries & (r_of == self._csr_indices) & is_pinned[r_of])
 
     def frame_state(self, x) -> tuple[float, np.ndarray]:
         """(lambda, k R) in the frame that follows the silicone's mean displacement and rotation.

@@ -189,16 +189,17 @@ class WallContact:
     def _candidates(self, P):
         """A broad phase (exact: a superset of what it stands for, in the full lists' order):
         (segment pairs that may cross, vertex-segment pairs that may be within the barrier's range),
-        from the segments' midpoints. Two segments cross only if their midpoints are within the
-        longest segment's length; a vertex within d_hat of a segment's line, its foot inside the
-        window, lies within d_hat + (1/2 + WINDOW) x that length of the segment's midpoint. A wall
-        has a few hundred vertices at most, so every distance is computed (m^2, faster than a tree)."""
+        from the distances of the vertices to the segments' midpoints (a wall has a few hundred
+        vertices at most: all of them, faster than a tree). Segments i and k cross only if vertex i
+        lies within 1.5 x the longest segment's length of segment k's midpoint; a vertex within d_hat
+        of a segment's line, its foot inside the window, lies within d_hat + (1/2 + WINDOW) x that
+        length of the segment's midpoint."""
         Q = np.roll(P, -1, axis=0)
-        mid = 0.5 * (P + Q)
         longest2 = float(np.max(np.einsum("ij,ij->i", Q - P, Q - P)))
-        crossing = np.nonzero(self._may_cross & (_squared_distances(mid, mid) <= longest2 * (1 + 1e-9) ** 2))
+        d2 = _squared_distances(P, 0.5 * (P + Q))
+        crossing = np.nonzero(self._may_cross & (d2 <= 2.25 * longest2 * (1 + 1e-9) ** 2))
         reach = (self.d_hat + (0.5 + WINDOW) * np.sqrt(longest2)) * (1 + 1e-9)
-        pair = self._pair_of[_squared_distances(P, mid) <= reach * reach]     # row-major: in the list's order
+        pair = self._pair_of[d2 <= reach * reach]     # row-major: in the list's order
         return crossing, pair[pair >= 0]
 
     def _active(self, x):

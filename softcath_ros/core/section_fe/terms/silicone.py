@@ -29,6 +29,7 @@ class SiliconeBody:
         self.area_e = rule.dA.sum(1)
         self.dA_silicone = rule.dA * silicone[:, None]
         self.bulk_e = np.where(silicone, bulk, 0.0)
+        self._bulk_per_area = self.bulk_e / self.area_e
 
     def _theta(self, J):
         return np.sum(self.rule.dA * J, 1) / self.area_e
@@ -88,17 +89,16 @@ class SiliconeBody:
         c_jj = dA * (W2 * cj * cj + W1 * (10.0 / 9.0) * j53 * I1 / J)
         c_hess = dA * (W1 * cj + p_e[:, None])
         # c_aa a a^T + c_aj (a Ja^T + Ja a^T) + c_jj Ja Ja^T, as two outer products
-        Maa = ((c_aa[..., None] * a + c_aj[..., None] * Ja)[..., :, None] * a[..., None, :]
-               + (c_aj[..., None] * a + c_jj[..., None] * Ja)[..., :, None] * Ja[..., None, :])
+        Maa = (c_aa[..., None] * a + c_aj[..., None] * Ja)[..., :, None] * a[..., None, :]
+        Maa += (c_aj[..., None] * a + c_jj[..., None] * Ja)[..., :, None] * Ja[..., None, :]
         add_jacobian_hessian(Maa, c_hess, a, f33)
-        Maa[..., range(5), range(5)] += c_eye[..., None]
+        Maa.reshape(ne, nq, 25)[..., ::6] += c_eye[..., None]       # the diagonal
         Pa = Pw + p_e[:, None, None] * Ga
         Dr = D.reshape(ne, nq * 5, 15)
         H_e = np.matmul(Dr.transpose(0, 2, 1), np.matmul(Maa, D).reshape(ne, nq * 5, 15))
         add_f33_hessian(H_e, Pa[..., 4], rule.N, kin.xq, *kin.globals)
-        H_e += (self.bulk_e / self.area_e)[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
-        return Contribution(float(E), g_e, H_e,
-                            condensation=(Up - p_e, (self.bulk_e / self.area_e)[:, None] * G_e))
+        H_e += self._bulk_per_area[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
+        return Contribution(float(E), g_e, H_e, condensation=(Up - p_e, self._bulk_per_area[:, None] * G_e))
 
     def pressure_update(self, dx, condensation) -> np.ndarray:
         """Linearised change of the element pressures for a Newton step ``dx`` (condensed out)."""
