@@ -55,9 +55,13 @@ class ChannelPressure:
         return lam * (A.sum() - kx * Sx.sum() - ky * Sy.sum())
 
     def energy(self, x, pressures) -> float:
-        return -pressures[self.channel] * self.volume(x)
+        p = pressures[self.channel]
+        return 0.0 if p == 0 else -p * self.volume(x)      # (a channel at rest does no work)
 
     def assemble(self, x, pressures) -> Contribution:
+        if pressures[self.channel] == 0:
+            nb = len(self.edges)
+            return Contribution(0.0, np.zeros((nb, 9)), np.zeros((nb, 9, 9)))
         lam, kx, ky = x[self.n_u:self.n_u + 3]
         v, gv, hv = self._volume_derivatives(self._wall(x), lam, kx, ky)
         if self.end_cap_only:
