@@ -771,6 +771,50 @@ def test_a_failed_ramp_names_its_stop_by_the_smallest_eigenvalue(lam_before, lam
         assert "only a mesh study tells" in text
 
 
+@pytest.mark.parametrize("stall_lam, tolerances, indefinite, reason", [
+    (0.0055, 1.6, 1.7, "physical limit point"),     # the 1-DOF optimum at 0.1124 bar: indefinite at 1.7 x the tolerance
+    (7e-4, 1.6, math.inf, "physical limit point"),  # singular at the stalled iterate
+    (-2e-3, 1.6, math.inf, "physical limit point"),  # negative there: not an equilibrium to call a saddle
+    (0.02, 1.6, math.inf, "numerical failure"),     # neither
+    (0.02, 1.6, 40.0, "numerical failure"),         # indefinite only far from equilibrium
+    (7e-4, 50.0, 1.7, "numerical failure"),         # stalled far from equilibrium: its iterate names nothing
+    (None, None, None, "numerical failure"),        # the solve did not stall
+])
+def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, tolerances, indefinite, reason):
+    """_name_the_stop where the last converged states read not singular (0.00697 / 0.0224 x 2 c1, the 1-DOF
+    optimum's at 0.1089 / 0.1121 bar, accepted microns along a mode whose energy is quartic there) but the
+    failed solve stalled within STALL_NEAR x its tolerance of equilibrium (Fe3dProblem.stalled): a singular
+    eigenvalue at its last iterate, or an indefinite tangent that near equilibrium, names a limit point."""
+    from types import SimpleNamespace
+
+    from softcath_ros.core.continuation import RampResult
+    from softcath_ros.core.fe3d.newton import Stall
+    from softcath_ros.core.fe3d.ramp import _name_the_stop
+
+    class Problem:
+        contact = None
+        load = SimpleNamespace(Set=lambda v: None)
+        stalled = None if stall_lam is None else Stall(11239.5, np.array([3.0]), 1.6 * 2.9e-12, tolerances, indefinite)
+
+        def set_state(self, s):
+            self.state = s
+
+        def stability(self, k=1):
+            lam = {1: 0.00697, 2: 0.0224, 3: stall_lam}[int(self.state[0])]
+            return SimpleNamespace(smallest=lam, load_share=0.01, where="silicone element at x = 0.50")
+
+    problem = Problem()
+    result = RampResult(points=[], converged=False, message="", last_load=11207.5,
+                        last_state=np.array([2.0]), previous=(10887.5, np.array([1.0])))
+    s, why, text = _name_the_stop(problem, result, 1e-3)
+    assert why == reason, text
+    assert problem.state[0] == 2.0   # left at the last converged state
+    assert ("Newton stalled at p = 0.1124 bar" in text) == (stall_lam is not None and tolerances < 10)
+    if why == "physical limit point":
+        assert f"smallest eigenvalue {stall_lam:.3g} x 2 c1 (singular" in text and "only a mesh study tells" in text
+        assert ("the tangent indefinite at 1.7 x its tolerance" in text) == (indefinite == 1.7)
+
+
 @pytest.mark.parametrize("without, past, reason", [
     (0.022, 5.9e-8, "numerical failure"),      # the contact's making: the silicone positive, pairs past the log range
     (0.022, 0.0, "unstable equilibrium"),      # every pair within the barrier's log range: the saddle stands
@@ -1083,8 +1127,15 @@ def test_a_stalled_newton_solve_fails_early_and_says_so(short_design):
         with pytest.raises(NewtonFailure) as exc:
             pb.newton()
         outcomes[stall, cuts] = exc.value
+        if stall is not None:
+            stall_problem = pb
     assert outcomes[3, None].reason.startswith("stalled: |du.r|") and outcomes[3, None].iterations < 12, \
         outcomes[3, None].reason
+    # the stalled solve keeps its last iterate and how far from equilibrium it is, for the ramp's stop naming
+    stall = outcomes[3, None].stall
+    assert stall is stall_problem.stalled and stall.load == 20000.0 and stall.state.shape == (stall_problem.fes.ndof,)
+    assert stall.tolerances == pytest.approx(stall.work / (1e-9 * stall_problem.energy_scale)) and stall.tolerances > 1
+    assert outcomes[None, None].stall is None
     assert outcomes[None, None].reason.startswith("no convergence in 12 Newton iterations"), outcomes[None, None].reason
     # NewtonSettings.cut_iterations: so many cut steps in a row fail the solve, saying where the full step fails
     cut = outcomes[None, 3]

@@ -36,15 +36,30 @@ class _Solve:
     chord: np.ndarray | None = None   # where the last step, taken with a reused factorisation, began
     last_work: float = math.inf       # the last increment's |du.r|
     cuts_in_row: int = 0        # iterations in a row whose full step was rejected
+    indefinite: float = math.inf   # the smallest |du.r| of a fresh increment with du.r < -tol since that search
+
+
+@dataclass(frozen=True)
+class Stall:
+    """A stalled Newton solve (Fe3dNewton.stalled), where the ramp's stop is named (ramp.py ``_at_the_stall``):
+    its load (Pa), last iterate, that iterate's |du.r| (J) and in Newton's tolerances, and the fewest
+    tolerances at which its tangent was indefinite (a fresh increment with du.r < -tol; inf: never)."""
+    load: float
+    state: np.ndarray
+    work: float
+    tolerances: float
+    indefinite: float = math.inf
 
 
 class NewtonFailure(Exception):
-    """One Newton solve failed; ``reason`` says how (diverged, inverted, max iterations)."""
+    """One Newton solve failed; ``reason`` says how (diverged, inverted, max iterations); ``stall``: where
+    a stalled solve stalled (None for other failures)."""
 
-    def __init__(self, reason: str, iterations: int):
+    def __init__(self, reason: str, iterations: int, stall: Stall | None = None):
         super().__init__(reason)
         self.reason = reason
         self.iterations = iterations
+        self.stall = stall
 
 
 class Fe3dNewton:
@@ -136,13 +151,16 @@ class Fe3dNewton:
         """Solve for the current load from the current state (Newton on u and q together).
         Returns the iterations; raises NewtonFailure (the state is then undefined: the
         caller restores a converged one). A step that inverts an element (det F <= 0) or
-        gives non-finite values is halved; below ``min_step`` the solve fails."""
+        gives non-finite values is halved; below ``min_step`` the solve fails. A solve that stalls
+        keeps its last iterate in ``stalled`` (None otherwise): a ramp's stop is named there too."""
+        self.stalled = None
         try:
             return self._newton()
-        except NewtonFailure:
+        except NewtonFailure as exc:
             # the factorisation is a failed iterate's: the tangent at the converged state the
             # caller restores must not use it (a ramp's predictor after a cut did, and stepped off)
             self.inverse = None
+            self.stalled = exc.stall
             raise
 
     def _newton(self) -> int:
@@ -180,6 +198,8 @@ class Fe3dNewton:
                     raise NewtonFailure("residual is not finite", it)
                 base, slope, fresh = self._increment(s, it)
                 s.work = abs(slope)
+                if fresh and slope < -s.tol:   # the tangent indefinite here (the shifted tangent's test of a saddle)
+                    s.indefinite = min(s.indefinite, s.work)
                 if not math.isfinite(s.work):
                     raise NewtonFailure("Newton increment is not finite", it)
                 if self.shift is not None and (self.sigma > 0.0 or slope < -s.tol):
@@ -217,7 +237,9 @@ class Fe3dNewton:
         n = self.newton_settings.stall_iterations
         if n is not None and len(s.works) > n and s.works[-1] > 0.1 * s.works[-1 - n]:
             raise NewtonFailure(f"stalled: |du.r| {s.works[-1]:.2e} J, not a tenth of its "
-                                f"{s.works[-1 - n]:.2e} J {n} iterations before", it - 1)
+                                f"{s.works[-1 - n]:.2e} J {n} iterations before", it - 1,
+                                Stall(self.load.Get(), self.get_state(), s.works[-1], s.works[-1] / s.tol,
+                                      s.indefinite / s.tol))
 
     def _increment(self, s: "_Solve", it: int) -> tuple[np.ndarray, float, bool]:
         """The iteration's increment self.du for the residual self.res: with the held factorisation
@@ -314,7 +336,7 @@ class Fe3dNewton:
             if s.searches > self.contact.max_searches:
                 raise NewtonFailure(f"the contact pairs did not settle in {s.searches} searches", it)
             s.budget = it + self.newton_settings.max_iterations
-            s.works, s.chord = [], None
+            s.works, s.chord, s.indefinite = [], None, math.inf
             return False
         gap = self.contact.min_gap()
         if gap < -self.contact.tolerance:

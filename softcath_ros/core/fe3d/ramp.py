@@ -90,7 +90,8 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
     """(Stability, stop reason, message tail) at the ramp's last converged state: UNSTABLE when its
     smallest eigenvalue is negative, LIMIT_POINT when it is singular (see SINGULAR_BELOW), else
     NUMERICAL_FAILURE; a negative or singular eigenvalue of the contact's making (``_contact_made``)
-    leaves it a NUMERICAL_FAILURE. The problem is left at that state."""
+    leaves it a NUMERICAL_FAILURE. A NUMERICAL_FAILURE whose failed solve stalled near equilibrium
+    where the tangent is singular is a LIMIT_POINT (``_at_the_stall``). The problem is left at that state."""
     def at(load, state):
         problem.set_state(state)
         problem.load.Set(load)
@@ -130,9 +131,50 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
                 f"{_split_text(split)}")
     elif split is not None:
         kind = f"{kind}; {_split_text(split)}"
+    stalled, at_stall = _at_the_stall(problem, at, threshold, result)
+    if stalled and reason == NUMERICAL_FAILURE:
+        reason = LIMIT_POINT
     return s, reason, (f"; the condensed tangent's smallest eigenvalue at the last converged state is "
                        f"{lam:.3g} x 2 c1{trend} ({kind}; load share of its mode {s.load_share:.2g}), "
-                       f"its mode largest at the {s.where}{_mirror_text(problem)}")
+                       f"its mode largest at the {s.where}{at_stall}{_mirror_text(problem)}")
+
+
+# a stalled Newton solve's iterates count as equilibria for naming the stop while their |du.r| is at most
+# STALL_NEAR x Newton's tolerance (a converged state is one at 1 x)
+STALL_NEAR = 10.0
+
+
+def _at_the_stall(problem: Fe3dProblem, at, threshold: float, result) -> tuple[bool, str]:
+    """(whether the tangent is singular there, a message tail) where the ramp's failed solve stalled within
+    STALL_NEAR x its tolerance of equilibrium (``Fe3dProblem.stalled``); (False, "") otherwise. Singular:
+    the smallest eigenvalue at its last iterate below ``threshold``, or an indefinite tangent at one of its
+    iterates that near (a fresh Newton increment with du.r < -tol, the shifted tangent's test of a saddle),
+    unless the contact term made it (``_contact_made``). Next to a bifurcation the energy along the soft mode
+    is quartic: on the 1-DOF optimum at 20 mm (0.1124 bar) the residual along it grew as its amplitude cubed
+    over 2-20 um, so the states Newton accepts or stalls at lie microns along the mode, where the curvature
+    is that offset's (0.0224 x 2 c1 at the last converged state, 0.0055 and 7e-4 at stalled iterates), and
+    within 1.7 x the tolerance the tangent is indefinite. The problem is left at the ramp's last converged
+    state (``result``)."""
+    stall = getattr(problem, "stalled", None)
+    if stall is None or not stall.tolerances <= STALL_NEAR:
+        return False, ""
+    try:
+        st, split = at(stall.load, stall.state)
+    except Exception as exc:  # noqa: BLE001 - the stop stays named as it was
+        return False, f"; at the stalled iterate not measured ({exc})"
+    finally:
+        problem.set_state(result.last_state)
+        problem.load.Set(result.last_load)
+    indefinite = stall.indefinite <= STALL_NEAR
+    singular = (st.smallest < threshold or indefinite) and not _contact_made(split, threshold)
+    kind = ("singular: a limit point or bifurcation of this mesh's equations; only a mesh study tells a physical "
+            "one from a discretisation mode" if singular else "not singular")
+    if split is not None:
+        kind = f"{kind}; {_split_text(split)}"
+    seen = f", the tangent indefinite at {stall.indefinite:.2g} x its tolerance" if indefinite else ""
+    return singular, (f"; Newton stalled at {describe_pressure(stall.load)} {stall.tolerances:.2g} x its tolerance "
+                      f"from equilibrium{seen}, its last iterate's smallest eigenvalue {st.smallest:.3g} x 2 c1 "
+                      f"({kind}; load share of its mode {st.load_share:.2g}), its mode largest at the {st.where}")
 
 
 def _mirror_text(problem: Fe3dProblem) -> str:

@@ -132,6 +132,7 @@ class Fe3dProblem(Fe3dNewton):
         self.last_effort = 0.0       # the last solve's iterations, those on a reused factorisation weighted
         self.factorizations = 0
         self.iterations_total = 0
+        self.stalled = None          # the last Newton solve's stalled iterate (newton.Stall), if it stalled
 
     # ------------------------------------------------------------------ energies
     def _assemble(self, lumen_fill):

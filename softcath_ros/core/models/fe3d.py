@@ -73,7 +73,7 @@ def _reference_mesh(mesh_size, layer_h):
 
 class Fe3dModel(BendModel):
     name = "fe3d"
-    solver_version = "fe3d-12"  # bump when a change alters results, so old cache entries are not reused
+    solver_version = "fe3d-13"  # bump when a change alters results, so old cache entries are not reused
                                 # (7: a ramp stops where the body reaches itself or its shaft;
                                 # 8: the default element, mesh and barrier distance; 9: Newton reuses
                                 # factorisations, the ramp's steps and stops: the same states to
