@@ -106,6 +106,26 @@ def test_the_contact_broad_phase_finds_exactly_the_pairs_every_pair_would(implem
         assert len(want) > 0              # squeezed flat: the walls within the barrier's range
 
 
+def test_the_broad_phase_shortcut_for_a_clear_wall_changes_no_answer(implemented_design, monkeypatch):
+    """Where no pair was a candidate, ``_active`` skips the search while the wall has moved by less
+    than a ninth of the margin it found: along a lumen squeezed from round to flat and through
+    itself, in steps from 1e-7 to 0.3 of its height, every answer is the search over every pair,
+    and the shortcut was taken."""
+    problem = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 12).problem
+    wall = problem.contact[0][1]
+    searches = []
+    search = wall._candidates
+    monkeypatch.setattr(wall, "_candidates", lambda P: searches.append(1) or search(P))
+    squeezes = np.concatenate([1 - np.geomspace(1e-7, 0.3, 25), np.linspace(0.6, 0.005, 25), [-0.3]])
+    for i, squeeze in enumerate(squeezes):
+        x = _squeezed(problem, squeeze)[0]
+        got, want = wall._active(x), _brute_force_active(wall, x)
+        assert (got is None) == (want is None), squeeze
+        if want is not None:
+            np.testing.assert_array_equal(got[1], want)
+    assert 0 < len(searches) < len(squeezes)         # searched where it had to, not every time
+
+
 def test_flat_wall_pressed_on_a_rigid_wall_balances_the_load_at_the_hand_solution_gap():
     """A long slit: its bottom wall is rigid, its top wall (free vertically) carries a line load
     q per unit length. Far from the ends the gap d is uniform and solves

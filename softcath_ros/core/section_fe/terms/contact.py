@@ -161,6 +161,8 @@ class WallContact:
         self.pv, self.ps = vi[keep], sj[keep]
         self._pair_of = np.full((m, m), -1, dtype=np.int64)  # (vertex, segment) -> index into pv, ps
         self._pair_of[self.pv, self.ps] = np.arange(len(self.pv))
+        self._valid = self._pair_of >= 0
+        self._clear = None                                   # (wall points, margin) where no pair was near
         # segment pairs for the crossing test: neither the same nor neighbours
         si, sk = np.triu_indices(m, k=2)
         far = (sk - si) <= m - 2
@@ -190,17 +192,28 @@ class WallContact:
         """A broad phase (exact: a superset of what it stands for, in the full lists' order):
         (segment pairs that may cross, vertex-segment pairs that may be within the barrier's range),
         from the distances of the vertices to the segments' midpoints (a wall has a few hundred
-        vertices at most: all of them, faster than a tree). Segments i and k cross only if vertex i
-        lies within 1.5 x the longest segment's length of segment k's midpoint; a vertex within d_hat
+        vertices at most: all of them, faster than a tree; where none is a candidate, how far each was
+        is kept, ``_active``'s shortcut). Segments i and k cross only if vertex i lies within 1.5 x
+        the longest segment's length of segment k's midpoint and vertex k of segment i's; a vertex within d_hat
         of a segment's line, its foot inside the window, lies within d_hat + (1/2 + WINDOW) x that
         length of the segment's midpoint."""
         Q = np.roll(P, -1, axis=0)
         longest2 = float(np.max(np.einsum("ij,ij->i", Q - P, Q - P)))
         d2 = _squared_distances(P, 0.5 * (P + Q))
-        crossing = np.nonzero(self._may_cross & (d2 <= 2.25 * longest2 * (1 + 1e-9) ** 2))
+        close = d2 <= 2.25 * longest2 * (1 + 1e-9) ** 2
+        crossing = np.nonzero(self._may_cross & close & close.T)
         reach = (self.d_hat + (0.5 + WINDOW) * np.sqrt(longest2)) * (1 + 1e-9)
         pair = self._pair_of[d2 <= reach * reach]     # row-major: in the list's order
-        return crossing, pair[pair >= 0]
+        pair = pair[pair >= 0]
+        self._clear = None
+        if not len(pair) and not len(crossing[0]):
+            # how far every distance is from making a candidate: while no wall point moves by a ninth
+            # of it (distances change by at most 2, the thresholds by 3 x the largest move), none can
+            d = np.sqrt(d2)
+            margin = min(float(np.min(np.maximum(d, d.T)[self._may_cross])) - 1.5 * np.sqrt(longest2) * (1 + 1e-9),
+                         float(np.min(d[self._valid])) - reach)
+            self._clear = (P, margin) if margin > 0 else None
+        return crossing, pair
 
     def _active(self, x):
         """(wall points, the pairs within the barrier's range, their squared distances and feet) or
@@ -210,6 +223,11 @@ class WallContact:
         last = self._last_active
         if last is not None and np.array_equal(P, last[0]):
             return last[1]
+        clear = self._clear
+        if clear is not None and np.max(np.abs(P - clear[0])) < clear[1] / 9:
+            got = P, np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)   # no pair can be near yet
+            self._last_active = (P, got)
+            return got
         crossing, candidates = self._candidates(P)
         got = None
         if not np.any(segments_cross(P, *crossing)):
