@@ -89,15 +89,16 @@ class SiliconeBody:
         c_jj = dA * (W2 * cj * cj + W1 * (10.0 / 9.0) * j53 * I1 / J)
         c_hess = dA * (W1 * cj + p_e[:, None])
         # c_aa a a^T + c_aj (a Ja^T + Ja a^T) + c_jj Ja Ja^T, as two outer products
-        Maa = (c_aa[..., None] * a + c_aj[..., None] * Ja)[..., :, None] * a[..., None, :]
-        Maa += (c_aj[..., None] * a + c_jj[..., None] * Ja)[..., :, None] * Ja[..., None, :]
+        # (einsum's outer products: the same single products as broadcasting, in less time)
+        Maa = np.einsum("...i,...j->...ij", c_aa[..., None] * a + c_aj[..., None] * Ja, a)
+        Maa += np.einsum("...i,...j->...ij", c_aj[..., None] * a + c_jj[..., None] * Ja, Ja)
         add_jacobian_hessian(Maa, c_hess, a, f33)
         Maa.reshape(ne, nq, 25)[..., ::6] += c_eye[..., None]       # the diagonal
         Pa = Pw + p_e[:, None, None] * Ga
         Dr = D.reshape(ne, nq * 5, 15)
         H_e = np.matmul(Dr.transpose(0, 2, 1), np.matmul(Maa, D).reshape(ne, nq * 5, 15))
         add_f33_hessian(H_e, Pa[..., 4], rule.N, kin.xq, *kin.globals)
-        H_e += self._bulk_per_area[:, None, None] * G_e[:, :, None] * G_e[:, None, :]
+        H_e += np.einsum("ei,ej->eij", self._bulk_per_area[:, None] * G_e, G_e)
         return Contribution(float(E), g_e, H_e, condensation=(Up - p_e, self._bulk_per_area[:, None] * G_e))
 
     def pressure_update(self, dx, condensation) -> np.ndarray:
