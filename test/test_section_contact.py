@@ -108,9 +108,9 @@ def test_the_contact_broad_phase_finds_exactly_the_pairs_every_pair_would(implem
 
 def test_the_broad_phase_shortcut_for_a_clear_wall_changes_no_answer(implemented_design, monkeypatch):
     """Where no pair was a candidate, ``_active`` skips the search while the wall has moved by less
-    than a ninth of the margin it found: along a lumen squeezed from round to flat and through
-    itself, in steps from 1e-7 to 0.3 of its height, every answer is the search over every pair,
-    and the shortcut was taken."""
+    than a ninth of the margin it found (but for a common translation): along a lumen squeezed from
+    round to flat and through itself, in steps from 1e-7 to 0.3 of its height, and moved as a whole,
+    every answer is the search over every pair, and the shortcut was taken."""
     problem = make_model("section", implemented_design, mesh_size=implemented_design.outer_diameter / 12).problem
     wall = problem.contact[0][1]
     searches = []
@@ -124,6 +124,14 @@ def test_the_broad_phase_shortcut_for_a_clear_wall_changes_no_answer(implemented
         if want is not None:
             np.testing.assert_array_equal(got[1], want)
     assert 0 < len(searches) < len(squeezes)         # searched where it had to, not every time
+    # a wall moved as a whole changes no distance: no search, the same (empty) answer
+    x = _squeezed(problem, 1.0)[0]
+    wall._active(x)
+    before = len(searches)
+    x.reshape(-1)[2 * wall.ids] += 0.1
+    x.reshape(-1)[2 * wall.ids + 1] -= 0.05
+    np.testing.assert_array_equal(wall._active(x)[1], _brute_force_active(wall, x))
+    assert len(searches) == before
 
 
 def test_flat_wall_pressed_on_a_rigid_wall_balances_the_load_at_the_hand_solution_gap():

@@ -128,6 +128,12 @@ def _squared_distances(A, B):
     return dx * dx + dy * dy
 
 
+def _largest_move(d) -> float:
+    """The largest component of the moves ``d`` (m, 2) of a wall's points but for their common
+    translation (the middle of their range): a translation changes no distance between them."""
+    return float(np.max(np.abs(d - 0.5 * (d.max(axis=0) + d.min(axis=0)))))
+
+
 def segments_cross(P, i, j):
     """True where polygon segments i and j (vertex k to k + 1) properly intersect."""
     m = len(P)
@@ -208,7 +214,8 @@ class WallContact:
         self._clear = None
         if not len(pair) and not len(crossing[0]):
             # how far every distance is from making a candidate: while no wall point moves by a ninth
-            # of it (distances change by at most 2, the thresholds by 3 x the largest move), none can
+            # of it but for a common translation (distances change by at most 2, the thresholds by 3 x
+            # the largest move), none can
             d = np.sqrt(d2)
             margin = min(float(np.min(np.maximum(d, d.T)[self._may_cross])) - 1.5 * np.sqrt(longest2) * (1 + 1e-9),
                          float(np.min(d[self._valid])) - reach)
@@ -224,7 +231,7 @@ class WallContact:
         if last is not None and np.array_equal(P, last[0]):
             return last[1]
         clear = self._clear
-        if clear is not None and np.max(np.abs(P - clear[0])) < clear[1] / 9:
+        if clear is not None and _largest_move(P - clear[0]) < clear[1] / 9:
             got = P, np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)   # no pair can be near yet
             self._last_active = (P, got)
             return got
