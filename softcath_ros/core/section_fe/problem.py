@@ -311,7 +311,7 @@ class SectionProblem:
         resisted = self.filled_holes.copy()
         for i, _ in self.contact:
             resisted[i] = True
-        return np.where(resisted, np.inf, self.hole_gaps(x))
+        return self.hole_gaps(x, ~resisted)
 
     def max_isochoric_i1(self, x) -> float:
         """The largest isochoric first invariant I1b in the silicone (at the quadrature points)."""
@@ -360,15 +360,19 @@ class SectionProblem:
         """The smallest distance (m) between the lumen wall and the device (inf without one)."""
         return np.inf if self.device is None else float(self.device.gaps(x).min() * self.R)
 
-    def hole_gaps(self, x) -> np.ndarray:
+    def hole_gaps(self, x, holes=None) -> np.ndarray:
         """Per hole (channels, then lumen): the smallest distance between its deformed wall points
         that are at least a quarter of the perimeter apart along it, relative to the hole's size
-        (twice its wall's mean distance from its centroid: the diameter of a circle).
+        (twice its wall's mean distance from its centroid: the diameter of a circle); only where
+        ``holes`` (bool per hole) is True if given, inf elsewhere.
 
         Near zero the opposite walls touch; the model has no self-contact, so it must stop there."""
         u = x[:self.n_u].reshape(-1, 2)
         out = []
-        for edges in self.mesh.hole_edges:
+        for k, edges in enumerate(self.mesh.hole_edges):
+            if holes is not None and not holes[k]:
+                out.append(np.inf)
+                continue
             ids = edges[:, :2].ravel()                     # corner and midside nodes, in order
             pts = self.X[ids] + u[ids]
             m = len(ids)

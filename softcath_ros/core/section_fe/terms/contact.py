@@ -250,6 +250,8 @@ class WallContact:
         if got is None:
             return np.inf
         P, a, s, t = got
+        if not len(a):
+            return 0.0                  # (what the sum over no pair gives)
         return float(self.kappa * np.sum(self.weight[self.pv[a]] * window_value(t) * barrier_value(s, self.s_hat)))
 
     def assemble(self, x, pressures) -> Contribution:
