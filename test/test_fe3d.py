@@ -771,16 +771,17 @@ def test_a_failed_ramp_names_its_stop_by_the_smallest_eigenvalue(lam_before, lam
         assert "only a mesh study tells" in text
 
 
-@pytest.mark.parametrize("stall_lam, tolerances, indefinite, reason", [
-    (0.0055, 1.6, 1.7, "physical limit point"),     # the 1-DOF optimum at 0.1124 bar: indefinite at 1.7 x the tolerance
-    (7e-4, 1.6, math.inf, "physical limit point"),  # singular at the stalled iterate
-    (-2e-3, 1.6, math.inf, "physical limit point"),  # negative there: not an equilibrium to call a saddle
-    (0.02, 1.6, math.inf, "numerical failure"),     # neither
-    (0.02, 1.6, 40.0, "numerical failure"),         # indefinite only far from equilibrium
-    (7e-4, 50.0, 1.7, "numerical failure"),         # stalled far from equilibrium: its iterate names nothing
-    (None, None, None, "numerical failure"),        # the solve did not stall
+@pytest.mark.parametrize("stall_lam, tolerances, indefinite, without, reason", [
+    (0.0055, 1.6, 1.7, -0.05, "physical limit point"),   # the 1-DOF optimum at 0.1124 bar: indefinite at 1.7 x tol
+    (0.0055, 1.6, 1.7, 0.022, "numerical failure"),      # ... but of the contact's making (pairs past the log range)
+    (7e-4, 1.6, math.inf, -0.05, "physical limit point"),  # singular at the stalled iterate
+    (-2e-3, 1.6, math.inf, -0.05, "physical limit point"),  # negative there: not an equilibrium to call a saddle
+    (0.02, 1.6, math.inf, -0.05, "numerical failure"),   # neither
+    (0.02, 1.6, 40.0, -0.05, "numerical failure"),       # indefinite only far from equilibrium
+    (7e-4, 50.0, 1.7, -0.05, "numerical failure"),       # stalled far from equilibrium: its iterate names nothing
+    (None, None, None, -0.05, "numerical failure"),      # the solve did not stall
 ])
-def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, tolerances, indefinite, reason):
+def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, tolerances, indefinite, without, reason):
     """_name_the_stop where the last converged states read not singular (0.00697 / 0.0224 x 2 c1, the 1-DOF
     optimum's at 0.1089 / 0.1121 bar, accepted microns along a mode whose energy is quartic there) but the
     failed solve stalled within STALL_NEAR x its tolerance of equilibrium (Fe3dProblem.stalled): a singular
@@ -790,9 +791,10 @@ def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, to
     from softcath_ros.core.continuation import RampResult
     from softcath_ros.core.fe3d.newton import Stall
     from softcath_ros.core.fe3d.ramp import _name_the_stop
+    from softcath_ros.core.fe3d.stability import ContactSplit
 
     class Problem:
-        contact = None
+        contact = SimpleNamespace(update=lambda: True, mirror_crossing=lambda: 0.0, d_hat=3e-5)
         load = SimpleNamespace(Set=lambda v: None)
         stalled = None if stall_lam is None else Stall(11239.5, np.array([3.0]), 1.6 * 2.9e-12, tolerances, indefinite)
 
@@ -802,6 +804,10 @@ def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, to
         def stability(self, k=1):
             lam = {1: 0.00697, 2: 0.0224, 3: stall_lam}[int(self.state[0])]
             return SimpleNamespace(smallest=lam, load_share=0.01, where="silicone element at x = 0.50")
+
+        def contact_split(self):
+            assert self.state[0] == 3.0   # only where Newton stalled: the converged states read not singular
+            return ContactSplit(without_contact=without, past_log_range_m2=5.9e-8)
 
     problem = Problem()
     result = RampResult(points=[], converged=False, message="", last_load=11207.5,
@@ -813,6 +819,8 @@ def test_a_stall_next_to_a_singular_tangent_is_named_a_limit_point(stall_lam, to
     if why == "physical limit point":
         assert f"smallest eigenvalue {stall_lam:.3g} x 2 c1 (singular" in text and "only a mesh study tells" in text
         assert ("the tangent indefinite at 1.7 x its tolerance" in text) == (indefinite == 1.7)
+    if indefinite == 1.7 and tolerances < 10:   # the contact's share checked where only the sign said singular
+        assert f"without the lumen contact's term {without:.3g}" in text
 
 
 @pytest.mark.parametrize("without, past, reason", [

@@ -158,14 +158,16 @@ def _at_the_stall(problem: Fe3dProblem, at, threshold: float, result) -> tuple[b
     stall = getattr(problem, "stalled", None)
     if stall is None or not stall.tolerances <= STALL_NEAR:
         return False, ""
+    indefinite = stall.indefinite <= STALL_NEAR
     try:
         st, split = at(stall.load, stall.state)
+        if split is None and indefinite and problem.contact is not None:
+            split = problem.contact_split()   # (``at`` splits only a singular eigenvalue)
     except Exception as exc:  # noqa: BLE001 - the stop stays named as it was
         return False, f"; at the stalled iterate not measured ({exc})"
     finally:
         problem.set_state(result.last_state)
         problem.load.Set(result.last_load)
-    indefinite = stall.indefinite <= STALL_NEAR
     singular = (st.smallest < threshold or indefinite) and not _contact_made(split, threshold)
     kind = ("singular: a limit point or bifurcation of this mesh's equations; only a mesh study tells a physical "
             "one from a discretisation mode" if singular else "not singular")
