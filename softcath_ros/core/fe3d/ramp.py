@@ -86,6 +86,17 @@ def _split_text(split) -> str:
             f"{split.past_log_range_m2 * 1e6:.2g} mm^2 of its pairs past the barrier's log range")
 
 
+# what a singular tangent at a stop is, said where the stop is named
+SINGULAR_KIND = ("singular: a limit point or bifurcation of this mesh's equations; only a mesh study tells a physical "
+                 "one from a discretisation mode")
+
+
+def _back_to_last_converged(problem: Fe3dProblem, result) -> None:
+    """Leave the problem at the ramp's last converged state (its stop is measured at other states)."""
+    problem.set_state(result.last_state)
+    problem.load.Set(result.last_load)
+
+
 def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float = SINGULAR_WITHIN):
     """(Stability, stop reason, message tail) at the ramp's last converged state: UNSTABLE when its
     smallest eigenvalue is negative, LIMIT_POINT when it is singular (see SINGULAR_BELOW), else
@@ -106,11 +117,9 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
         before = result.previous
         s0, split0 = at(*before) if before is not None and before[0] < result.last_load else (None, None)
     except Exception as exc:  # noqa: BLE001 - the failure stays named as it was
-        problem.set_state(result.last_state)
-        problem.load.Set(result.last_load)
+        _back_to_last_converged(problem, result)
         return None, NUMERICAL_FAILURE, f"; its stability not measured ({exc})"
-    problem.set_state(result.last_state)
-    problem.load.Set(result.last_load)
+    _back_to_last_converged(problem, result)
     lam = s.smallest
     lam0 = s0.smallest if s0 is not None else None
     zero = None   # the load where the eigenvalue's line through the last two states reaches 0
@@ -123,8 +132,7 @@ def _name_the_stop(problem: Fe3dProblem, result, threshold: float, within: float
             f": zero by {describe_pressure(zero)} on their line" if zero is not None else ": not falling")
     near = zero is not None and zero - result.last_load <= within * result.last_load
     reason = UNSTABLE if lam < 0.0 else LIMIT_POINT if lam < threshold or near else NUMERICAL_FAILURE
-    kind = {UNSTABLE: "a saddle", LIMIT_POINT: "singular: a limit point or bifurcation of this mesh's equations; "
-                                          "only a mesh study tells a physical one from a discretisation mode"}.get(reason, "not singular")
+    kind = {UNSTABLE: "a saddle", LIMIT_POINT: SINGULAR_KIND}.get(reason, "not singular")
     if lam < threshold and _contact_made(split, threshold):
         reason = NUMERICAL_FAILURE
         kind = (f"{'a saddle' if lam < 0.0 else 'singular'} of the lumen contact's making, not the body's: "
@@ -166,11 +174,9 @@ def _at_the_stall(problem: Fe3dProblem, at, threshold: float, result) -> tuple[b
     except Exception as exc:  # noqa: BLE001 - the stop stays named as it was
         return False, f"; at the stalled iterate not measured ({exc})"
     finally:
-        problem.set_state(result.last_state)
-        problem.load.Set(result.last_load)
+        _back_to_last_converged(problem, result)
     singular = (st.smallest < threshold or indefinite) and not _contact_made(split, threshold)
-    kind = ("singular: a limit point or bifurcation of this mesh's equations; only a mesh study tells a physical "
-            "one from a discretisation mode" if singular else "not singular")
+    kind = SINGULAR_KIND if singular else "not singular"
     if split is not None:
         kind = f"{kind}; {_split_text(split)}"
     seen = f", the tangent indefinite at {stall.indefinite:.2g} x its tolerance" if indefinite else ""
